@@ -1,0 +1,51 @@
+//! The crate's error types.
+
+use crate::site::SiteError;
+
+/// Everything that can go wrong in Waymark.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum Error {
+    /// A configuration field is out of range.
+    #[error("invalid configuration: {0}")]
+    InvalidConfig(String),
+    /// The site file could not be loaded.
+    #[error(transparent)]
+    Site(#[from] SiteError),
+    /// An input was rejected; the engine is unchanged.
+    #[error(transparent)]
+    Input(#[from] InputError),
+}
+
+/// Why an input was rejected. A rejected input leaves the engine exactly as it was, and is
+/// counted in [`InputStats`](crate::engine::InputStats).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum InputError {
+    /// The timestamp is not after the last accepted one (a duplicate or a step back in time).
+    #[error("timestamp {timestamp_ns} ns is not after the last accepted scan at {last_ns} ns")]
+    OutOfOrder {
+        /// The rejected timestamp.
+        timestamp_ns: u64,
+        /// The last accepted timestamp.
+        last_ns: u64,
+    },
+    /// A scan with no readings.
+    #[error("the scan has no readings")]
+    EmptyScan,
+    /// A reading's RSSI is NaN or infinite: the scan is corrupt and is rejected whole.
+    #[error("reading {index} ({transmitter}) has a non-finite RSSI")]
+    NonFiniteRssi {
+        /// Position of the reading in the scan.
+        index: usize,
+        /// Its transmitter.
+        transmitter: String,
+    },
+    /// None of the scan's readings is of a transmitter in the site's radio map (after dropping
+    /// duplicates and stale readings): it says nothing about where the phone is.
+    #[error("no reading is of a transmitter this site knows ({unknown} unknown, {stale} stale)")]
+    NoKnownTransmitter {
+        /// Readings of unknown transmitters.
+        unknown: usize,
+        /// Readings older than the age limit.
+        stale: usize,
+    },
+}

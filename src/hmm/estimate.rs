@@ -1,0 +1,100 @@
+//! From posterior to position: Hoang eq. 4 on the most likely floor, and a 68% radius.
+
+use crate::site::Site;
+use nalgebra::Point2;
+
+/// A position estimate from the posterior.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// The floor holding the most posterior mass.
+    pub floor: usize,
+    /// Posterior mass on that floor.
+    pub floor_probability: f64,
+    /// Posterior-weighted mean of the M most likely states on that floor (Hoang eq. 4), m.
+    pub position: Point2<f64>,
+    /// Radius around `position` holding `mass` of the posterior, widened by the cell size, m.
+    /// Always > 0.
+    pub accuracy_m: f64,
+}
+
+/// Share of a state's cell, in a corridor of cells `spacing` long, within which the true
+/// position lies with probability 0.68 when it is uniform over the cell: 0.68 · spacing / 2.
+const CELL_RADIUS_PER_SPACING: f64 = 0.34;
+
+/// Estimates the position from `posterior` (which sums to 1).
+///
+/// `scratch` is reused between calls so that an epoch allocates nothing once warm.
+pub fn estimate(site: &Site, posterior: &[f64], top_m: usize, mass: f64, scratch: &mut Vec<(f64, f64)>) -> Estimate {
+    let states = site.states();
+    let mut floor_mass = vec![0.0; site.floors().len()];
+    for (s, &p) in states.iter().zip(posterior) {
+        floor_mass[s.floor] += p;
+    }
+    let (floor, &floor_probability) = floor_mass
+        .iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(b.1))
+        .expect("a site has at least one floor");
+
+    // Eq. 4 over the M most likely states of that floor; scratch holds (-p, index).
+    scratch.clear();
+    scratch.extend(
+        states
+            .iter()
+            .zip(posterior)
+            .enumerate()
+            .filter(|(_, (s, &p))| s.floor == floor && p > 0.0)
+            .map(|(i, (_, &p))| (-p, i as f64)),
+    );
+    let m = top_m.min(scratch.len()).max(1);
+    let position = if scratch.is_empty() {
+        // No mass on any state of the floor (cannot happen with a normalised posterior and a
+        // floor chosen by mass); the first state of the floor keeps the output on the site.
+        states.iter().find(|s| s.floor == floor).map_or(Point2::origin(), |s| s.position)
+    } else {
+        if m < scratch.len() {
+            scratch.select_nth_unstable_by(m - 1, |a, b| a.0.total_cmp(&b.0));
+        }
+        let (mut sum, mut weight) = (nalgebra::Vector2::zeros(), 0.0);
+        for &(neg_p, i) in &scratch[..m] {
+            sum += states[i as usize].position.coords * -neg_p;
+            weight -= neg_p;
+        }
+        Point2::from(sum / weight)
+    };
+
+    // The radius holding `mass` of the whole posterior: states of other floors never count
+    // as inside. scratch now holds (distance, p).
+    scratch.clear();
+    scratch.extend(
+        states
+            .iter()
+            .zip(posterior)
+            .filter(|(s, &p)| s.floor == floor && p > 0.0)
+            .map(|(s, &p)| (nalgebra::distance(&s.position, &position), p)),
+    );
+    scratch.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+    let mut inside = 0.0;
+    let mut radius = f64::INFINITY;
+    for &(d, p) in scratch.iter() {
+        inside += p;
+        if inside >= mass {
+            radius = d;
+            break;
+        }
+    }
+    if !radius.is_finite() {
+        // Less than `mass` on this floor: the farthest state of the floor bounds what we know.
+        radius = scratch.last().map_or(0.0, |&(d, _)| d);
+    }
+    // Each state stands for a cell around it: the posterior radius alone is 0 when all mass
+    // is on one state. Quantisation and posterior spread add as independent errors.
+    let cell = CELL_RADIUS_PER_SPACING * site.spacing_m();
+    let accuracy_m = (radius * radius + cell * cell).sqrt().max(f64::EPSILON);
+    Estimate {
+        floor,
+        floor_probability,
+        position,
+        accuracy_m,
+    }
+}

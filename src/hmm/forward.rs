@@ -1,0 +1,187 @@
+//! The forward recursion (Hoang eq. 3) over a normalised posterior, with emissions kept in log
+//! space until the update: it cannot underflow over hours of epochs, nor when the likelihoods
+//! of a scan with a hundred transmitters sit near -1000 nats and hundreds apart.
+
+use super::Transition;
+
+/// Why a step could not be taken; the filter is left as it was.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
+pub enum FilterError {
+    /// The emission vector has the wrong length.
+    #[error("emission has {got} states, the filter {expected}")]
+    Length {
+        /// States in the filter.
+        expected: usize,
+        /// States in the emission.
+        got: usize,
+    },
+    /// No state can explain the observation (every emission is -inf or NaN).
+    #[error("no state has a finite likelihood")]
+    Degenerate,
+}
+
+/// The posterior P(s_t | observations so far) over N states.
+#[derive(Clone, Debug)]
+pub struct ForwardFilter {
+    posterior: Vec<f64>,
+    predicted: Vec<f64>,
+    weights: Vec<f64>,
+}
+
+impl ForwardFilter {
+    /// A filter over `n` states with the uniform prior.
+    pub fn new(n: usize) -> Self {
+        let mut filter = Self {
+            posterior: vec![0.0; n],
+            predicted: vec![0.0; n],
+            weights: vec![0.0; n],
+        };
+        filter.reset();
+        filter
+    }
+
+    /// Back to the uniform prior.
+    pub fn reset(&mut self) {
+        let n = self.posterior.len();
+        self.posterior.fill(1.0 / n as f64);
+    }
+
+    /// The current posterior; sums to 1.
+    pub fn posterior(&self) -> &[f64] {
+        &self.posterior
+    }
+
+    /// A prediction with no observation: the posterior becomes the predicted distribution.
+    pub fn predict(&mut self, transition: &dyn Transition) {
+        transition.predict(&self.posterior, &mut self.predicted);
+        std::mem::swap(&mut self.posterior, &mut self.predicted);
+    }
+
+    /// One epoch: predict with `transition` (none at the first epoch, or when no time has
+    /// passed), weight by `exp(ln_emission)`, normalise. Returns ln p(o_t | o_1..t-1), the
+    /// evidence of this observation given the past.
+    pub fn step(&mut self, transition: Option<&dyn Transition>, ln_emission: &[f64]) -> Result<f64, FilterError> {
+        let n = self.posterior.len();
+        if ln_emission.len() != n {
+            return Err(FilterError::Length {
+                expected: n,
+                got: ln_emission.len(),
+            });
+        }
+        match transition {
+            Some(t) => t.predict(&self.posterior, &mut self.predicted),
+            None => self.predicted.copy_from_slice(&self.posterior),
+        }
+        // w_j = ln pred_j + ln p(o | j); the max is subtracted before exponentiating.
+        let mut max = f64::NEG_INFINITY;
+        for ((w, &p), &e) in self.weights.iter_mut().zip(&self.predicted).zip(ln_emission) {
+            *w = if p > 0.0 && !e.is_nan() { p.ln() + e } else { f64::NEG_INFINITY };
+            max = max.max(*w);
+        }
+        if !max.is_finite() {
+            return Err(FilterError::Degenerate);
+        }
+        let mut total = 0.0;
+        for w in self.weights.iter_mut() {
+            *w = (*w - max).exp();
+            total += *w;
+        }
+        // total ≥ 1: the maximum contributes exp(0).
+        for (post, &w) in self.posterior.iter_mut().zip(&self.weights) {
+            *post = w / total;
+        }
+        Ok(max + total.ln())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+    use proptest::prelude::*;
+
+    /// A dense transition matrix, as a reference.
+    struct Dense(Vec<Vec<f64>>);
+    impl Transition for Dense {
+        fn predict(&self, prior: &[f64], out: &mut [f64]) {
+            for (j, o) in out.iter_mut().enumerate() {
+                *o = prior.iter().enumerate().map(|(i, p)| p * self.0[i][j]).sum();
+            }
+        }
+    }
+
+    /// P(s_T = j | o_1..T) by summing over every path: the definition, no recursion.
+    fn enumerate(initial: &[f64], a: &[Vec<f64>], emissions: &[Vec<f64>]) -> Vec<f64> {
+        let n = initial.len();
+        let t_len = emissions.len();
+        let mut result = vec![0.0; n];
+        let paths = n.pow(t_len as u32);
+        for code in 0..paths {
+            let path: Vec<usize> = (0..t_len).map(|t| (code / n.pow(t as u32)) % n).collect();
+            let mut p = initial[path[0]] * emissions[0][path[0]].exp();
+            for t in 1..t_len {
+                p *= a[path[t - 1]][path[t]] * emissions[t][path[t]].exp();
+            }
+            result[path[t_len - 1]] += p;
+        }
+        let total: f64 = result.iter().sum();
+        result.iter().map(|r| r / total).collect()
+    }
+
+    #[test]
+    fn matches_brute_force_on_a_tiny_hmm() {
+        let a = vec![vec![0.7, 0.2, 0.1], vec![0.3, 0.4, 0.3], vec![0.0, 0.5, 0.5]];
+        let emissions = vec![vec![-1.0, -2.0, -0.5], vec![-3.0, -0.2, -1.0], vec![-0.1, -4.0, -2.0], vec![-2.0, -2.0, -0.3]];
+        let mut filter = ForwardFilter::new(3);
+        let dense = Dense(a.clone());
+        for (t, e) in emissions.iter().enumerate() {
+            let transition: Option<&dyn Transition> = if t == 0 { None } else { Some(&dense) };
+            filter.step(transition, e).unwrap();
+            let expected = enumerate(&[1.0 / 3.0; 3], &a, &emissions[..=t]);
+            for j in 0..3 {
+                assert_relative_eq!(filter.posterior()[j], expected[j], epsilon = 1e-12);
+            }
+        }
+    }
+
+    #[test]
+    fn survives_likelihoods_hundreds_of_nats_apart_for_hours() {
+        let a = vec![vec![0.9, 0.1], vec![0.1, 0.9]];
+        let dense = Dense(a);
+        let mut filter = ForwardFilter::new(2);
+        // 24 h of 1.5 s epochs with 100-transmitter-like log-likelihoods.
+        for t in 0..57_600 {
+            let e = if t % 2 == 0 { [-1000.0, -1400.0] } else { [-1250.0, -1000.0] };
+            let evidence = filter.step(Some(&dense), &e).unwrap();
+            assert!(evidence.is_finite());
+        }
+        let p = filter.posterior();
+        assert_relative_eq!(p[0] + p[1], 1.0, epsilon = 1e-12);
+        assert!(p.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn degenerate_observation_leaves_the_filter_unchanged() {
+        let mut filter = ForwardFilter::new(2);
+        filter.step(None, &[-1.0, -2.0]).unwrap();
+        let before = filter.posterior().to_vec();
+        assert_eq!(filter.step(None, &[f64::NEG_INFINITY, f64::NAN]), Err(FilterError::Degenerate));
+        assert_eq!(filter.posterior(), &before[..]);
+        assert!(matches!(filter.step(None, &[0.0]), Err(FilterError::Length { .. })));
+    }
+
+    proptest! {
+        #[test]
+        fn posterior_is_a_distribution(emissions in proptest::collection::vec(proptest::collection::vec(-2000.0f64..0.0, 4), 1..30)) {
+            let a = vec![vec![0.25; 4]; 4];
+            let dense = Dense(a);
+            let mut filter = ForwardFilter::new(4);
+            for e in &emissions {
+                filter.step(Some(&dense), e).unwrap();
+                let sum: f64 = filter.posterior().iter().sum();
+                prop_assert!((sum - 1.0).abs() < 1e-12);
+                prop_assert!(filter.posterior().iter().all(|p| p.is_finite() && *p >= 0.0));
+            }
+        }
+    }
+}

@@ -1,0 +1,280 @@
+//! The radio map: every state's fingerprint, stored by transmitter so that a scan costs
+//! O(states + fingerprint entries of the transmitters heard), not O(states × transmitters).
+
+use super::{Gaussian, RssiModel, Scan, TransmitterId};
+use std::collections::HashMap;
+
+/// One transmitter's model at one state.
+#[derive(Clone, Copy, Debug)]
+struct Entry {
+    state: u32,
+    model: Gaussian,
+    /// ln p(absent | state), cached.
+    ln_absent: f64,
+}
+
+/// Fingerprints of every state, ready to score scans (Hoang eqs. 9-10).
+///
+/// Every transmitter of the map enters every state's likelihood: heard ones through their
+/// reading, the others as "below the clip level" (eq. 10). A state with no model of a
+/// transmitter uses the map's `unheard` model for it (Hoang §3: μ ≪ c, average σ).
+#[derive(Clone, Debug)]
+pub struct RadioMap {
+    model: RssiModel,
+    clip_dbm: f64,
+    unheard: Gaussian,
+    unheard_ln_absent: f64,
+    ids: Vec<TransmitterId>,
+    index: HashMap<TransmitterId, u32>,
+    /// Entries of transmitter `t` are `entries[starts[t]..starts[t + 1]]`.
+    starts: Vec<usize>,
+    entries: Vec<Entry>,
+    /// Per state: ln p(every transmitter absent | state).
+    all_absent: Vec<f64>,
+}
+
+/// A scan matched against the map: what the likelihood uses, and what was left out.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct ResolvedScan {
+    /// (transmitter index, RSSI dBm), one per transmitter.
+    pub observations: Vec<(u32, f64)>,
+    /// Readings of transmitters the map does not know (no information about any state).
+    pub unknown: usize,
+    /// Readings of a transmitter already in the scan; the freshest, then strongest, is kept.
+    pub duplicates: usize,
+    /// Readings older than the age limit.
+    pub stale: usize,
+}
+
+impl RadioMap {
+    /// Builds a map over `state_count` states from `(state, transmitter, model)` triples.
+    ///
+    /// Fails, with a message, on a duplicate transmitter id, an index out of range or a
+    /// transmitter modelled twice at one state.
+    pub fn new(
+        model: RssiModel,
+        clip_dbm: f64,
+        unheard: Gaussian,
+        ids: Vec<TransmitterId>,
+        state_count: usize,
+        fingerprints: impl IntoIterator<Item = (u32, u32, Gaussian)>,
+    ) -> Result<Self, String> {
+        let mut index = HashMap::with_capacity(ids.len());
+        for (i, id) in ids.iter().enumerate() {
+            if index.insert(id.clone(), i as u32).is_some() {
+                return Err(format!("transmitter {id} is listed twice"));
+            }
+        }
+        let mut triples: Vec<(u32, u32, Gaussian)> = fingerprints.into_iter().collect();
+        triples.sort_by_key(|&(state, tx, _)| (tx, state));
+        let mut starts = vec![0usize; ids.len() + 1];
+        let mut entries = Vec::with_capacity(triples.len());
+        let unheard_ln_absent = model.ln_absent(&unheard, clip_dbm);
+        let mut all_absent = vec![unheard_ln_absent * ids.len() as f64; state_count];
+        for (k, &(state, tx, g)) in triples.iter().enumerate() {
+            if state as usize >= state_count || tx as usize >= ids.len() {
+                return Err(format!("fingerprint entry (state {state}, transmitter {tx}) is out of range"));
+            }
+            if k > 0 && triples[k - 1].0 == state && triples[k - 1].1 == tx {
+                return Err(format!("state {state} models transmitter {} twice", ids[tx as usize]));
+            }
+            let ln_absent = model.ln_absent(&g, clip_dbm);
+            all_absent[state as usize] += ln_absent - unheard_ln_absent;
+            starts[tx as usize + 1] += 1;
+            entries.push(Entry { state, model: g, ln_absent });
+        }
+        for t in 0..ids.len() {
+            starts[t + 1] += starts[t];
+        }
+        Ok(Self {
+            model,
+            clip_dbm,
+            unheard,
+            unheard_ln_absent,
+            ids,
+            index,
+            starts,
+            entries,
+            all_absent,
+        })
+    }
+
+    /// The likelihood model.
+    pub fn model(&self) -> RssiModel {
+        self.model
+    }
+
+    /// Receiver clip level c, dBm.
+    pub fn clip_dbm(&self) -> f64 {
+        self.clip_dbm
+    }
+
+    /// The model of a transmitter at a state that never heard it.
+    pub fn unheard(&self) -> Gaussian {
+        self.unheard
+    }
+
+    /// Transmitters, by index.
+    pub fn transmitters(&self) -> &[TransmitterId] {
+        &self.ids
+    }
+
+    /// Number of states the map covers.
+    pub fn state_count(&self) -> usize {
+        self.all_absent.len()
+    }
+
+    /// Every `(state, transmitter, model)` of the map, by transmitter.
+    pub fn fingerprints(&self) -> impl Iterator<Item = (u32, u32, Gaussian)> + '_ {
+        (0..self.ids.len()).flat_map(move |t| {
+            self.entries[self.starts[t]..self.starts[t + 1]]
+                .iter()
+                .map(move |e| (e.state, t as u32, e.model))
+        })
+    }
+
+    /// Matches a scan's readings to the map's transmitters, dropping (and counting) unknown,
+    /// duplicate and, with `max_age_ns`, stale readings. RSSI values must already be finite.
+    pub fn resolve(&self, scan: &Scan, max_age_ns: Option<u64>) -> ResolvedScan {
+        let mut resolved = ResolvedScan::default();
+        let mut found: Vec<(u32, u64, f64)> = Vec::with_capacity(scan.readings.len());
+        for reading in &scan.readings {
+            if max_age_ns.is_some_and(|max| reading.age_ns > max) {
+                resolved.stale += 1;
+                continue;
+            }
+            match self.index.get(&reading.transmitter) {
+                Some(&t) => found.push((t, reading.age_ns, reading.rssi_dbm)),
+                None => resolved.unknown += 1,
+            }
+        }
+        // Freshest first, then strongest, so dedup keeps that one.
+        found.sort_by(|a, b| a.0.cmp(&b.0).then(a.1.cmp(&b.1)).then(b.2.total_cmp(&a.2)));
+        let before = found.len();
+        found.dedup_by_key(|r| r.0);
+        resolved.duplicates = before - found.len();
+        resolved.observations = found.into_iter().map(|(t, _, rssi)| (t, rssi)).collect();
+        resolved
+    }
+
+    /// ln p(scan | state) for every state (Hoang eqs. 9-10), written into `out`.
+    ///
+    /// `out.len()` must equal [`state_count`](Self::state_count).
+    pub fn ln_likelihood(&self, observations: &[(u32, f64)], out: &mut [f64]) {
+        debug_assert_eq!(out.len(), self.all_absent.len());
+        out.copy_from_slice(&self.all_absent);
+        let mut shared = 0.0;
+        for &(t, rssi) in observations {
+            // What hearing `rssi` changes for a state using the unheard model...
+            let unheard_delta = self.model.ln_heard(&self.unheard, rssi, self.clip_dbm) - self.unheard_ln_absent;
+            shared += unheard_delta;
+            // ...and, for states that model this transmitter, the difference to their own.
+            let (from, to) = (self.starts[t as usize], self.starts[t as usize + 1]);
+            for e in &self.entries[from..to] {
+                let delta = self.model.ln_heard(&e.model, rssi, self.clip_dbm) - e.ln_absent;
+                out[e.state as usize] += delta - unheard_delta;
+            }
+        }
+        for v in out.iter_mut() {
+            *v += shared;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::radio::Reading;
+    use approx::assert_relative_eq;
+
+    fn wifi(i: u8) -> TransmitterId {
+        TransmitterId::wifi(&format!("00:00:00:00:00:{i:02x}")).unwrap()
+    }
+
+    fn g(mean: f64, std: f64) -> Gaussian {
+        Gaussian::new(mean, std).unwrap()
+    }
+
+    fn small_map(model: RssiModel) -> RadioMap {
+        // Two states, three transmitters; state 1 never heard transmitter 2.
+        let fingerprints = vec![
+            (0, 0, g(-60.0, 4.0)),
+            (0, 1, g(-80.0, 5.0)),
+            (0, 2, g(-95.0, 6.0)),
+            (1, 0, g(-75.0, 3.0)),
+            (1, 1, g(-65.0, 4.0)),
+        ];
+        RadioMap::new(model, -100.0, g(-115.0, 5.0), vec![wifi(0), wifi(1), wifi(2)], 2, fingerprints).unwrap()
+    }
+
+    /// The dense product of eq. 9 over every transmitter, as a reference.
+    fn brute_force(map: &RadioMap, heard: &[(u32, f64)], state: u32) -> f64 {
+        let model_of = |t: u32| {
+            map.fingerprints()
+                .find(|&(s, tx, _)| s == state && tx == t)
+                .map_or(map.unheard(), |(_, _, g)| g)
+        };
+        (0..map.transmitters().len() as u32)
+            .map(|t| match heard.iter().find(|h| h.0 == t) {
+                Some(&(_, rssi)) => map.model().ln_heard(&model_of(t), rssi, -100.0),
+                None => map.model().ln_absent(&model_of(t), -100.0),
+            })
+            .sum()
+    }
+
+    #[test]
+    fn sparse_likelihood_equals_dense_product() {
+        for model in [RssiModel::CensoredGaussian, RssiModel::NaiveGaussian] {
+            let map = small_map(model);
+            for heard in [vec![(0, -62.0), (1, -79.0)], vec![(2, -92.0)], vec![(0, -100.0), (2, -99.0)], vec![]] {
+                let mut out = vec![0.0; 2];
+                map.ln_likelihood(&heard, &mut out);
+                for s in 0..2 {
+                    assert_relative_eq!(out[s as usize], brute_force(&map, &heard, s), epsilon = 1e-9);
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn likelihood_by_hand() {
+        // State 0 hears transmitter 0 at -60 exactly at its mean; 1 and 2 are absent.
+        let map = small_map(RssiModel::CensoredGaussian);
+        let mut out = vec![0.0; 2];
+        map.ln_likelihood(&[(0, -60.0)], &mut out);
+        let ln_pdf_at_mean = -(4.0 * (2.0 * std::f64::consts::PI).sqrt()).ln();
+        // Transmitter 1 below -100 with μ -80, σ 5: Φ(-4); transmitter 2 with μ -95, σ 6: Φ(-5/6).
+        let expected = ln_pdf_at_mean + 3.167_124_183_311_992e-5f64.ln() + 0.202_328_380_963_643_03f64.ln();
+        assert_relative_eq!(out[0], expected, epsilon = 1e-9);
+    }
+
+    #[test]
+    fn resolve_drops_unknown_duplicate_and_stale() {
+        let map = small_map(RssiModel::CensoredGaussian);
+        let reading = |t: u8, rssi: f64, age_ns: u64| Reading {
+            transmitter: wifi(t),
+            rssi_dbm: rssi,
+            age_ns,
+        };
+        let scan = Scan {
+            timestamp_ns: 1,
+            readings: vec![
+                reading(0, -70.0, 5),
+                reading(0, -65.0, 0),
+                reading(9, -50.0, 0),
+                reading(1, -80.0, 10_000_000_000),
+            ],
+        };
+        let r = map.resolve(&scan, Some(1_000_000_000));
+        assert_eq!(r.observations, vec![(0, -65.0)]);
+        assert_eq!((r.unknown, r.duplicates, r.stale), (1, 1, 1));
+    }
+
+    #[test]
+    fn rejects_bad_tables() {
+        let dup = RadioMap::new(RssiModel::CensoredGaussian, -100.0, g(-115.0, 5.0), vec![wifi(0), wifi(0)], 1, []);
+        assert!(dup.unwrap_err().contains("twice"));
+        let oob = RadioMap::new(RssiModel::CensoredGaussian, -100.0, g(-115.0, 5.0), vec![wifi(0)], 1, [(3, 0, g(-1.0, 1.0))]);
+        assert!(oob.unwrap_err().contains("out of range"));
+    }
+}

@@ -1,0 +1,156 @@
+//! Radio: transmitter identities, scans as the app delivers them, RSSI models (Hoang §3) and the
+//! radio map that turns a scan into one log-likelihood per state.
+
+mod gaussian;
+mod map;
+
+pub use gaussian::{
+    fit_censored, fit_naive, ln_std_normal_cdf, ln_std_normal_pdf, lower_tail_hazard, unheard_model,
+    CensoredFit, FitOptions, Gaussian, RssiModel,
+};
+pub use map::{RadioMap, ResolvedScan};
+
+use serde::{Deserialize, Serialize};
+use std::fmt;
+
+/// A radio transmitter the phone can hear: a WiFi access point or a BLE beacon.
+///
+/// Identifiers are normalised on construction (lower-case hex, `:`-separated MAC, hyphenated
+/// UUID) so that the same transmitter reported by Android and iOS compares equal.
+#[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case", try_from = "TransmitterIdRaw")]
+pub enum TransmitterId {
+    /// A WiFi access point by BSSID.
+    Wifi {
+        /// `aa:bb:cc:dd:ee:ff`.
+        bssid: String,
+    },
+    /// An iBeacon-style BLE beacon.
+    Ble {
+        /// `xxxxxxxx-xxxx-xxxx-xxxx-xxxxxxxxxxxx`.
+        uuid: String,
+        /// Beacon major number.
+        major: u16,
+        /// Beacon minor number.
+        minor: u16,
+    },
+}
+
+/// The serde shape before normalisation, so a site file with `"AA-BB-..."` loads the same
+/// transmitter as a scan with `"aa:bb:..."`.
+#[derive(Deserialize)]
+#[serde(rename_all = "snake_case")]
+enum TransmitterIdRaw {
+    Wifi { bssid: String },
+    Ble { uuid: String, major: u16, minor: u16 },
+}
+
+impl TryFrom<TransmitterIdRaw> for TransmitterId {
+    type Error = String;
+    fn try_from(raw: TransmitterIdRaw) -> Result<Self, String> {
+        match raw {
+            TransmitterIdRaw::Wifi { bssid } => TransmitterId::wifi(&bssid),
+            TransmitterIdRaw::Ble { uuid, major, minor } => TransmitterId::ble(&uuid, major, minor),
+        }
+    }
+}
+
+/// `text` without `separators`, lower-cased.
+fn hex_digits(text: &str, separators: &[char]) -> String {
+    text.chars()
+        .filter(|c| !separators.contains(c))
+        .flat_map(char::to_lowercase)
+        .collect()
+}
+
+impl TransmitterId {
+    /// A WiFi access point from its BSSID in any common notation (`AA:BB:..`, `aa-bb-..`,
+    /// `aabb..`).
+    pub fn wifi(bssid: &str) -> Result<Self, String> {
+        let hex = hex_digits(bssid.trim(), &[':', '-', '.']);
+        if hex.len() != 12 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
+            return Err(format!("`{bssid}` is not a BSSID (six hex bytes)"));
+        }
+        let octets: Vec<&str> = (0..6).map(|i| &hex[2 * i..2 * i + 2]).collect();
+        Ok(TransmitterId::Wifi {
+            bssid: octets.join(":"),
+        })
+    }
+
+    /// A BLE beacon from its proximity UUID (with or without hyphens), major and minor.
+    pub fn ble(uuid: &str, major: u16, minor: u16) -> Result<Self, String> {
+        let hex = hex_digits(uuid.trim(), &['-']);
+        if hex.len() != 32 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
+            return Err(format!("`{uuid}` is not a beacon UUID (32 hex digits)"));
+        }
+        let uuid = format!(
+            "{}-{}-{}-{}-{}",
+            &hex[0..8],
+            &hex[8..12],
+            &hex[12..16],
+            &hex[16..20],
+            &hex[20..32]
+        );
+        Ok(TransmitterId::Ble { uuid, major, minor })
+    }
+}
+
+impl fmt::Display for TransmitterId {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            TransmitterId::Wifi { bssid } => write!(f, "wifi {bssid}"),
+            TransmitterId::Ble { uuid, major, minor } => write!(f, "ble {uuid} {major}/{minor}"),
+        }
+    }
+}
+
+/// One transmitter heard in a scan.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Reading {
+    /// Who was heard.
+    pub transmitter: TransmitterId,
+    /// Received signal strength, dBm. Values at or below the site's clip level mean "below
+    /// the receiver's sensitivity".
+    pub rssi_dbm: f64,
+    /// How long before the scan's timestamp this reading was last measured, ns. Android
+    /// re-reports cached access points; 0 for a fresh reading.
+    #[serde(default)]
+    pub age_ns: u64,
+}
+
+/// A WiFi or BLE scan: everything heard at one moment.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Scan {
+    /// Monotonic time of the scan, ns, on the same clock as every other input.
+    pub timestamp_ns: u64,
+    /// The transmitters heard.
+    pub readings: Vec<Reading>,
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ids_normalise() {
+        assert_eq!(
+            TransmitterId::wifi("AA-BB-CC-0D-0E-0F").unwrap(),
+            TransmitterId::wifi("aa:bb:cc:0d:0e:0f").unwrap()
+        );
+        assert_eq!(TransmitterId::wifi("aabbcc0d0e0f").unwrap().to_string(), "wifi aa:bb:cc:0d:0e:0f");
+        assert!(TransmitterId::wifi("aa:bb:cc").is_err());
+        assert!(TransmitterId::wifi("zz:bb:cc:dd:ee:ff").is_err());
+        let ble = TransmitterId::ble("FDA50693A4E24FB1AFCFC6EB07647825", 10, 7).unwrap();
+        assert_eq!(ble, TransmitterId::ble("fda50693-a4e2-4fb1-afcf-c6eb07647825", 10, 7).unwrap());
+        assert!(TransmitterId::ble("fda50693", 1, 1).is_err());
+    }
+
+    #[test]
+    fn ids_round_trip_through_json_and_normalise_on_load() {
+        let id: TransmitterId = serde_json::from_str(r#"{"wifi":{"bssid":"AA:BB:CC:DD:EE:FF"}}"#).unwrap();
+        assert_eq!(id, TransmitterId::wifi("aa:bb:cc:dd:ee:ff").unwrap());
+        let text = serde_json::to_string(&id).unwrap();
+        assert_eq!(serde_json::from_str::<TransmitterId>(&text).unwrap(), id);
+        assert!(serde_json::from_str::<TransmitterId>(r#"{"wifi":{"bssid":"nope"}}"#).is_err());
+    }
+}

@@ -1,0 +1,156 @@
+//! Building a site from surveyed places and their training scans: fits every transmitter's
+//! RSSI model at every state (Hoang §3) and derives the map's "unheard" model.
+
+use super::{Edge, Floor, Site, SiteError, State, StateKind};
+use crate::radio::{unheard_model, FitOptions, Gaussian, RadioMap, RssiModel, Scan, TransmitterId};
+use nalgebra::Point2;
+use std::collections::{BTreeMap, BTreeSet};
+
+/// A scan taken during the survey at a state.
+pub type TrainingScan = Scan;
+
+/// Collects floors, states with their training scans, and walkable edges; [`build`](Self::build)
+/// fits the radio map.
+#[derive(Clone, Debug, Default)]
+pub struct SiteBuilder {
+    name: String,
+    floors: Vec<Floor>,
+    states: Vec<(State, Vec<TrainingScan>)>,
+    edges: Vec<(u32, u32, Option<f64>)>,
+}
+
+impl SiteBuilder {
+    /// An empty site called `name`.
+    pub fn new(name: &str) -> Self {
+        Self {
+            name: name.to_owned(),
+            ..Self::default()
+        }
+    }
+
+    /// Adds a floor; returns its index.
+    pub fn floor(&mut self, name: &str, elevation_m: f64) -> usize {
+        self.floors.push(Floor {
+            name: name.to_owned(),
+            elevation_m,
+        });
+        self.floors.len() - 1
+    }
+
+    /// Adds a surveyed state with the scans recorded there; returns its id (= index).
+    pub fn state(&mut self, floor: usize, position: Point2<f64>, scans: Vec<TrainingScan>) -> u32 {
+        let id = self.states.len() as u32;
+        let training_scans = scans.len() as u32;
+        self.states.push((
+            State {
+                id,
+                floor,
+                position,
+                kind: StateKind::Surveyed,
+                training_scans,
+            },
+            scans,
+        ));
+        id
+    }
+
+    /// Adds a walkable edge; `length_m` `None` means the straight line (same floor only).
+    pub fn edge(&mut self, a: u32, b: u32, length_m: Option<f64>) {
+        self.edges.push((a, b, length_m));
+    }
+
+    /// Fits every state's fingerprints with `model` and assembles the site.
+    pub fn build(self, options: BuildOptions) -> Result<Site, SiteError> {
+        if self.states.is_empty() {
+            return Err(SiteError::Invalid {
+                path: "states".into(),
+                message: "a site needs at least one state".into(),
+            });
+        }
+        let clip = options.fit.clip_dbm;
+        let ids: Vec<TransmitterId> = self
+            .states
+            .iter()
+            .flat_map(|(_, scans)| scans.iter().flat_map(|s| s.readings.iter().map(|r| r.transmitter.clone())))
+            .collect::<BTreeSet<_>>()
+            .into_iter()
+            .collect();
+        let index: BTreeMap<&TransmitterId, u32> = ids.iter().enumerate().map(|(i, id)| (id, i as u32)).collect();
+        let mut triples = Vec::new();
+        for (s, (_, scans)) in self.states.iter().enumerate() {
+            let mut samples: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
+            for (k, scan) in scans.iter().enumerate() {
+                for r in scan.readings.iter().filter(|r| r.rssi_dbm.is_finite()) {
+                    let column = samples.entry(index[&r.transmitter]).or_insert_with(|| vec![clip; scans.len()]);
+                    // Two readings of one transmitter in a scan: keep the stronger.
+                    column[k] = column[k].max(r.rssi_dbm.max(clip));
+                }
+            }
+            for (tx, column) in samples {
+                if let Some(g) = options.model.fit(&column, &options.fit) {
+                    triples.push((s as u32, tx, g));
+                }
+            }
+        }
+        let average_std = if triples.is_empty() {
+            options.fit.min_std_db
+        } else {
+            triples.iter().map(|t| t.2.std_db).sum::<f64>() / triples.len() as f64
+        };
+        let mut counts: Vec<u32> = self.states.iter().map(|(s, _)| s.training_scans).filter(|&n| n > 0).collect();
+        counts.sort_unstable();
+        let typical_scans = counts.get(counts.len() / 2).copied().unwrap_or(1);
+        let unheard = match options.model {
+            RssiModel::CensoredGaussian => unheard_model(clip, average_std, typical_scans),
+            // Disregarding censoring, a never-heard transmitter is "always at c".
+            RssiModel::NaiveGaussian => Gaussian::new(clip, average_std),
+        }
+        .ok_or_else(|| SiteError::Invalid {
+            path: "radio.unheard".into(),
+            message: "clip level and spreads must be finite".into(),
+        })?;
+        let states: Vec<State> = self.states.into_iter().map(|(s, _)| s).collect();
+        for (i, s) in states.iter().enumerate() {
+            if s.floor >= self.floors.len() || !(s.position.x.is_finite() && s.position.y.is_finite()) {
+                return Err(SiteError::Invalid {
+                    path: format!("states[{i}]"),
+                    message: format!("floor {} must exist and the position must be finite", s.floor),
+                });
+            }
+        }
+        let mut edges = Vec::with_capacity(self.edges.len());
+        for (k, (a, b, length)) in self.edges.into_iter().enumerate() {
+            let (sa, sb) = match (states.get(a as usize), states.get(b as usize)) {
+                (Some(sa), Some(sb)) if a != b => (sa, sb),
+                _ => {
+                    return Err(SiteError::Invalid {
+                        path: format!("edges[{k}]"),
+                        message: format!("edge {a}-{b} does not join two existing states"),
+                    })
+                }
+            };
+            let length_m = length.unwrap_or_else(|| nalgebra::distance(&sa.position, &sb.position));
+            if !(length_m.is_finite() && length_m > 0.0) {
+                return Err(SiteError::Invalid {
+                    path: format!("edges[{k}].length_m"),
+                    message: format!("must be finite and > 0 (got {length_m})"),
+                });
+            }
+            edges.push(Edge { a, b, length_m });
+        }
+        let map = RadioMap::new(options.model, clip, unheard, ids, states.len(), triples).map_err(|m| SiteError::Invalid {
+            path: "radio".into(),
+            message: m,
+        })?;
+        Ok(Site::from_parts(self.name, self.floors, states, edges, map))
+    }
+}
+
+/// How [`SiteBuilder::build`] fits fingerprints.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BuildOptions {
+    /// Censored EM (Hoang §3) or the naive fit.
+    pub model: RssiModel,
+    /// Clip level, σ floor and EM stopping rule.
+    pub fit: FitOptions,
+}

@@ -1,0 +1,452 @@
+//! Site file v1: serde JSON with a `format_version`. Loading checks everything an engine relies
+//! on and names what is wrong and where; it never panics.
+
+use super::{Edge, Floor, Site, State, StateKind};
+use crate::radio::{Gaussian, RadioMap, RssiModel, TransmitterId};
+use nalgebra::Point2;
+use serde::{Deserialize, Serialize};
+use std::collections::HashMap;
+use std::path::Path;
+
+/// The site-file format this build reads and writes.
+pub const FORMAT_VERSION: u32 = 1;
+
+/// Why a site file could not be loaded.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum SiteError {
+    /// The file could not be read.
+    #[error("cannot read site file {path}: {message}")]
+    Io {
+        /// The path given.
+        path: String,
+        /// The operating system's reason.
+        message: String,
+    },
+    /// The JSON ends early: a truncated download or copy.
+    #[error("site file is truncated (JSON ends at line {line}, column {column})")]
+    Truncated {
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+    },
+    /// Not JSON at all at some point.
+    #[error("site file is not valid JSON at line {line}, column {column}: {message}")]
+    Syntax {
+        /// 1-based line.
+        line: usize,
+        /// 1-based column.
+        column: usize,
+        /// serde_json's description.
+        message: String,
+    },
+    /// Written by a newer (or unknown) version of the format.
+    #[error("site file has format_version {found}; this build of Waymark reads version {supported}")]
+    UnsupportedVersion {
+        /// The version in the file.
+        found: u64,
+        /// The version this build reads.
+        supported: u32,
+    },
+    /// Valid JSON, but a field is missing, of the wrong type, or its value is impossible.
+    #[error("site file: {path}: {message}")]
+    Invalid {
+        /// Where, as a JSON path (`states[12].fingerprint[3].std_db`).
+        path: String,
+        /// What is wrong.
+        message: String,
+    },
+}
+
+fn invalid(path: impl Into<String>, message: impl Into<String>) -> SiteError {
+    SiteError::Invalid {
+        path: path.into(),
+        message: message.into(),
+    }
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct SiteFile {
+    format_version: u32,
+    name: String,
+    floors: Vec<FloorFile>,
+    radio: RadioFile,
+    states: Vec<StateFile>,
+    #[serde(default)]
+    edges: Vec<EdgeFile>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FloorFile {
+    name: String,
+    #[serde(default)]
+    elevation_m: f64,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RadioFile {
+    #[serde(default)]
+    model: RssiModel,
+    clip_dbm: f64,
+    unheard: GaussianFile,
+    transmitters: Vec<TransmitterId>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct GaussianFile {
+    mean_dbm: f64,
+    std_db: f64,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct StateFile {
+    id: u32,
+    floor: usize,
+    x: f64,
+    y: f64,
+    #[serde(default)]
+    kind: StateKind,
+    #[serde(default)]
+    training_scans: u32,
+    #[serde(default)]
+    fingerprint: Vec<FingerprintFile>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct FingerprintFile {
+    /// Index into `radio.transmitters`.
+    tx: usize,
+    mean_dbm: f64,
+    std_db: f64,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct EdgeFile {
+    /// State id.
+    from: u32,
+    /// State id.
+    to: u32,
+    /// Walking length; required between floors, else the straight-line distance.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    length_m: Option<f64>,
+}
+
+fn json_error(e: &serde_json::Error) -> SiteError {
+    let (line, column) = (e.line(), e.column());
+    match e.classify() {
+        serde_json::error::Category::Eof => SiteError::Truncated { line, column },
+        _ => SiteError::Syntax {
+            line,
+            column,
+            message: e.to_string(),
+        },
+    }
+}
+
+fn gaussian(path: &str, g: &GaussianFile) -> Result<Gaussian, SiteError> {
+    Gaussian::new(g.mean_dbm, g.std_db).ok_or_else(|| {
+        invalid(
+            path,
+            format!(
+                "mean_dbm must be finite and std_db finite and > 0 (got {}, {})",
+                g.mean_dbm, g.std_db
+            ),
+        )
+    })
+}
+
+impl Site {
+    /// Loads a site file from JSON bytes.
+    pub fn from_json(bytes: &[u8]) -> Result<Site, SiteError> {
+        #[derive(Deserialize)]
+        struct Version {
+            format_version: Option<serde_json::Value>,
+        }
+        let version: Version = serde_json::from_slice(bytes).map_err(|e| json_error(&e))?;
+        match version.format_version {
+            None => return Err(invalid("format_version", "missing: is this a Waymark site file?")),
+            Some(v) => match v.as_u64() {
+                Some(found) if found == u64::from(FORMAT_VERSION) => {}
+                Some(found) => {
+                    return Err(SiteError::UnsupportedVersion {
+                        found,
+                        supported: FORMAT_VERSION,
+                    })
+                }
+                None => return Err(invalid("format_version", format!("expected an integer, found {v}"))),
+            },
+        }
+        let mut de = serde_json::Deserializer::from_slice(bytes);
+        let file: SiteFile = serde_path_to_error::deserialize(&mut de).map_err(|e| {
+            let inner = e.inner();
+            match inner.classify() {
+                serde_json::error::Category::Data => invalid(e.path().to_string(), inner.to_string()),
+                _ => json_error(inner),
+            }
+        })?;
+        Site::from_file(file)
+    }
+
+    /// Loads a site file from disk.
+    pub fn load(path: impl AsRef<Path>) -> Result<Site, SiteError> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path).map_err(|e| SiteError::Io {
+            path: path.display().to_string(),
+            message: e.to_string(),
+        })?;
+        Site::from_json(&bytes)
+    }
+
+    /// The site as site-file JSON (current format version).
+    pub fn to_json(&self) -> String {
+        let mut fingerprints: Vec<Vec<FingerprintFile>> = (0..self.states.len()).map(|_| Vec::new()).collect();
+        for (state, tx, g) in self.radio.fingerprints() {
+            fingerprints[state as usize].push(FingerprintFile {
+                tx: tx as usize,
+                mean_dbm: g.mean_dbm,
+                std_db: g.std_db,
+            });
+        }
+        let unheard = self.radio.unheard();
+        let file = SiteFile {
+            format_version: FORMAT_VERSION,
+            name: self.name.clone(),
+            floors: self
+                .floors
+                .iter()
+                .map(|f| FloorFile {
+                    name: f.name.clone(),
+                    elevation_m: f.elevation_m,
+                })
+                .collect(),
+            radio: RadioFile {
+                model: self.radio.model(),
+                clip_dbm: self.radio.clip_dbm(),
+                unheard: GaussianFile {
+                    mean_dbm: unheard.mean_dbm,
+                    std_db: unheard.std_db,
+                },
+                transmitters: self.radio.transmitters().to_vec(),
+            },
+            states: self
+                .states
+                .iter()
+                .zip(fingerprints)
+                .map(|(s, fingerprint)| StateFile {
+                    id: s.id,
+                    floor: s.floor,
+                    x: s.position.x,
+                    y: s.position.y,
+                    kind: s.kind,
+                    training_scans: s.training_scans,
+                    fingerprint,
+                })
+                .collect(),
+            edges: self
+                .edges
+                .iter()
+                .map(|e| {
+                    let (a, b) = (&self.states[e.a as usize], &self.states[e.b as usize]);
+                    let straight = a.floor == b.floor && (nalgebra::distance(&a.position, &b.position) - e.length_m).abs() < 1e-9;
+                    EdgeFile {
+                        from: a.id,
+                        to: b.id,
+                        length_m: (!straight).then_some(e.length_m),
+                    }
+                })
+                .collect(),
+        };
+        serde_json::to_string(&file).expect("a site serialises: every float in it is finite")
+    }
+
+    fn from_file(file: SiteFile) -> Result<Site, SiteError> {
+        if file.floors.is_empty() {
+            return Err(invalid("floors", "a site needs at least one floor"));
+        }
+        for (i, f) in file.floors.iter().enumerate() {
+            if !f.elevation_m.is_finite() {
+                return Err(invalid(format!("floors[{i}].elevation_m"), "must be finite"));
+            }
+        }
+        if file.states.is_empty() {
+            return Err(invalid("states", "a site needs at least one state"));
+        }
+        if u32::try_from(file.states.len()).is_err() {
+            return Err(invalid("states", "more states than a u32 can index"));
+        }
+        let radio = &file.radio;
+        if !(radio.clip_dbm.is_finite()) {
+            return Err(invalid("radio.clip_dbm", "must be finite"));
+        }
+        let unheard = gaussian("radio.unheard", &radio.unheard)?;
+        let tx_count = radio.transmitters.len();
+        let mut ids = HashMap::with_capacity(file.states.len());
+        let mut states = Vec::with_capacity(file.states.len());
+        let mut triples = Vec::new();
+        for (i, s) in file.states.iter().enumerate() {
+            let at = |field: &str| format!("states[{i}].{field}");
+            if let Some(first) = ids.insert(s.id, i) {
+                return Err(invalid(at("id"), format!("id {} is already used by states[{first}]", s.id)));
+            }
+            if s.floor >= file.floors.len() {
+                return Err(invalid(
+                    at("floor"),
+                    format!("floor {} does not exist (the site has {} floors)", s.floor, file.floors.len()),
+                ));
+            }
+            if !(s.x.is_finite() && s.y.is_finite()) {
+                return Err(invalid(at("x"), "coordinates must be finite"));
+            }
+            let mut seen = std::collections::HashSet::new();
+            for (k, f) in s.fingerprint.iter().enumerate() {
+                let path = format!("states[{i}].fingerprint[{k}]");
+                if f.tx >= tx_count {
+                    return Err(invalid(
+                        format!("{path}.tx"),
+                        format!("transmitter {} does not exist (radio.transmitters has {tx_count})", f.tx),
+                    ));
+                }
+                if !seen.insert(f.tx) {
+                    return Err(invalid(format!("{path}.tx"), format!("transmitter {} is modelled twice", f.tx)));
+                }
+                let g = gaussian(&path, &GaussianFile {
+                    mean_dbm: f.mean_dbm,
+                    std_db: f.std_db,
+                })?;
+                triples.push((i as u32, f.tx as u32, g));
+            }
+            states.push(State {
+                id: s.id,
+                floor: s.floor,
+                position: Point2::new(s.x, s.y),
+                kind: s.kind,
+                training_scans: s.training_scans,
+            });
+        }
+        let mut edges = Vec::with_capacity(file.edges.len());
+        for (k, e) in file.edges.iter().enumerate() {
+            let at = |field: &str| format!("edges[{k}].{field}");
+            let lookup = |id: u32, field: &str| {
+                ids.get(&id)
+                    .copied()
+                    .ok_or_else(|| invalid(at(field), format!("no state has id {id}")))
+            };
+            let (a, b) = (lookup(e.from, "from")?, lookup(e.to, "to")?);
+            if a == b {
+                return Err(invalid(at("to"), "an edge must join two different states"));
+            }
+            let (sa, sb) = (&states[a], &states[b]);
+            let length_m = match e.length_m {
+                Some(l) if l.is_finite() && l > 0.0 => l,
+                Some(l) => return Err(invalid(at("length_m"), format!("must be finite and > 0 (got {l})"))),
+                None if sa.floor != sb.floor => {
+                    return Err(invalid(at("length_m"), "required for an edge between floors (stairs, lift)"))
+                }
+                None => {
+                    let d = nalgebra::distance(&sa.position, &sb.position);
+                    if d <= 0.0 {
+                        return Err(invalid(at("to"), "the two states are at the same place: give length_m"));
+                    }
+                    d
+                }
+            };
+            edges.push(Edge {
+                a: a as u32,
+                b: b as u32,
+                length_m,
+            });
+        }
+        let floors = file
+            .floors
+            .into_iter()
+            .map(|f| Floor {
+                name: f.name,
+                elevation_m: f.elevation_m,
+            })
+            .collect();
+        let map = RadioMap::new(radio.model, radio.clip_dbm, unheard, file.radio.transmitters, states.len(), triples)
+            .map_err(|m| invalid("radio.transmitters", m))?;
+        Ok(Site::from_parts(file.name, floors, states, edges, map))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const GOOD: &str = r#"{
+      "format_version": 1,
+      "name": "tiny",
+      "floors": [{"name": "G"}],
+      "radio": {"clip_dbm": -100, "unheard": {"mean_dbm": -115, "std_db": 5},
+                "transmitters": [{"wifi": {"bssid": "00:11:22:33:44:55"}}]},
+      "states": [
+        {"id": 7, "floor": 0, "x": 0, "y": 0, "training_scans": 10,
+         "fingerprint": [{"tx": 0, "mean_dbm": -60, "std_db": 4}]},
+        {"id": 9, "floor": 0, "x": 3, "y": 4}
+      ],
+      "edges": [{"from": 7, "to": 9}]
+    }"#;
+
+    fn err(text: &str) -> SiteError {
+        Site::from_json(text.as_bytes()).unwrap_err()
+    }
+
+    #[test]
+    fn loads_and_round_trips() {
+        let site = Site::from_json(GOOD.as_bytes()).unwrap();
+        assert_eq!(site.states().len(), 2);
+        assert_eq!(site.edges()[0].length_m, 5.0);
+        assert_eq!(site.neighbours(1), &[(0, 5.0)]);
+        let again = Site::from_json(site.to_json().as_bytes()).unwrap();
+        assert_eq!(again.to_json(), site.to_json());
+        assert_eq!(again.states(), site.states());
+    }
+
+    #[test]
+    fn truncated_file_is_named_as_such() {
+        for cut in [10, GOOD.len() / 2, GOOD.len() - 3] {
+            assert!(matches!(err(&GOOD[..cut]), SiteError::Truncated { .. }), "cut at {cut}");
+        }
+    }
+
+    #[test]
+    fn errors_say_what_and_where() {
+        assert!(matches!(err("{\"format_version\": 1,, }"), SiteError::Syntax { line: 1, .. }));
+        assert!(matches!(err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 2")),
+            SiteError::UnsupportedVersion { found: 2, supported: 1 }));
+        let cases = [
+            (GOOD.replace("\"format_version\": 1,", ""), "format_version"),
+            (GOOD.replace("\"std_db\": 4", "\"std_db\": 0"), "states[0].fingerprint[0]"),
+            (GOOD.replace("\"tx\": 0", "\"tx\": 3"), "states[0].fingerprint[0].tx"),
+            (GOOD.replace("\"id\": 9", "\"id\": 7"), "states[1].id"),
+            (GOOD.replace("\"to\": 9", "\"to\": 8"), "edges[0].to"),
+            (GOOD.replace("\"x\": 3", "\"x\": \"3\""), "states[1].x"),
+            (GOOD.replace("\"floor\": 0, \"x\": 3", "\"floor\": 4, \"x\": 3"), "states[1].floor"),
+            (GOOD.replace("\"bssid\": \"00:11:22:33:44:55\"", "\"bssid\": \"zz\""), "radio.transmitters[0]"),
+            (GOOD.replace("\"training_scans\": 10,", "\"trainingscans\": 10,"), "states[0]"),
+            (GOOD.replace("{\"from\": 7, \"to\": 9}", "{\"from\": 7, \"to\": 9, \"length_m\": -1}"), "edges[0].length_m"),
+        ];
+        for (text, path) in cases {
+            match err(&text) {
+                SiteError::Invalid { path: p, message } => {
+                    assert!(p.starts_with(path), "expected {path}, got {p}: {message}")
+                }
+                other => panic!("expected Invalid at {path}, got {other:?}"),
+            }
+        }
+    }
+
+    #[test]
+    fn io_error_names_the_path() {
+        let e = Site::load("/nonexistent/site.json").unwrap_err();
+        assert!(e.to_string().contains("/nonexistent/site.json"));
+    }
+}

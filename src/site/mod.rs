@@ -1,0 +1,156 @@
+//! The surveyed site: floors, states (the HMM's possible positions), the walkable graph between
+//! them, and the radio map. Loaded from a versioned JSON site file.
+
+mod builder;
+mod file;
+mod reach;
+
+pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
+pub use file::{SiteError, FORMAT_VERSION};
+pub use reach::ReachTable;
+
+use crate::radio::RadioMap;
+use nalgebra::Point2;
+use serde::{Deserialize, Serialize};
+
+/// A floor of the site.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Floor {
+    /// Display name ("B1", "F2", ...).
+    pub name: String,
+    /// Height of the floor above the site's reference, m.
+    pub elevation_m: f64,
+}
+
+/// Whether a state was surveyed (has measured fingerprints) or synthesised between surveyed
+/// states (Hoang §5).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum StateKind {
+    /// Fingerprints fitted from training scans taken here.
+    #[default]
+    Surveyed,
+    /// Fingerprints synthesised from neighbouring surveyed states (Hoang eqs. 12-13).
+    Pseudo,
+}
+
+/// A possible user position: one hidden state of the HMM.
+#[derive(Clone, Debug, PartialEq)]
+pub struct State {
+    /// The id the site file gives it.
+    pub id: u32,
+    /// Index into [`Site::floors`].
+    pub floor: usize,
+    /// Position in the floor's metric frame, m.
+    pub position: Point2<f64>,
+    /// Surveyed or pseudo.
+    pub kind: StateKind,
+    /// How many training scans the fingerprint was fitted from.
+    pub training_scans: u32,
+}
+
+/// A walkable connection between two states.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Edge {
+    /// State index.
+    pub a: u32,
+    /// State index.
+    pub b: u32,
+    /// Walking length, m.
+    pub length_m: f64,
+}
+
+/// A validated site, ready for engines. Immutable; share it with `Arc`.
+#[derive(Clone, Debug)]
+pub struct Site {
+    name: String,
+    floors: Vec<Floor>,
+    states: Vec<State>,
+    edges: Vec<Edge>,
+    /// Neighbours of state `i` are `adjacency[adjacency_starts[i]..adjacency_starts[i + 1]]`.
+    adjacency_starts: Vec<usize>,
+    adjacency: Vec<(u32, f64)>,
+    radio: RadioMap,
+    spacing_m: f64,
+}
+
+impl Site {
+    /// Assembles a site from parts that the caller has checked (indices in range, positive
+    /// lengths); the site-file loader and [`SiteBuilder`] are the callers.
+    fn from_parts(name: String, floors: Vec<Floor>, states: Vec<State>, edges: Vec<Edge>, radio: RadioMap) -> Self {
+        let n = states.len();
+        let mut degree = vec![0usize; n + 1];
+        for e in &edges {
+            degree[e.a as usize + 1] += 1;
+            degree[e.b as usize + 1] += 1;
+        }
+        for i in 0..n {
+            degree[i + 1] += degree[i];
+        }
+        let adjacency_starts = degree.clone();
+        let mut fill = degree;
+        let mut adjacency = vec![(0u32, 0.0f64); 2 * edges.len()];
+        for e in &edges {
+            adjacency[fill[e.a as usize]] = (e.b, e.length_m);
+            fill[e.a as usize] += 1;
+            adjacency[fill[e.b as usize]] = (e.a, e.length_m);
+            fill[e.b as usize] += 1;
+        }
+        let spacing_m = median_edge_length(&edges);
+        Self {
+            name,
+            floors,
+            states,
+            edges,
+            adjacency_starts,
+            adjacency,
+            radio,
+            spacing_m,
+        }
+    }
+
+    /// The site's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Floors, by index.
+    pub fn floors(&self) -> &[Floor] {
+        &self.floors
+    }
+
+    /// States, by index.
+    pub fn states(&self) -> &[State] {
+        &self.states
+    }
+
+    /// Walkable edges.
+    pub fn edges(&self) -> &[Edge] {
+        &self.edges
+    }
+
+    /// Walkable neighbours of state `i` with the edge length.
+    pub fn neighbours(&self, i: usize) -> &[(u32, f64)] {
+        &self.adjacency[self.adjacency_starts[i]..self.adjacency_starts[i + 1]]
+    }
+
+    /// The radio map.
+    pub fn radio(&self) -> &RadioMap {
+        &self.radio
+    }
+
+    /// Typical distance between neighbouring states (median edge length), m: the size of the
+    /// cell each state stands for.
+    pub fn spacing_m(&self) -> f64 {
+        self.spacing_m
+    }
+}
+
+fn median_edge_length(edges: &[Edge]) -> f64 {
+    if edges.is_empty() {
+        return 0.0;
+    }
+    let mut lengths: Vec<f64> = edges.iter().map(|e| e.length_m).collect();
+    lengths.sort_by(f64::total_cmp);
+    lengths[lengths.len() / 2]
+}
