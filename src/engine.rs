@@ -168,27 +168,18 @@ impl Engine {
     fn epoch(&mut self, scan: &Scan) -> Result<Position, InputError> {
         if let Some(last_ns) = self.last_scan_ns {
             if scan.timestamp_ns <= last_ns {
-                return Err(InputError::OutOfOrder {
-                    timestamp_ns: scan.timestamp_ns,
-                    last_ns,
-                });
+                return Err(InputError::OutOfOrder { timestamp_ns: scan.timestamp_ns, last_ns });
             }
         }
         if scan.readings.is_empty() {
             return Err(InputError::EmptyScan);
         }
         if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !r.rssi_dbm.is_finite()) {
-            return Err(InputError::NonFiniteRssi {
-                index,
-                transmitter: r.transmitter.to_string(),
-            });
+            return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
         }
         let resolved = self.site.radio().resolve(scan, self.config.max_reading_age_ns);
         if resolved.observations.is_empty() {
-            return Err(InputError::NoKnownTransmitter {
-                unknown: resolved.unknown,
-                stale: resolved.stale,
-            });
+            return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
         self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
 
@@ -241,11 +232,7 @@ impl Engine {
             self.filter.reset();
             self.stats.filter_restarts += 1;
         }
-        let transition = UniformReach {
-            table: &self.reach,
-            rho_m,
-            ratio,
-        };
+        let transition = UniformReach { table: &self.reach, rho_m, ratio };
         let passes = if passes > self.config.max_reach_passes { 0 } else { passes };
         // All but the last pass are pure predictions (no observation in between).
         for _ in 1..passes {
@@ -259,9 +246,7 @@ impl Engine {
                 // the radio alone.
                 self.stats.filter_restarts += 1;
                 self.filter.reset();
-                self.filter
-                    .step(None, &self.ln_emission)
-                    .unwrap_or(f64::NEG_INFINITY)
+                self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
             }
         }
     }

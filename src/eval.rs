@@ -81,11 +81,7 @@ mod tests {
 
     #[test]
     fn figures_by_hand() {
-        let e = |error_m, accuracy_m| EpochError {
-            error_m,
-            accuracy_m,
-            floor_correct: true,
-        };
+        let e = |error_m, accuracy_m| EpochError { error_m, accuracy_m, floor_correct: true };
         let epochs: Vec<EpochError> = (1..=10).map(|k| e(k as f64, 5.0)).collect();
         let s = ErrorSummary::new(&epochs);
         assert_eq!(s.epochs, 10);

@@ -31,11 +31,7 @@ pub struct ForwardFilter {
 impl ForwardFilter {
     /// A filter over `n` states with the uniform prior.
     pub fn new(n: usize) -> Self {
-        let mut filter = Self {
-            posterior: vec![0.0; n],
-            predicted: vec![0.0; n],
-            weights: vec![0.0; n],
-        };
+        let mut filter = Self { posterior: vec![0.0; n], predicted: vec![0.0; n], weights: vec![0.0; n] };
         filter.reset();
         filter
     }
@@ -60,13 +56,14 @@ impl ForwardFilter {
     /// One epoch: predict with `transition` (none at the first epoch, or when no time has
     /// passed), weight by `exp(ln_emission)`, normalise. Returns ln p(o_t | o_1..t-1), the
     /// evidence of this observation given the past.
-    pub fn step(&mut self, transition: Option<&dyn Transition>, ln_emission: &[f64]) -> Result<f64, FilterError> {
+    pub fn step(
+        &mut self,
+        transition: Option<&dyn Transition>,
+        ln_emission: &[f64],
+    ) -> Result<f64, FilterError> {
         let n = self.posterior.len();
         if ln_emission.len() != n {
-            return Err(FilterError::Length {
-                expected: n,
-                got: ln_emission.len(),
-            });
+            return Err(FilterError::Length { expected: n, got: ln_emission.len() });
         }
         match transition {
             Some(t) => t.predict(&self.posterior, &mut self.predicted),
@@ -131,7 +128,8 @@ mod tests {
     #[test]
     fn matches_brute_force_on_a_tiny_hmm() {
         let a = vec![vec![0.7, 0.2, 0.1], vec![0.3, 0.4, 0.3], vec![0.0, 0.5, 0.5]];
-        let emissions = vec![vec![-1.0, -2.0, -0.5], vec![-3.0, -0.2, -1.0], vec![-0.1, -4.0, -2.0], vec![-2.0, -2.0, -0.3]];
+        let emissions =
+            [vec![-1.0, -2.0, -0.5], vec![-3.0, -0.2, -1.0], vec![-0.1, -4.0, -2.0], vec![-2.0, -2.0, -0.3]];
         let mut filter = ForwardFilter::new(3);
         let dense = Dense(a.clone());
         for (t, e) in emissions.iter().enumerate() {

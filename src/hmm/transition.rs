@@ -46,3 +46,65 @@ impl Transition for UniformReach<'_> {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::site::{BuildOptions, Site, SiteBuilder, TrainingScan};
+    use approx::assert_relative_eq;
+    use nalgebra::Point2;
+
+    /// Six states on a corridor, 2 m apart.
+    fn corridor() -> Site {
+        let mut b = SiteBuilder::new("corridor");
+        let f = b.floor("G", 0.0);
+        let ids: Vec<u32> = (0..6)
+            .map(|k| b.state(f, Point2::new(2.0 * k as f64, 0.0), Vec::<TrainingScan>::new()))
+            .collect();
+        for w in ids.windows(2) {
+            b.edge(w[0], w[1], None);
+        }
+        b.build(BuildOptions::default()).unwrap()
+    }
+
+    #[test]
+    fn rows_follow_hipe_eqs_5_and_6() {
+        let site = corridor();
+        let table = ReachTable::build(&site, 9.0);
+        let ratio = 1000.0;
+        let t = UniformReach { table: &table, rho_m: 3.0, ratio };
+        // Row of state 2: itself, 1 and 3 reachable (U = 3), the other three low.
+        let mut prior = vec![0.0; 6];
+        prior[2] = 1.0;
+        let mut out = vec![0.0; 6];
+        t.predict(&prior, &mut out);
+        let high = ratio / (3.0 * ratio + 3.0);
+        for (j, &p) in out.iter().enumerate() {
+            let expected = if (1..=3).contains(&j) { high } else { high / ratio };
+            assert_relative_eq!(p, expected, epsilon = 1e-15);
+        }
+        assert_relative_eq!(out.iter().sum::<f64>(), 1.0, epsilon = 1e-15);
+    }
+
+    #[test]
+    fn sparse_prediction_equals_the_dense_matrix() {
+        let site = corridor();
+        let table = ReachTable::build(&site, 9.0);
+        let t = UniformReach { table: &table, rho_m: 4.5, ratio: 200_000.0 };
+        let prior = [0.1, 0.3, 0.0, 0.2, 0.15, 0.25];
+        let mut sparse = vec![0.0; 6];
+        t.predict(&prior, &mut sparse);
+        // a_ij by definition: walking distance on the corridor is |i - j| * 2 m.
+        for (j, &p) in sparse.iter().enumerate() {
+            let dense: f64 = (0..6)
+                .map(|i| {
+                    let reachable = |k: usize| (k as f64 - i as f64).abs() * 2.0 <= 4.5 || k.abs_diff(i) == 1;
+                    let u = (0..6).filter(|&k| reachable(k)).count() as f64;
+                    let high = t.ratio / (u * t.ratio + 6.0 - u);
+                    prior[i] * if reachable(j) { high } else { high / t.ratio }
+                })
+                .sum();
+            assert_relative_eq!(p, dense, epsilon = 1e-15);
+        }
+    }
+}

@@ -51,12 +51,7 @@ pub struct FitOptions {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self {
-            clip_dbm: -100.0,
-            min_std_db: 1.0,
-            max_iterations: 500,
-            tolerance_db: 1e-6,
-        }
+        Self { clip_dbm: -100.0, min_std_db: 1.0, max_iterations: 500, tolerance_db: 1e-6 }
     }
 }
 
@@ -116,8 +111,7 @@ fn mills_ratio(x: f64) -> f64 {
 impl Gaussian {
     /// A model, if both parameters are finite and σ > 0.
     pub fn new(mean_dbm: f64, std_db: f64) -> Option<Self> {
-        (mean_dbm.is_finite() && std_db.is_finite() && std_db > 0.0)
-            .then_some(Self { mean_dbm, std_db })
+        (mean_dbm.is_finite() && std_db.is_finite() && std_db > 0.0).then_some(Self { mean_dbm, std_db })
     }
 
     /// ln N(x; μ, σ²).
@@ -196,11 +190,7 @@ pub fn fit_censored(samples: &[f64], options: &FitOptions) -> CensoredFit {
     let N = samples.len();
     let n_clipped = N - n_obs;
     if n_obs == 0 {
-        return CensoredFit {
-            gaussian: None,
-            iterations: 0,
-            converged: true,
-        };
+        return CensoredFit { gaussian: None, iterations: 0, converged: true };
     }
     let min_var = options.min_std_db * options.min_std_db;
     if n_clipped == 0 {
@@ -298,11 +288,19 @@ mod tests {
         let censored = RssiModel::CensoredGaussian;
         assert_relative_eq!(censored.ln_heard(&g, -78.0, -100.0), expected.ln(), epsilon = 1e-12);
         // At the clip level: Φ((-100 + 80)/4) = Φ(-5) = 2.866515718791939e-7.
-        assert_relative_eq!(censored.ln_heard(&g, -100.0, -100.0), 2.866_515_718_791_939e-7f64.ln(), epsilon = 1e-9);
+        assert_relative_eq!(
+            censored.ln_heard(&g, -100.0, -100.0),
+            2.866_515_718_791_939e-7f64.ln(),
+            epsilon = 1e-9
+        );
         assert_relative_eq!(censored.ln_absent(&g, -100.0), 2.866_515_718_791_939e-7f64.ln(), epsilon = 1e-9);
         // The naive model treats -100 as a value: N(-100; -80, 16) = exp(-12.5)/(4√(2π)).
         let naive_at_clip = (-12.5f64).exp() / (4.0 * (2.0 * std::f64::consts::PI).sqrt());
-        assert_relative_eq!(RssiModel::NaiveGaussian.ln_absent(&g, -100.0), naive_at_clip.ln(), epsilon = 1e-12);
+        assert_relative_eq!(
+            RssiModel::NaiveGaussian.ln_absent(&g, -100.0),
+            naive_at_clip.ln(),
+            epsilon = 1e-12
+        );
     }
 
     #[test]

@@ -86,17 +86,7 @@ impl RadioMap {
         for t in 0..ids.len() {
             starts[t + 1] += starts[t];
         }
-        Ok(Self {
-            model,
-            clip_dbm,
-            unheard,
-            unheard_ln_absent,
-            ids,
-            index,
-            starts,
-            entries,
-            all_absent,
-        })
+        Ok(Self { model, clip_dbm, unheard, unheard_ln_absent, ids, index, starts, entries, all_absent })
     }
 
     /// The likelihood model.
@@ -127,9 +117,7 @@ impl RadioMap {
     /// Every `(state, transmitter, model)` of the map, by transmitter.
     pub fn fingerprints(&self) -> impl Iterator<Item = (u32, u32, Gaussian)> + '_ {
         (0..self.ids.len()).flat_map(move |t| {
-            self.entries[self.starts[t]..self.starts[t + 1]]
-                .iter()
-                .map(move |e| (e.state, t as u32, e.model))
+            self.entries[self.starts[t]..self.starts[t + 1]].iter().map(move |e| (e.state, t as u32, e.model))
         })
     }
 
@@ -166,7 +154,8 @@ impl RadioMap {
         let mut shared = 0.0;
         for &(t, rssi) in observations {
             // What hearing `rssi` changes for a state using the unheard model...
-            let unheard_delta = self.model.ln_heard(&self.unheard, rssi, self.clip_dbm) - self.unheard_ln_absent;
+            let unheard_delta =
+                self.model.ln_heard(&self.unheard, rssi, self.clip_dbm) - self.unheard_ln_absent;
             shared += unheard_delta;
             // ...and, for states that model this transmitter, the difference to their own.
             let (from, to) = (self.starts[t as usize], self.starts[t as usize + 1]);
@@ -204,15 +193,14 @@ mod tests {
             (1, 0, g(-75.0, 3.0)),
             (1, 1, g(-65.0, 4.0)),
         ];
-        RadioMap::new(model, -100.0, g(-115.0, 5.0), vec![wifi(0), wifi(1), wifi(2)], 2, fingerprints).unwrap()
+        RadioMap::new(model, -100.0, g(-115.0, 5.0), vec![wifi(0), wifi(1), wifi(2)], 2, fingerprints)
+            .unwrap()
     }
 
     /// The dense product of eq. 9 over every transmitter, as a reference.
     fn brute_force(map: &RadioMap, heard: &[(u32, f64)], state: u32) -> f64 {
         let model_of = |t: u32| {
-            map.fingerprints()
-                .find(|&(s, tx, _)| s == state && tx == t)
-                .map_or(map.unheard(), |(_, _, g)| g)
+            map.fingerprints().find(|&(s, tx, _)| s == state && tx == t).map_or(map.unheard(), |(_, _, g)| g)
         };
         (0..map.transmitters().len() as u32)
             .map(|t| match heard.iter().find(|h| h.0 == t) {
@@ -226,7 +214,9 @@ mod tests {
     fn sparse_likelihood_equals_dense_product() {
         for model in [RssiModel::CensoredGaussian, RssiModel::NaiveGaussian] {
             let map = small_map(model);
-            for heard in [vec![(0, -62.0), (1, -79.0)], vec![(2, -92.0)], vec![(0, -100.0), (2, -99.0)], vec![]] {
+            for heard in
+                [vec![(0, -62.0), (1, -79.0)], vec![(2, -92.0)], vec![(0, -100.0), (2, -99.0)], vec![]]
+            {
                 let mut out = vec![0.0; 2];
                 map.ln_likelihood(&heard, &mut out);
                 for s in 0..2 {
@@ -251,11 +241,8 @@ mod tests {
     #[test]
     fn resolve_drops_unknown_duplicate_and_stale() {
         let map = small_map(RssiModel::CensoredGaussian);
-        let reading = |t: u8, rssi: f64, age_ns: u64| Reading {
-            transmitter: wifi(t),
-            rssi_dbm: rssi,
-            age_ns,
-        };
+        let reading =
+            |t: u8, rssi: f64, age_ns: u64| Reading { transmitter: wifi(t), rssi_dbm: rssi, age_ns };
         let scan = Scan {
             timestamp_ns: 1,
             readings: vec![
@@ -272,9 +259,17 @@ mod tests {
 
     #[test]
     fn rejects_bad_tables() {
-        let dup = RadioMap::new(RssiModel::CensoredGaussian, -100.0, g(-115.0, 5.0), vec![wifi(0), wifi(0)], 1, []);
+        let dup =
+            RadioMap::new(RssiModel::CensoredGaussian, -100.0, g(-115.0, 5.0), vec![wifi(0), wifi(0)], 1, []);
         assert!(dup.unwrap_err().contains("twice"));
-        let oob = RadioMap::new(RssiModel::CensoredGaussian, -100.0, g(-115.0, 5.0), vec![wifi(0)], 1, [(3, 0, g(-1.0, 1.0))]);
+        let oob = RadioMap::new(
+            RssiModel::CensoredGaussian,
+            -100.0,
+            g(-115.0, 5.0),
+            vec![wifi(0)],
+            1,
+            [(3, 0, g(-1.0, 1.0))],
+        );
         assert!(oob.unwrap_err().contains("out of range"));
     }
 }

@@ -57,10 +57,7 @@ impl TryFrom<TransmitterIdRaw> for TransmitterId {
 
 /// `text` without `separators`, lower-cased.
 fn hex_digits(text: &str, separators: &[char]) -> String {
-    text.chars()
-        .filter(|c| !separators.contains(c))
-        .flat_map(char::to_lowercase)
-        .collect()
+    text.chars().filter(|c| !separators.contains(c)).flat_map(char::to_lowercase).collect()
 }
 
 impl TransmitterId {
@@ -72,9 +69,7 @@ impl TransmitterId {
             return Err(format!("`{bssid}` is not a BSSID (six hex bytes)"));
         }
         let octets: Vec<&str> = (0..6).map(|i| &hex[2 * i..2 * i + 2]).collect();
-        Ok(TransmitterId::Wifi {
-            bssid: octets.join(":"),
-        })
+        Ok(TransmitterId::Wifi { bssid: octets.join(":") })
     }
 
     /// A BLE beacon from its proximity UUID (with or without hyphens), major and minor.
@@ -83,14 +78,8 @@ impl TransmitterId {
         if hex.len() != 32 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
             return Err(format!("`{uuid}` is not a beacon UUID (32 hex digits)"));
         }
-        let uuid = format!(
-            "{}-{}-{}-{}-{}",
-            &hex[0..8],
-            &hex[8..12],
-            &hex[12..16],
-            &hex[16..20],
-            &hex[20..32]
-        );
+        let uuid =
+            format!("{}-{}-{}-{}-{}", &hex[0..8], &hex[8..12], &hex[12..16], &hex[16..20], &hex[20..32]);
         Ok(TransmitterId::Ble { uuid, major, minor })
     }
 }

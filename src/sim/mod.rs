@@ -2,6 +2,10 @@
 //! points with log-distance path loss and log-normal shadowing, clipping, training scans fitted
 //! by the EM, and random walks on the walkable graph. Everything is seeded and deterministic.
 
+mod experiment;
+
+pub use experiment::{run, Experiment, ExperimentReport, TrackPoint};
+
 use crate::radio::{FitOptions, Reading, RssiModel, Scan, TransmitterId};
 use crate::site::{BuildOptions, Site, SiteBuilder};
 use nalgebra::Point2;
@@ -55,10 +59,7 @@ impl Default for OfficeConfig {
             shadowing_db: 5.0,
             clip_dbm: -100.0,
             training_scans: 300,
-            path_loss: PathLoss {
-                ref_dbm: -45.0,
-                exponent: 3.5,
-            },
+            path_loss: PathLoss { ref_dbm: -45.0, exponent: 3.5 },
             model: RssiModel::CensoredGaussian,
         }
     }
@@ -157,17 +158,10 @@ impl RadioField {
             .filter_map(|(id, ap)| {
                 let mean = self.path_loss.mean_dbm(nalgebra::distance(ap, &position));
                 let rssi = (mean + fading.sample(rng)).round();
-                (rssi > self.clip_dbm).then(|| Reading {
-                    transmitter: id.clone(),
-                    rssi_dbm: rssi,
-                    age_ns: 0,
-                })
+                (rssi > self.clip_dbm).then(|| Reading { transmitter: id.clone(), rssi_dbm: rssi, age_ns: 0 })
             })
             .collect();
-        Scan {
-            timestamp_ns,
-            readings,
-        }
+        Scan { timestamp_ns, readings }
     }
 }
 
@@ -215,7 +209,10 @@ impl Office {
             .map(|k| {
                 let id = TransmitterId::wifi(&format!("02:00:00:00:{:02x}:{:02x}", k / 256, k % 256))
                     .expect("a well-formed BSSID");
-                let at = Point2::new(rng.random_range(0.0..OFFICE_SIZE_M.0), rng.random_range(0.0..OFFICE_SIZE_M.1));
+                let at = Point2::new(
+                    rng.random_range(0.0..OFFICE_SIZE_M.0),
+                    rng.random_range(0.0..OFFICE_SIZE_M.1),
+                );
                 (id, at)
             })
             .collect();
@@ -228,9 +225,8 @@ impl Office {
         let mut builder = SiteBuilder::new("waymark simulated office");
         let floor = builder.floor("office", 0.0);
         for &p in &points {
-            let scans = (0..config.training_scans as u64)
-                .map(|k| field.scan_at(p, k * EPOCH_NS, &mut rng))
-                .collect();
+            let scans =
+                (0..config.training_scans as u64).map(|k| field.scan_at(p, k * EPOCH_NS, &mut rng)).collect();
             builder.state(floor, p, scans);
         }
         let mut adjacency = vec![Vec::new(); points.len()];
@@ -241,18 +237,10 @@ impl Office {
         }
         let options = BuildOptions {
             model: config.model,
-            fit: FitOptions {
-                clip_dbm: config.clip_dbm,
-                ..FitOptions::default()
-            },
+            fit: FitOptions { clip_dbm: config.clip_dbm, ..FitOptions::default() },
         };
         let site = builder.build(options).expect("the office plan is a valid site");
-        Office {
-            site,
-            field,
-            points,
-            adjacency,
-        }
+        Office { site, field, points, adjacency }
     }
 
     /// Surveyed state positions, by state index.
@@ -273,7 +261,8 @@ impl Office {
         let mut walked = 0.0;
         while walked < length_m {
             let exits = &self.adjacency[at as usize];
-            let options: Vec<u32> = exits.iter().copied().filter(|&n| n != came_from || exits.len() == 1).collect();
+            let options: Vec<u32> =
+                exits.iter().copied().filter(|&n| n != came_from || exits.len() == 1).collect();
             let next = options[rng.random_range(0..options.len())];
             walked += nalgebra::distance(&self.points[at as usize], &self.points[next as usize]);
             came_from = at;
@@ -294,10 +283,7 @@ impl Office {
             let ((a, sa), (b, sb)) = (route[segment], route[segment + 1]);
             let truth = a + (b - a) * ((s - sa) / (sb - sa));
             let t_ns = 1_000_000_000 + k as u64 * EPOCH_NS;
-            epochs.push(WalkEpoch {
-                scan: self.field.scan_at(truth, t_ns, &mut rng),
-                truth,
-            });
+            epochs.push(WalkEpoch { scan: self.field.scan_at(truth, t_ns, &mut rng), truth });
         }
         Walk { epochs, length_m: walked }
     }

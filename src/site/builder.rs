@@ -22,18 +22,12 @@ pub struct SiteBuilder {
 impl SiteBuilder {
     /// An empty site called `name`.
     pub fn new(name: &str) -> Self {
-        Self {
-            name: name.to_owned(),
-            ..Self::default()
-        }
+        Self { name: name.to_owned(), ..Self::default() }
     }
 
     /// Adds a floor; returns its index.
     pub fn floor(&mut self, name: &str, elevation_m: f64) -> usize {
-        self.floors.push(Floor {
-            name: name.to_owned(),
-            elevation_m,
-        });
+        self.floors.push(Floor { name: name.to_owned(), elevation_m });
         self.floors.len() - 1
     }
 
@@ -41,16 +35,7 @@ impl SiteBuilder {
     pub fn state(&mut self, floor: usize, position: Point2<f64>, scans: Vec<TrainingScan>) -> u32 {
         let id = self.states.len() as u32;
         let training_scans = scans.len() as u32;
-        self.states.push((
-            State {
-                id,
-                floor,
-                position,
-                kind: StateKind::Surveyed,
-                training_scans,
-            },
-            scans,
-        ));
+        self.states.push((State { id, floor, position, kind: StateKind::Surveyed, training_scans }, scans));
         id
     }
 
@@ -71,17 +56,21 @@ impl SiteBuilder {
         let ids: Vec<TransmitterId> = self
             .states
             .iter()
-            .flat_map(|(_, scans)| scans.iter().flat_map(|s| s.readings.iter().map(|r| r.transmitter.clone())))
+            .flat_map(|(_, scans)| {
+                scans.iter().flat_map(|s| s.readings.iter().map(|r| r.transmitter.clone()))
+            })
             .collect::<BTreeSet<_>>()
             .into_iter()
             .collect();
-        let index: BTreeMap<&TransmitterId, u32> = ids.iter().enumerate().map(|(i, id)| (id, i as u32)).collect();
+        let index: BTreeMap<&TransmitterId, u32> =
+            ids.iter().enumerate().map(|(i, id)| (id, i as u32)).collect();
         let mut triples = Vec::new();
         for (s, (_, scans)) in self.states.iter().enumerate() {
             let mut samples: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
             for (k, scan) in scans.iter().enumerate() {
                 for r in scan.readings.iter().filter(|r| r.rssi_dbm.is_finite()) {
-                    let column = samples.entry(index[&r.transmitter]).or_insert_with(|| vec![clip; scans.len()]);
+                    let column =
+                        samples.entry(index[&r.transmitter]).or_insert_with(|| vec![clip; scans.len()]);
                     // Two readings of one transmitter in a scan: keep the stronger.
                     column[k] = column[k].max(r.rssi_dbm.max(clip));
                 }
@@ -97,7 +86,8 @@ impl SiteBuilder {
         } else {
             triples.iter().map(|t| t.2.std_db).sum::<f64>() / triples.len() as f64
         };
-        let mut counts: Vec<u32> = self.states.iter().map(|(s, _)| s.training_scans).filter(|&n| n > 0).collect();
+        let mut counts: Vec<u32> =
+            self.states.iter().map(|(s, _)| s.training_scans).filter(|&n| n > 0).collect();
         counts.sort_unstable();
         let typical_scans = counts.get(counts.len() / 2).copied().unwrap_or(1);
         let unheard = match options.model {
@@ -138,10 +128,8 @@ impl SiteBuilder {
             }
             edges.push(Edge { a, b, length_m });
         }
-        let map = RadioMap::new(options.model, clip, unheard, ids, states.len(), triples).map_err(|m| SiteError::Invalid {
-            path: "radio".into(),
-            message: m,
-        })?;
+        let map = RadioMap::new(options.model, clip, unheard, ids, states.len(), triples)
+            .map_err(|m| SiteError::Invalid { path: "radio".into(), message: m })?;
         Ok(Site::from_parts(self.name, self.floors, states, edges, map))
     }
 }

@@ -59,10 +59,7 @@ pub enum SiteError {
 }
 
 fn invalid(path: impl Into<String>, message: impl Into<String>) -> SiteError {
-    SiteError::Invalid {
-        path: path.into(),
-        message: message.into(),
-    }
+    SiteError::Invalid { path: path.into(), message: message.into() }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -142,11 +139,7 @@ fn json_error(e: &serde_json::Error) -> SiteError {
     let (line, column) = (e.line(), e.column());
     match e.classify() {
         serde_json::error::Category::Eof => SiteError::Truncated { line, column },
-        _ => SiteError::Syntax {
-            line,
-            column,
-            message: e.to_string(),
-        },
+        _ => SiteError::Syntax { line, column, message: e.to_string() },
     }
 }
 
@@ -154,10 +147,7 @@ fn gaussian(path: &str, g: &GaussianFile) -> Result<Gaussian, SiteError> {
     Gaussian::new(g.mean_dbm, g.std_db).ok_or_else(|| {
         invalid(
             path,
-            format!(
-                "mean_dbm must be finite and std_db finite and > 0 (got {}, {})",
-                g.mean_dbm, g.std_db
-            ),
+            format!("mean_dbm must be finite and std_db finite and > 0 (got {}, {})", g.mean_dbm, g.std_db),
         )
     })
 }
@@ -175,10 +165,7 @@ impl Site {
             Some(v) => match v.as_u64() {
                 Some(found) if found == u64::from(FORMAT_VERSION) => {}
                 Some(found) => {
-                    return Err(SiteError::UnsupportedVersion {
-                        found,
-                        supported: FORMAT_VERSION,
-                    })
+                    return Err(SiteError::UnsupportedVersion { found, supported: FORMAT_VERSION })
                 }
                 None => return Err(invalid("format_version", format!("expected an integer, found {v}"))),
             },
@@ -197,16 +184,15 @@ impl Site {
     /// Loads a site file from disk.
     pub fn load(path: impl AsRef<Path>) -> Result<Site, SiteError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path).map_err(|e| SiteError::Io {
-            path: path.display().to_string(),
-            message: e.to_string(),
-        })?;
+        let bytes = std::fs::read(path)
+            .map_err(|e| SiteError::Io { path: path.display().to_string(), message: e.to_string() })?;
         Site::from_json(&bytes)
     }
 
     /// The site as site-file JSON (current format version).
     pub fn to_json(&self) -> String {
-        let mut fingerprints: Vec<Vec<FingerprintFile>> = (0..self.states.len()).map(|_| Vec::new()).collect();
+        let mut fingerprints: Vec<Vec<FingerprintFile>> =
+            (0..self.states.len()).map(|_| Vec::new()).collect();
         for (state, tx, g) in self.radio.fingerprints() {
             fingerprints[state as usize].push(FingerprintFile {
                 tx: tx as usize,
@@ -221,18 +207,12 @@ impl Site {
             floors: self
                 .floors
                 .iter()
-                .map(|f| FloorFile {
-                    name: f.name.clone(),
-                    elevation_m: f.elevation_m,
-                })
+                .map(|f| FloorFile { name: f.name.clone(), elevation_m: f.elevation_m })
                 .collect(),
             radio: RadioFile {
                 model: self.radio.model(),
                 clip_dbm: self.radio.clip_dbm(),
-                unheard: GaussianFile {
-                    mean_dbm: unheard.mean_dbm,
-                    std_db: unheard.std_db,
-                },
+                unheard: GaussianFile { mean_dbm: unheard.mean_dbm, std_db: unheard.std_db },
                 transmitters: self.radio.transmitters().to_vec(),
             },
             states: self
@@ -254,12 +234,9 @@ impl Site {
                 .iter()
                 .map(|e| {
                     let (a, b) = (&self.states[e.a as usize], &self.states[e.b as usize]);
-                    let straight = a.floor == b.floor && (nalgebra::distance(&a.position, &b.position) - e.length_m).abs() < 1e-9;
-                    EdgeFile {
-                        from: a.id,
-                        to: b.id,
-                        length_m: (!straight).then_some(e.length_m),
-                    }
+                    let straight = a.floor == b.floor
+                        && (nalgebra::distance(&a.position, &b.position) - e.length_m).abs() < 1e-9;
+                    EdgeFile { from: a.id, to: b.id, length_m: (!straight).then_some(e.length_m) }
                 })
                 .collect(),
         };
@@ -314,12 +291,12 @@ impl Site {
                     ));
                 }
                 if !seen.insert(f.tx) {
-                    return Err(invalid(format!("{path}.tx"), format!("transmitter {} is modelled twice", f.tx)));
+                    return Err(invalid(
+                        format!("{path}.tx"),
+                        format!("transmitter {} is modelled twice", f.tx),
+                    ));
                 }
-                let g = gaussian(&path, &GaussianFile {
-                    mean_dbm: f.mean_dbm,
-                    std_db: f.std_db,
-                })?;
+                let g = gaussian(&path, &GaussianFile { mean_dbm: f.mean_dbm, std_db: f.std_db })?;
                 triples.push((i as u32, f.tx as u32, g));
             }
             states.push(State {
@@ -334,9 +311,7 @@ impl Site {
         for (k, e) in file.edges.iter().enumerate() {
             let at = |field: &str| format!("edges[{k}].{field}");
             let lookup = |id: u32, field: &str| {
-                ids.get(&id)
-                    .copied()
-                    .ok_or_else(|| invalid(at(field), format!("no state has id {id}")))
+                ids.get(&id).copied().ok_or_else(|| invalid(at(field), format!("no state has id {id}")))
             };
             let (a, b) = (lookup(e.from, "from")?, lookup(e.to, "to")?);
             if a == b {
@@ -357,22 +332,19 @@ impl Site {
                     d
                 }
             };
-            edges.push(Edge {
-                a: a as u32,
-                b: b as u32,
-                length_m,
-            });
+            edges.push(Edge { a: a as u32, b: b as u32, length_m });
         }
-        let floors = file
-            .floors
-            .into_iter()
-            .map(|f| Floor {
-                name: f.name,
-                elevation_m: f.elevation_m,
-            })
-            .collect();
-        let map = RadioMap::new(radio.model, radio.clip_dbm, unheard, file.radio.transmitters, states.len(), triples)
-            .map_err(|m| invalid("radio.transmitters", m))?;
+        let floors =
+            file.floors.into_iter().map(|f| Floor { name: f.name, elevation_m: f.elevation_m }).collect();
+        let map = RadioMap::new(
+            radio.model,
+            radio.clip_dbm,
+            unheard,
+            file.radio.transmitters,
+            states.len(),
+            triples,
+        )
+        .map_err(|m| invalid("radio.transmitters", m))?;
         Ok(Site::from_parts(file.name, floors, states, edges, map))
     }
 }
@@ -420,8 +392,10 @@ mod tests {
     #[test]
     fn errors_say_what_and_where() {
         assert!(matches!(err("{\"format_version\": 1,, }"), SiteError::Syntax { line: 1, .. }));
-        assert!(matches!(err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 2")),
-            SiteError::UnsupportedVersion { found: 2, supported: 1 }));
+        assert!(matches!(
+            err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 2")),
+            SiteError::UnsupportedVersion { found: 2, supported: 1 }
+        ));
         let cases = [
             (GOOD.replace("\"format_version\": 1,", ""), "format_version"),
             (GOOD.replace("\"std_db\": 4", "\"std_db\": 0"), "states[0].fingerprint[0]"),
@@ -432,7 +406,10 @@ mod tests {
             (GOOD.replace("\"floor\": 0, \"x\": 3", "\"floor\": 4, \"x\": 3"), "states[1].floor"),
             (GOOD.replace("\"bssid\": \"00:11:22:33:44:55\"", "\"bssid\": \"zz\""), "radio.transmitters[0]"),
             (GOOD.replace("\"training_scans\": 10,", "\"trainingscans\": 10,"), "states[0]"),
-            (GOOD.replace("{\"from\": 7, \"to\": 9}", "{\"from\": 7, \"to\": 9, \"length_m\": -1}"), "edges[0].length_m"),
+            (
+                GOOD.replace("{\"from\": 7, \"to\": 9}", "{\"from\": 7, \"to\": 9, \"length_m\": -1}"),
+                "edges[0].length_m",
+            ),
         ];
         for (text, path) in cases {
             match err(&text) {

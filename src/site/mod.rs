@@ -77,7 +77,13 @@ pub struct Site {
 impl Site {
     /// Assembles a site from parts that the caller has checked (indices in range, positive
     /// lengths); the site-file loader and [`SiteBuilder`] are the callers.
-    fn from_parts(name: String, floors: Vec<Floor>, states: Vec<State>, edges: Vec<Edge>, radio: RadioMap) -> Self {
+    fn from_parts(
+        name: String,
+        floors: Vec<Floor>,
+        states: Vec<State>,
+        edges: Vec<Edge>,
+        radio: RadioMap,
+    ) -> Self {
         let n = states.len();
         let mut degree = vec![0usize; n + 1];
         for e in &edges {
@@ -97,16 +103,7 @@ impl Site {
             fill[e.b as usize] += 1;
         }
         let spacing_m = median_edge_length(&edges);
-        Self {
-            name,
-            floors,
-            states,
-            edges,
-            adjacency_starts,
-            adjacency,
-            radio,
-            spacing_m,
-        }
+        Self { name, floors, states, edges, adjacency_starts, adjacency, radio, spacing_m }
     }
 
     /// The site's name.

@@ -86,12 +86,7 @@ impl ReachTable {
             touched.clear();
         }
         starts.push(entries.len());
-        Self {
-            radius_m,
-            starts,
-            sorted_from,
-            entries,
-        }
+        Self { radius_m, starts, sorted_from, entries }
     }
 
     /// The radius the table was built for, m.
@@ -130,10 +125,8 @@ mod tests {
         let mut b = SiteBuilder::new("corridor");
         let f = b.floor("G", 0.0);
         let points = [(0.0, 0.0), (2.0, 0.0), (4.0, 0.0), (6.0, 0.0), (0.0, 1.0)];
-        let ids: Vec<u32> = points
-            .iter()
-            .map(|&(x, y)| b.state(f, Point2::new(x, y), Vec::<TrainingScan>::new()))
-            .collect();
+        let ids: Vec<u32> =
+            points.iter().map(|&(x, y)| b.state(f, Point2::new(x, y), Vec::<TrainingScan>::new())).collect();
         for w in ids[..4].windows(2) {
             b.edge(w[0], w[1], None);
         }

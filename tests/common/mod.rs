@@ -1,0 +1,56 @@
+//! Shared helpers for the integration tests.
+#![allow(dead_code)]
+
+use nalgebra::Point2;
+use waymark::radio::{Reading, Scan, TransmitterId};
+use waymark::site::{BuildOptions, Site, SiteBuilder};
+
+pub fn wifi(k: u8) -> TransmitterId {
+    TransmitterId::wifi(&format!("02:00:00:00:00:{k:02x}")).unwrap()
+}
+
+pub fn scan(timestamp_ns: u64, readings: &[(u8, f64)]) -> Scan {
+    Scan {
+        timestamp_ns,
+        readings: readings
+            .iter()
+            .map(|&(k, rssi_dbm)| Reading { transmitter: wifi(k), rssi_dbm, age_ns: 0 })
+            .collect(),
+    }
+}
+
+/// Two floors, each a corridor of five states 3 m apart, joined by a 6 m staircase between
+/// their first states. Floor 0 hears transmitters 0-2, floor 1 hears 3-5, each strongest
+/// near its own end of the corridor. Training scans alternate ±2 dB around the mean.
+pub fn two_floor_site() -> Site {
+    let mut b = SiteBuilder::new("two floors");
+    let floors = [b.floor("G", 0.0), b.floor("1", 4.0)];
+    let mut first = Vec::new();
+    for (f, &floor) in floors.iter().enumerate() {
+        let mut previous = None;
+        for k in 0..5 {
+            let x = 3.0 * k as f64;
+            let scans = (0..20)
+                .map(|n| {
+                    let jitter = if n % 2 == 0 { 2.0 } else { -2.0 };
+                    let readings: Vec<(u8, f64)> = (0..3)
+                        .map(|t| {
+                            let ap_x = 6.0 * t as f64;
+                            ((3 * f + t) as u8, -40.0 - 4.0 * (x - ap_x).abs() + jitter)
+                        })
+                        .collect();
+                    scan(n as u64, &readings)
+                })
+                .collect();
+            let id = b.state(floor, Point2::new(x, 0.0), scans);
+            if let Some(p) = previous {
+                b.edge(p, id, None);
+            } else {
+                first.push(id);
+            }
+            previous = Some(id);
+        }
+    }
+    b.edge(first[0], first[1], Some(6.0));
+    b.build(BuildOptions::default()).unwrap()
+}

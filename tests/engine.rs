@@ -1,0 +1,120 @@
+//! The engine as an app uses it: scans in, positions out, bad input rejected and counted with
+//! the engine unchanged.
+
+mod common;
+
+use common::{scan, two_floor_site};
+use std::sync::{Arc, Mutex};
+use waymark::{Engine, EngineConfig, InputError, Position, Site};
+
+const SECOND: u64 = 1_000_000_000;
+
+fn engine() -> Engine {
+    Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap()
+}
+
+/// What a transmitter layout predicts at x on floor f (the site's training means).
+fn readings_at(f: usize, x: f64) -> Vec<(u8, f64)> {
+    (0..3).map(|t| ((3 * f + t) as u8, -40.0 - 4.0 * (x - 6.0 * t as f64).abs())).collect()
+}
+
+#[test]
+fn finds_the_floor_and_the_place() {
+    let mut engine = engine();
+    for k in 0..3 {
+        let p = engine.push_scan(&scan(SECOND * (k + 1), &readings_at(1, 9.0))).unwrap();
+        assert_eq!(p.floor, 1);
+        assert!(p.floor_probability > 0.99, "{p:?}");
+        assert!((p.x - 9.0).abs() < 1.0 && p.y.abs() < 1e-9, "{p:?}");
+        assert!(p.accuracy_m > 0.0 && p.accuracy_m < 3.0, "{p:?}");
+    }
+    assert_eq!(engine.stats().scans_accepted, 3);
+    let sum: f64 = engine.posterior().iter().sum();
+    assert!((sum - 1.0).abs() < 1e-12);
+}
+
+#[test]
+fn rejected_input_leaves_the_engine_unchanged_and_is_counted() {
+    let mut engine = engine();
+    let first = engine.push_scan(&scan(10 * SECOND, &readings_at(0, 3.0))).unwrap();
+    let posterior = engine.posterior().to_vec();
+
+    let back = engine.push_scan(&scan(9 * SECOND, &readings_at(1, 3.0)));
+    assert_eq!(back, Err(InputError::OutOfOrder { timestamp_ns: 9 * SECOND, last_ns: 10 * SECOND }));
+    let same = engine.push_scan(&scan(10 * SECOND, &readings_at(1, 3.0)));
+    assert!(matches!(same, Err(InputError::OutOfOrder { .. })));
+    assert_eq!(engine.push_scan(&scan(11 * SECOND, &[])), Err(InputError::EmptyScan));
+    let nan = engine.push_scan(&scan(11 * SECOND, &[(0, -60.0), (1, f64::NAN)]));
+    assert!(matches!(nan, Err(InputError::NonFiniteRssi { index: 1, .. })));
+    let inf = engine.push_scan(&scan(11 * SECOND, &[(0, f64::NEG_INFINITY)]));
+    assert!(matches!(inf, Err(InputError::NonFiniteRssi { index: 0, .. })));
+    let unknown = engine.push_scan(&scan(11 * SECOND, &[(77, -60.0), (78, -70.0)]));
+    assert_eq!(unknown, Err(InputError::NoKnownTransmitter { unknown: 2, stale: 0 }));
+
+    assert_eq!(engine.posterior(), &posterior[..]);
+    assert_eq!(engine.position(), Some(&first));
+    let stats = engine.stats();
+    assert_eq!(
+        (
+            stats.scans_accepted,
+            stats.scans_out_of_order,
+            stats.scans_empty,
+            stats.scans_non_finite,
+            stats.scans_no_known_transmitter
+        ),
+        (1, 2, 1, 2, 1)
+    );
+
+    // Unknown and duplicate readings inside a good scan are dropped and counted, not fatal.
+    let mut mixed = readings_at(0, 3.0);
+    mixed.push((77, -50.0));
+    mixed.push((0, -90.0));
+    engine.push_scan(&scan(12 * SECOND, &mixed)).unwrap();
+    assert_eq!((engine.stats().readings_unknown, engine.stats().readings_duplicate), (1, 1));
+}
+
+#[test]
+fn listeners_hear_every_epoch_until_unsubscribed() {
+    let mut engine = engine();
+    let heard: Arc<Mutex<Vec<Position>>> = Arc::default();
+    let sink = Arc::clone(&heard);
+    let id = engine.subscribe(Box::new(move |p: &Position| sink.lock().unwrap().push(p.clone())));
+    let p1 = engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
+    let p2 = engine.push_scan(&scan(2 * SECOND, &readings_at(0, 3.0))).unwrap();
+    let _ = engine.push_scan(&scan(SECOND, &readings_at(0, 3.0)));
+    assert!(engine.unsubscribe(id));
+    assert!(!engine.unsubscribe(id));
+    engine.push_scan(&scan(3 * SECOND, &readings_at(0, 6.0))).unwrap();
+    assert_eq!(*heard.lock().unwrap(), vec![p1, p2]);
+}
+
+#[test]
+fn a_long_silence_restarts_from_the_prior_and_recovers() {
+    let mut engine = engine();
+    engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
+    // Ten minutes later, on the other floor.
+    let p = engine.push_scan(&scan(601 * SECOND, &readings_at(1, 12.0))).unwrap();
+    assert_eq!(engine.stats().filter_restarts, 1);
+    assert_eq!(p.floor, 1);
+    assert!((p.x - 12.0).abs() < 1.5, "{p:?}");
+}
+
+#[test]
+fn a_site_file_round_trip_gives_the_same_track() {
+    let site = two_floor_site();
+    let reloaded = Site::from_json(site.to_json().as_bytes()).unwrap();
+    let run = |site: Site| {
+        let mut engine = Engine::new(Arc::new(site), EngineConfig::default()).unwrap();
+        (0..5)
+            .map(|k| engine.push_scan(&scan(SECOND * (k + 1), &readings_at(0, 3.0 * k as f64))).unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(run(site), run(reloaded));
+}
+
+#[test]
+fn invalid_config_is_refused() {
+    let config = EngineConfig { estimate_states: 0, ..EngineConfig::default() };
+    let err = Engine::new(Arc::new(two_floor_site()), config).err().unwrap();
+    assert!(err.to_string().contains("estimate_states"));
+}
