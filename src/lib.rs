@@ -8,6 +8,7 @@ pub mod error;
 pub mod eval;
 pub mod hmm;
 pub mod radio;
+pub mod sensors;
 pub mod sim;
 pub mod site;
 

@@ -3,8 +3,11 @@
 //! by the EM, and random walks on the walkable graph. Everything is seeded and deterministic.
 
 mod experiment;
+pub mod imu;
+mod trajectory;
 
 pub use experiment::{run, Experiment, ExperimentReport, TrackPoint};
+pub use trajectory::{Pose, Trajectory};
 
 use crate::radio::{FitOptions, Reading, RssiModel, Scan, TransmitterId};
 use crate::site::{BuildOptions, Site, SiteBuilder};
@@ -192,6 +195,8 @@ pub struct Walk {
     pub epochs: Vec<WalkEpoch>,
     /// Distance walked, m.
     pub length_m: f64,
+    /// The walker's path over time, for synthesising inertial sensors.
+    pub trajectory: Trajectory,
 }
 
 /// Hoang §6.1: "movement vectors and RSSI measurements are generated every 1.5 s".
@@ -269,22 +274,16 @@ impl Office {
             at = next;
             route.push((self.points[at as usize], walked));
         }
-        let step_m = speed * EPOCH_NS as f64 * 1e-9;
-        let mut epochs = Vec::new();
-        let mut segment = 0;
-        for k in 0.. {
-            let s = k as f64 * step_m;
-            if s > walked {
-                break;
-            }
-            while route[segment + 1].1 < s {
-                segment += 1;
-            }
-            let ((a, sa), (b, sb)) = (route[segment], route[segment + 1]);
-            let truth = a + (b - a) * ((s - sa) / (sb - sa));
-            let t_ns = 1_000_000_000 + k as u64 * EPOCH_NS;
-            epochs.push(WalkEpoch { scan: self.field.scan_at(truth, t_ns, &mut rng), truth });
-        }
-        Walk { epochs, length_m: walked }
+        let points: Vec<Point2<f64>> = route.iter().map(|r| r.0).collect();
+        let trajectory = Trajectory::new(1_000_000_000, speed, &points, Vec::new());
+        let epochs = (0..)
+            .map(|k| trajectory.start_ns() + k * EPOCH_NS)
+            .take_while(|&t_ns| t_ns <= trajectory.end_ns())
+            .map(|t_ns| {
+                let truth = trajectory.pose_at(t_ns).position;
+                WalkEpoch { scan: self.field.scan_at(truth, t_ns, &mut rng), truth }
+            })
+            .collect();
+        Walk { epochs, length_m: walked, trajectory }
     }
 }

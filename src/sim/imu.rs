@@ -1,0 +1,1 @@
+//! Synthetic raw inertial sensors for a simulated walk (being written).
