@@ -2,7 +2,7 @@
 //! space until the update: it cannot underflow over hours of epochs, nor when the likelihoods
 //! of a scan with a hundred transmitters sit near -1000 nats and hundreds apart.
 
-use super::Transition;
+use super::transition::{predict, Transition};
 
 /// Why a step could not be taken; the filter is left as it was.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -26,12 +26,14 @@ pub struct ForwardFilter {
     posterior: Vec<f64>,
     predicted: Vec<f64>,
     weights: Vec<f64>,
+    row: Vec<(u32, f64)>,
 }
 
 impl ForwardFilter {
     /// A filter over `n` states with the uniform prior.
     pub fn new(n: usize) -> Self {
-        let mut filter = Self { posterior: vec![0.0; n], predicted: vec![0.0; n], weights: vec![0.0; n] };
+        let mut filter =
+            Self { posterior: vec![0.0; n], predicted: vec![0.0; n], weights: vec![0.0; n], row: Vec::new() };
         filter.reset();
         filter
     }
@@ -49,8 +51,11 @@ impl ForwardFilter {
 
     /// A prediction with no observation: the posterior becomes the predicted distribution.
     pub fn predict(&mut self, transition: &dyn Transition) {
-        transition.predict(&self.posterior, &mut self.predicted);
-        std::mem::swap(&mut self.posterior, &mut self.predicted);
+        predict(transition, &self.posterior, &mut self.predicted, &mut self.row);
+        let total: f64 = self.predicted.iter().sum();
+        for (post, &p) in self.posterior.iter_mut().zip(&self.predicted) {
+            *post = p / total;
+        }
     }
 
     /// One epoch: predict with `transition` (none at the first epoch, or when no time has
@@ -66,7 +71,7 @@ impl ForwardFilter {
             return Err(FilterError::Length { expected: n, got: ln_emission.len() });
         }
         match transition {
-            Some(t) => t.predict(&self.posterior, &mut self.predicted),
+            Some(t) => predict(t, &self.posterior, &mut self.predicted, &mut self.row),
             None => self.predicted.copy_from_slice(&self.posterior),
         }
         // w_j = ln pred_j + ln p(o | j); the max is subtracted before exponentiating.
@@ -100,10 +105,9 @@ mod tests {
     /// A dense transition matrix, as a reference.
     struct Dense(Vec<Vec<f64>>);
     impl Transition for Dense {
-        fn predict(&self, prior: &[f64], out: &mut [f64]) {
-            for (j, o) in out.iter_mut().enumerate() {
-                *o = prior.iter().enumerate().map(|(i, p)| p * self.0[i][j]).sum();
-            }
+        fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+            row.extend(self.0[i].iter().enumerate().map(|(j, &a)| (j as u32, a)));
+            0.0
         }
     }
 

@@ -7,4 +7,4 @@ mod transition;
 
 pub use estimate::{estimate, Estimate};
 pub use forward::{FilterError, ForwardFilter};
-pub use transition::{Transition, UniformReach};
+pub use transition::{hipe_probabilities, predict, viterbi_step, Transition, UniformReach};

@@ -1,12 +1,74 @@
-//! Transition models. For now the reachability model of Hoang §6.1 with HIPE's low-probability
-//! floor: uniform over the states reachable in one epoch, K times less likely elsewhere.
+//! Sparse transition models. A model gives, for each state i, the weights a_ij of the states j
+//! it names explicitly, and one weight shared by every other state (HIPE eq. 11: every
+//! a_ij > 0, so the filter can recover from a wrong track). Prediction and the Viterbi step
+//! are written once over that shape, in O(explicit entries + N).
 
 use crate::site::ReachTable;
 
-/// A transition model: one prediction step of the forward recursion.
+/// A transition model (or, with Hoang eq. 14, a transition times a movement likelihood).
 pub trait Transition {
-    /// `out[j] = Σ_i prior[i] · a_ij`. `prior` sums to 1 and so does `out`.
-    fn predict(&self, prior: &[f64], out: &mut [f64]);
+    /// Writes the explicit entries (j, a_ij) of row `i` into `row` (cleared first by the
+    /// caller) and returns the weight of every state not listed. Each j appears at most once.
+    fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64;
+}
+
+/// `out[j] = Σ_i prior[i] · a_ij`, skipping states with no mass.
+pub fn predict(transition: &dyn Transition, prior: &[f64], out: &mut [f64], row: &mut Vec<(u32, f64)>) {
+    let mut shared = 0.0;
+    out.fill(0.0);
+    for (i, &p) in prior.iter().enumerate() {
+        if p == 0.0 {
+            continue;
+        }
+        row.clear();
+        let floor = transition.row(i, row);
+        shared += p * floor;
+        for &(j, a) in row.iter() {
+            out[j as usize] += p * (a - floor);
+        }
+    }
+    for v in out.iter_mut() {
+        *v += shared;
+    }
+}
+
+/// One max-product step in log space: `out[j] = max_i (delta[i] + ln a_ij)` and `back[j]` the
+/// maximising i.
+pub fn viterbi_step(
+    transition: &dyn Transition,
+    delta: &[f64],
+    out: &mut [f64],
+    back: &mut [u32],
+    row: &mut Vec<(u32, f64)>,
+) {
+    out.fill(f64::NEG_INFINITY);
+    // The best predecessor through the shared (floor) weight, valid for every j.
+    let (mut floor_best, mut floor_arg) = (f64::NEG_INFINITY, 0u32);
+    for (i, &d) in delta.iter().enumerate() {
+        if d == f64::NEG_INFINITY {
+            continue;
+        }
+        row.clear();
+        let floor = transition.row(i, row);
+        let via_floor = d + floor.ln();
+        if via_floor > floor_best {
+            floor_best = via_floor;
+            floor_arg = i as u32;
+        }
+        for &(j, a) in row.iter() {
+            let v = d + a.ln();
+            if v > out[j as usize] {
+                out[j as usize] = v;
+                back[j as usize] = i as u32;
+            }
+        }
+    }
+    for (o, b) in out.iter_mut().zip(back.iter_mut()) {
+        if floor_best > *o {
+            *o = floor_best;
+            *b = floor_arg;
+        }
+    }
 }
 
 /// Uniform 1/U over the U states reachable from state i within `rho_m` walking distance
@@ -22,28 +84,20 @@ pub struct UniformReach<'a> {
     pub ratio: f64,
 }
 
+/// HIPE eqs. 5-6: the high and low probabilities of a row with `high_count` of `n` states in
+/// the high set and ratio `k`.
+pub fn hipe_probabilities(high_count: usize, n: usize, k: f64) -> (f64, f64) {
+    let (i, n) = (high_count as f64, n as f64);
+    let high = k / (i * k + n - i);
+    (high, high / k)
+}
+
 impl Transition for UniformReach<'_> {
-    fn predict(&self, prior: &[f64], out: &mut [f64]) {
-        let n = prior.len() as f64;
-        let mut low_total = 0.0;
-        out.fill(0.0);
-        for (i, &p) in prior.iter().enumerate() {
-            if p == 0.0 {
-                continue;
-            }
-            let reach = self.table.reachable(i, self.rho_m);
-            let u = reach.len() as f64;
-            let high = self.ratio / (u * self.ratio + n - u);
-            let low = high / self.ratio;
-            low_total += p * low;
-            let extra = p * (high - low);
-            for &(j, _) in reach {
-                out[j as usize] += extra;
-            }
-        }
-        for v in out.iter_mut() {
-            *v += low_total;
-        }
+    fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+        let reach = self.table.reachable(i, self.rho_m);
+        let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
+        row.extend(reach.iter().map(|&(j, _)| (j, high)));
+        low
     }
 }
 
@@ -77,13 +131,25 @@ mod tests {
         let mut prior = vec![0.0; 6];
         prior[2] = 1.0;
         let mut out = vec![0.0; 6];
-        t.predict(&prior, &mut out);
+        predict(&t, &prior, &mut out, &mut Vec::new());
         let high = ratio / (3.0 * ratio + 3.0);
         for (j, &p) in out.iter().enumerate() {
             let expected = if (1..=3).contains(&j) { high } else { high / ratio };
             assert_relative_eq!(p, expected, epsilon = 1e-15);
         }
         assert_relative_eq!(out.iter().sum::<f64>(), 1.0, epsilon = 1e-15);
+    }
+
+    /// a_ij by definition on the corridor: walking distance |i - j| · 2 m.
+    fn dense(t: &UniformReach, i: usize, j: usize) -> f64 {
+        let reachable = |k: usize| (k as f64 - i as f64).abs() * 2.0 <= t.rho_m || k.abs_diff(i) == 1;
+        let u = (0..6).filter(|&k| reachable(k)).count();
+        let (high, low) = hipe_probabilities(u, 6, t.ratio);
+        if reachable(j) {
+            high
+        } else {
+            low
+        }
     }
 
     #[test]
@@ -93,18 +159,28 @@ mod tests {
         let t = UniformReach { table: &table, rho_m: 4.5, ratio: 200_000.0 };
         let prior = [0.1, 0.3, 0.0, 0.2, 0.15, 0.25];
         let mut sparse = vec![0.0; 6];
-        t.predict(&prior, &mut sparse);
-        // a_ij by definition: walking distance on the corridor is |i - j| * 2 m.
+        predict(&t, &prior, &mut sparse, &mut Vec::new());
         for (j, &p) in sparse.iter().enumerate() {
-            let dense: f64 = (0..6)
-                .map(|i| {
-                    let reachable = |k: usize| (k as f64 - i as f64).abs() * 2.0 <= 4.5 || k.abs_diff(i) == 1;
-                    let u = (0..6).filter(|&k| reachable(k)).count() as f64;
-                    let high = t.ratio / (u * t.ratio + 6.0 - u);
-                    prior[i] * if reachable(j) { high } else { high / t.ratio }
-                })
-                .sum();
-            assert_relative_eq!(p, dense, epsilon = 1e-15);
+            let expected: f64 = (0..6).map(|i| prior[i] * dense(&t, i, j)).sum();
+            assert_relative_eq!(p, expected, epsilon = 1e-15);
+        }
+    }
+
+    #[test]
+    fn sparse_viterbi_step_equals_the_dense_maximum() {
+        let site = corridor();
+        let table = ReachTable::build(&site, 9.0);
+        let t = UniformReach { table: &table, rho_m: 2.0, ratio: 50.0 };
+        let delta = [-3.0, -1.0, f64::NEG_INFINITY, -2.5, -7.0, -0.5];
+        let (mut out, mut back) = (vec![0.0; 6], vec![0u32; 6]);
+        viterbi_step(&t, &delta, &mut out, &mut back, &mut Vec::new());
+        for j in 0..6 {
+            let (best_i, best) = (0..6)
+                .map(|i| (i, delta[i] + dense(&t, i, j).ln()))
+                .max_by(|a, b| a.1.total_cmp(&b.1))
+                .unwrap();
+            assert_relative_eq!(out[j], best, epsilon = 1e-12);
+            assert_eq!(back[j] as usize, best_i);
         }
     }
 }

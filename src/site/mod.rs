@@ -3,10 +3,12 @@
 
 mod builder;
 mod file;
+mod pseudo;
 mod reach;
 
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
 pub use file::{SiteError, FORMAT_VERSION};
+pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
 pub use reach::ReachTable;
 
 use crate::radio::RadioMap;

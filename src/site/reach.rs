@@ -102,6 +102,11 @@ impl ReachTable {
         &self.entries[self.starts[i]..self.sorted_from[i] + within]
     }
 
+    /// Number of states the table covers.
+    pub fn state_count(&self) -> usize {
+        self.sorted_from.len()
+    }
+
     /// Entries stored, for memory accounting.
     pub fn len(&self) -> usize {
         self.entries.len()
