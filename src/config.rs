@@ -2,6 +2,67 @@
 //! or the measurement that chose it.
 
 use crate::error::Error;
+use serde::{Deserialize, Serialize};
+
+/// Which transition model the HMM uses.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum TransitionModel {
+    /// Uniform over the states reachable at `max_speed_mps`, motion ignored (Hoang §6.1,
+    /// the "RSSI only" row of Table 1).
+    Reach,
+    /// HIPE's high/low regions from the measured distance and heading (HIPE eqs. 5-11).
+    #[default]
+    Hipe,
+    /// Hoang's Gaussian on the movement vector over the reachable states (Hoang eqs. 11, 14).
+    Hoang,
+}
+
+/// HIPE's parameters (HIPE Table 4 unless said otherwise).
+#[derive(Clone, Debug, PartialEq)]
+pub struct HipeConfig {
+    /// Relative distance tolerance: ±10% of the distance estimate (Table 4).
+    pub distance_tolerance_fraction: f64,
+    /// Least distance tolerance: 1.5 m, "half the separation distance of most RPs" (§5.2).
+    pub distance_tolerance_min_m: f64,
+    /// Heading tolerance γ: 55° (Table 4).
+    pub heading_tolerance_rad: f64,
+    /// Assumed maximum speed for the speed scenarios: 1 m/s (§4.2.2, Table 1).
+    pub assumed_speed_mps: f64,
+    /// Smallest K: 200 (Table 4). K moves log-linearly between `transition_ratio_min` and
+    /// the engine's `transition_ratio` with the reliability of the motion data and of the
+    /// previous estimate (§4.2.1: "greater when ... more reliable"; the rule is Waymark's).
+    pub transition_ratio_min: f64,
+}
+
+impl Default for HipeConfig {
+    fn default() -> Self {
+        Self {
+            distance_tolerance_fraction: 0.10,
+            distance_tolerance_min_m: 1.5,
+            heading_tolerance_rad: 55f64.to_radians(),
+            assumed_speed_mps: 1.0,
+            transition_ratio_min: 200.0,
+        }
+    }
+}
+
+/// Hoang's movement-vector model.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HoangConfig {
+    /// Σ_v = variance · I: 0.25 m² (Hoang §6.1, "determined in offline experiments").
+    pub movement_variance_m2: f64,
+    /// Mahalanobis distance beyond which the movement likelihood stops falling, so that a
+    /// miscounted step cannot rule a state out: 3, the usual three-sigma gate. Waymark's
+    /// robustness choice, in the spirit of HIPE eq. 11.
+    pub mahalanobis_cap: f64,
+}
+
+impl Default for HoangConfig {
+    fn default() -> Self {
+        Self { movement_variance_m2: 0.25, mahalanobis_cap: 3.0 }
+    }
+}
 
 /// How the engine turns scans into positions.
 #[derive(Clone, Debug, PartialEq)]
@@ -9,6 +70,22 @@ pub struct EngineConfig {
     /// Fastest a person is assumed to move, m/s: bounds the states reachable between two
     /// epochs. Hoang et al. §6.1: "a user cannot move faster than 3 m/s".
     pub max_speed_mps: f64,
+    /// The transition model.
+    pub transition: TransitionModel,
+    /// HIPE's parameters, for [`TransitionModel::Hipe`].
+    pub hipe: HipeConfig,
+    /// Hoang's parameters, for [`TransitionModel::Hoang`].
+    pub hoang: HoangConfig,
+    /// γ of Hoang eq. 14: the radio likelihood is raised to γ and the movement likelihood to
+    /// 1 - γ. `None` is eq. 3 (both to the power 1), as in Hoang's simulations (§6.1); the
+    /// field-data value is chosen per site by jackknife (Hoang §6.2 found 0.003).
+    pub rssi_weight: Option<f64>,
+    /// Epochs the Viterbi tracker keeps (HIPE §4.1 tracks by Viterbi): 64 epochs, 96 s at
+    /// Hoang's 1.5 s epoch, bounding its memory to 64 × 4 bytes per state.
+    pub track_window_epochs: usize,
+    /// Lag of the fixed-lag estimate, epochs: 3 (4.5 s at 1.5 s epochs). Chosen with
+    /// `waymark simulate --json` (fixed-lag error by lag, seeds other than the default).
+    pub fixed_lag_epochs: usize,
     /// Ratio K between the high transition probability (reachable states) and the low one
     /// (everything else), HIPE eqs. 5-6. The low one keeps every a_ij > 0 (HIPE eq. 11) so the
     /// filter can recover from a wrong track. Default: the top of HIPE Table 4's range
@@ -41,6 +118,12 @@ impl Default for EngineConfig {
     fn default() -> Self {
         Self {
             max_speed_mps: 3.0,
+            transition: TransitionModel::default(),
+            hipe: HipeConfig::default(),
+            hoang: HoangConfig::default(),
+            rssi_weight: None,
+            track_window_epochs: 64,
+            fixed_lag_epochs: 3,
             transition_ratio: 200_000.0,
             estimate_states: 5,
             reach_radius_m: 9.0,
@@ -60,6 +143,33 @@ impl EngineConfig {
         }
         if !(self.transition_ratio.is_finite() && self.transition_ratio >= 1.0) {
             return fail(format!("transition_ratio must be finite and >= 1 (got {})", self.transition_ratio));
+        }
+        let h = &self.hipe;
+        let positive = |v: f64| v.is_finite() && v > 0.0;
+        let tolerances_ok = h.distance_tolerance_fraction.is_finite()
+            && h.distance_tolerance_fraction >= 0.0
+            && positive(h.distance_tolerance_min_m)
+            && positive(h.heading_tolerance_rad)
+            && positive(h.assumed_speed_mps);
+        if !tolerances_ok {
+            return fail("hipe: tolerances and assumed_speed_mps must be finite and positive".into());
+        }
+        if !(h.transition_ratio_min >= 1.0 && h.transition_ratio_min <= self.transition_ratio) {
+            return fail(format!(
+                "hipe.transition_ratio_min must be in [1, transition_ratio] (got {})",
+                h.transition_ratio_min
+            ));
+        }
+        if !positive(self.hoang.movement_variance_m2) || !positive(self.hoang.mahalanobis_cap) {
+            return fail("hoang: movement_variance_m2 and mahalanobis_cap must be finite and > 0".into());
+        }
+        if let Some(g) = self.rssi_weight {
+            if !(g > 0.0 && g <= 1.0) {
+                return fail(format!("rssi_weight must be in (0, 1] (got {g})"));
+            }
+        }
+        if self.track_window_epochs == 0 || self.fixed_lag_epochs >= self.track_window_epochs {
+            return fail("track_window_epochs must be > fixed_lag_epochs".into());
         }
         if self.estimate_states == 0 {
             return fail("estimate_states must be at least 1".into());

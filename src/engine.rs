@@ -1,13 +1,18 @@
-//! The positioning session: takes scans in time order, runs one HMM epoch per scan, and
-//! publishes positions to whoever polls or listens.
+//! The positioning session: takes inertial batches and scans in time order, runs one HMM epoch
+//! per scan (or per [`Engine::advance`] without radio), and publishes positions, status
+//! changes and track revisions to whoever polls or listens.
 //!
 //! The engine is single-threaded and deterministic, so a replay is exact; the FFI layer puts
 //! it behind a lock.
 
-use crate::config::EngineConfig;
+use crate::config::{EngineConfig, TransitionModel};
 use crate::error::{Error, InputError};
-use crate::hmm::{estimate, ForwardFilter, Transition, UniformReach};
+use crate::hmm::{
+    estimate, ForwardFilter, HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach,
+    ViterbiWindow,
+};
 use crate::radio::Scan;
+use crate::sensors::{MdiScenario, MotionState, MotionUpdate};
 use crate::site::{ReachTable, Site};
 use std::sync::Arc;
 
@@ -27,15 +32,70 @@ pub struct Position {
     /// Radius of the circle around (x, y) that holds the true position with probability 0.68
     /// (the configured `accuracy_mass`), m. Always > 0.
     pub accuracy_m: f64,
-    /// ln p(scan | earlier scans): how well the site's radio map explains this scan. Very low
-    /// values mean the phone hears what the map does not expect.
-    pub radio_log_evidence: f64,
+    /// Direction of travel, radians clockwise from the site's +y axis, when the sensors gave a
+    /// trustworthy absolute heading this epoch.
+    pub heading_rad: Option<f64>,
+    /// One standard deviation of `heading_rad`, rad.
+    pub heading_accuracy_rad: Option<f64>,
+    /// Walking, stationary, or unknown (no accelerometer).
+    pub motion_state: MotionState,
+    /// The motion information this epoch had (HIPE Table 1).
+    pub scenario: MdiScenario,
+    /// Steps detected since the previous epoch.
+    pub steps: u32,
+    /// ln p(scan | earlier input): how well the radio map explains this scan; `None` for an
+    /// epoch without a scan. Very low values mean the phone hears what the map does not expect.
+    pub radio_log_evidence: Option<f64>,
 }
 
-/// Receives every new position.
+/// One point of the smoothed track.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackPoint {
+    /// Epoch time, ns.
+    pub timestamp_ns: u64,
+    /// Index of the state on the most likely path.
+    pub state: u32,
+    /// Its floor.
+    pub floor: usize,
+    /// Its x, m.
+    pub x: f64,
+    /// Its y, m.
+    pub y: f64,
+}
+
+/// Something about the session changed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StatusEvent {
+    /// The motion information available changed (a sensor stopped, the compass became
+    /// disturbed, ...).
+    ScenarioChanged {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// Before.
+        from: MdiScenario,
+        /// Now.
+        to: MdiScenario,
+    },
+    /// The person started or stopped walking.
+    MotionStateChanged {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// Before.
+        from: MotionState,
+        /// Now.
+        to: MotionState,
+    },
+}
+
+/// Receives what the engine publishes. Only `on_position` is required.
 pub trait PositionListener: Send {
     /// Called after each epoch, on the thread that pushed the input.
     fn on_position(&mut self, position: &Position);
+    /// Called when the motion scenario or state changes.
+    fn on_status(&mut self, _status: &StatusEvent) {}
+    /// Called when the most likely track changed for epochs before the latest one (a later
+    /// observation showed an earlier position was wrong): the revised points, oldest first.
+    fn on_track_revised(&mut self, _revised: &[TrackPoint]) {}
 }
 
 impl<F: FnMut(&Position) + Send> PositionListener for F {
@@ -53,7 +113,7 @@ pub struct SubscriptionId(u64);
 pub struct InputStats {
     /// Scans that made an epoch.
     pub scans_accepted: u64,
-    /// Scans rejected because their timestamp was not after the last accepted one.
+    /// Scans rejected because their timestamp was not after the last epoch.
     pub scans_out_of_order: u64,
     /// Scans rejected for having no readings.
     pub scans_empty: u64,
@@ -67,6 +127,8 @@ pub struct InputStats {
     pub readings_duplicate: u64,
     /// Readings older than `max_reading_age_ns` (in accepted scans).
     pub readings_stale: u64,
+    /// Epochs without a scan ([`Engine::advance`]).
+    pub motion_epochs: u64,
     /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
     /// when no state could explain a scan.
     pub filter_restarts: u64,
@@ -78,10 +140,12 @@ pub struct Engine {
     config: EngineConfig,
     reach: ReachTable,
     filter: ForwardFilter,
+    viterbi: ViterbiWindow,
     ln_emission: Vec<f64>,
     scratch: Vec<(f64, f64)>,
-    last_scan_ns: Option<u64>,
+    last_epoch_ns: Option<u64>,
     latest: Option<Position>,
+    published_track: Vec<TrackPoint>,
     listeners: Vec<(SubscriptionId, Box<dyn PositionListener>)>,
     next_subscription: u64,
     stats: InputStats,
@@ -94,17 +158,19 @@ impl Engine {
         let n = site.states().len();
         let reach = ReachTable::build(&site, config.reach_radius_m);
         Ok(Self {
+            viterbi: ViterbiWindow::new(n, config.track_window_epochs),
             site,
-            config,
             reach,
             filter: ForwardFilter::new(n),
             ln_emission: vec![0.0; n],
             scratch: Vec::with_capacity(n),
-            last_scan_ns: None,
+            last_epoch_ns: None,
             latest: None,
+            published_track: Vec::new(),
             listeners: Vec::new(),
             next_subscription: 0,
             stats: InputStats::default(),
+            config,
         })
     }
 
@@ -118,7 +184,7 @@ impl Engine {
         &self.config
     }
 
-    /// The latest position, if any scan has been accepted.
+    /// The latest position, if any epoch has run.
     pub fn position(&self) -> Option<&Position> {
         self.latest.as_ref()
     }
@@ -133,7 +199,12 @@ impl Engine {
         &self.stats
     }
 
-    /// Calls `listener` with every new position until [`unsubscribe`](Self::unsubscribe).
+    /// Bytes held by the Viterbi window (bounded by `track_window_epochs`).
+    pub fn track_memory_bytes(&self) -> usize {
+        self.viterbi.memory_bytes()
+    }
+
+    /// Calls `listener` with everything published until [`unsubscribe`](Self::unsubscribe).
     pub fn subscribe(&mut self, listener: Box<dyn PositionListener>) -> SubscriptionId {
         let id = SubscriptionId(self.next_subscription);
         self.next_subscription += 1;
@@ -148,10 +219,38 @@ impl Engine {
         self.listeners.len() != before
     }
 
+    /// The most likely path over the last `track_window_epochs` epochs (HIPE §4.1: Viterbi for
+    /// tracking), oldest first.
+    pub fn track(&self) -> Vec<TrackPoint> {
+        self.viterbi.path().into_iter().map(|(t, s)| self.track_point(t, s)).collect()
+    }
+
+    /// The position `fixed_lag_epochs` epochs ago on the most likely path: later than the live
+    /// estimate, but it has seen what came after.
+    pub fn fixed_lag_position(&self) -> Option<TrackPoint> {
+        let path = self.viterbi.path();
+        let lag = self.config.fixed_lag_epochs.min(path.len().saturating_sub(1));
+        path.len().checked_sub(1 + lag).map(|k| self.track_point(path[k].0, path[k].1))
+    }
+
+    fn track_point(&self, timestamp_ns: u64, state: u32) -> TrackPoint {
+        let s = &self.site.states()[state as usize];
+        TrackPoint { timestamp_ns, state, floor: s.floor, x: s.position.x, y: s.position.y }
+    }
+
     /// Takes a WiFi or BLE scan: one epoch of the HMM. A rejected scan leaves the engine as it
     /// was and is counted by reason.
     pub fn push_scan(&mut self, scan: &Scan) -> Result<Position, InputError> {
-        let result = self.epoch(scan);
+        self.push_scan_with_motion(scan, &MotionUpdate::default())
+    }
+
+    /// Takes a scan with the motion measured since the previous epoch.
+    pub fn push_scan_with_motion(
+        &mut self,
+        scan: &Scan,
+        motion: &MotionUpdate,
+    ) -> Result<Position, InputError> {
+        let result = self.scan_epoch(scan, motion);
         if let Err(e) = &result {
             let counter = match e {
                 InputError::OutOfOrder { .. } => &mut self.stats.scans_out_of_order,
@@ -165,12 +264,29 @@ impl Engine {
         result
     }
 
-    fn epoch(&mut self, scan: &Scan) -> Result<Position, InputError> {
-        if let Some(last_ns) = self.last_scan_ns {
-            if scan.timestamp_ns <= last_ns {
-                return Err(InputError::OutOfOrder { timestamp_ns: scan.timestamp_ns, last_ns });
-            }
+    /// An epoch without radio at `timestamp_ns`, from the motion measured since the previous
+    /// epoch: call it on a timer when scans are rare (iOS, throttled Android) to keep the
+    /// position moving. Scans older than it will then be rejected as out of order.
+    pub fn advance_with_motion(
+        &mut self,
+        timestamp_ns: u64,
+        motion: &MotionUpdate,
+    ) -> Result<Position, InputError> {
+        self.check_time(timestamp_ns)?;
+        self.ln_emission.fill(0.0);
+        self.stats.motion_epochs += 1;
+        Ok(self.run_epoch(timestamp_ns, None, motion))
+    }
+
+    fn check_time(&self, timestamp_ns: u64) -> Result<(), InputError> {
+        match self.last_epoch_ns {
+            Some(last_ns) if timestamp_ns <= last_ns => Err(InputError::OutOfOrder { timestamp_ns, last_ns }),
+            _ => Ok(()),
         }
+    }
+
+    fn scan_epoch(&mut self, scan: &Scan, motion: &MotionUpdate) -> Result<Position, InputError> {
+        self.check_time(scan.timestamp_ns)?;
         if scan.readings.is_empty() {
             return Err(InputError::EmptyScan);
         }
@@ -182,16 +298,26 @@ impl Engine {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
         self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
-
+        if let Some(gamma) = self.config.rssi_weight {
+            // Hoang eq. 14: p(o | s)^γ.
+            for e in self.ln_emission.iter_mut() {
+                *e *= gamma;
+            }
+        }
         // Accepted from here on: the state changes.
-        let dt_s = self.last_scan_ns.map(|last| (scan.timestamp_ns - last) as f64 * 1e-9);
-        let evidence = self.forward(dt_s);
         self.stats.scans_accepted += 1;
         self.stats.readings_unknown += resolved.unknown as u64;
         self.stats.readings_duplicate += resolved.duplicates as u64;
         self.stats.readings_stale += resolved.stale as u64;
-        self.last_scan_ns = Some(scan.timestamp_ns);
+        Ok(self.run_epoch(scan.timestamp_ns, Some(()), motion))
+    }
 
+    /// Prediction, update, estimate, publication. `ln_emission` holds the observation (zeros
+    /// when `scan` is `None`).
+    fn run_epoch(&mut self, timestamp_ns: u64, scan: Option<()>, motion: &MotionUpdate) -> Position {
+        let dt_s = self.last_epoch_ns.map(|last| (timestamp_ns - last) as f64 * 1e-9);
+        let evidence = self.forward(timestamp_ns, dt_s, motion);
+        self.last_epoch_ns = Some(timestamp_ns);
         let e = estimate(
             &self.site,
             self.filter.posterior(),
@@ -200,54 +326,211 @@ impl Engine {
             &mut self.scratch,
         );
         let position = Position {
-            timestamp_ns: scan.timestamp_ns,
+            timestamp_ns,
             floor: e.floor,
             floor_probability: e.floor_probability,
             x: e.position.x,
             y: e.position.y,
             accuracy_m: e.accuracy_m,
-            radio_log_evidence: evidence,
+            heading_rad: motion.heading_rad,
+            heading_accuracy_rad: motion.heading_rad.map(|_| motion.heading_sigma_rad),
+            motion_state: motion.motion_state,
+            scenario: motion.scenario,
+            steps: motion.steps,
+            radio_log_evidence: scan.map(|_| evidence),
         };
-        for (_, listener) in &mut self.listeners {
-            listener.on_position(&position);
-        }
+        self.publish(&position);
         self.latest = Some(position.clone());
-        Ok(position)
+        position
     }
 
-    /// Predicts over `dt_s` (none at the first epoch) and updates with `ln_emission`.
-    /// Returns the radio evidence.
-    fn forward(&mut self, dt_s: Option<f64>) -> f64 {
-        let ratio = self.config.transition_ratio;
-        let (passes, rho_m) = match dt_s {
-            None => (0, 0.0),
-            Some(dt) => {
-                let reach = self.config.max_speed_mps * dt;
-                let passes = (reach / self.reach.radius_m()).ceil().max(1.0);
-                (passes as u32, reach / passes)
+    fn publish(&mut self, position: &Position) {
+        let mut events = Vec::new();
+        if let Some(previous) = &self.latest {
+            if previous.scenario != position.scenario {
+                events.push(StatusEvent::ScenarioChanged {
+                    timestamp_ns: position.timestamp_ns,
+                    from: previous.scenario,
+                    to: position.scenario,
+                });
             }
-        };
-        if passes > self.config.max_reach_passes {
-            log::debug!("{:.1} s without a scan: restarting from the uniform prior", dt_s.unwrap_or(0.0));
-            self.filter.reset();
-            self.stats.filter_restarts += 1;
-        }
-        let transition = UniformReach { table: &self.reach, rho_m, ratio };
-        let passes = if passes > self.config.max_reach_passes { 0 } else { passes };
-        // All but the last pass are pure predictions (no observation in between).
-        for _ in 1..passes {
-            self.filter.predict(&transition);
-        }
-        let last: Option<&dyn Transition> = if passes >= 1 { Some(&transition) } else { None };
-        match self.filter.step(last, &self.ln_emission) {
-            Ok(evidence) => evidence,
-            Err(_) => {
-                // The map explains this scan nowhere the motion model allows: start again from
-                // the radio alone.
-                self.stats.filter_restarts += 1;
-                self.filter.reset();
-                self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
+            if previous.motion_state != position.motion_state {
+                events.push(StatusEvent::MotionStateChanged {
+                    timestamp_ns: position.timestamp_ns,
+                    from: previous.motion_state,
+                    to: position.motion_state,
+                });
             }
+        }
+        let revised = self.revise_track();
+        for (_, listener) in &mut self.listeners {
+            for event in &events {
+                listener.on_status(event);
+            }
+            if !revised.is_empty() {
+                listener.on_track_revised(&revised);
+            }
+            listener.on_position(position);
         }
     }
+
+    /// The points of the Viterbi path, before the newest epoch, that differ from what was last
+    /// published.
+    fn revise_track(&mut self) -> Vec<TrackPoint> {
+        let track = self.track();
+        let revised: Vec<TrackPoint> = match track.split_last() {
+            Some((_, earlier)) => earlier
+                .iter()
+                .filter(|p| {
+                    self.published_track
+                        .iter()
+                        .find(|q| q.timestamp_ns == p.timestamp_ns)
+                        .is_some_and(|q| q.state != p.state)
+                })
+                .cloned()
+                .collect(),
+            None => Vec::new(),
+        };
+        self.published_track = track;
+        revised
+    }
+
+    /// Predicts over `dt_s` (none at the first epoch) with the configured model and `motion`,
+    /// and updates with `ln_emission`. Returns the log evidence.
+    fn forward(&mut self, timestamp_ns: u64, dt_s: Option<f64>, motion: &MotionUpdate) -> f64 {
+        let Some(dt) = dt_s else {
+            self.viterbi.step(
+                timestamp_ns,
+                &UniformReach { table: &self.reach, rho_m: 0.0, ratio: 1.0 },
+                &self.ln_emission,
+            );
+            return self.update(None);
+        };
+        let config = &self.config;
+        let speed_reach = config.max_speed_mps * dt;
+        let table_radius = self.reach.radius_m();
+        let hipe_region = hipe_region(config, motion, dt);
+        let needed = match config.transition {
+            TransitionModel::Reach | TransitionModel::Hoang => speed_reach,
+            TransitionModel::Hipe => hipe_region.outer_radius_m(),
+        };
+        if needed > table_radius {
+            return self.bridge_gap(timestamp_ns, speed_reach);
+        }
+        let ratio_max = config.transition_ratio;
+        let reach = UniformReach { table: &self.reach, rho_m: speed_reach, ratio: ratio_max };
+        let hipe = HipeTransition {
+            site: &self.site,
+            table: &self.reach,
+            region: hipe_region,
+            ratio: hipe_ratio(config, motion, self.latest.as_ref()),
+        };
+        let hoang = HoangTransition {
+            site: &self.site,
+            table: &self.reach,
+            reach_m: speed_reach,
+            ratio: ratio_max,
+            movement_m: motion.displacement_m,
+            variance_m2: config.hoang.movement_variance_m2,
+            mahalanobis_cap: config.hoang.mahalanobis_cap,
+            exponent: config.rssi_weight.map_or(1.0, |g| 1.0 - g),
+        };
+        let transition: &dyn Transition = match config.transition {
+            TransitionModel::Reach => &reach,
+            TransitionModel::Hipe => &hipe,
+            TransitionModel::Hoang => &hoang,
+        };
+        self.viterbi.step(timestamp_ns, transition, &self.ln_emission);
+        let result = self.filter.step(Some(transition), &self.ln_emission);
+        result.unwrap_or_else(|_| self.restart())
+    }
+
+    /// A reach beyond the walking-distance table: several passes of the speed bound, or a
+    /// restart from the uniform prior when even that is too far.
+    fn bridge_gap(&mut self, timestamp_ns: u64, speed_reach: f64) -> f64 {
+        let table_radius = self.reach.radius_m();
+        let passes = (speed_reach / table_radius).ceil().max(1.0);
+        let pass = UniformReach {
+            table: &self.reach,
+            rho_m: speed_reach / passes,
+            ratio: self.config.transition_ratio,
+        };
+        self.viterbi.step(timestamp_ns, &UniformReach { rho_m: table_radius, ..pass }, &self.ln_emission);
+        if passes > f64::from(self.config.max_reach_passes) {
+            log::debug!("{speed_reach:.0} m of possible walking since the last epoch: restarting");
+            self.filter.reset();
+            self.stats.filter_restarts += 1;
+            return self.update(None);
+        }
+        for _ in 1..passes as u32 {
+            self.filter.predict(&pass);
+        }
+        let result = self.filter.step(Some(&pass), &self.ln_emission);
+        result.unwrap_or_else(|_| self.restart())
+    }
+
+    fn update(&mut self, transition: Option<&dyn Transition>) -> f64 {
+        match self.filter.step(transition, &self.ln_emission) {
+            Ok(evidence) => evidence,
+            Err(_) => self.restart(),
+        }
+    }
+
+    /// The map explains this observation nowhere the motion model allows: start again from the
+    /// observation alone.
+    fn restart(&mut self) -> f64 {
+        self.stats.filter_restarts += 1;
+        self.filter.reset();
+        self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
+    }
+}
+
+/// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).
+fn hipe_region(config: &EngineConfig, motion: &MotionUpdate, dt_s: f64) -> HipeRegion {
+    let h = &config.hipe;
+    let range_m = h.assumed_speed_mps * dt_s;
+    let tolerance = |d: f64| (h.distance_tolerance_fraction * d).max(h.distance_tolerance_min_m);
+    match (motion.scenario, motion.distance_m, motion.heading_rad) {
+        (MdiScenario::DistanceHeading, Some(d), Some(heading_rad)) if d > 0.0 => HipeRegion::RingSector {
+            distance_m: d,
+            tolerance_m: tolerance(d),
+            heading_rad,
+            tolerance_rad: h.heading_tolerance_rad,
+        },
+        // Standing still, or distance without heading: the ring (a disc of the tolerance when
+        // d = 0).
+        (MdiScenario::DistanceHeading | MdiScenario::Distance, Some(d), _) => {
+            HipeRegion::Ring { distance_m: d, tolerance_m: tolerance(d) }
+        }
+        (MdiScenario::HeadingSpeed, _, Some(heading_rad)) => {
+            HipeRegion::Sector { range_m, heading_rad, tolerance_rad: h.heading_tolerance_rad }
+        }
+        _ => HipeRegion::Disc { range_m },
+    }
+}
+
+/// HIPE's adaptive K: log-linear between `hipe.transition_ratio_min` and `transition_ratio`
+/// with a reliability r = r_motion · r_estimate in [0, 1]. r_motion is 1 when stationary,
+/// else how far the measured spreads stay inside HIPE's tolerances (0 for assumed speed
+/// only); r_estimate is how far the previous 68% radius is within the least distance
+/// tolerance (1.5 m).
+fn hipe_ratio(config: &EngineConfig, motion: &MotionUpdate, previous: Option<&Position>) -> f64 {
+    let h = &config.hipe;
+    let within = |spread: f64, tolerance: f64| (1.0 - spread / tolerance).clamp(0.0, 1.0);
+    let distance_tolerance = motion.distance_m.map_or(h.distance_tolerance_min_m, |d| {
+        (h.distance_tolerance_fraction * d).max(h.distance_tolerance_min_m)
+    });
+    let r_distance = within(motion.distance_sigma_m, distance_tolerance);
+    let r_heading = within(motion.heading_sigma_rad, h.heading_tolerance_rad);
+    let r_motion = match motion.scenario {
+        _ if motion.motion_state == MotionState::Stationary => 1.0,
+        MdiScenario::DistanceHeading => r_distance * r_heading,
+        MdiScenario::Distance => r_distance,
+        MdiScenario::HeadingSpeed => r_heading,
+        MdiScenario::Speed => 0.0,
+    };
+    let r_estimate = previous.map_or(0.0, |p| (h.distance_tolerance_min_m / p.accuracy_m).min(1.0));
+    let r = r_motion * r_estimate;
+    let (lo, hi) = (h.transition_ratio_min.ln(), config.transition_ratio.ln());
+    (lo + r * (hi - lo)).exp()
 }

@@ -13,7 +13,7 @@ pub mod sim;
 pub mod site;
 
 pub use config::EngineConfig;
-pub use engine::{Engine, InputStats, Position, PositionListener, SubscriptionId};
+pub use engine::{Engine, InputStats, Position, PositionListener, StatusEvent, SubscriptionId, TrackPoint};
 pub use error::{Error, InputError};
 pub use radio::{Reading, Scan, TransmitterId};
 pub use site::{Site, SiteError};

@@ -3,8 +3,12 @@
 
 mod estimate;
 mod forward;
+mod motion;
 mod transition;
+mod viterbi;
 
 pub use estimate::{estimate, Estimate};
 pub use forward::{FilterError, ForwardFilter};
+pub use motion::{angle_between, azimuth, HipeRegion, HipeTransition, HoangTransition};
 pub use transition::{hipe_probabilities, predict, viterbi_step, Transition, UniformReach};
+pub use viterbi::ViterbiWindow;

@@ -102,6 +102,12 @@ impl ReachTable {
         &self.entries[self.starts[i]..self.sorted_from[i] + within]
     }
 
+    /// How many of the first entries of state `i`'s [`reachable`](Self::reachable) slice are the
+    /// state itself and its direct neighbours.
+    pub fn near_count(&self, i: usize) -> usize {
+        self.sorted_from[i] - self.starts[i]
+    }
+
     /// Number of states the table covers.
     pub fn state_count(&self) -> usize {
         self.sorted_from.len()

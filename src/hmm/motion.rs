@@ -1,0 +1,303 @@
+//! Transition models driven by the motion the inertial sensors measured: HIPE's high/low
+//! regions (eqs. 5-11, Table 1) and Hoang's Gaussian on the movement vector (eqs. 11, 14).
+
+use super::transition::{hipe_probabilities, Transition};
+use crate::site::{ReachTable, Site};
+use nalgebra::Vector2;
+
+/// Where HIPE puts the high transition probability from state i (HIPE eqs. 7-10, Fig. 6).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum HipeRegion {
+    /// Eq. 7, measured distance: walking distance within `distance_m ± tolerance_m`.
+    Ring {
+        /// d, m.
+        distance_m: f64,
+        /// ε, m.
+        tolerance_m: f64,
+    },
+    /// Eq. 8, measured heading and assumed speed: within `range_m` and within
+    /// `tolerance_rad` of `heading_rad`.
+    Sector {
+        /// ρ = v_max · Δt, m.
+        range_m: f64,
+        /// α, radians clockwise from the site's +y axis.
+        heading_rad: f64,
+        /// γ, rad.
+        tolerance_rad: f64,
+    },
+    /// Eq. 9: ring ∩ sector.
+    RingSector {
+        /// d, m.
+        distance_m: f64,
+        /// ε, m.
+        tolerance_m: f64,
+        /// α, rad.
+        heading_rad: f64,
+        /// γ, rad.
+        tolerance_rad: f64,
+    },
+    /// Eq. 10, assumed speed only: within `range_m`.
+    Disc {
+        /// ρ, m.
+        range_m: f64,
+    },
+}
+
+impl HipeRegion {
+    /// The walking distance the region reaches out to, m.
+    pub fn outer_radius_m(&self) -> f64 {
+        match *self {
+            HipeRegion::Ring { distance_m, tolerance_m }
+            | HipeRegion::RingSector { distance_m, tolerance_m, .. } => distance_m + tolerance_m,
+            HipeRegion::Sector { range_m, .. } | HipeRegion::Disc { range_m } => range_m,
+        }
+    }
+}
+
+/// Smallest absolute difference between two angles, in [0, π].
+pub fn angle_between(a: f64, b: f64) -> f64 {
+    let d = (a - b).rem_euclid(std::f64::consts::TAU);
+    d.min(std::f64::consts::TAU - d)
+}
+
+/// Azimuth of a site-frame vector, radians clockwise from +y.
+pub fn azimuth(v: Vector2<f64>) -> f64 {
+    v.x.atan2(v.y)
+}
+
+/// HIPE's transition: a_h on the region, a_l = a_h / K elsewhere (eqs. 5-6).
+#[derive(Clone, Copy, Debug)]
+pub struct HipeTransition<'a> {
+    /// The site (state positions for directions).
+    pub site: &'a Site,
+    /// Walking distances.
+    pub table: &'a ReachTable,
+    /// This epoch's region.
+    pub region: HipeRegion,
+    /// K, adaptive per epoch.
+    pub ratio: f64,
+}
+
+impl HipeTransition<'_> {
+    fn in_region(&self, i: usize, j: u32, walk_m: f64, near: bool) -> bool {
+        let states = self.site.states();
+        let heading_ok = |heading: f64, tolerance: f64| {
+            let (a, b) = (&states[i], &states[j as usize]);
+            if j as usize == i || a.floor != b.floor {
+                return true;
+            }
+            angle_between(azimuth(b.position - a.position), heading) <= tolerance
+        };
+        match self.region {
+            HipeRegion::Ring { distance_m, tolerance_m } => (walk_m - distance_m).abs() <= tolerance_m,
+            HipeRegion::RingSector { distance_m, tolerance_m, heading_rad, tolerance_rad } => {
+                (walk_m - distance_m).abs() <= tolerance_m && heading_ok(heading_rad, tolerance_rad)
+            }
+            // A state stands for a cell: the speed-bounded regions keep the direct neighbours
+            // (the walker may be on the boundary between the two cells).
+            HipeRegion::Sector { range_m, heading_rad, tolerance_rad } => {
+                (walk_m <= range_m || near) && heading_ok(heading_rad, tolerance_rad)
+            }
+            HipeRegion::Disc { range_m } => walk_m <= range_m || near,
+        }
+    }
+}
+
+impl Transition for HipeTransition<'_> {
+    fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+        let outer = self.region.outer_radius_m();
+        let candidates = self.table.reachable(i, outer);
+        let near = self.table.near_count(i);
+        for (k, &(j, walk_m)) in candidates.iter().enumerate() {
+            if self.in_region(i, j, f64::from(walk_m), k < near) {
+                row.push((j, 0.0));
+            }
+        }
+        if row.is_empty() {
+            // No state in the ring (the grid is coarser than the tolerance there): fall back to
+            // the disc it bounds, so that the measured motion still limits the move.
+            row.extend(candidates.iter().map(|&(j, _)| (j, 0.0)));
+        }
+        let (high, low) = hipe_probabilities(row.len(), self.table.state_count(), self.ratio);
+        for entry in row.iter_mut() {
+            entry.1 = high;
+        }
+        low
+    }
+}
+
+/// Hoang's transition with the movement vector: uniform over the states reachable within
+/// v_max·Δt (Hoang §6.1, with HIPE's floor a_h/K elsewhere), times the movement likelihood
+/// N(v; l_j - l_i, Σ_v) of eq. 11, raised to 1 - γ as in eq. 14.
+///
+/// The Mahalanobis distance is capped (at 3 by default) so that a wrong step count or heading
+/// cannot make a state impossible: beyond the cap every state has the cap's density, which is
+/// also the density of the floor entries.
+#[derive(Clone, Copy, Debug)]
+pub struct HoangTransition<'a> {
+    /// The site (state positions).
+    pub site: &'a Site,
+    /// Walking distances.
+    pub table: &'a ReachTable,
+    /// v_max · Δt, m.
+    pub reach_m: f64,
+    /// K of the reachability floor.
+    pub ratio: f64,
+    /// The measured movement vector v_t in the site frame, m; `None`: no movement term.
+    pub movement_m: Option<[f64; 2]>,
+    /// Σ_v = variance · I, m² (Hoang §6.1: 0.25 m²).
+    pub variance_m2: f64,
+    /// Largest Mahalanobis distance taken at face value.
+    pub mahalanobis_cap: f64,
+    /// 1 - γ of eq. 14 (1 for eq. 3).
+    pub exponent: f64,
+}
+
+impl HoangTransition<'_> {
+    /// ln N(v; Δ, σ²I) with the capped Mahalanobis distance, times the exponent.
+    fn ln_movement(&self, delta: Vector2<f64>) -> f64 {
+        let Some([vx, vy]) = self.movement_m else { return 0.0 };
+        let r2 = ((Vector2::new(vx, vy) - delta).norm_squared() / self.variance_m2)
+            .min(self.mahalanobis_cap * self.mahalanobis_cap);
+        self.exponent * (-0.5 * r2 - (std::f64::consts::TAU * self.variance_m2).ln())
+    }
+}
+
+impl Transition for HoangTransition<'_> {
+    fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+        let states = self.site.states();
+        let reach = self.table.reachable(i, self.reach_m);
+        let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
+        let from = &states[i];
+        for &(j, walk_m) in reach {
+            let to = &states[j as usize];
+            let delta = if to.floor == from.floor {
+                to.position - from.position
+            } else {
+                // Between floors the plan distance is the walk along the stairs.
+                let v = self.movement_m.map_or(Vector2::zeros(), |[x, y]| Vector2::new(x, y));
+                v.try_normalize(1e-9).unwrap_or_else(Vector2::zeros) * f64::from(walk_m)
+            };
+            row.push((j, high * self.ln_movement(delta).exp()));
+        }
+        let cap = self.movement_m.map_or(0.0, |_| {
+            self.exponent
+                * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap
+                    - (std::f64::consts::TAU * self.variance_m2).ln())
+        });
+        low * cap.exp()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::site::{BuildOptions, SiteBuilder};
+    use approx::assert_relative_eq;
+    use nalgebra::Point2;
+
+    /// A 5 x 5 grid, 1 m apart, 4-connected.
+    fn grid() -> Site {
+        let mut b = SiteBuilder::new("grid");
+        let f = b.floor("G", 0.0);
+        let ids: Vec<Vec<u32>> = (0..5)
+            .map(|y| (0..5).map(|x| b.state(f, Point2::new(x as f64, y as f64), vec![])).collect())
+            .collect();
+        for y in 0..5 {
+            for x in 0..5 {
+                if x + 1 < 5 {
+                    b.edge(ids[y][x], ids[y][x + 1], None);
+                }
+                if y + 1 < 5 {
+                    b.edge(ids[y][x], ids[y + 1][x], None);
+                }
+            }
+        }
+        b.build(BuildOptions::default()).unwrap()
+    }
+
+    fn high_set(t: &dyn Transition, i: usize) -> Vec<u32> {
+        let mut row = Vec::new();
+        t.row(i, &mut row);
+        let mut js: Vec<u32> = row.iter().map(|e| e.0).collect();
+        js.sort_unstable();
+        js
+    }
+
+    #[test]
+    fn hipe_regions_are_rings_sectors_and_discs() {
+        let site = grid();
+        let table = ReachTable::build(&site, 9.0);
+        let centre = 12; // (2, 2)
+        let at = |x: u32, y: u32| y * 5 + x;
+        let t = |region| HipeTransition { site: &site, table: &table, region, ratio: 1000.0 };
+        // Ring of walking distance 2 ± 0.5 around the centre: the 8 states two steps away.
+        let ring = high_set(&t(HipeRegion::Ring { distance_m: 2.0, tolerance_m: 0.5 }), centre);
+        assert_eq!(ring.len(), 8);
+        assert!(ring.contains(&at(2, 0)) && ring.contains(&at(1, 1)) && !ring.contains(&at(2, 1)));
+        // Ring ∩ sector heading +y (north) ± 50°: (2,4), (1,3), (3,3).
+        let north = HipeRegion::RingSector {
+            distance_m: 2.0,
+            tolerance_m: 0.5,
+            heading_rad: 0.0,
+            tolerance_rad: 50f64.to_radians(),
+        };
+        assert_eq!(high_set(&t(north), centre), vec![at(1, 3), at(3, 3), at(2, 4)]);
+        // Disc of 1 m: the centre and its 4 neighbours.
+        assert_eq!(high_set(&t(HipeRegion::Disc { range_m: 1.0 }), centre).len(), 5);
+        // Sector east (+x, 90°) ± 30° within 2 m: centre, (3,2), (4,2).
+        let east = HipeRegion::Sector {
+            range_m: 2.0,
+            heading_rad: 90f64.to_radians(),
+            tolerance_rad: 30f64.to_radians(),
+        };
+        assert_eq!(high_set(&t(east), centre), vec![centre as u32, at(3, 2), at(4, 2)]);
+        // Every row sums to one.
+        let tr = t(north);
+        let mut row = Vec::new();
+        let low = tr.row(centre, &mut row);
+        assert_relative_eq!(
+            row.iter().map(|e| e.1).sum::<f64>() + low * (25 - row.len()) as f64,
+            1.0,
+            epsilon = 1e-12
+        );
+    }
+
+    #[test]
+    fn hoang_movement_likelihood_peaks_at_the_measured_vector() {
+        let site = grid();
+        let table = ReachTable::build(&site, 9.0);
+        let t = HoangTransition {
+            site: &site,
+            table: &table,
+            reach_m: 4.5,
+            ratio: 200_000.0,
+            movement_m: Some([1.0, 0.0]),
+            variance_m2: 0.25,
+            mahalanobis_cap: 3.0,
+            exponent: 1.0,
+        };
+        let mut row = Vec::new();
+        let floor = t.row(12, &mut row);
+        let weight = |j: u32| row.iter().find(|e| e.0 == j).unwrap().1;
+        let (high, low) = hipe_probabilities(row.len(), 25, 200_000.0);
+        // Moving one metre east lands on (3, 2) = 13: the density at the mean, 1/(2π·0.25).
+        assert_relative_eq!(weight(13), high / (std::f64::consts::TAU * 0.25), epsilon = 1e-12);
+        // Staying put is 1 m = 2σ off: exp(-2) less.
+        assert_relative_eq!(weight(12), weight(13) * (-2.0f64).exp(), epsilon = 1e-12);
+        // Far off is capped at 3σ, and so is the floor.
+        assert_relative_eq!(
+            weight(10),
+            high / (std::f64::consts::TAU * 0.25) * (-4.5f64).exp(),
+            epsilon = 1e-12
+        );
+        assert_relative_eq!(floor, low / (std::f64::consts::TAU * 0.25) * (-4.5f64).exp(), epsilon = 1e-15);
+    }
+
+    #[test]
+    fn angles_wrap() {
+        assert_relative_eq!(angle_between(3.1, -3.1), std::f64::consts::TAU - 6.2, epsilon = 1e-12);
+        assert_relative_eq!(angle_between(0.0, std::f64::consts::PI), std::f64::consts::PI);
+        assert_relative_eq!(azimuth(Vector2::new(1.0, 0.0)), std::f64::consts::FRAC_PI_2);
+    }
+}

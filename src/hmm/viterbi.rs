@@ -1,0 +1,165 @@
+//! Viterbi over a bounded window of epochs (HIPE §4.1: the Viterbi algorithm for tracking),
+//! in log space, with back-pointers kept for the last `capacity` epochs only, so memory is
+//! capacity × N × 4 bytes however long the session runs.
+
+use super::transition::{viterbi_step, Transition};
+use std::collections::VecDeque;
+
+/// The most likely state sequence over the last epochs.
+#[derive(Clone, Debug)]
+pub struct ViterbiWindow {
+    capacity: usize,
+    /// max over paths of ln p(path, observations), shifted so that its maximum is 0.
+    delta: Vec<f64>,
+    next: Vec<f64>,
+    /// Per epoch in the window (oldest first): timestamp and back-pointers into the previous
+    /// epoch (unused for the window's first epoch).
+    epochs: VecDeque<(u64, Vec<u32>)>,
+    spare: Vec<Vec<u32>>,
+    row: Vec<(u32, f64)>,
+}
+
+impl ViterbiWindow {
+    /// A window over `n` states keeping `capacity` (≥ 1) epochs.
+    pub fn new(n: usize, capacity: usize) -> Self {
+        Self {
+            capacity: capacity.max(1),
+            delta: vec![0.0; n],
+            next: vec![0.0; n],
+            epochs: VecDeque::with_capacity(capacity.max(1)),
+            spare: Vec::new(),
+            row: Vec::new(),
+        }
+    }
+
+    /// Forgets every epoch.
+    pub fn reset(&mut self) {
+        while let Some((_, back)) = self.epochs.pop_front() {
+            self.spare.push(back);
+        }
+    }
+
+    /// Epochs held.
+    pub fn len(&self) -> usize {
+        self.epochs.len()
+    }
+
+    /// Whether no epoch is held.
+    pub fn is_empty(&self) -> bool {
+        self.epochs.is_empty()
+    }
+
+    /// Bytes held by back-pointers and scores, for memory accounting.
+    pub fn memory_bytes(&self) -> usize {
+        let n = self.delta.len();
+        (self.epochs.len() + self.spare.len()) * n * 4 + 2 * n * 8
+    }
+
+    /// Adds an epoch: `transition` from the previous one (ignored for the first epoch of the
+    /// window, which starts from a uniform prior) and the observation's log-likelihoods.
+    /// Emissions that are NaN count as impossible.
+    pub fn step(&mut self, timestamp_ns: u64, transition: &dyn Transition, ln_emission: &[f64]) {
+        let n = self.delta.len();
+        let mut back = self.spare.pop().unwrap_or_else(|| vec![0; n]);
+        if self.epochs.is_empty() {
+            self.next.copy_from_slice(ln_emission);
+        } else {
+            viterbi_step(transition, &self.delta, &mut self.next, &mut back, &mut self.row);
+            for (d, &e) in self.next.iter_mut().zip(ln_emission) {
+                *d += e;
+            }
+        }
+        let max = self.next.iter().copied().filter(|v| !v.is_nan()).fold(f64::NEG_INFINITY, f64::max);
+        if !max.is_finite() {
+            // Nothing explains the observation: restart the window from it alone.
+            self.spare.push(back);
+            self.reset();
+            self.delta.fill(0.0);
+            return;
+        }
+        for (d, &v) in self.delta.iter_mut().zip(&self.next) {
+            *d = if v.is_nan() { f64::NEG_INFINITY } else { v - max };
+        }
+        if self.epochs.len() == self.capacity {
+            if let Some((_, old)) = self.epochs.pop_front() {
+                self.spare.push(old);
+            }
+        }
+        self.epochs.push_back((timestamp_ns, back));
+    }
+
+    /// The most likely path through the window, oldest first, as (timestamp, state).
+    pub fn path(&self) -> Vec<(u64, u32)> {
+        let Some(mut state) =
+            self.delta.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map(|(i, _)| i as u32)
+        else {
+            return Vec::new();
+        };
+        let mut path = Vec::with_capacity(self.epochs.len());
+        for (k, (timestamp, back)) in self.epochs.iter().enumerate().rev() {
+            path.push((*timestamp, state));
+            if k > 0 {
+                state = back[state as usize];
+            }
+        }
+        path.reverse();
+        path
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    struct Dense(Vec<Vec<f64>>);
+    impl Transition for Dense {
+        fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+            row.extend(self.0[i].iter().enumerate().map(|(j, &a)| (j as u32, a)));
+            0.0
+        }
+    }
+
+    /// The best path by trying every path.
+    fn brute_force(a: &[Vec<f64>], emissions: &[Vec<f64>]) -> Vec<u32> {
+        let n = a.len();
+        let t_len = emissions.len();
+        let mut best = (f64::NEG_INFINITY, Vec::new());
+        for code in 0..n.pow(t_len as u32) {
+            let path: Vec<usize> = (0..t_len).map(|t| (code / n.pow(t as u32)) % n).collect();
+            let mut score = emissions[0][path[0]];
+            for t in 1..t_len {
+                score += a[path[t - 1]][path[t]].ln() + emissions[t][path[t]];
+            }
+            if score > best.0 {
+                best = (score, path.iter().map(|&s| s as u32).collect());
+            }
+        }
+        best.1
+    }
+
+    #[test]
+    fn matches_brute_force_and_forgets_beyond_the_window() {
+        let a = vec![vec![0.6, 0.3, 0.1], vec![0.2, 0.5, 0.3], vec![0.1, 0.1, 0.8]];
+        let emissions = [
+            vec![-0.1, -2.0, -3.0],
+            vec![-1.5, -0.4, -2.0],
+            vec![-2.0, -1.9, -0.3],
+            vec![-0.2, -2.5, -0.9],
+            vec![-3.0, -0.1, -1.0],
+        ];
+        let dense = Dense(a.clone());
+        let mut window = ViterbiWindow::new(3, 10);
+        for (t, e) in emissions.iter().enumerate() {
+            window.step(t as u64, &dense, e);
+            let expected = brute_force(&a, &emissions[..=t]);
+            let got: Vec<u32> = window.path().iter().map(|p| p.1).collect();
+            assert_eq!(got, expected, "after epoch {t}");
+        }
+        let mut short = ViterbiWindow::new(3, 2);
+        for (t, e) in emissions.iter().enumerate() {
+            short.step(t as u64, &dense, e);
+        }
+        assert_eq!(short.len(), 2);
+        assert_eq!(short.path().iter().map(|p| p.0).collect::<Vec<_>>(), vec![3, 4]);
+    }
+}
