@@ -1,0 +1,184 @@
+//! Motion-driven epochs through the engine: status events, the Viterbi track and its
+//! revisions, and the transition models' effect, with motion given directly.
+
+mod common;
+
+use common::{scan, two_floor_site};
+use std::sync::{Arc, Mutex};
+use waymark::config::TransitionModel;
+use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
+use waymark::{Engine, EngineConfig, Position, PositionListener, StatusEvent, TrackPoint};
+
+const SECOND: u64 = 1_000_000_000;
+
+fn readings_at(f: usize, x: f64) -> Vec<(u8, f64)> {
+    (0..3).map(|t| ((3 * f + t) as u8, -40.0 - 4.0 * (x - 6.0 * t as f64).abs())).collect()
+}
+
+/// Walking east along the corridor: `steps` of 0.75 m, heading +x (90°).
+fn walking(steps: u32) -> MotionUpdate {
+    let d = 0.75 * steps as f64;
+    MotionUpdate {
+        steps,
+        distance_m: Some(d),
+        distance_sigma_m: 0.1 * d,
+        heading_rad: Some(std::f64::consts::FRAC_PI_2),
+        heading_sigma_rad: 0.1,
+        displacement_m: Some([d, 0.0]),
+        motion_state: MotionState::Walking,
+        scenario: MdiScenario::DistanceHeading,
+        ..MotionUpdate::default()
+    }
+}
+
+#[derive(Default)]
+struct Recorder {
+    positions: Vec<Position>,
+    statuses: Vec<StatusEvent>,
+    revisions: Vec<Vec<TrackPoint>>,
+}
+
+struct Shared(Arc<Mutex<Recorder>>);
+impl PositionListener for Shared {
+    fn on_position(&mut self, p: &Position) {
+        self.0.lock().unwrap().positions.push(p.clone());
+    }
+    fn on_status(&mut self, s: &StatusEvent) {
+        self.0.lock().unwrap().statuses.push(s.clone());
+    }
+    fn on_track_revised(&mut self, r: &[TrackPoint]) {
+        self.0.lock().unwrap().revisions.push(r.to_vec());
+    }
+}
+
+#[test]
+fn every_model_follows_a_walk_and_the_track_has_every_epoch() {
+    for model in [TransitionModel::Reach, TransitionModel::Hipe, TransitionModel::Hoang] {
+        let config = EngineConfig { transition: model, ..EngineConfig::default() };
+        let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
+        for k in 0..5u64 {
+            let x = 3.0 * k as f64;
+            let p = engine
+                .push_scan_with_motion(&scan(SECOND * (k + 1), &readings_at(0, x)), &walking(4))
+                .unwrap();
+            assert!((p.x - x).abs() < 1.0 && p.floor == 0, "{model:?}: {p:?}");
+            assert_eq!(p.scenario, MdiScenario::DistanceHeading);
+        }
+        let track = engine.track();
+        assert_eq!(track.len(), 5);
+        assert!(track.windows(2).all(|w| w[0].timestamp_ns < w[1].timestamp_ns));
+        assert_eq!(
+            track.iter().map(|p| p.x).collect::<Vec<_>>(),
+            vec![0.0, 3.0, 6.0, 9.0, 12.0],
+            "{model:?}"
+        );
+        let lagged = engine.fixed_lag_position().unwrap();
+        assert_eq!(lagged, track[5 - 1 - engine.config().fixed_lag_epochs]);
+    }
+}
+
+#[test]
+fn scenario_and_motion_changes_are_announced() {
+    let mut engine = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
+    let recorder = Arc::new(Mutex::new(Recorder::default()));
+    engine.subscribe(Box::new(Shared(Arc::clone(&recorder))));
+    engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
+    engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), &walking(4)).unwrap();
+    engine.push_scan_with_motion(&scan(3 * SECOND, &readings_at(0, 6.0)), &walking(4)).unwrap();
+    let r = recorder.lock().unwrap();
+    assert_eq!(r.positions.len(), 3);
+    assert_eq!(
+        r.statuses,
+        vec![
+            StatusEvent::ScenarioChanged {
+                timestamp_ns: 2 * SECOND,
+                from: MdiScenario::Speed,
+                to: MdiScenario::DistanceHeading
+            },
+            StatusEvent::MotionStateChanged {
+                timestamp_ns: 2 * SECOND,
+                from: MotionState::Unknown,
+                to: MotionState::Walking
+            },
+        ]
+    );
+}
+
+/// A corridor of five states 3 m apart whose one transmitter is symmetric: -50 dBm at both
+/// ends, -70 dBm in the middle. Only the direction of walking tells the ends apart.
+fn symmetric_corridor() -> waymark::Site {
+    use waymark::site::{BuildOptions, SiteBuilder};
+    let mut b = SiteBuilder::new("symmetric");
+    let f = b.floor("G", 0.0);
+    let mut previous = None;
+    for k in 0..5 {
+        let x = 3.0 * k as f64;
+        let mean = -50.0 - 10.0 * (x.min(12.0 - x) / 3.0);
+        let scans = (0..20).map(|n| scan(n, &[(0, mean + if n % 2 == 0 { 2.0 } else { -2.0 })])).collect();
+        let id = b.state(f, nalgebra::Point2::new(x, 0.0), scans);
+        if let Some(p) = previous {
+            b.edge(p, id, None);
+        }
+        previous = Some(id);
+    }
+    b.build(BuildOptions::default()).unwrap()
+}
+
+#[test]
+fn a_later_epoch_revises_an_ambiguous_past() {
+    let mut engine = Engine::new(Arc::new(symmetric_corridor()), EngineConfig::default()).unwrap();
+    let recorder = Arc::new(Mutex::new(Recorder::default()));
+    engine.subscribe(Box::new(Shared(Arc::clone(&recorder))));
+    // At an end: which one, the radio cannot say.
+    engine.push_scan(&scan(SECOND, &[(0, -50.0)])).unwrap();
+    let first_guess = engine.track()[0].x;
+    // Four steps east, and the signal fades: only the west end fits.
+    engine.push_scan_with_motion(&scan(2 * SECOND, &[(0, -60.0)]), &walking(4)).unwrap();
+    let track = engine.track();
+    assert_eq!(track.iter().map(|p| p.x).collect::<Vec<_>>(), vec![0.0, 3.0]);
+    let r = recorder.lock().unwrap();
+    if first_guess != 0.0 {
+        assert_eq!(r.revisions.len(), 1, "{:?}", r.revisions);
+        assert_eq!(r.revisions[0], vec![track[0].clone()]);
+    } else {
+        assert!(r.revisions.is_empty());
+    }
+}
+
+#[test]
+fn standing_still_holds_the_estimate_that_walking_would_move() {
+    let still = MotionUpdate {
+        distance_m: Some(0.0),
+        distance_sigma_m: 0.0,
+        displacement_m: Some([0.0, 0.0]),
+        motion_state: MotionState::Stationary,
+        scenario: MdiScenario::Distance,
+        ..MotionUpdate::default()
+    };
+    let run = |motion: &MotionUpdate| {
+        let mut engine = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
+        engine.push_scan(&scan(SECOND, &readings_at(0, 6.0))).unwrap();
+        // The radio now leans towards x = 9 by about 3.6 nats.
+        engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 7.6)), motion).unwrap()
+    };
+    let held = run(&still);
+    assert!((held.x - 6.0).abs() < 0.5, "{held:?}");
+    let unknown = run(&MotionUpdate::default());
+    assert!(unknown.x > 8.0, "{unknown:?}");
+}
+
+#[test]
+fn motion_epochs_move_the_estimate_without_radio() {
+    let config = EngineConfig { transition: TransitionModel::Hoang, ..EngineConfig::default() };
+    let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
+    engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
+    let mut p = None;
+    for k in 0..4u64 {
+        p = Some(engine.advance_with_motion(SECOND * (k + 2), &walking(4)).unwrap());
+    }
+    let p = p.unwrap();
+    assert!(p.radio_log_evidence.is_none());
+    assert!(p.x > 6.0, "{p:?}");
+    assert_eq!(engine.stats().motion_epochs, 4);
+    assert!(engine.advance_with_motion(SECOND, &walking(1)).is_err());
+}
