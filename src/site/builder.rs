@@ -1,7 +1,7 @@
 //! Building a site from surveyed places and their training scans: fits every transmitter's
 //! RSSI model at every state (Hoang §3) and derives the map's "unheard" model.
 
-use super::{Edge, Floor, Site, SiteError, State, StateKind};
+use super::{Edge, Floor, North, Site, SiteError, State, StateKind};
 use crate::radio::{unheard_model, FitOptions, Gaussian, RadioMap, RssiModel, Scan, TransmitterId};
 use nalgebra::Point2;
 use std::collections::{BTreeMap, BTreeSet};
@@ -17,6 +17,7 @@ pub struct SiteBuilder {
     floors: Vec<Floor>,
     states: Vec<(State, Vec<TrainingScan>)>,
     edges: Vec<(u32, u32, Option<f64>)>,
+    north: North,
 }
 
 impl SiteBuilder {
@@ -37,6 +38,11 @@ impl SiteBuilder {
         let training_scans = scans.len() as u32;
         self.states.push((State { id, floor, position, kind: StateKind::Surveyed, training_scans }, scans));
         id
+    }
+
+    /// Sets the site frame's orientation on the Earth.
+    pub fn north(&mut self, north: North) {
+        self.north = north;
     }
 
     /// Adds a walkable edge; `length_m` `None` means the straight line (same floor only).
@@ -130,7 +136,7 @@ impl SiteBuilder {
         }
         let map = RadioMap::new(options.model, clip, unheard, ids, states.len(), triples)
             .map_err(|m| SiteError::Invalid { path: "radio".into(), message: m })?;
-        Ok(Site::from_parts(self.name, self.floors, states, edges, map))
+        Ok(Site::from_parts(self.name, self.floors, states, edges, map, self.north))
     }
 }
 

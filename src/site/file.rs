@@ -1,7 +1,7 @@
 //! Site file v1: serde JSON with a `format_version`. Loading checks everything an engine relies
 //! on and names what is wrong and where; it never panics.
 
-use super::{Edge, Floor, Site, State, StateKind};
+use super::{Edge, Floor, North, Site, State, StateKind};
 use crate::radio::{Gaussian, RadioMap, RssiModel, TransmitterId};
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
@@ -67,6 +67,8 @@ fn invalid(path: impl Into<String>, message: impl Into<String>) -> SiteError {
 struct SiteFile {
     format_version: u32,
     name: String,
+    #[serde(default)]
+    north: North,
     floors: Vec<FloorFile>,
     radio: RadioFile,
     states: Vec<StateFile>,
@@ -204,6 +206,7 @@ impl Site {
         let file = SiteFile {
             format_version: FORMAT_VERSION,
             name: self.name.clone(),
+            north: self.north,
             floors: self
                 .floors
                 .iter()
@@ -345,7 +348,10 @@ impl Site {
             triples,
         )
         .map_err(|m| invalid("radio.transmitters", m))?;
-        Ok(Site::from_parts(file.name, floors, states, edges, map))
+        if !(file.north.site_rotation_rad.is_finite() && file.north.declination_rad.is_finite()) {
+            return Err(invalid("north", "angles must be finite"));
+        }
+        Ok(Site::from_parts(file.name, floors, states, edges, map, file.north))
     }
 }
 

@@ -51,6 +51,18 @@ pub struct State {
     pub training_scans: u32,
 }
 
+/// How the site's frame sits on the Earth, for turning compass readings into site headings.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct North {
+    /// Azimuth of the site's +y axis, radians clockwise from true north.
+    #[serde(default)]
+    pub site_rotation_rad: f64,
+    /// Magnetic declination at the site (true minus magnetic azimuth), rad, east positive.
+    #[serde(default)]
+    pub declination_rad: f64,
+}
+
 /// A walkable connection between two states.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct Edge {
@@ -73,6 +85,7 @@ pub struct Site {
     adjacency_starts: Vec<usize>,
     adjacency: Vec<(u32, f64)>,
     radio: RadioMap,
+    north: North,
     spacing_m: f64,
 }
 
@@ -85,6 +98,7 @@ impl Site {
         states: Vec<State>,
         edges: Vec<Edge>,
         radio: RadioMap,
+        north: North,
     ) -> Self {
         let n = states.len();
         let mut degree = vec![0usize; n + 1];
@@ -105,7 +119,7 @@ impl Site {
             fill[e.b as usize] += 1;
         }
         let spacing_m = median_edge_length(&edges);
-        Self { name, floors, states, edges, adjacency_starts, adjacency, radio, spacing_m }
+        Self { name, floors, states, edges, adjacency_starts, adjacency, radio, north, spacing_m }
     }
 
     /// The site's name.
@@ -136,6 +150,11 @@ impl Site {
     /// The radio map.
     pub fn radio(&self) -> &RadioMap {
         &self.radio
+    }
+
+    /// The site frame's orientation on the Earth.
+    pub fn north(&self) -> North {
+        self.north
     }
 
     /// Typical distance between neighbouring states (median edge length), m: the size of the
