@@ -8,6 +8,25 @@
 //! - `MotionTracker::new(MotionConfig) -> Result<MotionTracker, crate::Error>`,
 //!   `push_accelerometer / push_gyroscope / push_magnetometer(&mut self, &[SensorSample]) -> BatchReport`,
 //!   `update(&mut self, until_ns: u64) -> MotionUpdate`, `stats(&self) -> &MotionStats`.
+//!
+//! Files: `config.rs` ([`MotionConfig`], every default cited or measured), `filter.rs`
+//! (angle wrapping, a moving average over a duration), `step.rs` (gravity learning, the two
+//! detectors, the gait check that keeps shaking out), `heading.rs` (tilt-compensated compass,
+//! gyro yaw rate, the 1-D Kalman filter, disturbance detection), `tracker.rs`
+//! ([`MotionTracker`]: buffering, time ordering, epochs). The simulator that exercises them
+//! is [`crate::sim::imu`]; their measured accuracy comes from
+//! [`crate::sim::motion_eval::evaluate`].
+
+mod config;
+mod filter;
+mod heading;
+mod step;
+mod tracker;
+
+pub use config::{EarthField, MotionConfig, StepDetectorKind, StepLengthModel};
+pub use filter::wrap_angle;
+pub use heading::{compass_azimuth, field_dip, gyro_yaw_rate};
+pub use tracker::{HeadingEstimate, MotionStats, MotionTracker, StepEvent, StreamStats};
 
 use serde::{Deserialize, Serialize};
 
