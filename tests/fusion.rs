@@ -156,7 +156,8 @@ fn standing_still_holds_the_estimate_that_walking_would_move() {
         ..MotionUpdate::default()
     };
     let run = |motion: &MotionUpdate| {
-        let mut engine = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
+        let config = EngineConfig { transition: TransitionModel::Hipe, ..EngineConfig::default() };
+        let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
         engine.push_scan(&scan(SECOND, &readings_at(0, 6.0))).unwrap();
         // The radio now leans towards x = 9 by about 3.6 nats.
         engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 7.6)), motion).unwrap()

@@ -5,11 +5,8 @@ use waymark::radio::RssiModel;
 use waymark::sim::{self, Experiment, OfficeConfig};
 
 fn experiment(seed: u64, model: RssiModel) -> Experiment {
-    Experiment {
-        office: OfficeConfig { seed, model, ..OfficeConfig::default() },
-        walks: 20,
-        ..Experiment::default()
-    }
+    let base = Experiment::rssi_only();
+    Experiment { office: OfficeConfig { seed, model, ..base.office.clone() }, walks: 20, ..base }
 }
 
 #[test]
@@ -28,6 +25,20 @@ fn rssi_only_tracking_is_near_hoangs_figure() {
 }
 
 #[test]
+fn fusion_from_raw_imu_beats_radio_alone() {
+    // The demo's engine: Hoang transitions, pseudo states, raw IMU. Seed 13 is used nowhere else.
+    let fused = Experiment {
+        office: OfficeConfig { seed: 13, ..OfficeConfig::default() },
+        walks: 10,
+        ..Experiment::default()
+    };
+    let radio = Experiment { office: fused.office.clone(), walks: 10, ..Experiment::rssi_only() };
+    let (fused, radio) = (sim::run(&fused).unwrap().summary, sim::run(&radio).unwrap().summary);
+    assert!(fused.mean_error_m < 0.7 * radio.mean_error_m, "fused {fused:?}\nradio {radio:?}");
+    assert!(fused.p90_error_m < radio.p90_error_m, "fused {fused:?}\nradio {radio:?}");
+}
+
+#[test]
 fn the_demo_is_deterministic() {
     let a = sim::run(&experiment(3, RssiModel::CensoredGaussian)).unwrap();
     let b = sim::run(&experiment(3, RssiModel::CensoredGaussian)).unwrap();
@@ -43,4 +54,21 @@ fn the_simulated_site_survives_its_own_file_format() {
     assert_eq!(again.to_json(), text);
     assert_eq!(again.states().len(), 81);
     assert_eq!(again.radio().transmitters().len(), 15);
+}
+
+#[test]
+fn both_papers_orderings_hold_on_a_few_walks() {
+    use waymark::sim::{run_papers, PaperExperiment};
+    // Seed 21 is used nowhere else; 10 walks keep the debug-build test short.
+    let report = run_papers(&PaperExperiment { seed: 21, runs: 10, ..PaperExperiment::default() }).unwrap();
+    let t = &report.hoang_table1;
+    assert!(t.rssi_step_pseudo < t.rssi_step, "{t:?}");
+    assert!(t.rssi_step < t.rssi_step_uncensored, "{t:?}");
+    assert!(t.rssi_step_uncensored < t.rssi_only, "{t:?}");
+    assert!(t.rssi_step_pseudo <= 0.8 * t.rssi_step, "pseudo-state gain below 20%: {t:?}");
+    let h = &report.hipe_table5;
+    assert!(h.distance_heading.mean_m <= h.distance.mean_m, "{h:?}");
+    assert!(h.distance.mean_m <= h.heading_speed.mean_m, "{h:?}");
+    assert!(h.speed.mean_m < h.mle.mean_m, "{h:?}");
+    assert!(report.states_with_pseudo > 4 * report.surveyed_states);
 }

@@ -3,8 +3,9 @@
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
+use waymark::config::TransitionModel;
 use waymark::radio::RssiModel;
-use waymark::sim::{self, Experiment};
+use waymark::sim::{self, Experiment, PaperExperiment};
 use waymark::EngineConfig;
 
 #[derive(Parser)]
@@ -16,9 +17,33 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// Track random walks through a simulated office from WiFi scans alone and print the error
-    /// (Hoang et al. §6.1, Table 1 "RSSI only").
+    /// Track random walks through a simulated office from raw accelerometer, gyroscope and
+    /// magnetometer samples and WiFi scans, and print the error.
     Demo(DemoArgs),
+    /// The papers' artificial-data experiments on the same walks: Hoang et al. Table 1 and
+    /// HIPE Table 5.
+    Simulate(SimulateArgs),
+}
+
+#[derive(Clone, Copy, ValueEnum)]
+enum Model {
+    /// HIPE's high/low regions (HIPE eqs. 5-11).
+    Hipe,
+    /// Hoang's Gaussian on the movement vector (Hoang eqs. 11, 14).
+    Hoang,
+}
+
+#[derive(clap::Args)]
+struct SimulateArgs {
+    /// Number of random walks (Hoang: 100).
+    #[arg(long, default_value_t = 100)]
+    runs: usize,
+    /// Seed of the building and its walks.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Print one JSON object instead of the tables.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -46,6 +71,12 @@ struct DemoArgs {
     /// M, the number of most likely states averaged into the estimate (Hoang eq. 4).
     #[arg(long)]
     top_m: Option<usize>,
+    /// Position from WiFi alone on the surveyed states (Hoang Table 1, "RSSI only").
+    #[arg(long)]
+    rssi_only: bool,
+    /// The transition model for the full fusion.
+    #[arg(long, value_enum)]
+    model: Option<Model>,
     /// Print one JSON object instead of the table.
     #[arg(long)]
     json: bool,
@@ -55,6 +86,7 @@ fn main() -> ExitCode {
     let cli = Cli::parse();
     match cli.command {
         Command::Demo(args) => demo(&args),
+        Command::Simulate(args) => simulate(&args),
     }
 }
 
@@ -81,12 +113,19 @@ fn demo(args: &DemoArgs) -> ExitCode {
         Fit::Em => "censored_em",
         Fit::Naive => "naive",
     };
+    let mode = if args.rssi_only {
+        "rssi_only".to_owned()
+    } else {
+        format!("{:?}", experiment.engine.transition).to_lowercase()
+    };
     if args.json {
         let value = serde_json::json!({
             "seed": args.seed,
+            "mode": mode,
             "fit": fit,
             "walks": args.walks,
             "walk_length_m": args.walk_length_m,
+            "surveyed_states": report.surveyed_states,
             "states": report.states,
             "access_points": report.access_points,
             "top_m": experiment.engine.estimate_states,
@@ -98,17 +137,30 @@ fn demo(args: &DemoArgs) -> ExitCode {
             "max_error_m": s.max_error_m,
             "accuracy_68_hit": s.accuracy_68_hit,
             "median_accuracy_m": s.median_accuracy_m,
-            "hoang_table1_rssi_only_mean_error_m": 1.74,
         });
         println!("{value}");
         return ExitCode::SUCCESS;
     }
     println!(
-        "Waymark demo: simulated office (seed {}), {} states, {} access points, {} walks of ~{:.0} m, a WiFi scan every 1.5 s",
-        args.seed, report.states, report.access_points, args.walks, args.walk_length_m
+        "Waymark demo: simulated office (seed {}), {} surveyed states ({} with pseudo states), {} access points,\n\
+         {} walks of ~{:.0} m, a WiFi scan every 1.5 s",
+        args.seed, report.surveyed_states, report.states, report.access_points, args.walks, args.walk_length_m
     );
+    if args.rssi_only {
+        println!("Positioning from WiFi alone (Hoang Table 1, RSSI only: 1.74 m)");
+    } else {
+        println!(
+            "Full fusion: raw accelerometer, gyroscope and magnetometer at {:.0} Hz -> steps and heading -> {} transitions, with WiFi",
+            experiment.imu.rate_hz,
+            match experiment.engine.transition {
+                TransitionModel::Hipe => "HIPE",
+                TransitionModel::Hoang => "Hoang",
+                TransitionModel::Reach => "reachability",
+            }
+        );
+    }
     println!(
-        "Positioning from WiFi alone, fingerprints fitted by {}\n",
+        "Fingerprints fitted by {}\n",
         match args.fit {
             Fit::Em => "the censored-Gaussian EM (Hoang et al. §3)",
             Fit::Naive => "plain mean and variance, censoring disregarded",
@@ -116,25 +168,30 @@ fn demo(args: &DemoArgs) -> ExitCode {
     );
     println!("First walk, every 10th epoch:");
     println!(
-        "  {:>6}  {:>15}  {:>15}  {:>7}  {:>10}",
-        "t [s]", "truth [m]", "estimate [m]", "error", "accuracy"
+        "  {:>6}  {:>15}  {:>15}  {:>7}  {:>9}  {:>7}  {:>5}  {:<16}",
+        "t [s]", "truth [m]", "estimate [m]", "error", "accuracy", "heading", "steps", "scenario"
     );
     let t0 = report.first_track.first().map_or(0, |p| p.position.timestamp_ns);
     for p in report.first_track.iter().step_by(10) {
-        let error = nalgebra::distance(&p.truth, &nalgebra::Point2::new(p.position.x, p.position.y));
+        let position = &p.position;
+        let error = nalgebra::distance(&p.truth, &nalgebra::Point2::new(position.x, position.y));
+        let heading = position.heading_rad.map_or("-".to_owned(), |h| format!("{:.0}°", h.to_degrees()));
         println!(
-            "  {:>6.1}  ({:>5.1}, {:>5.1})  ({:>5.1}, {:>5.1})  {:>5.2} m  {:>8.2} m",
-            (p.position.timestamp_ns - t0) as f64 * 1e-9,
+            "  {:>6.1}  ({:>5.1}, {:>5.1})  ({:>5.1}, {:>5.1})  {:>5.2} m  {:>7.2} m  {:>7}  {:>5}  {:<16}",
+            (position.timestamp_ns - t0) as f64 * 1e-9,
             p.truth.x,
             p.truth.y,
-            p.position.x,
-            p.position.y,
+            position.x,
+            position.y,
             error,
-            p.position.accuracy_m
+            position.accuracy_m,
+            heading,
+            position.steps,
+            format!("{:?}", position.scenario),
         );
     }
     println!("\nAll walks, {} epochs:", s.epochs);
-    println!("  mean error     {:>6.2} m    (Hoang Table 1, RSSI only: 1.74 m)", s.mean_error_m);
+    println!("  mean error     {:>6.2} m", s.mean_error_m);
     println!("  median error   {:>6.2} m", s.median_error_m);
     println!("  90% error      {:>6.2} m", s.p90_error_m);
     println!("  RMSE           {:>6.2} m", s.rmse_m);
@@ -144,5 +201,65 @@ fn demo(args: &DemoArgs) -> ExitCode {
         100.0 * s.accuracy_68_hit,
         s.median_accuracy_m
     );
+    ExitCode::SUCCESS
+}
+
+fn simulate(args: &SimulateArgs) -> ExitCode {
+    let experiment = PaperExperiment { seed: args.seed, runs: args.runs, ..PaperExperiment::default() };
+    let report = match sim::run_papers(&experiment) {
+        Ok(report) => report,
+        Err(e) => {
+            eprintln!("waymark simulate: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if args.json {
+        let value = serde_json::json!({
+            "seed": args.seed,
+            "runs": args.runs,
+            "epochs": report.epochs,
+            "surveyed_states": report.surveyed_states,
+            "states_with_pseudo": report.states_with_pseudo,
+            "hoang_table1": report.hoang_table1,
+            "hipe_table5": report.hipe_table5,
+            "fixed_lag_mean_error_m": report.fixed_lag_mean_error_m,
+            "summaries": report.summaries.iter().map(|(n, s)| (n.clone(), s)).collect::<std::collections::BTreeMap<_, _>>(),
+        });
+        println!("{value}");
+        return ExitCode::SUCCESS;
+    }
+    println!(
+        "Simulated office (seed {}), {} walks of ~200 m, {} epochs per method; {} surveyed states, {} with pseudo states\n",
+        args.seed, args.runs, report.epochs, report.surveyed_states, report.states_with_pseudo
+    );
+    let t = &report.hoang_table1;
+    println!("Hoang et al., Table 1: mean positioning error");
+    println!("  {:<42} {:>8} {:>8}", "method", "Waymark", "paper");
+    for (name, ours, paper) in [
+        ("RSSI only", t.rssi_only, 1.74),
+        ("RSSI + step det., censoring ignored", t.rssi_step_uncensored, 1.42),
+        ("RSSI + step det.", t.rssi_step, 1.37),
+        ("RSSI + step det. + pseudo states", t.rssi_step_pseudo, 1.02),
+    ] {
+        println!("  {name:<42} {ours:>6.2} m {paper:>6.2} m");
+    }
+    let h = &report.hipe_table5;
+    println!(
+        "\nHIPE, Table 5 scenarios on the same walks (HIPE's own figures are from its office, not this one)"
+    );
+    println!("  {:<36} {:>8} {:>8} {:>8}", "scenario", "RMSE", "mean", "max");
+    for (name, row) in [
+        ("measured distance & heading", &h.distance_heading),
+        ("measured distance", &h.distance),
+        ("measured heading & assumed speed", &h.heading_speed),
+        ("assumed speed", &h.speed),
+        ("MLE fingerprinting (no HMM)", &h.mle),
+    ] {
+        println!("  {name:<36} {:>6.2} m {:>6.2} m {:>6.2} m", row.rmse_m, row.mean_m, row.max_m);
+    }
+    println!("\nViterbi track of the default engine (Hoang, full motion, pseudo states): mean error by lag");
+    for (lag, e) in &report.fixed_lag_mean_error_m {
+        println!("  lag {lag}: {e:.2} m");
+    }
     ExitCode::SUCCESS
 }

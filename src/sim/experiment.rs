@@ -1,36 +1,41 @@
-//! Hoang §6.1's experiment: random walks through a simulated office, each tracked by a fresh
-//! engine, errors pooled over all epochs.
+//! Simulated walks tracked by fresh engines fed exactly as an app feeds them: raw inertial
+//! batches up to each scan, then the scan. Used by `waymark demo`, `waymark simulate` and the
+//! tests.
 
-use super::{Office, OfficeConfig};
-use crate::config::EngineConfig;
+use super::imu::{synthesize, ImuConfig, ImuTrace};
+use super::{Office, OfficeConfig, Walk};
+use crate::config::{EngineConfig, TransitionModel};
 use crate::engine::{Engine, Position};
 use crate::error::Error;
 use crate::eval::{EpochError, ErrorSummary};
+use crate::sensors::SensorSample;
+use crate::site::{Site, PSEUDO_SPACING_M};
 use nalgebra::Point2;
 use std::sync::Arc;
 
-/// What to run.
-#[derive(Clone, Debug, PartialEq)]
-pub struct Experiment {
-    /// The building (its seed also seeds the walks).
-    pub office: OfficeConfig,
-    /// Number of walks: 100 (Hoang §6.1: "averaged over 100 experiments").
-    pub walks: usize,
-    /// Length of each walk, m: 200 (Hoang §6.1: "of about 200 m").
-    pub walk_length_m: f64,
-    /// The engine under test.
-    pub engine: EngineConfig,
+/// Which inertial streams a run feeds to the engine.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Sensors {
+    /// Accelerometer batches.
+    pub accelerometer: bool,
+    /// Gyroscope batches.
+    pub gyroscope: bool,
+    /// Magnetometer batches.
+    pub magnetometer: bool,
 }
 
-impl Default for Experiment {
-    fn default() -> Self {
-        Self {
-            office: OfficeConfig::default(),
-            walks: 100,
-            walk_length_m: 200.0,
-            engine: EngineConfig::default(),
-        }
-    }
+impl Sensors {
+    /// All three.
+    pub const ALL: Sensors = Sensors { accelerometer: true, gyroscope: true, magnetometer: true };
+    /// None: radio only.
+    pub const NONE: Sensors = Sensors { accelerometer: false, gyroscope: false, magnetometer: false };
+}
+
+/// Samples of `stream` with `from < t ≤ to`.
+fn between(stream: &[SensorSample], from: Option<u64>, to: u64) -> &[SensorSample] {
+    let start = from.map_or(0, |f| stream.partition_point(|s| s.timestamp_ns <= f));
+    let end = stream.partition_point(|s| s.timestamp_ns <= to).max(start);
+    &stream[start..end]
 }
 
 /// One epoch of a tracked walk.
@@ -42,6 +47,117 @@ pub struct TrackPoint {
     pub position: Position,
 }
 
+/// A tracked walk: every epoch's position, and the error of the Viterbi track `lag` epochs
+/// behind the newest, for each lag below `lags`.
+pub struct TrackedWalk {
+    /// Epoch by epoch.
+    pub points: Vec<TrackPoint>,
+    /// `lag_errors[lag]`: errors of the track point `lag` epochs back, m.
+    pub lag_errors: Vec<Vec<f64>>,
+}
+
+/// Tracks `walk` with a fresh engine on `site`, feeding the `sensors` streams of `imu` in
+/// batches up to each scan.
+pub fn track_walk(
+    site: &Arc<Site>,
+    config: &EngineConfig,
+    sensors: Sensors,
+    walk: &Walk,
+    imu: &ImuTrace,
+    lags: usize,
+) -> Result<TrackedWalk, Error> {
+    let mut engine = Engine::new(Arc::clone(site), config.clone())?;
+    let mut points = Vec::with_capacity(walk.epochs.len());
+    let mut lag_errors = vec![Vec::new(); lags];
+    let mut previous = None;
+    for (k, epoch) in walk.epochs.iter().enumerate() {
+        let t = epoch.scan.timestamp_ns;
+        if sensors.accelerometer {
+            engine.push_accelerometer(between(&imu.accelerometer, previous, t));
+        }
+        if sensors.gyroscope {
+            engine.push_gyroscope(between(&imu.gyroscope, previous, t));
+        }
+        if sensors.magnetometer {
+            engine.push_magnetometer(between(&imu.magnetometer, previous, t));
+        }
+        previous = Some(t);
+        // A scan where no access point was heard is rejected (and counted): nothing to score.
+        let Ok(position) = engine.push_scan(&epoch.scan) else { continue };
+        points.push(TrackPoint { truth: epoch.truth, position });
+        if lags > 0 {
+            let path = engine.track();
+            for (lag, out) in lag_errors.iter_mut().enumerate() {
+                let back = path.len().checked_sub(1 + lag).zip(k.checked_sub(lag));
+                if let Some((i, past)) = back {
+                    out.push(nalgebra::distance(
+                        &walk.epochs[past].truth,
+                        &Point2::new(path[i].x, path[i].y),
+                    ));
+                }
+            }
+        }
+    }
+    Ok(TrackedWalk { points, lag_errors })
+}
+
+/// Scores a track.
+pub fn errors(points: &[TrackPoint]) -> Vec<EpochError> {
+    points
+        .iter()
+        .map(|p| EpochError {
+            error_m: nalgebra::distance(&p.truth, &Point2::new(p.position.x, p.position.y)),
+            accuracy_m: p.position.accuracy_m,
+            floor_correct: p.position.floor == 0,
+        })
+        .collect()
+}
+
+/// What `waymark demo` runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Experiment {
+    /// The building (its seed also seeds the walks).
+    pub office: OfficeConfig,
+    /// Number of walks: 100 (Hoang §6.1: "averaged over 100 experiments").
+    pub walks: usize,
+    /// Length of each walk, m: 200 (Hoang §6.1: "of about 200 m").
+    pub walk_length_m: f64,
+    /// The engine under test.
+    pub engine: EngineConfig,
+    /// Inertial streams fed to it.
+    pub sensors: Sensors,
+    /// The phone's inertial sensors.
+    pub imu: ImuConfig,
+    /// Whether the site gets pseudo states (Hoang §5).
+    pub pseudo_states: bool,
+}
+
+impl Default for Experiment {
+    fn default() -> Self {
+        Self {
+            office: OfficeConfig::default(),
+            walks: 100,
+            walk_length_m: 200.0,
+            engine: EngineConfig::default(),
+            sensors: Sensors::ALL,
+            imu: ImuConfig::default(),
+            pseudo_states: true,
+        }
+    }
+}
+
+impl Experiment {
+    /// Hoang's "RSSI only": surveyed states, uniform reach, no inertial sensors.
+    pub fn rssi_only() -> Self {
+        Self {
+            engine: EngineConfig { transition: TransitionModel::Reach, ..EngineConfig::default() },
+            sensors: Sensors::NONE,
+            pseudo_states: false,
+            ..Self::default()
+        }
+    }
+}
+
 /// What came out.
 #[derive(Clone, Debug)]
 pub struct ExperimentReport {
@@ -49,44 +165,44 @@ pub struct ExperimentReport {
     pub summary: ErrorSummary,
     /// The first walk, epoch by epoch.
     pub first_track: Vec<TrackPoint>,
-    /// States in the site.
+    /// Surveyed states in the site.
+    pub surveyed_states: usize,
+    /// States the engine ran on (with pseudo states, if any).
     pub states: usize,
     /// Access points in the building.
     pub access_points: usize,
 }
 
+/// The seed of walk `w` of a building seeded `seed`: one `--seed` fixes everything.
+pub fn walk_seed(seed: u64, w: usize) -> u64 {
+    seed.wrapping_mul(1_000_003).wrapping_add(w as u64)
+}
+
 /// Runs the experiment.
 pub fn run(experiment: &Experiment) -> Result<ExperimentReport, Error> {
     let office = Office::generate(&experiment.office);
-    let site = Arc::new(office.site.clone());
-    let mut errors = Vec::new();
+    let surveyed = office.site.states().len();
+    let site = Arc::new(if experiment.pseudo_states {
+        office.site.with_pseudo_states(PSEUDO_SPACING_M)
+    } else {
+        office.site.clone()
+    });
+    let mut all = Vec::new();
     let mut first_track = Vec::new();
     for w in 0..experiment.walks {
-        // Walk seeds are derived from the building's so that one --seed fixes everything.
-        let walk = office.walk(
-            experiment.office.seed.wrapping_mul(1_000_003).wrapping_add(w as u64),
-            experiment.walk_length_m,
-        );
-        let mut engine = Engine::new(Arc::clone(&site), experiment.engine.clone())?;
-        for epoch in &walk.epochs {
-            // A scan where no access point was heard is rejected (and counted) by the engine;
-            // it has no position to score.
-            let Ok(position) = engine.push_scan(&epoch.scan) else {
-                continue;
-            };
-            errors.push(EpochError {
-                error_m: nalgebra::distance(&epoch.truth, &Point2::new(position.x, position.y)),
-                accuracy_m: position.accuracy_m,
-                floor_correct: position.floor == 0,
-            });
-            if w == 0 {
-                first_track.push(TrackPoint { truth: epoch.truth, position });
-            }
+        let seed = walk_seed(experiment.office.seed, w);
+        let walk = office.walk(seed, experiment.walk_length_m);
+        let imu = synthesize(&walk.trajectory, &experiment.imu, seed);
+        let tracked = track_walk(&site, &experiment.engine, experiment.sensors, &walk, &imu, 0)?;
+        all.extend(errors(&tracked.points));
+        if w == 0 {
+            first_track = tracked.points;
         }
     }
     Ok(ExperimentReport {
-        summary: ErrorSummary::new(&errors),
+        summary: ErrorSummary::new(&all),
         first_track,
+        surveyed_states: surveyed,
         states: site.states().len(),
         access_points: office.field.access_points.len(),
     })

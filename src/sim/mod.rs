@@ -4,9 +4,14 @@
 
 mod experiment;
 pub mod imu;
+pub mod motion_eval;
+mod paper;
 mod trajectory;
 
-pub use experiment::{run, Experiment, ExperimentReport, TrackPoint};
+pub use experiment::{
+    errors, run, track_walk, walk_seed, Experiment, ExperimentReport, Sensors, TrackPoint, TrackedWalk,
+};
+pub use paper::{run_papers, HipeTable5, HoangTable1, PaperExperiment, PaperReport, Table5Row};
 pub use trajectory::{Pose, Trajectory};
 
 use crate::radio::{FitOptions, Reading, RssiModel, Scan, TransmitterId};
@@ -62,7 +67,7 @@ impl Default for OfficeConfig {
             shadowing_db: 5.0,
             clip_dbm: -100.0,
             training_scans: 300,
-            path_loss: PathLoss { ref_dbm: -45.0, exponent: 3.5 },
+            path_loss: PathLoss { ref_dbm: -45.0, exponent: 4.0 },
             model: RssiModel::CensoredGaussian,
         }
     }
