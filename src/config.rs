@@ -78,8 +78,8 @@ pub struct EngineConfig {
     /// epochs. Hoang et al. §6.1: "a user cannot move faster than 3 m/s".
     pub max_speed_mps: f64,
     /// The transition model. Default Hoang's: with full motion on the pseudo-state site,
-    /// `waymark simulate --runs 100 --json --seed S` for S = 1, 2, 3 gives 0.52 / 0.51 / 0.48 m
-    /// mean error against HIPE's 0.62 / 0.62 / 0.58 m (`rssi_step_pseudo` against
+    /// `waymark simulate --runs 100 --json --seed S` for S = 1, 2, 3 gives 0.508 / 0.493 / 0.472 m
+    /// mean error against HIPE's 0.644 / 0.641 / 0.601 m (`rssi_step_pseudo` against
     /// `distance_heading`). To be checked again on real traces.
     pub transition: TransitionModel,
     /// How raw inertial samples become steps, distance and heading. `declination_rad` and
@@ -99,7 +99,7 @@ pub struct EngineConfig {
     /// Lag of the fixed-lag estimate, epochs: 3 (4.5 s at 1.5 s epochs). Measured with
     /// `waymark simulate --runs 100 --json --seed S`, S = 1, 2, 3: the Viterbi track's mean
     /// error falls from 0.533 / 0.524 / 0.501 m at lag 0 to 0.448 / 0.437 / 0.424 m at lag 3 and
-    /// stays within 3 mm of that at lags 4-6 (the forward estimate: 0.520 / 0.506 / 0.482 m).
+    /// stays within 3 mm of that at lags 4-6 (the forward estimate: 0.508 / 0.493 / 0.472 m).
     pub fixed_lag_epochs: usize,
     /// Ratio K between the high transition probability (reachable states) and the low one
     /// (everything else), HIPE eqs. 5-6. The low one keeps every a_ij > 0 (HIPE eq. 11) so the
@@ -107,10 +107,11 @@ pub struct EngineConfig {
     /// [200, 200 000], i.e. the most trust in the reachability model.
     pub transition_ratio: f64,
     /// M, the number of most likely states averaged into the estimate (Hoang eq. 4; the paper
-    /// gives no value). Default 5, measured with `waymark demo --json --top-m M --seed S` over
-    /// seeds 1-5 (not the demo's default seed 0): mean error 1.470 / 1.240 / 1.212 / 1.206 /
-    /// 1.206 m for M = 1 / 2 / 3 / 5 / 8. The error stops falling at 3; 5 is as good here and
-    /// keeps the average over more than one cell where states are denser (pseudo states).
+    /// gives no value). Default 3. Radio only, `waymark demo --rssi-only --json --top-m M
+    /// --seed S` over seeds 1-5 (not the demo's seed 0): 1.363 / 1.146 / 1.125 / 1.121 /
+    /// 1.121 m for M = 1 / 2 / 3 / 5 / 8. Fused on the pseudo-state grid, `waymark demo --json
+    /// --walks 30 --top-m M --seed S` over seeds 1-3: 0.506 / 0.484 / 0.495 / 0.513 m for
+    /// M = 1 / 3 / 5 / 8.
     pub estimate_states: usize,
     /// Radius of the precomputed walking-distance table, m. A larger reach (a long gap between
     /// scans) is covered by several passes of the table. Default: the reach of two of Hoang's
@@ -141,7 +142,7 @@ impl Default for EngineConfig {
             track_window_epochs: 64,
             fixed_lag_epochs: 3,
             transition_ratio: 200_000.0,
-            estimate_states: 5,
+            estimate_states: 3,
             reach_radius_m: 9.0,
             max_reach_passes: 16,
             max_reading_age_ns: None,

@@ -573,9 +573,10 @@ fn hipe_region(config: &EngineConfig, motion: &MotionUpdate, dt_s: f64) -> HipeR
 /// else how far the measured spreads stay inside HIPE's tolerances, counting an assumed
 /// quantity as unreliable: 0 for assumed speed only, and half the heading's reliability for
 /// heading & assumed speed, whose region is measured in angle but assumed in range. Measured
-/// with `waymark simulate --runs 100 --seed 1..3`: with the full heading reliability there,
-/// heading & assumed speed was no better than assumed speed alone (1.365 / 1.390 / 1.274 m
-/// against 1.365 / 1.354 / 1.234 m); with half, 1.260 / 1.278 / 1.170 m. r_estimate is how
+/// with `waymark simulate --runs 100 --seed 1..3` (M = 5 then): with the full heading
+/// reliability there, heading & assumed speed was no better than assumed speed alone
+/// (1.365 / 1.390 / 1.274 m against 1.365 / 1.354 / 1.234 m); with half, 1.260 / 1.278 /
+/// 1.170 m (with M = 3 now: 1.266 / 1.286 / 1.180 against 1.381 / 1.367 / 1.246 m). r_estimate is how
 /// far the previous 68% radius is within the least distance tolerance (1.5 m).
 fn hipe_ratio(config: &EngineConfig, motion: &MotionUpdate, previous: Option<&Position>) -> f64 {
     let h = &config.hipe;

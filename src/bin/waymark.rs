@@ -44,6 +44,10 @@ struct SimulateArgs {
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     json: bool,
+    /// Instead: evaluate the motion tracker alone on simulated raw IMU (steps detected at 20,
+    /// 50, 100 and 200 Hz, steps while still and shaken, heading RMSE past steel); prints JSON.
+    #[arg(long)]
+    motion: bool,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -91,8 +95,14 @@ fn main() -> ExitCode {
 }
 
 fn demo(args: &DemoArgs) -> ExitCode {
-    let mut experiment =
-        Experiment { walks: args.walks, walk_length_m: args.walk_length_m, ..Experiment::default() };
+    let base = if args.rssi_only { Experiment::rssi_only() } else { Experiment::default() };
+    let mut experiment = Experiment { walks: args.walks, walk_length_m: args.walk_length_m, ..base };
+    if let Some(model) = args.model {
+        experiment.engine.transition = match model {
+            Model::Hipe => TransitionModel::Hipe,
+            Model::Hoang => TransitionModel::Hoang,
+        };
+    }
     experiment.office.seed = args.seed;
     experiment.office.model = match args.fit {
         Fit::Em => RssiModel::CensoredGaussian,
@@ -205,6 +215,17 @@ fn demo(args: &DemoArgs) -> ExitCode {
 }
 
 fn simulate(args: &SimulateArgs) -> ExitCode {
+    if args.motion {
+        let report = sim::motion_eval::evaluate(args.seed, args.runs);
+        match serde_json::to_string_pretty(&report) {
+            Ok(text) => println!("{text}"),
+            Err(e) => {
+                eprintln!("waymark simulate --motion: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+        return ExitCode::SUCCESS;
+    }
     let experiment = PaperExperiment { seed: args.seed, runs: args.runs, ..PaperExperiment::default() };
     let report = match sim::run_papers(&experiment) {
         Ok(report) => report,
