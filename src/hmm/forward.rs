@@ -102,14 +102,7 @@ mod tests {
     use approx::assert_relative_eq;
     use proptest::prelude::*;
 
-    /// A dense transition matrix, as a reference.
-    struct Dense(Vec<Vec<f64>>);
-    impl Transition for Dense {
-        fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
-            row.extend(self.0[i].iter().enumerate().map(|(j, &a)| (j as u32, a)));
-            0.0
-        }
-    }
+    use crate::hmm::transition::DenseTransition as Dense;
 
     /// P(s_T = j | o_1..T) by summing over every path: the definition, no recursion.
     fn enumerate(initial: &[f64], a: &[Vec<f64>], emissions: &[Vec<f64>]) -> Vec<f64> {

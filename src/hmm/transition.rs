@@ -101,6 +101,18 @@ impl Transition for UniformReach<'_> {
     }
 }
 
+/// A dense transition matrix, as the reference the sparse code is tested against.
+#[cfg(test)]
+pub(crate) struct DenseTransition(pub Vec<Vec<f64>>);
+
+#[cfg(test)]
+impl Transition for DenseTransition {
+    fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+        row.extend(self.0[i].iter().enumerate().map(|(j, &a)| (j as u32, a)));
+        0.0
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -111,13 +111,7 @@ impl ViterbiWindow {
 mod tests {
     use super::*;
 
-    struct Dense(Vec<Vec<f64>>);
-    impl Transition for Dense {
-        fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
-            row.extend(self.0[i].iter().enumerate().map(|(j, &a)| (j as u32, a)));
-            0.0
-        }
-    }
+    use crate::hmm::transition::DenseTransition as Dense;
 
     /// The best path by trying every path.
     fn brute_force(a: &[Vec<f64>], emissions: &[Vec<f64>]) -> Vec<u32> {

@@ -29,8 +29,7 @@ pub struct Trajectory {
 
 /// Azimuth of `to - from`, clockwise from +y.
 fn azimuth(from: Point2<f64>, to: Point2<f64>) -> f64 {
-    let d = to - from;
-    d.x.atan2(d.y)
+    crate::hmm::azimuth(to - from)
 }
 
 impl Trajectory {
