@@ -6,6 +6,7 @@ pub mod config;
 pub mod engine;
 pub mod error;
 pub mod eval;
+pub mod ffi;
 pub mod hmm;
 pub mod radio;
 pub mod sensors;

@@ -1,0 +1,554 @@
+//! The Kotlin and Swift API, through uniffi proc-macros. Every exported type lives here; a
+//! change in this file is a possible breaking change for apps (CHANGELOG, "Breaking changes").
+
+use crate::config::{EngineConfig, TransitionModel};
+use crate::engine::{self, Engine, PositionListener as CoreListener};
+use crate::radio::{Reading, Scan, TransmitterId};
+use crate::sensors::{self, SensorSample};
+use crate::site::Site;
+use std::sync::{Arc, Mutex, Weak};
+
+/// Errors an app can act on.
+#[derive(Debug, thiserror::Error, uniffi::Error)]
+pub enum PositioningError {
+    /// The site file could not be read or is malformed; `reason` says what and where.
+    #[error("invalid site: {reason}")]
+    InvalidSite {
+        /// What is wrong and where.
+        reason: String,
+    },
+    /// A configuration value is out of range.
+    #[error("invalid configuration: {reason}")]
+    InvalidConfig {
+        /// Which field and why.
+        reason: String,
+    },
+    /// An input was rejected (out of order, empty, NaN, no known transmitter); the engine is
+    /// unchanged and goes on.
+    #[error("input rejected: {reason}")]
+    InputRejected {
+        /// Why.
+        reason: String,
+    },
+    /// A bug in Waymark or in a listener: the call had no effect.
+    #[error("internal error: {reason}")]
+    Internal {
+        /// What happened.
+        reason: String,
+    },
+}
+
+impl From<uniffi::UnexpectedUniFFICallbackError> for PositioningError {
+    fn from(e: uniffi::UnexpectedUniFFICallbackError) -> Self {
+        PositioningError::Internal { reason: format!("listener failed: {}", e.reason) }
+    }
+}
+
+impl From<crate::Error> for PositioningError {
+    fn from(e: crate::Error) -> Self {
+        match e {
+            crate::Error::InvalidConfig(reason) => PositioningError::InvalidConfig { reason },
+            crate::Error::Site(s) => PositioningError::InvalidSite { reason: s.to_string() },
+            crate::Error::Input(i) => PositioningError::InputRejected { reason: i.to_string() },
+        }
+    }
+}
+
+/// Which transition model the engine uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
+pub enum TransitionKind {
+    /// Radio only: uniform over the states reachable at the maximum speed.
+    Reach,
+    /// HIPE's high/low regions from distance and heading.
+    Hipe,
+    /// Hoang's Gaussian on the movement vector (the default).
+    Hoang,
+}
+
+/// Engine settings an app may change; every field has a default.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct EngineOptions {
+    /// Transition model; `null` / `nil` for the default (Hoang's).
+    #[uniffi(default = None)]
+    pub transition: Option<TransitionKind>,
+    /// The user's step length in metres (HIPE: 0.7 m).
+    #[uniffi(default = 0.7)]
+    pub step_length_m: f64,
+    /// How many epochs behind the newest the fixed-lag estimate is.
+    #[uniffi(default = 3)]
+    pub fixed_lag_epochs: u32,
+}
+
+impl Default for EngineOptions {
+    fn default() -> Self {
+        let core = EngineConfig::default();
+        Self { transition: None, step_length_m: 0.7, fixed_lag_epochs: core.fixed_lag_epochs as u32 }
+    }
+}
+
+impl EngineOptions {
+    fn to_config(&self) -> EngineConfig {
+        let mut config = EngineConfig {
+            transition: match self.transition {
+                None => TransitionModel::default(),
+                Some(TransitionKind::Reach) => TransitionModel::Reach,
+                Some(TransitionKind::Hipe) => TransitionModel::Hipe,
+                Some(TransitionKind::Hoang) => TransitionModel::Hoang,
+            },
+            fixed_lag_epochs: self.fixed_lag_epochs as usize,
+            ..EngineConfig::default()
+        };
+        config.motion.step_length = sensors::StepLengthModel::Constant { length_m: self.step_length_m };
+        config
+    }
+}
+
+/// One accelerometer (m/s², gravity included), gyroscope (rad/s) or magnetometer (µT) sample
+/// in the phone's frame, with its monotonic timestamp in nanoseconds (Android
+/// `SensorEvent.timestamp`; iOS `CMLogItem.timestamp` × 1e9).
+#[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
+pub struct MotionSample {
+    /// Nanoseconds on the monotonic clock shared by every input.
+    pub timestamp_ns: u64,
+    /// x axis.
+    pub x: f64,
+    /// y axis.
+    pub y: f64,
+    /// z axis.
+    pub z: f64,
+}
+
+/// A WiFi access point heard in a scan.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct WifiReading {
+    /// BSSID, any common notation.
+    pub bssid: String,
+    /// Signal strength, dBm.
+    pub rssi_dbm: f64,
+    /// How long before the scan this reading was measured, ms (0 if fresh).
+    #[uniffi(default = 0)]
+    pub age_ms: u64,
+}
+
+/// A BLE beacon heard in a scan.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct BeaconReading {
+    /// Proximity UUID.
+    pub uuid: String,
+    /// Major number.
+    pub major: u16,
+    /// Minor number.
+    pub minor: u16,
+    /// Signal strength, dBm.
+    pub rssi_dbm: f64,
+    /// How long before the scan this reading was measured, ms (0 if fresh).
+    #[uniffi(default = 0)]
+    pub age_ms: u64,
+}
+
+/// Everything heard at one moment.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct RadioScan {
+    /// Nanoseconds on the monotonic clock shared by every input.
+    pub timestamp_ns: u64,
+    /// WiFi access points.
+    pub wifi: Vec<WifiReading>,
+    /// BLE beacons.
+    pub beacons: Vec<BeaconReading>,
+}
+
+/// Walking or not.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
+pub enum MotionState {
+    /// No accelerometer data.
+    Unknown,
+    /// Still.
+    Stationary,
+    /// Walking.
+    Walking,
+}
+
+/// Which motion information the engine had (HIPE's four scenarios).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
+pub enum MotionScenario {
+    /// Steps and heading.
+    DistanceHeading,
+    /// Steps, no trustworthy heading.
+    Distance,
+    /// Heading, no steps.
+    HeadingSpeed,
+    /// Neither.
+    Speed,
+}
+
+/// Where the phone is.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct PositionEstimate {
+    /// Time of the epoch, ns.
+    pub timestamp_ns: u64,
+    /// x in the site's metric frame, m.
+    pub x: f64,
+    /// y in the site's metric frame, m.
+    pub y: f64,
+    /// Floor index in the site file.
+    pub floor: u32,
+    /// Floor name.
+    pub floor_name: String,
+    /// Probability of that floor.
+    pub floor_probability: f64,
+    /// Radius of the 68% circle, m, as Android's `getAccuracy()` and iOS's
+    /// `horizontalAccuracy`.
+    pub accuracy_m: f64,
+    /// Direction of travel, degrees clockwise from the site's +y axis, when known.
+    pub heading_deg: Option<f64>,
+    /// One standard deviation of the heading, degrees.
+    pub heading_accuracy_deg: Option<f64>,
+    /// Walking or not.
+    pub motion_state: MotionState,
+    /// Motion information available this epoch.
+    pub scenario: MotionScenario,
+    /// Steps since the previous epoch.
+    pub steps: u32,
+}
+
+/// One point of the smoothed track.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct TrackPoint {
+    /// Epoch time, ns.
+    pub timestamp_ns: u64,
+    /// x, m.
+    pub x: f64,
+    /// y, m.
+    pub y: f64,
+    /// Floor index.
+    pub floor: u32,
+}
+
+/// Something about the session changed.
+#[derive(Clone, Debug, PartialEq, uniffi::Enum)]
+pub enum StatusUpdate {
+    /// The motion information changed (a sensor stopped, the compass became disturbed, ...).
+    ScenarioChanged {
+        /// Now.
+        scenario: MotionScenario,
+    },
+    /// The person started or stopped walking.
+    MotionStateChanged {
+        /// Now.
+        state: MotionState,
+    },
+    /// Earlier positions were revised by later evidence.
+    TrackRevised {
+        /// The revised points, oldest first.
+        points: Vec<TrackPoint>,
+    },
+}
+
+/// Receives positions and status on the thread that pushed the input, after the engine's
+/// lock is released. Throwing from a method is reported, never fatal.
+#[uniffi::export(with_foreign)]
+pub trait PositionListener: Send + Sync {
+    /// A new position.
+    fn on_position(&self, position: PositionEstimate) -> Result<(), PositioningError>;
+    /// A status change.
+    fn on_status(&self, status: StatusUpdate) -> Result<(), PositioningError>;
+}
+
+fn scenario(s: sensors::MdiScenario) -> MotionScenario {
+    match s {
+        sensors::MdiScenario::DistanceHeading => MotionScenario::DistanceHeading,
+        sensors::MdiScenario::Distance => MotionScenario::Distance,
+        sensors::MdiScenario::HeadingSpeed => MotionScenario::HeadingSpeed,
+        sensors::MdiScenario::Speed => MotionScenario::Speed,
+    }
+}
+
+fn motion_state(s: sensors::MotionState) -> MotionState {
+    match s {
+        sensors::MotionState::Unknown => MotionState::Unknown,
+        sensors::MotionState::Stationary => MotionState::Stationary,
+        sensors::MotionState::Walking => MotionState::Walking,
+    }
+}
+
+fn track_point(p: &engine::TrackPoint) -> TrackPoint {
+    TrackPoint { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor as u32 }
+}
+
+/// What the core engine published during one call, delivered after the lock is released.
+enum Event {
+    Position(PositionEstimate),
+    Status(StatusUpdate),
+}
+
+/// Collects the core engine's publications into a queue.
+struct Collector {
+    queue: Arc<Mutex<Vec<Event>>>,
+    floor_names: Vec<String>,
+}
+
+impl Collector {
+    fn push(&self, event: Event) {
+        if let Ok(mut q) = self.queue.lock() {
+            q.push(event);
+        }
+    }
+}
+
+fn estimate(p: &engine::Position, floor_names: &[String]) -> PositionEstimate {
+    PositionEstimate {
+        timestamp_ns: p.timestamp_ns,
+        x: p.x,
+        y: p.y,
+        floor: p.floor as u32,
+        floor_name: floor_names.get(p.floor).cloned().unwrap_or_default(),
+        floor_probability: p.floor_probability,
+        accuracy_m: p.accuracy_m,
+        heading_deg: p.heading_rad.map(f64::to_degrees),
+        heading_accuracy_deg: p.heading_accuracy_rad.map(f64::to_degrees),
+        motion_state: motion_state(p.motion_state),
+        scenario: scenario(p.scenario),
+        steps: p.steps,
+    }
+}
+
+impl CoreListener for Collector {
+    fn on_position(&mut self, p: &engine::Position) {
+        self.push(Event::Position(estimate(p, &self.floor_names)));
+    }
+
+    fn on_status(&mut self, status: &engine::StatusEvent) {
+        let update = match status {
+            engine::StatusEvent::ScenarioChanged { to, .. } => {
+                StatusUpdate::ScenarioChanged { scenario: scenario(*to) }
+            }
+            engine::StatusEvent::MotionStateChanged { to, .. } => {
+                StatusUpdate::MotionStateChanged { state: motion_state(*to) }
+            }
+        };
+        self.push(Event::Status(update));
+    }
+
+    fn on_track_revised(&mut self, revised: &[engine::TrackPoint]) {
+        self.push(Event::Status(StatusUpdate::TrackRevised {
+            points: revised.iter().map(track_point).collect(),
+        }));
+    }
+}
+
+struct Inner {
+    engine: Engine,
+    floor_names: Vec<String>,
+    /// The last position, in FFI form.
+    latest: Option<PositionEstimate>,
+}
+
+/// The positioning engine. Thread-safe: sensor threads and the scan receiver may call it at
+/// once. Create it from a site file; feed it sensor batches and scans with timestamps on one
+/// monotonic clock; read positions by polling or by subscribing a listener.
+#[derive(uniffi::Object)]
+pub struct PositioningEngine {
+    inner: Mutex<Inner>,
+    queue: Arc<Mutex<Vec<Event>>>,
+    listeners: Mutex<Vec<(u64, Arc<dyn PositionListener>)>>,
+    next_listener: Mutex<u64>,
+}
+
+/// Cancels its listener's subscription when dropped (or when `cancel` is called).
+#[derive(uniffi::Object)]
+pub struct Subscription {
+    engine: Weak<PositioningEngine>,
+    id: u64,
+}
+
+#[uniffi::export]
+impl Subscription {
+    /// Stops the listener now.
+    pub fn cancel(&self) {
+        if let Some(engine) = self.engine.upgrade() {
+            if let Ok(mut listeners) = engine.listeners.lock() {
+                listeners.retain(|(id, _)| *id != self.id);
+            }
+        }
+    }
+}
+
+impl Drop for Subscription {
+    fn drop(&mut self) {
+        self.cancel();
+    }
+}
+
+fn samples(batch: &[MotionSample]) -> Vec<SensorSample> {
+    batch.iter().map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z }).collect()
+}
+
+fn internal(what: &str) -> PositioningError {
+    PositioningError::Internal { reason: format!("{what}: a previous call panicked") }
+}
+
+impl PositioningEngine {
+    fn create(site: Site, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
+        let floor_names: Vec<String> = site.floors().iter().map(|f| f.name.clone()).collect();
+        let mut engine = Engine::new(Arc::new(site), options.to_config())?;
+        let queue = Arc::new(Mutex::new(Vec::new()));
+        engine.subscribe(Box::new(Collector { queue: Arc::clone(&queue), floor_names: floor_names.clone() }));
+        Ok(Arc::new(Self {
+            inner: Mutex::new(Inner { engine, floor_names, latest: None }),
+            queue,
+            listeners: Mutex::new(Vec::new()),
+            next_listener: Mutex::new(0),
+        }))
+    }
+
+    /// Runs `f` on the engine under its lock, then delivers what it published to the
+    /// listeners with no lock held. A panic inside becomes `Internal` and leaves the engine
+    /// usable.
+    fn with_engine<T>(
+        &self,
+        f: impl FnOnce(&mut Inner) -> Result<T, PositioningError>,
+    ) -> Result<T, PositioningError> {
+        let result = {
+            let mut inner = self.inner.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&mut inner)))
+                .unwrap_or_else(|_| Err(internal("engine")))
+        };
+        self.deliver();
+        result
+    }
+
+    fn deliver(&self) {
+        let events: Vec<Event> = match self.queue.lock() {
+            Ok(mut q) => std::mem::take(&mut *q),
+            Err(_) => return,
+        };
+        if events.is_empty() {
+            return;
+        }
+        let listeners: Vec<Arc<dyn PositionListener>> = match self.listeners.lock() {
+            Ok(l) => l.iter().map(|(_, l)| Arc::clone(l)).collect(),
+            Err(_) => return,
+        };
+        for event in &events {
+            for listener in &listeners {
+                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match event {
+                    Event::Position(p) => listener.on_position(p.clone()),
+                    Event::Status(s) => listener.on_status(s.clone()),
+                }));
+                match outcome {
+                    Ok(Ok(())) => {}
+                    Ok(Err(e)) => log::warn!("a position listener failed: {e}"),
+                    Err(_) => log::warn!("a position listener panicked"),
+                }
+            }
+        }
+    }
+}
+
+#[uniffi::export]
+impl PositioningEngine {
+    /// An engine on the site file given as JSON text.
+    #[uniffi::constructor]
+    pub fn new(site_json: String, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
+        let site = Site::from_json(site_json.as_bytes()).map_err(crate::Error::from)?;
+        Self::create(site, options)
+    }
+
+    /// An engine on the site file at `path`.
+    #[uniffi::constructor]
+    pub fn from_path(path: String, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
+        let site = Site::load(&path).map_err(crate::Error::from)?;
+        Self::create(site, options)
+    }
+
+    /// Accelerometer samples, oldest first. Bad samples are dropped and counted; returns how
+    /// many were taken.
+    pub fn push_accelerometer(&self, batch: Vec<MotionSample>) -> Result<u32, PositioningError> {
+        self.with_engine(|i| Ok(i.engine.push_accelerometer(&samples(&batch)).accepted as u32))
+    }
+
+    /// Gyroscope samples, oldest first; as `push_accelerometer`.
+    pub fn push_gyroscope(&self, batch: Vec<MotionSample>) -> Result<u32, PositioningError> {
+        self.with_engine(|i| Ok(i.engine.push_gyroscope(&samples(&batch)).accepted as u32))
+    }
+
+    /// Magnetometer samples, oldest first; as `push_accelerometer`.
+    pub fn push_magnetometer(&self, batch: Vec<MotionSample>) -> Result<u32, PositioningError> {
+        self.with_engine(|i| Ok(i.engine.push_magnetometer(&samples(&batch)).accepted as u32))
+    }
+
+    /// A WiFi / BLE scan: one positioning epoch. Push the sensor batches up to the scan's time
+    /// first. Returns the new position; a rejected scan throws `InputRejected` and changes
+    /// nothing.
+    pub fn push_scan(&self, scan: RadioScan) -> Result<PositionEstimate, PositioningError> {
+        let mut readings = Vec::with_capacity(scan.wifi.len() + scan.beacons.len());
+        for w in &scan.wifi {
+            let transmitter =
+                TransmitterId::wifi(&w.bssid).map_err(|reason| PositioningError::InputRejected { reason })?;
+            readings.push(Reading {
+                transmitter,
+                rssi_dbm: w.rssi_dbm,
+                age_ns: w.age_ms.saturating_mul(1_000_000),
+            });
+        }
+        for b in &scan.beacons {
+            let transmitter = TransmitterId::ble(&b.uuid, b.major, b.minor)
+                .map_err(|reason| PositioningError::InputRejected { reason })?;
+            readings.push(Reading {
+                transmitter,
+                rssi_dbm: b.rssi_dbm,
+                age_ns: b.age_ms.saturating_mul(1_000_000),
+            });
+        }
+        let core = Scan { timestamp_ns: scan.timestamp_ns, readings };
+        self.epoch(|engine| engine.push_scan(&core))
+    }
+
+    /// An epoch without radio, from the motion since the last one: call it on a timer when
+    /// scans are rare.
+    pub fn advance(&self, timestamp_ns: u64) -> Result<PositionEstimate, PositioningError> {
+        self.epoch(|engine| engine.advance(timestamp_ns))
+    }
+
+    /// The latest position, if any.
+    pub fn position(&self) -> Option<PositionEstimate> {
+        self.with_engine(|i| Ok(i.latest.clone())).ok().flatten()
+    }
+
+    /// The most likely recent track, oldest first.
+    pub fn track(&self) -> Vec<TrackPoint> {
+        self.with_engine(|i| Ok(i.engine.track().iter().map(track_point).collect())).unwrap_or_default()
+    }
+
+    /// The fixed-lag position: a few epochs old, but revised by what came after.
+    pub fn fixed_lag_position(&self) -> Option<TrackPoint> {
+        self.with_engine(|i| Ok(i.engine.fixed_lag_position().as_ref().map(track_point))).ok().flatten()
+    }
+
+    /// Calls `listener` with every position and status change until the returned subscription
+    /// is cancelled or dropped. Listeners run on the pushing thread, with no lock held.
+    pub fn subscribe(self: Arc<Self>, listener: Arc<dyn PositionListener>) -> Arc<Subscription> {
+        let id = {
+            let mut next = self.next_listener.lock().unwrap_or_else(|p| p.into_inner());
+            *next += 1;
+            *next
+        };
+        self.listeners.lock().unwrap_or_else(|p| p.into_inner()).push((id, listener));
+        Arc::new(Subscription { engine: Arc::downgrade(&self), id })
+    }
+}
+
+impl PositioningEngine {
+    fn epoch(
+        &self,
+        f: impl FnOnce(&mut Engine) -> Result<engine::Position, crate::InputError>,
+    ) -> Result<PositionEstimate, PositioningError> {
+        self.with_engine(|inner| {
+            let position = f(&mut inner.engine)
+                .map_err(|e| PositioningError::InputRejected { reason: e.to_string() })?;
+            let estimate = estimate(&position, &inner.floor_names);
+            inner.latest = Some(estimate.clone());
+            Ok(estimate)
+        })
+    }
+}
