@@ -23,6 +23,22 @@ enum Command {
     /// The papers' artificial-data experiments on the same walks: Hoang et al. Table 1 and
     /// HIPE Table 5.
     Simulate(SimulateArgs),
+    /// Write a simulated site file and one walk (raw IMU batches and WiFi scans per epoch,
+    /// with the truth) as JSON, for testing the engine from other languages.
+    SimExport(SimExportArgs),
+}
+
+#[derive(clap::Args)]
+struct SimExportArgs {
+    /// Seed of the building and the walk.
+    #[arg(long, default_value_t = 0)]
+    seed: u64,
+    /// Length of the walk, m.
+    #[arg(long, default_value_t = 60.0)]
+    walk_length_m: f64,
+    /// Folder to write `site.json` and `walk.json` into.
+    #[arg(long)]
+    out: std::path::PathBuf,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -91,6 +107,7 @@ fn main() -> ExitCode {
     match cli.command {
         Command::Demo(args) => demo(&args),
         Command::Simulate(args) => simulate(&args),
+        Command::SimExport(args) => sim_export(&args),
     }
 }
 
@@ -283,4 +300,60 @@ fn simulate(args: &SimulateArgs) -> ExitCode {
         println!("  lag {lag}: {e:.2} m");
     }
     ExitCode::SUCCESS
+}
+
+fn sim_export(args: &SimExportArgs) -> ExitCode {
+    use waymark::sensors::SensorSample;
+    let office =
+        sim::Office::generate(&sim::OfficeConfig { seed: args.seed, ..sim::OfficeConfig::default() });
+    let walk = office.walk(sim::walk_seed(args.seed, 0), args.walk_length_m);
+    let imu = sim::imu::synthesize(&walk.trajectory, &sim::imu::ImuConfig::default(), args.seed);
+    let rows =
+        |v: &[SensorSample]| v.iter().map(|s| [s.timestamp_ns as f64, s.x, s.y, s.z]).collect::<Vec<_>>();
+    let mut previous = 0u64;
+    let epochs: Vec<serde_json::Value> = walk
+        .epochs
+        .iter()
+        .map(|e| {
+            let t = e.scan.timestamp_ns;
+            let batch = |v: &[SensorSample]| {
+                rows(
+                    &v[v.partition_point(|s| s.timestamp_ns <= previous)
+                        ..v.partition_point(|s| s.timestamp_ns <= t)],
+                )
+            };
+            let value = serde_json::json!({
+                "timestamp_ns": t,
+                "truth": [e.truth.x, e.truth.y],
+                "accelerometer": batch(&imu.accelerometer),
+                "gyroscope": batch(&imu.gyroscope),
+                "magnetometer": batch(&imu.magnetometer),
+                "wifi": e.scan.readings.iter().map(|r| serde_json::json!({
+                    "bssid": match &r.transmitter {
+                        waymark::TransmitterId::Wifi { bssid } => bssid.clone(),
+                        other => other.to_string(),
+                    },
+                    "rssi_dbm": r.rssi_dbm,
+                })).collect::<Vec<_>>(),
+            });
+            previous = t;
+            value
+        })
+        .collect();
+    let walk_json = serde_json::json!({
+        "seed": args.seed,
+        "note": "IMU rows are [timestamp_ns, x, y, z] in the phone frame: m/s², rad/s, µT. Each epoch's batches cover (previous epoch, this epoch].",
+        "epochs": epochs,
+    });
+    let write = |name: &str, text: String| std::fs::write(args.out.join(name), text);
+    let result = std::fs::create_dir_all(&args.out)
+        .and_then(|_| write("site.json", office.site.to_json()))
+        .and_then(|_| write("walk.json", walk_json.to_string()));
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("waymark sim-export: {}: {e}", args.out.display());
+            ExitCode::FAILURE
+        }
+    }
 }
