@@ -27,3 +27,6 @@ cargo test --all-features --locked
 
 step "The README's main command, as a smoke test (waymark demo --json)"
 cargo run --release --features cli --locked --quiet -- demo --json --walks 20
+
+step "C ABI: header freshness, shared and static library under valgrind"
+bash bindings/c/test.sh

@@ -1,0 +1,174 @@
+/* The C test of Waymark: loads a simulated site, replays a walk's raw IMU batches and WiFi
+ * scans through the C ABI, checks positions against the truth, and exercises the error paths
+ * (NULL, bad JSON, out-of-order time, NaN samples). Run under valgrind by test.sh. */
+#include <math.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "waymark.h"
+
+static int failures = 0, checks = 0;
+#define CHECK(cond, ...)                                         \
+    do {                                                         \
+        checks++;                                                \
+        if (!(cond)) {                                           \
+            failures++;                                          \
+            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__); \
+            fprintf(stderr, __VA_ARGS__);                        \
+            fprintf(stderr, "\n");                               \
+        }                                                        \
+    } while (0)
+
+static char *read_file(const char *path, size_t *len) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *buf = malloc((size_t)n + 1);
+    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
+        free(buf);
+        buf = NULL;
+    }
+    fclose(f);
+    if (buf) buf[n] = 0;
+    *len = (size_t)n;
+    return buf;
+}
+
+static int callbacks = 0;
+static void on_position(void *userdata, const waymark_position *p) {
+    int *count = userdata;
+    (*count)++;
+    (void)p;
+}
+
+static waymark_sample *read_samples(FILE *f, size_t n) {
+    waymark_sample *s = calloc(n ? n : 1, sizeof *s);
+    for (size_t i = 0; i < n; i++) {
+        unsigned long long t;
+        if (fscanf(f, "%llu %lf %lf %lf", &t, &s[i].x, &s[i].y, &s[i].z) != 4) exit(2);
+        s[i].timestamp_ns = t;
+    }
+    return s;
+}
+
+static void walk(const char *site_path, const char *walk_path) {
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "load site");
+    CHECK(waymark_engine_set_callback(engine, on_position, &callbacks) == WAYMARK_RESULT_OK, "callback");
+    FILE *f = fopen(walk_path, "r");
+    CHECK(f != NULL, "open walk");
+    if (!f) return;
+    unsigned long long t;
+    double tx, ty, error_sum = 0;
+    size_t na, ng, nm, nw;
+    int epochs = 0, positions = 0;
+    while (fscanf(f, " E %llu %lf %lf %zu %zu %zu %zu", &t, &tx, &ty, &na, &ng, &nm, &nw) == 7) {
+        waymark_sample *a = read_samples(f, na), *g = read_samples(f, ng), *m = read_samples(f, nm);
+        size_t accepted = 0;
+        CHECK(waymark_engine_push_accelerometer(engine, a, na, &accepted) == WAYMARK_RESULT_OK, "accel");
+        CHECK(waymark_engine_push_gyroscope(engine, g, ng, NULL) == WAYMARK_RESULT_OK, "gyro");
+        CHECK(waymark_engine_push_magnetometer(engine, m, nm, NULL) == WAYMARK_RESULT_OK, "mag");
+        free(a);
+        free(g);
+        free(m);
+        waymark_wifi_reading *w = calloc(nw ? nw : 1, sizeof *w);
+        char (*bssids)[32] = calloc(nw ? nw : 1, sizeof *bssids);
+        for (size_t i = 0; i < nw; i++) {
+            if (fscanf(f, "%31s %lf", bssids[i], &w[i].rssi_dbm) != 2) exit(2);
+            w[i].bssid = bssids[i];
+        }
+        waymark_position p;
+        waymark_result r = waymark_engine_push_scan(engine, t, w, nw, NULL, 0, &p);
+        if (r == WAYMARK_RESULT_OK) {
+            positions++;
+            error_sum += hypot(p.x - tx, p.y - ty);
+            CHECK(p.accuracy_m > 0 && isfinite(p.x) && isfinite(p.y), "finite position");
+        } else {
+            CHECK(r == WAYMARK_RESULT_INPUT_REJECTED, "scan result %d", (int)r);
+        }
+        free(w);
+        free(bssids);
+        epochs++;
+    }
+    fclose(f);
+    double mean = positions ? error_sum / positions : INFINITY;
+    printf("walk: %d epochs, %d positions, mean error %.2f m, %d callbacks\n", epochs, positions, mean, callbacks);
+    CHECK(epochs > 10 && positions > epochs / 2, "positions");
+    CHECK(mean < 1.5, "mean error %.2f", mean);
+    CHECK(callbacks == positions, "callbacks %d positions %d", callbacks, positions);
+
+    /* The latest position, then an out-of-order scan: rejected, engine unchanged. */
+    waymark_position latest, again;
+    CHECK(waymark_engine_position(engine, &latest) == WAYMARK_RESULT_OK, "position");
+    waymark_wifi_reading old = {"02:00:00:00:00:00", -60.0, 0};
+    CHECK(waymark_engine_push_scan(engine, 1, &old, 1, NULL, 0, NULL) == WAYMARK_RESULT_INPUT_REJECTED, "old scan");
+    char message[256];
+    size_t n = waymark_last_error(message, sizeof message);
+    CHECK(n > 0 && strstr(message, "not after") != NULL, "last error: %s", message);
+    CHECK(waymark_engine_position(engine, &again) == WAYMARK_RESULT_OK && again.timestamp_ns == latest.timestamp_ns,
+          "unchanged");
+    /* NaN samples are dropped, not fatal. */
+    waymark_sample bad[2] = {{latest.timestamp_ns + 1, NAN, 0, 9.8}, {latest.timestamp_ns + 2, 0, 0, 9.8}};
+    size_t accepted = 99;
+    CHECK(waymark_engine_push_accelerometer(engine, bad, 2, &accepted) == WAYMARK_RESULT_OK && accepted == 1,
+          "nan dropped, %zu accepted", accepted);
+    waymark_position moved;
+    CHECK(waymark_engine_advance(engine, latest.timestamp_ns + 1500000000ull, &moved) == WAYMARK_RESULT_OK, "advance");
+    /* A bad BSSID and a NaN RSSI are rejected. */
+    waymark_wifi_reading junk = {"not-a-bssid", -60.0, 0};
+    CHECK(waymark_engine_push_scan(engine, moved.timestamp_ns + 1, &junk, 1, NULL, 0, NULL) ==
+              WAYMARK_RESULT_INPUT_REJECTED, "bad bssid");
+    waymark_wifi_reading nan_rssi = {"02:00:00:00:00:00", NAN, 0};
+    CHECK(waymark_engine_push_scan(engine, moved.timestamp_ns + 1, &nan_rssi, 1, NULL, 0, NULL) ==
+              WAYMARK_RESULT_INPUT_REJECTED, "nan rssi");
+    CHECK(waymark_engine_set_callback(engine, NULL, NULL) == WAYMARK_RESULT_OK, "clear callback");
+    waymark_engine_free(engine);
+}
+
+static void error_paths(const char *site_path) {
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new(NULL, 0, &engine) == WAYMARK_RESULT_NULL_PARAMETER, "null json");
+    CHECK(waymark_engine_new((const uint8_t *)"{}", 2, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "null out");
+    const char *bad = "{\"format_version\": 1, \"name\": ";
+    CHECK(waymark_engine_new((const uint8_t *)bad, strlen(bad), &engine) == WAYMARK_RESULT_INVALID_SITE, "bad json");
+    char message[256];
+    waymark_last_error(message, sizeof message);
+    CHECK(strstr(message, "truncated") != NULL, "message: %s", message);
+    CHECK(waymark_last_error(NULL, 0) > 0, "length query");
+    CHECK(waymark_engine_new_from_path("/nonexistent/site.json", &engine) == WAYMARK_RESULT_INVALID_SITE, "no file");
+    CHECK(waymark_engine_new_from_path(NULL, &engine) == WAYMARK_RESULT_NULL_PARAMETER, "null path");
+    waymark_position p;
+    CHECK(waymark_engine_position(NULL, &p) == WAYMARK_RESULT_NULL_PARAMETER, "null engine");
+    CHECK(waymark_engine_push_accelerometer(NULL, NULL, 0, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "null engine");
+    waymark_engine_free(NULL);
+
+    size_t len = 0;
+    char *json = read_file(site_path, &len);
+    CHECK(json != NULL, "read site");
+    if (!json) return;
+    CHECK(waymark_engine_new((const uint8_t *)json, len, &engine) == WAYMARK_RESULT_OK, "site from bytes");
+    CHECK(waymark_engine_position(engine, &p) == WAYMARK_RESULT_NO_POSITION, "no position yet");
+    CHECK(waymark_engine_push_accelerometer(engine, NULL, 3, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "null samples");
+    CHECK(waymark_engine_push_scan(engine, 5, NULL, 0, NULL, 0, &p) == WAYMARK_RESULT_INPUT_REJECTED, "empty scan");
+    CHECK(waymark_engine_push_scan(engine, 5, NULL, 2, NULL, 0, &p) == WAYMARK_RESULT_NULL_PARAMETER, "null wifi");
+    waymark_beacon_reading beacon = {"fda50693-a4e2-4fb1-afcf-c6eb07647825", 1, 2, -70.0, 0};
+    CHECK(waymark_engine_push_scan(engine, 5, NULL, 0, &beacon, 1, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+          "unknown beacon only");
+    free(json);
+    waymark_engine_free(engine);
+    CHECK(strcmp(waymark_version(), WAYMARK_VERSION) == 0, "version %s", waymark_version());
+}
+
+int main(int argc, char **argv) {
+    if (argc != 3) {
+        fprintf(stderr, "usage: %s site.json walk.txt\n", argv[0]);
+        return 2;
+    }
+    error_paths(argv[1]);
+    walk(argv[1], argv[2]);
+    printf("%d passed, %d failed\n", checks - failures, failures);
+    return failures ? 1 : 0;
+}

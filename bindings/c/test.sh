@@ -1,0 +1,45 @@
+#!/usr/bin/env bash
+# The C ABI test: checks the committed header is what cbindgen makes from src/ffi/c.rs, builds
+# the library, compiles bindings/c/test.c against the header and the library (shared and
+# static), and runs both under valgrind: zero errors, zero leaks.
+set -euo pipefail
+repo=$(cd "$(dirname "$0")/../.." && pwd)
+cd "$repo"
+target=${CARGO_TARGET_DIR:-$repo/target}
+work="$target/c-test"
+mkdir -p "$work"
+
+need() { command -v "$1" >/dev/null 2>&1; }
+if ! need gcc || ! need valgrind || ! need python3; then
+    apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq gcc valgrind python3 >/dev/null
+fi
+if ! need cbindgen || [ "$(cbindgen --version)" != "cbindgen 0.29.4" ]; then
+    cargo install cbindgen --version 0.29.4 --locked
+fi
+
+echo "-- header is fresh"
+cbindgen --config cbindgen.toml --quiet --output "$work/waymark.h"
+if ! diff -u bindings/c/waymark.h "$work/waymark.h"; then
+    echo "bindings/c/waymark.h is stale: run cbindgen --config cbindgen.toml --output bindings/c/waymark.h" >&2
+    exit 1
+fi
+crate_version=$(sed -n 's/^version = "\(.*\)"/\1/p' Cargo.toml | head -n1)
+if ! grep -q "#define WAYMARK_VERSION \"$crate_version\"" bindings/c/waymark.h; then
+    echo "WAYMARK_VERSION in cbindgen.toml does not match Cargo.toml ($crate_version)" >&2
+    exit 1
+fi
+
+echo "-- build"
+cargo build --lib --locked --quiet
+cargo run --features cli --locked --quiet -- sim-export --walk-length-m 40 --out "$work"
+python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
+flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -I bindings/c)
+gcc "${flags[@]}" bindings/c/test.c -L "$target/debug" -lwaymark -lm -o "$work/test_shared"
+gcc "${flags[@]}" bindings/c/test.c "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/test_static"
+
+for kind in shared static; do
+    echo "-- $kind library under valgrind"
+    LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
+        --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
+        "$work/test_$kind" "$work/site.json" "$work/walk.txt"
+done

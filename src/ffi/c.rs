@@ -1,0 +1,477 @@
+//! The C ABI, in rustls-ffi's conventions: one `waymark_` prefix, opaque handles, a
+//! `waymark_result` code from every call, out-parameters last, NULL checks, every body behind
+//! a panic boundary, a thread-local last-error message, `_free` for what Waymark allocates.
+//! The header `bindings/c/waymark.h` is generated from this file by cbindgen.
+#![deny(clippy::undocumented_unsafe_blocks)]
+#![allow(non_camel_case_types)]
+// These functions are called from C, which cannot see `unsafe`: each pointer's contract is in
+// the header, and each dereference carries a SAFETY comment (as rustls-ffi does).
+#![allow(clippy::not_unsafe_ptr_arg_deref)]
+
+use crate::engine::{Engine, Position};
+use crate::radio::{Reading, Scan, TransmitterId};
+use crate::sensors::{MdiScenario, MotionState, SensorSample};
+use crate::site::Site;
+use crate::EngineConfig;
+use std::cell::RefCell;
+use std::ffi::{c_char, c_void, CStr};
+use std::sync::{Arc, Mutex};
+
+/// What a call did.
+#[repr(u32)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum waymark_result {
+    /// Success.
+    Ok = 0,
+    /// A required pointer was NULL.
+    NullParameter = 1,
+    /// The site file could not be read or is malformed (see `waymark_last_error`).
+    InvalidSite = 2,
+    /// The configuration is invalid.
+    InvalidConfig = 3,
+    /// The input was rejected (out of order, empty, NaN, unknown transmitters only, bad id);
+    /// the engine is unchanged.
+    InputRejected = 4,
+    /// No position yet.
+    NoPosition = 5,
+    /// A string was not UTF-8.
+    InvalidUtf8 = 6,
+    /// Waymark panicked; the call had no effect and the engine stays usable.
+    Panic = 99,
+}
+
+/// An engine. Opaque; create with `waymark_engine_new`, free with `waymark_engine_free`.
+/// Thread-safe: any thread may call any function on it.
+pub struct waymark_engine {
+    inner: Mutex<Inner>,
+}
+
+struct Inner {
+    engine: Engine,
+    callback: Option<(waymark_position_callback, usize)>,
+}
+
+/// One accelerometer (m/s², gravity included), gyroscope (rad/s) or magnetometer (µT) sample
+/// in the phone's frame, with a monotonic timestamp in ns.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct waymark_sample {
+    /// ns on the clock shared by every input.
+    pub timestamp_ns: u64,
+    /// x axis.
+    pub x: f64,
+    /// y axis.
+    pub y: f64,
+    /// z axis.
+    pub z: f64,
+}
+
+/// A WiFi access point heard in a scan.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct waymark_wifi_reading {
+    /// NUL-terminated BSSID, any common notation.
+    pub bssid: *const c_char,
+    /// dBm.
+    pub rssi_dbm: f64,
+    /// How long before the scan it was measured, ms.
+    pub age_ms: u64,
+}
+
+/// A BLE beacon heard in a scan.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct waymark_beacon_reading {
+    /// NUL-terminated proximity UUID.
+    pub uuid: *const c_char,
+    /// Major.
+    pub major: u16,
+    /// Minor.
+    pub minor: u16,
+    /// dBm.
+    pub rssi_dbm: f64,
+    /// How long before the scan it was measured, ms.
+    pub age_ms: u64,
+}
+
+/// A position.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default)]
+pub struct waymark_position {
+    /// Epoch time, ns.
+    pub timestamp_ns: u64,
+    /// x in the site frame, m.
+    pub x: f64,
+    /// y in the site frame, m.
+    pub y: f64,
+    /// Floor index in the site file.
+    pub floor: u32,
+    /// Probability of that floor.
+    pub floor_probability: f64,
+    /// Radius of the 68% circle, m.
+    pub accuracy_m: f64,
+    /// Direction of travel, degrees clockwise from the site's +y axis; NaN when unknown.
+    pub heading_deg: f64,
+    /// One standard deviation of the heading, degrees; NaN when unknown.
+    pub heading_accuracy_deg: f64,
+    /// 0 unknown, 1 stationary, 2 walking.
+    pub motion_state: u32,
+    /// HIPE scenario: 0 distance & heading, 1 distance, 2 heading & speed, 3 speed.
+    pub scenario: u32,
+    /// Steps since the previous epoch.
+    pub steps: u32,
+}
+
+/// Called with every new position, on the thread that pushed the input, with no lock held.
+pub type waymark_position_callback =
+    Option<unsafe extern "C" fn(userdata: *mut c_void, position: *const waymark_position)>;
+
+thread_local! {
+    static LAST_ERROR: RefCell<String> = const { RefCell::new(String::new()) };
+}
+
+fn fail(code: waymark_result, message: impl Into<String>) -> waymark_result {
+    let message = message.into();
+    LAST_ERROR.with(|e| *e.borrow_mut() = message);
+    code
+}
+
+/// Runs `body`, turning a panic into `waymark_result::Panic`.
+fn boundary(body: impl FnOnce() -> waymark_result) -> waymark_result {
+    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)) {
+        Ok(code) => code,
+        Err(_) => fail(waymark_result::Panic, "Waymark panicked; the call had no effect"),
+    }
+}
+
+fn convert(p: &Position) -> waymark_position {
+    waymark_position {
+        timestamp_ns: p.timestamp_ns,
+        x: p.x,
+        y: p.y,
+        floor: p.floor as u32,
+        floor_probability: p.floor_probability,
+        accuracy_m: p.accuracy_m,
+        heading_deg: p.heading_rad.map_or(f64::NAN, f64::to_degrees),
+        heading_accuracy_deg: p.heading_accuracy_rad.map_or(f64::NAN, f64::to_degrees),
+        motion_state: match p.motion_state {
+            MotionState::Unknown => 0,
+            MotionState::Stationary => 1,
+            MotionState::Walking => 2,
+        },
+        scenario: match p.scenario {
+            MdiScenario::DistanceHeading => 0,
+            MdiScenario::Distance => 1,
+            MdiScenario::HeadingSpeed => 2,
+            MdiScenario::Speed => 3,
+        },
+        steps: p.steps,
+    }
+}
+
+fn create(site: Result<Site, crate::SiteError>, out: *mut *mut waymark_engine) -> waymark_result {
+    let site = match site {
+        Ok(site) => site,
+        Err(e) => return fail(waymark_result::InvalidSite, e.to_string()),
+    };
+    let engine = match Engine::new(Arc::new(site), EngineConfig::default()) {
+        Ok(engine) => engine,
+        Err(e) => return fail(waymark_result::InvalidConfig, e.to_string()),
+    };
+    let handle = Box::new(waymark_engine { inner: Mutex::new(Inner { engine, callback: None }) });
+    // SAFETY: `out` was checked non-NULL by the caller of `create` and points to writable
+    // storage for one pointer, as the header documents.
+    unsafe { *out = Box::into_raw(handle) };
+    waymark_result::Ok
+}
+
+/// Creates an engine from site-file JSON (`len` bytes at `site_json`, not NUL-terminated
+/// necessarily). On success `*out` holds the engine; free it with `waymark_engine_free`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_new(
+    site_json: *const u8,
+    len: usize,
+    out: *mut *mut waymark_engine,
+) -> waymark_result {
+    boundary(|| {
+        if site_json.is_null() || out.is_null() {
+            return fail(waymark_result::NullParameter, "site_json and out must not be NULL");
+        }
+        // SAFETY: the caller guarantees `site_json` points to `len` readable bytes.
+        let bytes = unsafe { std::slice::from_raw_parts(site_json, len) };
+        create(Site::from_json(bytes), out)
+    })
+}
+
+/// Creates an engine from the site file at the NUL-terminated `path`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_new_from_path(
+    path: *const c_char,
+    out: *mut *mut waymark_engine,
+) -> waymark_result {
+    boundary(|| {
+        if path.is_null() || out.is_null() {
+            return fail(waymark_result::NullParameter, "path and out must not be NULL");
+        }
+        // SAFETY: the caller guarantees a NUL-terminated string at `path`.
+        let Ok(path) = unsafe { CStr::from_ptr(path) }.to_str() else {
+            return fail(waymark_result::InvalidUtf8, "path is not UTF-8");
+        };
+        create(Site::load(path), out)
+    })
+}
+
+/// Frees an engine. NULL is ignored.
+#[no_mangle]
+pub extern "C" fn waymark_engine_free(engine: *mut waymark_engine) {
+    let _ = boundary(|| {
+        if !engine.is_null() {
+            // SAFETY: `engine` came from `waymark_engine_new*` (Box::into_raw) and is freed
+            // once, as the header requires.
+            drop(unsafe { Box::from_raw(engine) });
+        }
+        waymark_result::Ok
+    });
+}
+
+/// Borrows the engine behind `engine`, or fails with `NullParameter`.
+fn with_engine(
+    engine: *const waymark_engine,
+    body: impl FnOnce(&mut Inner) -> waymark_result,
+) -> waymark_result {
+    boundary(|| {
+        // SAFETY: a non-NULL `engine` is a live handle from `waymark_engine_new*` (the header's
+        // contract); `waymark_engine` is Sync, so a shared reference from any thread is fine.
+        let Some(handle) = (unsafe { engine.as_ref() }) else {
+            return fail(waymark_result::NullParameter, "engine must not be NULL");
+        };
+        let mut inner = handle.inner.lock().unwrap_or_else(|p| p.into_inner());
+        body(&mut inner)
+    })
+}
+
+fn samples<'a>(batch: *const waymark_sample, count: usize) -> Option<&'a [waymark_sample]> {
+    if count == 0 {
+        return Some(&[]);
+    }
+    // SAFETY: a non-NULL `batch` points to `count` samples (the header's contract).
+    (!batch.is_null()).then(|| unsafe { std::slice::from_raw_parts(batch, count) })
+}
+
+fn push_samples(
+    engine: *mut waymark_engine,
+    batch: *const waymark_sample,
+    count: usize,
+    accepted: *mut usize,
+    push: fn(&mut Engine, &[SensorSample]) -> crate::sensors::BatchReport,
+) -> waymark_result {
+    with_engine(engine, |inner| {
+        let Some(batch) = samples(batch, count) else {
+            return fail(waymark_result::NullParameter, "samples must not be NULL when count > 0");
+        };
+        let converted: Vec<SensorSample> = batch
+            .iter()
+            .map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z })
+            .collect();
+        let report = push(&mut inner.engine, &converted);
+        if !accepted.is_null() {
+            // SAFETY: a non-NULL `accepted` points to writable storage for one size_t.
+            unsafe { *accepted = report.accepted };
+        }
+        waymark_result::Ok
+    })
+}
+
+/// Accelerometer samples (m/s², gravity included), oldest first. Bad samples are dropped and
+/// counted; `*accepted` (may be NULL) receives how many were taken.
+#[no_mangle]
+pub extern "C" fn waymark_engine_push_accelerometer(
+    engine: *mut waymark_engine,
+    samples: *const waymark_sample,
+    count: usize,
+    accepted: *mut usize,
+) -> waymark_result {
+    push_samples(engine, samples, count, accepted, Engine::push_accelerometer)
+}
+
+/// Gyroscope samples (rad/s); as `waymark_engine_push_accelerometer`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_push_gyroscope(
+    engine: *mut waymark_engine,
+    samples: *const waymark_sample,
+    count: usize,
+    accepted: *mut usize,
+) -> waymark_result {
+    push_samples(engine, samples, count, accepted, Engine::push_gyroscope)
+}
+
+/// Magnetometer samples (µT); as `waymark_engine_push_accelerometer`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_push_magnetometer(
+    engine: *mut waymark_engine,
+    samples: *const waymark_sample,
+    count: usize,
+    accepted: *mut usize,
+) -> waymark_result {
+    push_samples(engine, samples, count, accepted, Engine::push_magnetometer)
+}
+
+fn string_arg(text: *const c_char, what: &str) -> Result<String, waymark_result> {
+    if text.is_null() {
+        return Err(fail(waymark_result::NullParameter, format!("{what} must not be NULL")));
+    }
+    // SAFETY: a non-NULL string argument is NUL-terminated (the header's contract).
+    match unsafe { CStr::from_ptr(text) }.to_str() {
+        Ok(s) => Ok(s.to_owned()),
+        Err(_) => Err(fail(waymark_result::InvalidUtf8, format!("{what} is not UTF-8"))),
+    }
+}
+
+/// Runs an epoch under the lock, then calls the callback with no lock held and writes `out`.
+fn epoch(
+    engine: *mut waymark_engine,
+    out: *mut waymark_position,
+    body: impl FnOnce(&mut Engine) -> Result<Position, waymark_result>,
+) -> waymark_result {
+    let mut result = None;
+    let code = with_engine(engine, |inner| match body(&mut inner.engine) {
+        Ok(p) => {
+            result = Some((convert(&p), inner.callback));
+            waymark_result::Ok
+        }
+        Err(code) => code,
+    });
+    if let Some((position, callback)) = result {
+        if !out.is_null() {
+            // SAFETY: a non-NULL `out` points to writable storage for one waymark_position.
+            unsafe { *out = position };
+        }
+        if let Some((Some(callback), userdata)) = callback {
+            // SAFETY: the callback and its userdata were registered together by the caller of
+            // `waymark_engine_set_callback`, who guarantees they stay valid until replaced.
+            unsafe { callback(userdata as *mut c_void, &position) };
+        }
+    }
+    code
+}
+
+/// A scan: WiFi readings and BLE beacon readings (either array may be NULL with count 0). One
+/// positioning epoch; `*out` (may be NULL) receives the new position. A rejected scan returns
+/// `InputRejected` and changes nothing.
+#[no_mangle]
+pub extern "C" fn waymark_engine_push_scan(
+    engine: *mut waymark_engine,
+    timestamp_ns: u64,
+    wifi: *const waymark_wifi_reading,
+    wifi_count: usize,
+    beacons: *const waymark_beacon_reading,
+    beacon_count: usize,
+    out: *mut waymark_position,
+) -> waymark_result {
+    epoch(engine, out, |engine| {
+        if (wifi.is_null() && wifi_count > 0) || (beacons.is_null() && beacon_count > 0) {
+            return Err(fail(
+                waymark_result::NullParameter,
+                "reading arrays must not be NULL when count > 0",
+            ));
+        }
+        let mut readings = Vec::with_capacity(wifi_count + beacon_count);
+        if wifi_count > 0 {
+            // SAFETY: checked non-NULL above; the caller guarantees `wifi_count` elements.
+            for w in unsafe { std::slice::from_raw_parts(wifi, wifi_count) } {
+                let bssid = string_arg(w.bssid, "bssid")?;
+                let transmitter =
+                    TransmitterId::wifi(&bssid).map_err(|m| fail(waymark_result::InputRejected, m))?;
+                readings.push(Reading {
+                    transmitter,
+                    rssi_dbm: w.rssi_dbm,
+                    age_ns: w.age_ms.saturating_mul(1_000_000),
+                });
+            }
+        }
+        if beacon_count > 0 {
+            // SAFETY: checked non-NULL above; the caller guarantees `beacon_count` elements.
+            for b in unsafe { std::slice::from_raw_parts(beacons, beacon_count) } {
+                let uuid = string_arg(b.uuid, "uuid")?;
+                let transmitter = TransmitterId::ble(&uuid, b.major, b.minor)
+                    .map_err(|m| fail(waymark_result::InputRejected, m))?;
+                readings.push(Reading {
+                    transmitter,
+                    rssi_dbm: b.rssi_dbm,
+                    age_ns: b.age_ms.saturating_mul(1_000_000),
+                });
+            }
+        }
+        engine
+            .push_scan(&Scan { timestamp_ns, readings })
+            .map_err(|e| fail(waymark_result::InputRejected, e.to_string()))
+    })
+}
+
+/// An epoch without radio at `timestamp_ns`, from the motion since the last epoch.
+#[no_mangle]
+pub extern "C" fn waymark_engine_advance(
+    engine: *mut waymark_engine,
+    timestamp_ns: u64,
+    out: *mut waymark_position,
+) -> waymark_result {
+    epoch(engine, out, |engine| {
+        engine.advance(timestamp_ns).map_err(|e| fail(waymark_result::InputRejected, e.to_string()))
+    })
+}
+
+/// The latest position into `*out`, or `NoPosition`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_position(
+    engine: *const waymark_engine,
+    out: *mut waymark_position,
+) -> waymark_result {
+    if out.is_null() {
+        return fail(waymark_result::NullParameter, "out must not be NULL");
+    }
+    with_engine(engine, |inner| match inner.engine.position() {
+        Some(p) => {
+            // SAFETY: `out` was checked non-NULL and points to one waymark_position.
+            unsafe { *out = convert(p) };
+            waymark_result::Ok
+        }
+        None => fail(waymark_result::NoPosition, "no epoch has run yet"),
+    })
+}
+
+/// Sets (or, with a NULL callback, clears) the function called with every new position.
+/// `userdata` is passed back untouched; it must stay valid until the callback is replaced or
+/// the engine freed.
+#[no_mangle]
+pub extern "C" fn waymark_engine_set_callback(
+    engine: *mut waymark_engine,
+    callback: waymark_position_callback,
+    userdata: *mut c_void,
+) -> waymark_result {
+    with_engine(engine, |inner| {
+        inner.callback = callback.map(|c| (Some(c), userdata as usize));
+        waymark_result::Ok
+    })
+}
+
+/// Copies the calling thread's last error message into `buf` (NUL-terminated, truncated to
+/// `len`) and returns the message's full length in bytes. `buf` may be NULL to ask the length.
+#[no_mangle]
+pub extern "C" fn waymark_last_error(buf: *mut c_char, len: usize) -> usize {
+    let message = LAST_ERROR.with(|e| e.borrow().clone());
+    if !buf.is_null() && len > 0 {
+        let n = message.len().min(len - 1);
+        // SAFETY: `buf` points to `len` writable bytes (the header's contract); n < len.
+        unsafe {
+            std::ptr::copy_nonoverlapping(message.as_ptr(), buf as *mut u8, n);
+            *buf.add(n) = 0;
+        }
+    }
+    message.len()
+}
+
+/// The library's version, a static NUL-terminated string.
+#[no_mangle]
+pub extern "C" fn waymark_version() -> *const c_char {
+    concat!(env!("CARGO_PKG_VERSION"), "\0").as_ptr() as *const c_char
+}
