@@ -30,3 +30,6 @@ cargo run --release --features cli --locked --quiet -- demo --json --walks 20
 
 step "C ABI: header freshness, shared and static library under valgrind"
 bash bindings/c/test.sh
+
+step "Kotlin bindings on the JVM (JNA, JUnit 4)"
+bash bindings/kotlin/test.sh

@@ -1,0 +1,46 @@
+package dev.waymark
+
+import kotlin.system.exitProcess
+import org.junit.runner.Description
+import org.junit.runner.JUnitCore
+import org.junit.runner.notification.Failure
+import org.junit.runner.notification.RunListener
+
+/**
+ * Runs [WaymarkTest] with JUnit 4, prints one line per test and, last, exactly
+ * `N passed, N failed` (what CI reads). Exits 1 if anything failed.
+ */
+object RunTests {
+    @JvmStatic
+    fun main(args: Array<String>) {
+        val core = JUnitCore()
+        core.addListener(object : RunListener() {
+            private val failed = HashSet<Description>()
+
+            override fun testStarted(description: Description) {
+                println("RUN  ${description.methodName}")
+            }
+
+            override fun testFailure(failure: Failure) {
+                failed.add(failure.description)
+                println("FAIL ${failure.description.methodName ?: failure.description.displayName}: ${failure.message}")
+                failure.exception.printStackTrace(System.out)
+            }
+
+            override fun testFinished(description: Description) {
+                if (description !in failed) println("PASS ${description.methodName}")
+            }
+        })
+        val result = core.run(WaymarkTest::class.java, ConversionsTest::class.java)
+        // A failure in @BeforeClass fails the class without running any test: count each test.
+        val failed = if (result.runCount == 0 && result.failureCount > 0) {
+            maxOf(result.failureCount, listOf(WaymarkTest::class.java, ConversionsTest::class.java).sumOf { c -> c.methods.count { it.isAnnotationPresent(org.junit.Test::class.java) } })
+        } else {
+            result.failureCount
+        }
+        val passed = result.runCount - result.failureCount
+        println("${maxOf(passed, 0)} passed, $failed failed")
+        System.out.flush()
+        exitProcess(if (failed == 0 && passed > 0) 0 else 1)
+    }
+}

@@ -1,0 +1,335 @@
+package dev.waymark
+
+import java.io.File
+import java.util.Collections
+import java.util.concurrent.CountDownLatch
+import java.util.concurrent.Executors
+import java.util.concurrent.TimeUnit
+import java.util.concurrent.atomic.AtomicInteger
+import kotlin.math.hypot
+import org.junit.Assert.assertEquals
+import org.junit.Assert.assertFalse
+import org.junit.Assert.assertNotNull
+import org.junit.Assert.assertTrue
+import org.junit.Assert.fail
+import org.junit.BeforeClass
+import org.junit.Test
+
+/**
+ * The Kotlin surface of Waymark on the JVM, against the bindings uniffi generates: the simulated
+ * walk of `waymark sim-export` pushed through a Kotlin listener, typed errors, a throwing
+ * listener, eight threads at once, and cancellation. Paths come from the system properties
+ * `waymark.site` / `waymark.walk` (or the environment variables `WAYMARK_SITE` / `WAYMARK_WALK`).
+ */
+class WaymarkTest {
+    /** Counts what it hears; remembers the last position. */
+    class Counter : PositionListener {
+        val positions = AtomicInteger()
+        val statuses = AtomicInteger()
+        @Volatile var last: PositionEstimate? = null
+
+        override fun onPosition(position: PositionEstimate) {
+            positions.incrementAndGet()
+            last = position
+        }
+
+        override fun onStatus(status: StatusUpdate) {
+            statuses.incrementAndGet()
+        }
+    }
+
+    /** Throws from every call, as a buggy app's listener might: the typed error and an unexpected one. */
+    class Throwing : PositionListener {
+        val positions = AtomicInteger()
+        val statuses = AtomicInteger()
+
+        override fun onPosition(position: PositionEstimate) {
+            positions.incrementAndGet()
+            throw PositioningException.Internal("app bug in onPosition")
+        }
+
+        override fun onStatus(status: StatusUpdate) {
+            statuses.incrementAndGet()
+            throw IllegalStateException("app bug in onStatus")
+        }
+    }
+
+    /**
+     * Throws a kotlin.Error (`TODO()`), which uniffi's generated callback code does not catch
+     * (it catches Exception): JNA's callback dispatcher reports it and the call returns as if
+     * it succeeded.
+     */
+    class ThrowingError : PositionListener {
+        val calls = AtomicInteger()
+
+        override fun onPosition(position: PositionEstimate) {
+            calls.incrementAndGet()
+            TODO("app never finished onPosition")
+        }
+
+        override fun onStatus(status: StatusUpdate) {
+            calls.incrementAndGet()
+            throw StackOverflowError("app bug in onStatus")
+        }
+    }
+
+    companion object {
+        private lateinit var sitePath: String
+        private lateinit var siteJson: String
+        private lateinit var walk: List<Epoch>
+
+        private fun setting(property: String, env: String): String =
+            System.getProperty(property) ?: System.getenv(env)
+                ?: throw IllegalStateException("set -D$property=... or $env")
+
+        @BeforeClass
+        @JvmStatic
+        fun loadWalk() {
+            sitePath = setting("waymark.site", "WAYMARK_SITE")
+            siteJson = File(sitePath).readText()
+            walk = Walk.load(setting("waymark.walk", "WAYMARK_WALK"))
+            assertTrue("the walk has epochs", walk.size > 10)
+        }
+
+        /** Pushes one epoch's IMU batches then its scan; the position, or null if rejected. */
+        fun pushEpoch(engine: PositioningEngine, epoch: Epoch): PositionEstimate? {
+            assertEquals(epoch.accelerometer.size.toUInt(), engine.pushAccelerometer(epoch.accelerometer))
+            assertEquals(epoch.gyroscope.size.toUInt(), engine.pushGyroscope(epoch.gyroscope))
+            assertEquals(epoch.magnetometer.size.toUInt(), engine.pushMagnetometer(epoch.magnetometer))
+            return try {
+                engine.pushScan(epoch.scan())
+            } catch (e: PositioningException.InputRejected) {
+                null
+            }
+        }
+
+        fun newEngine(): PositioningEngine = PositioningEngine(siteJson, EngineOptions())
+
+        fun sample(t: Long, x: Double) = MotionSample(t.toULong(), x, 0.0, 9.81)
+    }
+
+    @Test
+    fun aWalkThroughTheBindingsWithAListener() {
+        PositioningEngine.fromPath(sitePath, EngineOptions()).use { engine ->
+            val counter = Counter()
+            val subscription = engine.subscribe(counter)
+            val errors = ArrayList<Double>()
+            for (epoch in walk) {
+                val p = pushEpoch(engine, epoch) ?: continue
+                errors.add(hypot(p.x - epoch.truthX, p.y - epoch.truthY))
+                assertEquals("office", p.floorName)
+                assertTrue(p.accuracyM > 0.0)
+            }
+            assertTrue("most scans are accepted", errors.size > walk.size / 2)
+            assertEquals("one position per accepted scan", errors.size, counter.positions.get())
+            val mean = errors.average()
+            println("walk: ${walk.size} epochs, ${errors.size} accepted, mean error %.3f m".format(mean))
+            assertTrue("mean error $mean m", mean < 1.5)
+            assertEquals(counter.last, engine.position())
+            assertFalse(engine.track().isEmpty())
+            assertNotNull(engine.fixedLagPosition())
+            subscription.cancel()
+            subscription.close()
+        }
+    }
+
+    @Test
+    fun errorsAreTyped() {
+        try {
+            PositioningEngine("{\"format_version\": 1", EngineOptions())
+            fail("bad JSON was accepted")
+        } catch (e: PositioningException.InvalidSite) {
+            assertTrue(e.reason.isNotEmpty())
+        }
+        try {
+            PositioningEngine.fromPath("/nonexistent/site.json", EngineOptions())
+            fail("a missing file was accepted")
+        } catch (e: PositioningException.InvalidSite) {
+        }
+        try {
+            PositioningEngine(siteJson, EngineOptions(fixedLagEpochs = 1000u))
+            fail("fixed_lag_epochs = 1000 was accepted")
+        } catch (e: PositioningException.InvalidConfig) {
+        }
+
+        newEngine().use { engine ->
+            val bssid = walk.first().wifi.first().bssid
+            fun scan(t: Long, b: String = bssid, rssi: Double = -60.0) =
+                RadioScan(t.toULong(), listOf(WifiReading(b, rssi, 0uL)), emptyList())
+
+            engine.pushScan(scan(1_000))
+            val rejected = mapOf(
+                "out of order" to scan(500),
+                "same time" to scan(1_000),
+                "invalid BSSID" to scan(2_000, b = "not a bssid"),
+                "NaN RSSI" to scan(2_000, rssi = Double.NaN),
+                "empty" to RadioScan(2_000uL, emptyList(), emptyList()),
+            )
+            for ((what, bad) in rejected) {
+                try {
+                    engine.pushScan(bad)
+                    fail("$what scan was accepted")
+                } catch (e: PositioningException.InputRejected) {
+                    assertTrue(e.reason.isNotEmpty())
+                }
+            }
+            // The engine is unchanged by the rejections and goes on.
+            assertEquals(1_000uL, engine.position()!!.timestampNs)
+            engine.pushScan(scan(2_000))
+
+            // NaN and backwards samples are dropped and not counted, not thrown.
+            val batch = listOf(sample(2_005, 0.0), sample(2_004, 0.0), sample(2_006, Double.NaN), sample(2_007, 0.1))
+            assertEquals(2u, engine.pushAccelerometer(batch))
+            assertEquals(0u, engine.pushGyroscope(listOf(MotionSample(2_010uL, Double.NaN, 0.0, 0.0))))
+            assertEquals(0u, engine.pushMagnetometer(emptyList()))
+        }
+    }
+
+    @Test
+    fun aThrowingListenerBreaksNothing() {
+        // Count (and silence) what JNA's callback dispatcher reports: the kotlin.Errors.
+        val reported = AtomicInteger()
+        val jnaHandler = com.sun.jna.Native.getCallbackExceptionHandler()
+        com.sun.jna.Native.setCallbackExceptionHandler { _, _ -> reported.incrementAndGet() }
+        try {
+            throwingListeners(reported)
+        } finally {
+            com.sun.jna.Native.setCallbackExceptionHandler(jnaHandler)
+        }
+    }
+
+    private fun throwingListeners(reported: AtomicInteger) {
+        newEngine().use { engine ->
+            val throwing = Throwing()
+            val throwingError = ThrowingError()
+            val before = Counter()
+            val after = Counter()
+            val s1 = engine.subscribe(throwing)
+            val s0 = engine.subscribe(throwingError)
+            val s2 = engine.subscribe(before) // runs after the throwing ones
+            var accepted = 0
+            for (epoch in walk.take(10)) {
+                if (pushEpoch(engine, epoch) != null) accepted++
+            }
+            assertTrue(accepted > 0)
+            assertEquals("the throwing listener was called", accepted, throwing.positions.get())
+            assertTrue("the throwing listener heard a status", throwing.statuses.get() > 0)
+            assertEquals(accepted + throwing.statuses.get(), throwingError.calls.get())
+            assertEquals(throwingError.calls.get(), reported.get())
+            assertEquals(accepted, before.positions.get())
+            // The next push still works and a listener subscribed now hears it.
+            val s3 = engine.subscribe(after)
+            val next = walk[10]
+            assertNotNull(pushEpoch(engine, next))
+            assertEquals(accepted + 1, before.positions.get())
+            assertEquals(1, after.positions.get())
+            engine.advance(next.timestampNs + 1_000_000_000uL)
+            assertEquals(2, after.positions.get())
+            listOf(s0, s1, s2, s3).forEach { it.close() }
+        }
+    }
+
+    @Test(timeout = 300_000)
+    fun eightThreadsAtOnce() {
+        newEngine().use { engine ->
+            val threads = 8
+            val accepted = AtomicInteger()
+            val heard = AtomicInteger()
+            val failures = Collections.synchronizedList(ArrayList<Throwable>())
+            val start = CountDownLatch(1)
+            val pool = Executors.newFixedThreadPool(threads) { r -> Thread(r).apply { isDaemon = true } }
+            try {
+                val futures = (0 until threads).map { thread ->
+                    pool.submit {
+                        try {
+                            start.await()
+                            // A listener that calls back into the engine: listeners run with no lock held.
+                            val reentrant = object : PositionListener {
+                                override fun onPosition(position: PositionEstimate) {
+                                    heard.incrementAndGet()
+                                    engine.position()
+                                }
+
+                                override fun onStatus(status: StatusUpdate) {}
+                            }
+                            for ((k, epoch) in walk.withIndex().filter { it.index % threads == thread }.map { it.value }.withIndex()) {
+                                val subscription = engine.subscribe(if (k % 2 == 0) reentrant else Counter())
+                                val t = epoch.timestampNs.toLong()
+                                engine.pushAccelerometer(listOf(sample(t - 1, 0.0)))
+                                engine.pushGyroscope(epoch.gyroscope)
+                                try {
+                                    engine.pushScan(epoch.scan())
+                                    accepted.incrementAndGet()
+                                } catch (e: PositioningException.InputRejected) {
+                                    // Scans from other threads may arrive out of order.
+                                }
+                                engine.position()
+                                engine.track()
+                                engine.fixedLagPosition()
+                                subscription.cancel()
+                                subscription.close()
+                            }
+                        } catch (t: Throwable) {
+                            failures.add(t)
+                        }
+                    }
+                }
+                start.countDown()
+                for (f in futures) f.get(240, TimeUnit.SECONDS) // a deadlock fails here
+            } finally {
+                pool.shutdownNow()
+            }
+            if (failures.isNotEmpty()) throw AssertionError("a thread failed", failures.first())
+            assertTrue(accepted.get() > 0)
+            assertTrue(heard.get() > 0)
+            assertNotNull(engine.position())
+            // Still usable afterwards.
+            val counter = Counter()
+            engine.subscribe(counter).use {
+                engine.advance(walk.last().timestampNs + 5_000_000_000uL)
+                assertEquals(1, counter.positions.get())
+            }
+        }
+    }
+
+    @Test
+    fun cancelCloseAndDestroyStopDelivery() {
+        newEngine().use { engine ->
+            val cancelled = Counter()
+            val closed = Counter()
+            val destroyed = Counter()
+            val kept = Counter()
+            val s1 = engine.subscribe(cancelled)
+            val s2 = engine.subscribe(closed)
+            val s3 = engine.subscribe(destroyed)
+            val s4 = engine.subscribe(kept)
+            var t = walk.first().timestampNs
+            fun epoch() {
+                t += 1_000_000_000uL
+                engine.advance(t)
+            }
+            epoch()
+            listOf(cancelled, closed, destroyed, kept).forEach { assertEquals(1, it.positions.get()) }
+
+            s1.cancel()
+            s1.cancel() // idempotent
+            epoch()
+            assertEquals(1, cancelled.positions.get())
+            assertEquals(2, kept.positions.get())
+
+            s2.close()
+            epoch()
+            assertEquals(2, closed.positions.get())
+
+            s3.destroy()
+            epoch()
+            assertEquals(3, destroyed.positions.get())
+
+            assertEquals(4, kept.positions.get())
+            s1.close()
+            s4.close()
+            epoch()
+            assertEquals(4, kept.positions.get())
+        }
+    }
+}

@@ -1,0 +1,118 @@
+#!/usr/bin/env bash
+# The Kotlin test of Waymark on the JVM: builds the library and uniffi's generator, generates the
+# Kotlin bindings, exports a simulated site and walk, compiles the bindings and the JUnit 4 test
+# with kotlinc and runs it. Installs what is missing (Debian: libjna-java junit4; npm: the Kotlin
+# compiler, unpacked under $TARGET/tools). Last line: exactly "N passed, N failed".
+# Usage: bash bindings/kotlin/test.sh        (from anywhere; honours CARGO_TARGET_DIR)
+set -euo pipefail
+
+KOTLIN_VERSION=2.4.20
+HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
+REPO=$(cd "$HERE/../.." && pwd)
+TARGET=${CARGO_TARGET_DIR:-$REPO/target}
+mkdir -p "$TARGET"
+TARGET=$(cd "$TARGET" && pwd) # absolute, whatever the caller's directory
+export CARGO_TARGET_DIR=$TARGET
+TOOLS=$TARGET/tools
+KOTLIN_HOME=$TOOLS/kotlin-compiler-$KOTLIN_VERSION
+OUT=$TARGET/kotlin-test
+BINDINGS=$TARGET/bindings/kotlin
+SIM=$TARGET/sim-export
+
+# Whatever stops the script before the tests report, CI still gets its line.
+summary_printed=0
+on_exit() {
+    local status=$?
+    if [ "$summary_printed" = 0 ]; then
+        echo "test.sh: failed before the tests reported (exit $status)" >&2
+        echo "0 passed, 1 failed"
+    fi
+}
+trap on_exit EXIT
+step() { echo "== $*" >&2; }
+
+# --- Tools -------------------------------------------------------------------------------------
+missing=()
+for pkg in libjna-java junit4; do
+    dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg")
+done
+if [ ${#missing[@]} -gt 0 ]; then
+    step "apt-get install ${missing[*]}"
+    sudo=()
+    [ "$(id -u)" = 0 ] || sudo=(sudo)
+    "${sudo[@]}" apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive "${sudo[@]}" apt-get install -y -qq --no-install-recommends "${missing[@]}" >&2
+fi
+command -v java >/dev/null || { echo "test.sh: no java on PATH (Java 17 expected)" >&2; exit 1; }
+
+if [ ! -x "$KOTLIN_HOME/bin/kotlinc" ]; then
+    step "npm pack kotlin-compiler@$KOTLIN_VERSION -> $KOTLIN_HOME"
+    mkdir -p "$TOOLS"
+    scratch=$(mktemp -d "$TOOLS/.kotlin.XXXXXX")
+    (cd "$scratch" && npm pack --silent "kotlin-compiler@$KOTLIN_VERSION" >/dev/null)
+    tar -xzf "$scratch"/kotlin-compiler-*.tgz -C "$scratch"
+    rm -rf "$KOTLIN_HOME"
+    mv "$scratch/package" "$KOTLIN_HOME"
+    rm -rf "$scratch"
+fi
+KOTLINC=$KOTLIN_HOME/bin/kotlinc
+STDLIB=$KOTLIN_HOME/lib/kotlin-stdlib.jar
+COROUTINES=$KOTLIN_HOME/lib/kotlinx-coroutines-core-jvm.jar
+JNA=/usr/share/java/jna.jar
+JUNIT=/usr/share/java/junit4.jar
+HAMCREST=/usr/share/java/hamcrest-core.jar
+[ -f "$HAMCREST" ] || HAMCREST=/usr/share/java/hamcrest.jar
+for jar in "$STDLIB" "$COROUTINES" "$JNA" "$JUNIT" "$HAMCREST"; do
+    [ -f "$jar" ] || { echo "test.sh: missing $jar" >&2; exit 1; }
+done
+
+# --- Build, generate, export ---------------------------------------------------------------------
+cd "$REPO"
+step "cargo build --features bindgen --bin uniffi-bindgen"
+cargo build --features bindgen --bin uniffi-bindgen
+# The simulated site and walk. Built and run before the lean library below, because a build
+# with --features cli rewrites target/debug/libwaymark.so too.
+step "waymark sim-export --out $SIM"
+cargo build --features cli --bin waymark
+"$TARGET/debug/waymark" sim-export --out "$SIM"
+# The shipped library, without the bindgen (or cli) feature: the one the JVM loads.
+step "cargo build --lib"
+cargo build --lib
+LIB=$TARGET/debug/libwaymark.so
+step "uniffi-bindgen generate -> $BINDINGS"
+rm -rf "$BINDINGS"
+"$TARGET/debug/uniffi-bindgen" generate --no-format --library "$LIB" --language kotlin --out-dir "$BINDINGS"
+GENERATED=$BINDINGS/dev/waymark/waymark.kt
+[ -f "$GENERATED" ] || { echo "test.sh: uniffi-bindgen wrote no $GENERATED" >&2; exit 1; }
+
+# --- Compile and run -----------------------------------------------------------------------------
+# The generated code needs kotlinx-coroutines only for async functions (none today).
+compile_cp=$JNA:$JUNIT
+run_cp=$STDLIB:$JNA:$JUNIT:$HAMCREST
+if grep -q 'kotlinx\.coroutines' "$GENERATED"; then
+    compile_cp=$compile_cp:$COROUTINES
+    run_cp=$run_cp:$COROUTINES
+fi
+step "kotlinc"
+rm -rf "$OUT"
+mkdir -p "$OUT/classes"
+"$KOTLINC" -nowarn -jvm-target 17 -cp "$compile_cp" -d "$OUT/classes" \
+    "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt \
+    "$HERE"/../../android/src/main/kotlin/dev/waymark/android/Conversions.kt
+
+step "JUnit 4"
+set +e
+java -Djna.library.path="$TARGET/debug" \
+    -Dwaymark.site="$SIM/site.json" -Dwaymark.walk="$SIM/walk.json" \
+    -cp "$OUT/classes:$run_cp" dev.waymark.RunTests 2>&1 | tee "$OUT/junit.log"
+status=${PIPESTATUS[0]}
+set -e
+summary_printed=1
+last=$(tail -n 1 "$OUT/junit.log")
+if ! [[ "$last" =~ ^[0-9]+\ passed,\ [0-9]+\ failed$ ]]; then
+    # The JVM died before the runner's summary (a crash in native code, say).
+    echo "test.sh: the JVM exited with $status before the summary" >&2
+    echo "$(grep -c '^PASS ' "$OUT/junit.log" || true) passed, 1 failed"
+    exit 1
+fi
+exit "$status"
