@@ -4,10 +4,17 @@
 #
 #   ./scripts/test.sh
 #
+# Ends with one line `N passed, N failed` summing the Rust, C, Kotlin and Swift tests.
 set -euo pipefail
 cd "$(dirname "$0")/.."
+target=${CARGO_TARGET_DIR:-$PWD/target}
+mkdir -p "$target"
+log="$target/test-suite.log"
+: > "$log"
 
 step() { printf '\n==> %s\n' "$*"; }
+# Runs a command, keeping its output in the log for the final count.
+run() { "$@" 2>&1 | tee -a "$log"; }
 
 step "Installing what the tests need"
 for component in rustfmt clippy; do
@@ -23,13 +30,32 @@ step "Lints (cargo clippy, warnings denied)"
 cargo clippy --all-targets --all-features --locked -- -D warnings
 
 step "Rust tests (unit, integration, property, doc)"
-cargo test --all-features --locked
+run cargo test --all-features --locked
 
 step "The README's main command, as a smoke test (waymark demo --json)"
 cargo run --release --features cli --locked --quiet -- demo --json --walks 20
 
 step "C ABI: header freshness, shared and static library under valgrind"
-bash bindings/c/test.sh
+run bash bindings/c/test.sh
 
 step "Kotlin bindings on the JVM (JNA, JUnit 4)"
-bash bindings/kotlin/test.sh
+run bash bindings/kotlin/test.sh
+
+step "Swift bindings on Linux (XCTest in a Debian trixie chroot)"
+run bash bindings/swift/test.sh
+
+step "All tests"
+python3 - "$log" <<'PY'
+import re, sys
+text = open(sys.argv[1], errors="replace").read()
+passed = failed = 0
+for p, f in re.findall(r"test result: \w+\. (\d+) passed; (\d+) failed", text):  # cargo test
+    passed += int(p); failed += int(f)
+for p, f in re.findall(r"^(\d+) passed, (\d+) failed$", text, re.M):  # C, Kotlin
+    passed += int(p); failed += int(f)
+m = re.findall(r"Test Suite 'All tests' \w+ at .*\n\s+Executed (\d+) tests?, with (\d+) failures", text)
+if m:  # XCTest
+    n, f = map(int, m[-1]); passed += n - f; failed += f
+print(f"{passed} passed, {failed} failed")
+sys.exit(1 if failed else 0)
+PY

@@ -1,0 +1,279 @@
+// The Swift bindings on Linux, against the host-built libwaymark.so: the scenarios of
+// tests/ffi.rs from Swift, on the walk `waymark sim-export` writes (test.sh exports it and
+// passes its folder in WAYMARK_SIM_DIR), plus the plain-Swift sensor conversions.
+
+import Foundation
+import XCTest
+
+@testable import Waymark
+
+/// Records what the engine publishes; called on whichever thread pushed the input.
+final class Recorder: PositionListener, @unchecked Sendable {
+    private let lock = NSLock()
+    private var _positions: [PositionEstimate] = []
+    private var _statuses: [StatusUpdate] = []
+
+    var positions: [PositionEstimate] { lock.lock(); defer { lock.unlock() }; return _positions }
+    var statuses: [StatusUpdate] { lock.lock(); defer { lock.unlock() }; return _statuses }
+
+    func onPosition(position: PositionEstimate) throws {
+        lock.lock(); defer { lock.unlock() }
+        _positions.append(position)
+    }
+
+    func onStatus(status: StatusUpdate) throws {
+        lock.lock(); defer { lock.unlock() }
+        _statuses.append(status)
+    }
+}
+
+/// A listener that always throws, as a buggy app's might: a declared error from one method,
+/// an undeclared Swift error from the other.
+final class Throwing: PositionListener, @unchecked Sendable {
+    struct AppBug: Error {}
+    func onPosition(position: PositionEstimate) throws {
+        throw PositioningError.Internal(reason: "app bug")
+    }
+    func onStatus(status: StatusUpdate) throws {
+        throw AppBug()
+    }
+}
+
+/// `walk.json` of `waymark sim-export`.
+struct Walk: Decodable {
+    struct Wifi: Decodable {
+        let bssid: String
+        let rssiDbm: Double
+    }
+    struct Epoch: Decodable {
+        let timestampNs: UInt64
+        let truth: [Double]
+        let accelerometer: [[Double]]
+        let gyroscope: [[Double]]
+        let magnetometer: [[Double]]
+        let wifi: [Wifi]
+
+        var scan: RadioScan {
+            RadioScan(
+                timestampNs: timestampNs,
+                wifi: wifi.map { WifiReading(bssid: $0.bssid, rssiDbm: $0.rssiDbm) },
+                beacons: [])
+        }
+    }
+    let epochs: [Epoch]
+}
+
+/// Rows `[timestamp_ns, x, y, z]` as samples.
+func samples(_ rows: [[Double]]) -> [MotionSample] {
+    rows.map { MotionSample(timestampNs: UInt64($0[0]), x: $0[1], y: $0[2], z: $0[3]) }
+}
+
+final class WaymarkTests: XCTestCase {
+    static let simDir: URL = {
+        if let dir = ProcessInfo.processInfo.environment["WAYMARK_SIM_DIR"] {
+            return URL(fileURLWithPath: dir)
+        }
+        // bindings/swift/Tests/WaymarkTests/ -> <repo>/target/sim-export
+        return URL(fileURLWithPath: #filePath).deletingLastPathComponent()
+            .appendingPathComponent("../../../../target/sim-export").standardized
+    }()
+
+    func siteJson() throws -> String {
+        try String(contentsOf: Self.simDir.appendingPathComponent("site.json"), encoding: .utf8)
+    }
+
+    func walk() throws -> Walk {
+        let data = try Data(contentsOf: Self.simDir.appendingPathComponent("walk.json"))
+        let decoder = JSONDecoder()
+        decoder.keyDecodingStrategy = .convertFromSnakeCase
+        return try decoder.decode(Walk.self, from: data)
+    }
+
+    // (a) The exported walk, raw IMU batches and scans epoch by epoch, through a listener.
+    func testWalkThroughTheBindingsWithAListener() throws {
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let recorder = Recorder()
+        let subscription = engine.subscribe(listener: recorder)
+        let walk = try walk()
+        XCTAssertGreaterThan(walk.epochs.count, 10)
+
+        var errors: [Double] = []
+        var taken: UInt32 = 0
+        for epoch in walk.epochs {
+            taken += try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
+            taken += try engine.pushGyroscope(batch: samples(epoch.gyroscope))
+            taken += try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
+            do {
+                let p = try engine.pushScan(scan: epoch.scan)
+                XCTAssertEqual(p.timestampNs, epoch.timestampNs)
+                XCTAssertEqual(p.floorName, "office")
+                XCTAssertGreaterThan(p.accuracyM, 0)
+                errors.append(hypot(p.x - epoch.truth[0], p.y - epoch.truth[1]))
+            } catch PositioningError.InputRejected {
+                // A scan with no known transmitter: the engine goes on.
+            }
+        }
+        let rows = walk.epochs.reduce(0) { $0 + $1.accelerometer.count + $1.gyroscope.count + $1.magnetometer.count }
+        XCTAssertEqual(Int(taken), rows, "every simulated IMU sample is valid")
+        XCTAssertGreaterThan(errors.count, walk.epochs.count * 9 / 10)
+        let mean = errors.reduce(0, +) / Double(errors.count)
+        XCTAssertLessThan(mean, 1.5, "mean error \(mean) m over \(errors.count) epochs")
+
+        // One position per accepted scan, the last one the engine's.
+        XCTAssertEqual(recorder.positions.count, errors.count)
+        XCTAssertEqual(recorder.positions.last, engine.position())
+        XCTAssertFalse(recorder.statuses.isEmpty, "walking starts: a motion-state change")
+        XCTAssertFalse(engine.track().isEmpty)
+        XCTAssertNotNil(engine.fixedLagPosition())
+
+        // A cancelled subscription hears nothing more.
+        subscription.cancel()
+        let before = recorder.positions.count
+        _ = try engine.advance(timestampNs: walk.epochs.last!.timestampNs + 1_500_000_000)
+        XCTAssertEqual(recorder.positions.count, before)
+    }
+
+    // (b) Typed errors.
+    func testErrorsAreTyped() throws {
+        XCTAssertThrowsError(try PositioningEngine(siteJson: "{\"format_version\": 1", options: EngineOptions())) {
+            guard case PositioningError.InvalidSite(let reason) = $0 else {
+                return XCTFail("expected invalidSite, got \($0)")
+            }
+            XCTAssertFalse(reason.isEmpty)
+        }
+        XCTAssertThrowsError(try PositioningEngine.fromPath(path: "/nonexistent.json", options: EngineOptions())) {
+            guard case PositioningError.InvalidSite = $0 else { return XCTFail("expected invalidSite, got \($0)") }
+        }
+        XCTAssertThrowsError(
+            try PositioningEngine(siteJson: try siteJson(), options: EngineOptions(fixedLagEpochs: 1000))
+        ) {
+            guard case PositioningError.InvalidConfig = $0 else { return XCTFail("expected invalidConfig, got \($0)") }
+        }
+
+        let engine = try PositioningEngine.fromPath(
+            path: Self.simDir.appendingPathComponent("site.json").path, options: EngineOptions())
+        let first = try walk().epochs[0].scan
+        _ = try engine.pushScan(scan: first)
+        var older = first
+        older.timestampNs -= 1
+        for rejected in [
+            first,  // same time again
+            older,  // out of order
+            RadioScan(timestampNs: first.timestampNs + 1, wifi: [], beacons: []),
+            RadioScan(timestampNs: first.timestampNs + 2, wifi: [WifiReading(bssid: "not a bssid", rssiDbm: -60)], beacons: []),
+        ] {
+            XCTAssertThrowsError(try engine.pushScan(scan: rejected)) {
+                guard case PositioningError.InputRejected = $0 else {
+                    return XCTFail("expected inputRejected, got \($0)")
+                }
+            }
+        }
+        // NaN and backwards samples are dropped, not fatal.
+        let s = { (t: UInt64, x: Double) in MotionSample(timestampNs: first.timestampNs + t, x: x, y: 0, z: 9.81) }
+        XCTAssertEqual(try engine.pushAccelerometer(batch: [s(15, 0), s(14, 0), s(16, .nan), s(17, 0.1)]), 2)
+        XCTAssertNotNil(engine.position())
+    }
+
+    // (c) A throwing listener is reported, never fatal, and does not starve the others.
+    func testAThrowingListenerDoesNotBreakTheEngine() throws {
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let throwing = engine.subscribe(listener: Throwing())
+        let recorder = Recorder()
+        let subscription = engine.subscribe(listener: recorder)
+        var accepted = 0
+        for epoch in try walk().epochs.prefix(20) {
+            _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
+            _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
+            _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
+            if (try? engine.pushScan(scan: epoch.scan)) != nil { accepted += 1 }
+        }
+        XCTAssertGreaterThan(accepted, 0)
+        XCTAssertEqual(recorder.positions.count, accepted)
+        XCTAssertFalse(recorder.statuses.isEmpty, "status changes reached the listener after the throwing one")
+        throwing.cancel()
+        subscription.cancel()
+    }
+
+    // (d) Several threads at once: pushes, polls and subscriptions, as sensor queues would.
+    func testManyThreadsAtOnce() throws {
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let epochs = try walk().epochs
+        let recorder = Recorder()
+        let lock = NSLock()
+        var accepted = 0
+        let threads = 8
+        DispatchQueue.concurrentPerform(iterations: threads) { thread in
+            let subscription = engine.subscribe(listener: recorder)
+            for epoch in epochs.enumerated().filter({ $0.offset % threads == thread }).map(\.element) {
+                _ = try? engine.pushAccelerometer(batch: samples(epoch.accelerometer))
+                _ = try? engine.pushGyroscope(batch: samples(epoch.gyroscope))
+                _ = try? engine.pushMagnetometer(batch: samples(epoch.magnetometer))
+                if (try? engine.pushScan(scan: epoch.scan)) != nil {
+                    lock.lock(); accepted += 1; lock.unlock()
+                }
+                _ = engine.position()
+                _ = engine.track()
+                _ = engine.fixedLagPosition()
+            }
+            subscription.cancel()
+        }
+        // Scans from other threads may arrive out of order and be rejected; the engine works.
+        XCTAssertGreaterThan(accepted, 0)
+        XCTAssertNotNil(engine.position())
+        _ = try engine.advance(timestampNs: epochs.last!.timestampNs + 1_000_000_000)
+    }
+
+    // (e) The CoreMotion / CoreLocation conversions of Conversions.swift.
+    func testAppleSensorConversions() throws {
+        typealias C = AppleSensorConversion
+        XCTAssertEqual(C.nanoseconds(fromSeconds: 0), 0)
+        XCTAssertEqual(C.nanoseconds(fromSeconds: 12.5), 12_500_000_000)
+        // A day of uptime keeps nanosecond resolution.
+        XCTAssertEqual(C.nanoseconds(fromSeconds: 86_400.000_000_123), 86_400_000_000_123)
+        XCTAssertNil(C.nanoseconds(fromSeconds: -1))
+        XCTAssertNil(C.nanoseconds(fromSeconds: .nan))
+        XCTAssertNil(C.nanoseconds(fromSeconds: .infinity))
+        XCTAssertNil(C.nanoseconds(fromSeconds: 1e12))
+
+        // Lying face up: iOS reads z = -1 g; Waymark wants +9.80665 m/s² (Android's sign).
+        let a = try XCTUnwrap(C.accelerometer(timestamp: 2, x: 0.5, y: 0, z: -1))
+        XCTAssertEqual(a.timestampNs, 2_000_000_000)
+        XCTAssertEqual(a.x, -4.903325, accuracy: 1e-12)
+        XCTAssertEqual(a.y, 0)
+        XCTAssertEqual(a.z, 9.80665, accuracy: 1e-12)
+        XCTAssertNil(C.accelerometer(timestamp: -0.1, x: 0, y: 0, z: -1))
+
+        XCTAssertEqual(
+            C.gyroscope(timestamp: 1.25, x: 0.1, y: -0.2, z: 3.14),
+            MotionSample(timestampNs: 1_250_000_000, x: 0.1, y: -0.2, z: 3.14))
+        XCTAssertEqual(
+            C.magnetometer(timestamp: 3, x: 20, y: -5, z: -42),
+            MotionSample(timestampNs: 3_000_000_000, x: 20, y: -5, z: -42))
+
+        let uuid = try XCTUnwrap(UUID(uuidString: "f7826da6-4fa2-4e98-8024-bc5b71e0893e"))
+        let now = Date(timeIntervalSince1970: 1_700_000_000)
+        XCTAssertEqual(
+            C.beacon(uuid: uuid, major: 1, minor: 65_535, rssi: -71, measuredAt: now.addingTimeInterval(-0.25), now: now),
+            BeaconReading(uuid: "F7826DA6-4FA2-4E98-8024-BC5B71E0893E", major: 1, minor: 65_535, rssiDbm: -71, ageMs: 250))
+        XCTAssertNil(C.beacon(uuid: uuid, major: 1, minor: 2, rssi: 0), "rssi 0: not measured")
+        XCTAssertNil(C.beacon(uuid: uuid, major: 70_000, minor: 2, rssi: -60))
+        XCTAssertNil(C.beacon(uuid: uuid, major: 1, minor: -1, rssi: -60))
+        XCTAssertEqual(C.ageMs(measuredAt: nil, now: now), 0)
+        XCTAssertEqual(C.ageMs(measuredAt: now.addingTimeInterval(5), now: now), 0, "clock skew: fresh")
+
+        let scan = try XCTUnwrap(C.scan(uptime: 4.5, beacons: []))
+        XCTAssertEqual(scan.timestampNs, 4_500_000_000)
+        XCTAssertNil(C.scan(uptime: .nan, beacons: []))
+
+        // A converted beacon scan is a well-formed engine input: rejected only because this
+        // site has no beacons ("no known transmitter"), with the typed error.
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let beacon = try XCTUnwrap(C.beacon(uuid: uuid, major: 1, minor: 2, rssi: -60))
+        XCTAssertThrowsError(try engine.pushScan(scan: C.scan(uptime: 1, beacons: [beacon])!)) {
+            guard case PositioningError.InputRejected = $0 else { return XCTFail("got \($0)") }
+        }
+        // Converted motion is accepted.
+        let batch = (0..<50).compactMap { C.accelerometer(timestamp: 0.5 + Double($0) / 100, x: 0, y: 0, z: -1) }
+        XCTAssertEqual(try engine.pushAccelerometer(batch: batch), 50)
+    }
+}
