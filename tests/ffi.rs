@@ -15,7 +15,9 @@ use waymark::sim::{imu, Office, OfficeConfig};
 struct Counter {
     positions: AtomicUsize,
     statuses: AtomicUsize,
+    errors: AtomicUsize,
     last: Mutex<Option<PositionEstimate>>,
+    status_log: Mutex<Vec<StatusUpdate>>,
 }
 
 impl PositionListener for Counter {
@@ -24,8 +26,13 @@ impl PositionListener for Counter {
         *self.last.lock().unwrap() = Some(position);
         Ok(())
     }
-    fn on_status(&self, _status: StatusUpdate) -> Result<(), PositioningError> {
+    fn on_status(&self, status: StatusUpdate) -> Result<(), PositioningError> {
         self.statuses.fetch_add(1, Ordering::SeqCst);
+        self.status_log.lock().unwrap().push(status);
+        Ok(())
+    }
+    fn on_error(&self, _message: String) -> Result<(), PositioningError> {
+        self.errors.fetch_add(1, Ordering::SeqCst);
         Ok(())
     }
 }
@@ -38,6 +45,9 @@ impl PositionListener for Failing {
     }
     fn on_status(&self, _: StatusUpdate) -> Result<(), PositioningError> {
         panic!("app bug in on_status")
+    }
+    fn on_error(&self, _: String) -> Result<(), PositioningError> {
+        Err(PositioningError::Internal { reason: "app bug".into() })
     }
 }
 
@@ -131,6 +141,14 @@ fn errors_are_typed() {
     ] {
         assert!(matches!(engine.push_scan(rejected), Err(PositioningError::InputRejected { .. })));
     }
+    // Listeners hear rejections too, and a scan of unknown transmitters means no coverage.
+    let counter = Arc::new(Counter::default());
+    let _subscription = Arc::clone(&engine).subscribe(counter.clone());
+    let foreign =
+        RadioScan { timestamp_ns: 30, wifi: vec![reading("aa:aa:aa:aa:aa:aa", -50.0)], beacons: vec![] };
+    assert!(engine.push_scan(foreign).is_err());
+    assert_eq!(counter.errors.load(Ordering::SeqCst), 1);
+    assert_eq!(*counter.status_log.lock().unwrap(), vec![StatusUpdate::NoSiteCoverage { timestamp_ns: 30 }]);
     // NaN and backwards samples are dropped, not fatal.
     let s = |t, x| MotionSample { timestamp_ns: t, x, y: 0.0, z: 9.81 };
     assert_eq!(
@@ -176,4 +194,40 @@ fn eight_threads_at_once() {
     // produced a position, and the engine still works.
     assert!(accepted.load(Ordering::SeqCst) > 0);
     assert!(engine.position().is_some());
+}
+
+#[cfg(feature = "fault-injection")]
+#[test]
+fn an_injected_panic_is_an_error_and_the_engine_goes_on() {
+    use waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS;
+    let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
+    let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
+    let wifi = vec![WifiReading { bssid: "02:00:00:00:00:00".into(), rssi_dbm: -60.0, age_ms: 0 }];
+    let boom = RadioScan { timestamp_ns: FAULT_INJECTION_TIMESTAMP_NS, wifi: wifi.clone(), beacons: vec![] };
+    assert!(matches!(engine.push_scan(boom), Err(PositioningError::Internal { .. })));
+    engine.push_scan(RadioScan { timestamp_ns: 10, wifi, beacons: vec![] }).unwrap();
+}
+
+#[test]
+fn log_records_reach_the_sink() {
+    use waymark::ffi::logging::{init_logging, LogLevel, LogSink};
+    #[derive(Default)]
+    struct Sink(Mutex<Vec<String>>);
+    impl LogSink for Sink {
+        fn log(&self, _level: LogLevel, target: String, message: String) {
+            self.0.lock().unwrap().push(format!("{target}: {message}"));
+        }
+    }
+    let sink = Arc::new(Sink::default());
+    init_logging(Some(sink.clone()), LogLevel::Debug);
+    init_logging(Some(sink.clone()), LogLevel::Debug); // idempotent
+    let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
+    let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
+    let _ = engine.push_scan(RadioScan { timestamp_ns: 5, wifi: vec![], beacons: vec![] });
+    assert!(
+        sink.0.lock().unwrap().iter().any(|m| m.contains("scan rejected")),
+        "{:?}",
+        sink.0.lock().unwrap()
+    );
+    init_logging(None, LogLevel::Error);
 }

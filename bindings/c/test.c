@@ -124,6 +124,13 @@ static void walk(const char *site_path, const char *walk_path) {
     waymark_wifi_reading nan_rssi = {"02:00:00:00:00:00", NAN, 0};
     CHECK(waymark_engine_push_scan(engine, moved.timestamp_ns + 1, &nan_rssi, 1, NULL, 0, NULL) ==
               WAYMARK_RESULT_INPUT_REJECTED, "nan rssi");
+    /* A panic inside Waymark (injected in this test build) is an error code, not an abort, and
+     * the engine goes on. */
+    waymark_wifi_reading known = {"02:00:00:00:00:00", -60.0, 0};
+    CHECK(waymark_engine_push_scan(engine, UINT64_MAX - 7, &known, 1, NULL, 0, NULL) == WAYMARK_RESULT_PANIC,
+          "injected panic");
+    CHECK(waymark_engine_push_scan(engine, moved.timestamp_ns + 2, &known, 1, NULL, 0, NULL) == WAYMARK_RESULT_OK,
+          "usable after a panic");
     CHECK(waymark_engine_set_callback(engine, NULL, NULL) == WAYMARK_RESULT_OK, "clear callback");
     waymark_engine_free(engine);
 }

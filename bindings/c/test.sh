@@ -31,9 +31,10 @@ fi
 
 echo "-- build"
 # The CLI first: building it with --features cli rebuilds the library with that feature; the
-# plain `--lib` build after it leaves the lean library the test links against.
+# `--lib` build after it leaves the library the test links against.
 cargo run --features cli --locked --quiet -- sim-export --walk-length-m 40 --out "$work"
-cargo build --lib --locked --quiet
+# A test build: a scan at UINT64_MAX - 7 panics inside the engine (feature fault-injection).
+cargo build --lib --locked --quiet --features fault-injection
 python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
 flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -I bindings/c)
 gcc "${flags[@]}" bindings/c/test.c -L "$target/debug" -lwaymark -lm -o "$work/test_shared"

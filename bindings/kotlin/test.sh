@@ -77,7 +77,8 @@ cargo build --features cli --bin waymark
 "$TARGET/debug/waymark" sim-export --out "$SIM"
 # The shipped library, without the bindgen (or cli) feature: the one the JVM loads.
 step "cargo build --lib"
-cargo build --lib
+# A test build: a scan at ULong.MAX - 7 panics inside the engine (feature fault-injection).
+cargo build --lib --features fault-injection
 LIB=$TARGET/debug/libwaymark.so
 step "uniffi-bindgen generate -> $BINDINGS"
 rm -rf "$BINDINGS"

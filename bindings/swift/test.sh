@@ -39,7 +39,11 @@ fi
 # --- 2. The library and the generator, exactly as the release does (bindgen never in the lib).
 log "building"
 cargo build --quiet --features bindgen --bin uniffi-bindgen
-cargo build --quiet --lib
+# The simulated site and walk the XCTest replays (building the CLI rebuilds the library with
+# its feature, so the library comes last).
+cargo run --quiet --features cli --bin waymark -- sim-export --out "$TARGET/sim-export" >/dev/null
+# A test build: a scan at UInt64.max - 7 panics inside the engine (feature fault-injection).
+cargo build --quiet --lib --features fault-injection
 LIB="$TARGET/debug/libwaymark.so"
 
 # --- 3. Freshness: the committed Swift must be what the generator makes today.
@@ -58,10 +62,6 @@ if (( stale )); then
     log "  and copy Waymark.swift, WaymarkFFI.h, WaymarkFFI.modulemap (as module.modulemap) into ios/Sources/"
     exit 1
 fi
-
-# --- 4. The simulated site and walk the XCTest replays.
-log "exporting the simulated walk"
-cargo run --quiet --features cli --bin waymark -- sim-export --out "$TARGET/sim-export" >/dev/null
 
 # --- 5. XCTest in the chroot. The checkout (and the target dir, if elsewhere) is bind-mounted
 # at the same path inside, so every path resolves identically.

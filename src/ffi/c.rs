@@ -402,6 +402,7 @@ pub extern "C" fn waymark_engine_push_scan(
                 });
             }
         }
+        super::uniffi::fault_injection(timestamp_ns);
         engine
             .push_scan(&Scan { timestamp_ns, readings })
             .map_err(|e| fail(waymark_result::InputRejected, e.to_string()))

@@ -3,4 +3,5 @@
 //! through the header `bindings/c/waymark.h`.
 
 pub mod c;
+pub mod logging;
 pub mod uniffi;

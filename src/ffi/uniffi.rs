@@ -237,6 +237,12 @@ pub enum StatusUpdate {
         /// Now.
         state: MotionState,
     },
+    /// A scan heard no transmitter of the site: the phone is probably outside the surveyed
+    /// area (or the site file is for another building).
+    NoSiteCoverage {
+        /// The scan's time, ns.
+        timestamp_ns: u64,
+    },
     /// Earlier positions were revised by later evidence.
     TrackRevised {
         /// The revised points, oldest first.
@@ -252,6 +258,9 @@ pub trait PositionListener: Send + Sync {
     fn on_position(&self, position: PositionEstimate) -> Result<(), PositioningError>;
     /// A status change.
     fn on_status(&self, status: StatusUpdate) -> Result<(), PositioningError>;
+    /// An input was rejected (the call that pushed it also returned the error): for apps that
+    /// push from sensor callbacks and want failures in one place.
+    fn on_error(&self, message: String) -> Result<(), PositioningError>;
 }
 
 fn scenario(s: sensors::MdiScenario) -> MotionScenario {
@@ -279,6 +288,7 @@ fn track_point(p: &engine::TrackPoint) -> TrackPoint {
 enum Event {
     Position(PositionEstimate),
     Status(StatusUpdate),
+    Error(String),
 }
 
 /// Collects the core engine's publications into a queue.
@@ -383,6 +393,17 @@ fn samples(batch: &[MotionSample]) -> Vec<SensorSample> {
     batch.iter().map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z }).collect()
 }
 
+/// With the `fault-injection` feature (test builds only), a scan at this timestamp panics
+/// inside the engine call, to show that a panic comes out as an error, not an abort.
+pub const FAULT_INJECTION_TIMESTAMP_NS: u64 = u64::MAX - 7;
+
+/// Panics on the magic timestamp in test builds; nothing otherwise.
+pub(crate) fn fault_injection(timestamp_ns: u64) {
+    if cfg!(feature = "fault-injection") && timestamp_ns == FAULT_INJECTION_TIMESTAMP_NS {
+        panic!("fault injected at timestamp {timestamp_ns}");
+    }
+}
+
 fn internal(what: &str) -> PositioningError {
     PositioningError::Internal { reason: format!("{what}: a previous call panicked") }
 }
@@ -413,6 +434,11 @@ impl PositioningEngine {
             std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&mut inner)))
                 .unwrap_or_else(|_| Err(internal("engine")))
         };
+        if let Err(e) = &result {
+            if let Ok(mut q) = self.queue.lock() {
+                q.push(Event::Error(e.to_string()));
+            }
+        }
         self.deliver();
         result
     }
@@ -434,6 +460,7 @@ impl PositioningEngine {
                 let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match event {
                     Event::Position(p) => listener.on_position(p.clone()),
                     Event::Status(s) => listener.on_status(s.clone()),
+                    Event::Error(m) => listener.on_error(m.clone()),
                 }));
                 match outcome {
                     Ok(Ok(())) => {}
@@ -501,7 +528,17 @@ impl PositioningEngine {
             });
         }
         let core = Scan { timestamp_ns: scan.timestamp_ns, readings };
-        self.epoch(|engine| engine.push_scan(&core))
+        let queue = Arc::clone(&self.queue);
+        self.epoch(|engine| {
+            fault_injection(core.timestamp_ns);
+            let result = engine.push_scan(&core);
+            if let Err(crate::InputError::NoKnownTransmitter { .. }) = result {
+                if let Ok(mut q) = queue.lock() {
+                    q.push(Event::Status(StatusUpdate::NoSiteCoverage { timestamp_ns: core.timestamp_ns }));
+                }
+            }
+            result
+        })
     }
 
     /// An epoch without radio, from the motion since the last one: call it on a timer when

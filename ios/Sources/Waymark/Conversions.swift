@@ -87,3 +87,34 @@ public enum AppleSensorConversion {
         return RadioScan(timestampNs: ns, wifi: wifi, beacons: beacons)
     }
 }
+
+/// Where the site frame sits on the Earth, and a position there as latitude/longitude
+/// (local tangent plane). Plain Swift, so the Linux test covers it; `toCLLocation` wraps it.
+public struct GeoOrigin: Sendable, Equatable {
+    /// Latitude of the site frame's origin, degrees.
+    public let latitudeDeg: Double
+    /// Longitude of the site frame's origin, degrees.
+    public let longitudeDeg: Double
+    /// True azimuth of the site's +y axis (the site file's `north.site_rotation_rad`), degrees.
+    public let siteRotationDeg: Double
+
+    /// Mean Earth radius, m (IUGG).
+    static let earthRadiusM = 6_371_008.8
+
+    public init(latitudeDeg: Double, longitudeDeg: Double, siteRotationDeg: Double) {
+        self.latitudeDeg = latitudeDeg
+        self.longitudeDeg = longitudeDeg
+        self.siteRotationDeg = siteRotationDeg
+    }
+
+    /// Latitude, longitude and true course (nil without a heading) of a position.
+    public func geo(_ position: PositionEstimate) -> (latitudeDeg: Double, longitudeDeg: Double, courseDeg: Double?) {
+        let theta = siteRotationDeg * .pi / 180
+        let east = position.x * cos(theta) + position.y * sin(theta)
+        let north = -position.x * sin(theta) + position.y * cos(theta)
+        let lat = latitudeDeg + (north / Self.earthRadiusM) * 180 / .pi
+        let lon = longitudeDeg + (east / (Self.earthRadiusM * cos(latitudeDeg * .pi / 180))) * 180 / .pi
+        let course = position.headingDeg.map { (($0 + siteRotationDeg).truncatingRemainder(dividingBy: 360) + 360).truncatingRemainder(dividingBy: 360) }
+        return (lat, lon, course)
+    }
+}

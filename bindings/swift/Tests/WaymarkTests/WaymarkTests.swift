@@ -12,9 +12,11 @@ final class Recorder: PositionListener, @unchecked Sendable {
     private let lock = NSLock()
     private var _positions: [PositionEstimate] = []
     private var _statuses: [StatusUpdate] = []
+    private var _errors: [String] = []
 
     var positions: [PositionEstimate] { lock.lock(); defer { lock.unlock() }; return _positions }
     var statuses: [StatusUpdate] { lock.lock(); defer { lock.unlock() }; return _statuses }
+    var errors: [String] { lock.lock(); defer { lock.unlock() }; return _errors }
 
     func onPosition(position: PositionEstimate) throws {
         lock.lock(); defer { lock.unlock() }
@@ -24,6 +26,11 @@ final class Recorder: PositionListener, @unchecked Sendable {
     func onStatus(status: StatusUpdate) throws {
         lock.lock(); defer { lock.unlock() }
         _statuses.append(status)
+    }
+
+    func onError(message: String) throws {
+        lock.lock(); defer { lock.unlock() }
+        _errors.append(message)
     }
 }
 
@@ -35,6 +42,9 @@ final class Throwing: PositionListener, @unchecked Sendable {
         throw PositioningError.Internal(reason: "app bug")
     }
     func onStatus(status: StatusUpdate) throws {
+        throw AppBug()
+    }
+    func onError(message: String) throws {
         throw AppBug()
     }
 }
@@ -194,6 +204,22 @@ final class WaymarkTests: XCTestCase {
         subscription.cancel()
     }
 
+    // A panic inside Rust (injected on this timestamp in the test build) is a thrown error,
+    // not an abort, and the engine goes on.
+    func testAnInjectedPanicIsAnErrorAndTheEngineGoesOn() throws {
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let recorder = Recorder()
+        let subscription = engine.subscribe(listener: recorder)
+        let wifi = [WifiReading(bssid: "02:00:00:00:00:00", rssiDbm: -60, ageMs: 0)]
+        XCTAssertThrowsError(try engine.pushScan(scan: RadioScan(timestampNs: UInt64.max - 7, wifi: wifi, beacons: []))) {
+            guard case PositioningError.Internal = $0 else { return XCTFail("expected Internal, got \($0)") }
+        }
+        XCTAssertEqual(recorder.errors.count, 1)
+        _ = try engine.pushScan(scan: RadioScan(timestampNs: 10, wifi: wifi, beacons: []))
+        XCTAssertEqual(recorder.positions.count, 1)
+        subscription.cancel()
+    }
+
     // (d) Several threads at once: pushes, polls and subscriptions, as sensor queues would.
     func testManyThreadsAtOnce() throws {
         let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
@@ -224,6 +250,24 @@ final class WaymarkTests: XCTestCase {
     }
 
     // (e) The CoreMotion / CoreLocation conversions of Conversions.swift.
+    func testGeoOrigin() throws {
+        func at(_ x: Double, _ y: Double, _ heading: Double?) -> PositionEstimate {
+            PositionEstimate(timestampNs: 1, x: x, y: y, floor: 0, floorName: "G", floorProbability: 1,
+                             accuracyM: 2.5, headingDeg: heading, headingAccuracyDeg: heading.map { _ in 5 },
+                             motionState: .walking, scenario: .distanceHeading, steps: 2)
+        }
+        let origin = GeoOrigin(latitudeDeg: 60, longitudeDeg: 24, siteRotationDeg: 0)
+        let north = origin.geo(at(0, 111.195, 10))
+        XCTAssertEqual(north.latitudeDeg, 60.001, accuracy: 1e-6)
+        XCTAssertEqual(north.longitudeDeg, 24, accuracy: 1e-9)
+        XCTAssertEqual(north.courseDeg ?? -1, 10, accuracy: 1e-9)
+        XCTAssertEqual(origin.geo(at(55.597, 0, nil)).longitudeDeg, 24.001, accuracy: 1e-6)
+        XCTAssertNil(origin.geo(at(55.597, 0, nil)).courseDeg)
+        let rotated = GeoOrigin(latitudeDeg: 60, longitudeDeg: 24, siteRotationDeg: 90).geo(at(0, 55.597, 300))
+        XCTAssertEqual(rotated.longitudeDeg, 24.001, accuracy: 1e-6)
+        XCTAssertEqual(rotated.courseDeg ?? -1, 30, accuracy: 1e-9)
+    }
+
     func testAppleSensorConversions() throws {
         typealias C = AppleSensorConversion
         XCTAssertEqual(C.nanoseconds(fromSeconds: 0), 0)

@@ -243,6 +243,13 @@ typedef void (*UniffiForeignFutureCompleteVoid)(uint64_t, UniffiForeignFutureRes
     );
 
 #endif
+#ifndef UNIFFI_FFIDEF_CALLBACK_INTERFACE_LOG_SINK_METHOD0
+#define UNIFFI_FFIDEF_CALLBACK_INTERFACE_LOG_SINK_METHOD0
+typedef void (*UniffiCallbackInterfaceLogSinkMethod0)(uint64_t, RustBuffer, RustBuffer, RustBuffer, void* _Nonnull, 
+        RustCallStatus *_Nonnull uniffiCallStatus
+    );
+
+#endif
 #ifndef UNIFFI_FFIDEF_CALLBACK_INTERFACE_POSITION_LISTENER_METHOD0
 #define UNIFFI_FFIDEF_CALLBACK_INTERFACE_POSITION_LISTENER_METHOD0
 typedef void (*UniffiCallbackInterfacePositionListenerMethod0)(uint64_t, RustBuffer, void* _Nonnull, 
@@ -257,6 +264,22 @@ typedef void (*UniffiCallbackInterfacePositionListenerMethod1)(uint64_t, RustBuf
     );
 
 #endif
+#ifndef UNIFFI_FFIDEF_CALLBACK_INTERFACE_POSITION_LISTENER_METHOD2
+#define UNIFFI_FFIDEF_CALLBACK_INTERFACE_POSITION_LISTENER_METHOD2
+typedef void (*UniffiCallbackInterfacePositionListenerMethod2)(uint64_t, RustBuffer, void* _Nonnull, 
+        RustCallStatus *_Nonnull uniffiCallStatus
+    );
+
+#endif
+#ifndef UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_LOG_SINK
+#define UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_LOG_SINK
+typedef struct UniffiVTableCallbackInterfaceLogSink {
+    UniffiCallbackInterfaceFree _Nonnull uniffiFree;
+    UniffiCallbackInterfaceClone _Nonnull uniffiClone;
+    UniffiCallbackInterfaceLogSinkMethod0 _Nonnull log;
+} UniffiVTableCallbackInterfaceLogSink;
+
+#endif
 #ifndef UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_POSITION_LISTENER
 #define UNIFFI_FFIDEF_V_TABLE_CALLBACK_INTERFACE_POSITION_LISTENER
 typedef struct UniffiVTableCallbackInterfacePositionListener {
@@ -264,8 +287,29 @@ typedef struct UniffiVTableCallbackInterfacePositionListener {
     UniffiCallbackInterfaceClone _Nonnull uniffiClone;
     UniffiCallbackInterfacePositionListenerMethod0 _Nonnull onPosition;
     UniffiCallbackInterfacePositionListenerMethod1 _Nonnull onStatus;
+    UniffiCallbackInterfacePositionListenerMethod2 _Nonnull onError;
 } UniffiVTableCallbackInterfacePositionListener;
 
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_LOGSINK
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_LOGSINK
+uint64_t uniffi_waymark_fn_clone_logsink(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FREE_LOGSINK
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FREE_LOGSINK
+void uniffi_waymark_fn_free_logsink(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_INIT_CALLBACK_VTABLE_LOGSINK
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_INIT_CALLBACK_VTABLE_LOGSINK
+void uniffi_waymark_fn_init_callback_vtable_logsink(const UniffiVTableCallbackInterfaceLogSink* _Nonnull vtable
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_LOGSINK_LOG
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_LOGSINK_LOG
+void uniffi_waymark_fn_method_logsink_log(uint64_t ptr, RustBuffer level, RustBuffer target, RustBuffer message, RustCallStatus *_Nonnull out_status
+);
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_POSITIONLISTENER
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_POSITIONLISTENER
@@ -290,6 +334,11 @@ void uniffi_waymark_fn_method_positionlistener_on_position(uint64_t ptr, RustBuf
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONLISTENER_ON_STATUS
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONLISTENER_ON_STATUS
 void uniffi_waymark_fn_method_positionlistener_on_status(uint64_t ptr, RustBuffer status, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONLISTENER_ON_ERROR
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONLISTENER_ON_ERROR
+void uniffi_waymark_fn_method_positionlistener_on_error(uint64_t ptr, RustBuffer message, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_POSITIONINGENGINE
@@ -370,6 +419,11 @@ void uniffi_waymark_fn_free_subscription(uint64_t handle, RustCallStatus *_Nonnu
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SUBSCRIPTION_CANCEL
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SUBSCRIPTION_CANCEL
 void uniffi_waymark_fn_method_subscription_cancel(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FUNC_INIT_LOGGING
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FUNC_INIT_LOGGING
+void uniffi_waymark_fn_func_init_logging(RustBuffer sink, RustBuffer level, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_FFI_WAYMARK_RUSTBUFFER_ALLOC
@@ -632,6 +686,18 @@ void ffi_waymark_rust_future_free_void(uint64_t handle
 void ffi_waymark_rust_future_complete_void(uint64_t handle, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_FUNC_INIT_LOGGING
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_FUNC_INIT_LOGGING
+uint16_t uniffi_waymark_checksum_func_init_logging(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_LOGSINK_LOG
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_LOGSINK_LOG
+uint16_t uniffi_waymark_checksum_method_logsink_log(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONLISTENER_ON_POSITION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONLISTENER_ON_POSITION
 uint16_t uniffi_waymark_checksum_method_positionlistener_on_position(void
@@ -641,6 +707,12 @@ uint16_t uniffi_waymark_checksum_method_positionlistener_on_position(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONLISTENER_ON_STATUS
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONLISTENER_ON_STATUS
 uint16_t uniffi_waymark_checksum_method_positionlistener_on_status(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONLISTENER_ON_ERROR
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONLISTENER_ON_ERROR
+uint16_t uniffi_waymark_checksum_method_positionlistener_on_error(void
     
 );
 #endif

@@ -1,7 +1,10 @@
 package dev.waymark.android
 
 import dev.waymark.MotionSample
+import dev.waymark.PositionEstimate
 import dev.waymark.WifiReading
+import kotlin.math.cos
+import kotlin.math.sin
 
 /**
  * Plain-Kotlin conversions from Android's sensor and WiFi types to Waymark's records. They use
@@ -30,4 +33,30 @@ object Conversions {
 
     /** The time of a scan: the newest result's timestamp, µs since boot, in ns. */
     fun scanTimeNs(resultTimestampsUs: List<Long>): Long = (resultTimestampsUs.maxOrNull() ?: 0L) * 1_000L
+
+    /** Mean Earth radius, m (IUGG). */
+    private const val EARTH_RADIUS_M = 6_371_008.8
+
+    /**
+     * Where the site frame sits on the Earth: the latitude/longitude of its origin and the
+     * true azimuth of its +y axis (the site file's `north.site_rotation_rad`), in degrees.
+     */
+    data class GeoOrigin(val latitudeDeg: Double, val longitudeDeg: Double, val siteRotationDeg: Double)
+
+    /** Latitude, longitude, bearing and accuracy for an Android `Location`. */
+    data class Geo(val latitudeDeg: Double, val longitudeDeg: Double, val bearingDeg: Double?, val accuracyM: Double)
+
+    /**
+     * A position in the site frame as latitude/longitude (local tangent plane; metres of error
+     * per kilometre from the origin are negligible inside a building).
+     */
+    fun geo(position: PositionEstimate, origin: GeoOrigin): Geo {
+        val theta = Math.toRadians(origin.siteRotationDeg)
+        val east = position.x * cos(theta) + position.y * sin(theta)
+        val north = -position.x * sin(theta) + position.y * cos(theta)
+        val lat = origin.latitudeDeg + Math.toDegrees(north / EARTH_RADIUS_M)
+        val lon = origin.longitudeDeg + Math.toDegrees(east / (EARTH_RADIUS_M * cos(Math.toRadians(origin.latitudeDeg))))
+        val bearing = position.headingDeg?.let { ((it + origin.siteRotationDeg) % 360.0 + 360.0) % 360.0 }
+        return Geo(lat, lon, bearing, position.accuracyM)
+    }
 }

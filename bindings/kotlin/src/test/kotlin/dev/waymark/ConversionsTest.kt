@@ -32,3 +32,30 @@ class ConversionsTest {
         assertEquals(0L, Conversions.scanTimeNs(emptyList()))
     }
 }
+
+class GeoConversionsTest {
+    private fun position(x: Double, y: Double, heading: Double?) = PositionEstimate(
+        timestampNs = 1UL, x = x, y = y, floor = 0U, floorName = "G", floorProbability = 1.0, accuracyM = 2.5,
+        headingDeg = heading, headingAccuracyDeg = heading?.let { 5.0 }, motionState = MotionState.WALKING,
+        scenario = MotionScenario.DISTANCE_HEADING, steps = 2U,
+    )
+
+    @Test
+    fun siteMetresBecomeLatitudeAndLongitude() {
+        val origin = Conversions.GeoOrigin(60.0, 24.0, 0.0)
+        // 111.2 m north is 0.001°; at 60°N, 55.6 m east is 0.001° of longitude.
+        val north = Conversions.geo(position(0.0, 111.195, 10.0), origin)
+        org.junit.Assert.assertEquals(60.001, north.latitudeDeg, 1e-6)
+        org.junit.Assert.assertEquals(24.0, north.longitudeDeg, 1e-9)
+        org.junit.Assert.assertEquals(10.0, north.bearingDeg!!, 1e-9)
+        org.junit.Assert.assertEquals(2.5, north.accuracyM, 0.0)
+        val east = Conversions.geo(position(55.597, 0.0, null), origin)
+        org.junit.Assert.assertEquals(24.001, east.longitudeDeg, 1e-6)
+        org.junit.Assert.assertNull(east.bearingDeg)
+        // A site whose +y points east: +y metres go east, headings turn by 90°.
+        val rotated = Conversions.geo(position(0.0, 55.597, 300.0), Conversions.GeoOrigin(60.0, 24.0, 90.0))
+        org.junit.Assert.assertEquals(24.001, rotated.longitudeDeg, 1e-6)
+        org.junit.Assert.assertEquals(60.0, rotated.latitudeDeg, 1e-9)
+        org.junit.Assert.assertEquals(30.0, rotated.bearingDeg!!, 1e-9)
+    }
+}

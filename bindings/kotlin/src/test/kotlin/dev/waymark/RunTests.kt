@@ -31,10 +31,10 @@ object RunTests {
                 if (description !in failed) println("PASS ${description.methodName}")
             }
         })
-        val result = core.run(WaymarkTest::class.java, ConversionsTest::class.java)
+        val result = core.run(WaymarkTest::class.java, ConversionsTest::class.java, GeoConversionsTest::class.java)
         // A failure in @BeforeClass fails the class without running any test: count each test.
         val failed = if (result.runCount == 0 && result.failureCount > 0) {
-            maxOf(result.failureCount, listOf(WaymarkTest::class.java, ConversionsTest::class.java).sumOf { c -> c.methods.count { it.isAnnotationPresent(org.junit.Test::class.java) } })
+            maxOf(result.failureCount, listOf(WaymarkTest::class.java, ConversionsTest::class.java, GeoConversionsTest::class.java).sumOf { c -> c.methods.count { it.isAnnotationPresent(org.junit.Test::class.java) } })
         } else {
             result.failureCount
         }

@@ -26,6 +26,7 @@ class WaymarkTest {
     class Counter : PositionListener {
         val positions = AtomicInteger()
         val statuses = AtomicInteger()
+        val errors = AtomicInteger()
         @Volatile var last: PositionEstimate? = null
 
         override fun onPosition(position: PositionEstimate) {
@@ -35,6 +36,10 @@ class WaymarkTest {
 
         override fun onStatus(status: StatusUpdate) {
             statuses.incrementAndGet()
+        }
+
+        override fun onError(message: String) {
+            errors.incrementAndGet()
         }
     }
 
@@ -51,6 +56,10 @@ class WaymarkTest {
         override fun onStatus(status: StatusUpdate) {
             statuses.incrementAndGet()
             throw IllegalStateException("app bug in onStatus")
+        }
+
+        override fun onError(message: String) {
+            throw IllegalStateException("app bug in onError")
         }
     }
 
@@ -70,6 +79,10 @@ class WaymarkTest {
         override fun onStatus(status: StatusUpdate) {
             calls.incrementAndGet()
             throw StackOverflowError("app bug in onStatus")
+        }
+
+        override fun onError(message: String) {
+            calls.incrementAndGet()
         }
     }
 
@@ -131,6 +144,25 @@ class WaymarkTest {
             subscription.cancel()
             subscription.close()
         }
+    }
+
+    @Test
+    fun anInjectedPanicIsAnExceptionAndTheEngineGoesOn() {
+        val engine = PositioningEngine.fromPath(sitePath, EngineOptions())
+        val counter = Counter()
+        val subscription = engine.subscribe(counter)
+        val wifi = listOf(WifiReading("02:00:00:00:00:00", -60.0, 0UL))
+        try {
+            // This test build panics inside Rust on this timestamp (feature fault-injection).
+            engine.pushScan(RadioScan(ULong.MAX_VALUE - 7UL, wifi, emptyList()))
+            fail("the injected panic did not surface")
+        } catch (e: PositioningException.Internal) {
+            assertTrue(e.reason.isNotEmpty())
+        }
+        assertEquals(1, counter.errors.get())
+        engine.pushScan(RadioScan(10UL, wifi, emptyList()))
+        assertEquals(1, counter.positions.get())
+        subscription.cancel()
     }
 
     @Test
@@ -251,6 +283,8 @@ class WaymarkTest {
                                 }
 
                                 override fun onStatus(status: StatusUpdate) {}
+
+                                override fun onError(message: String) {}
                             }
                             for ((k, epoch) in walk.withIndex().filter { it.index % threads == thread }.map { it.value }.withIndex()) {
                                 val subscription = engine.subscribe(if (k % 2 == 0) reentrant else Counter())

@@ -1,0 +1,72 @@
+// The thin iOS shell: CoreMotion device motion and magnetometer, CoreLocation beacon ranging,
+// and CLLocation output. Every conversion is in Conversions.swift (plain Swift, tested on
+// Linux); this file only wires Apple's callbacks to them and compiles only on Apple platforms.
+#if canImport(CoreMotion) && canImport(CoreLocation)
+import CoreLocation
+import CoreMotion
+import Foundation
+
+/// Feeds an engine from CoreMotion at ~100 Hz, batching samples per FFI call.
+public final class MotionAdapter: @unchecked Sendable {
+    private let engine: PositioningEngine
+    private let manager = CMMotionManager()
+    private let queue = OperationQueue()
+    private let batchSize: Int
+    private var accel: [MotionSample] = []
+    private var gyro: [MotionSample] = []
+    private var mag: [MotionSample] = []
+
+    public init(engine: PositioningEngine, batchSize: Int = 50) {
+        self.engine = engine
+        self.batchSize = batchSize
+        queue.maxConcurrentOperationCount = 1
+    }
+
+    /// Starts the raw accelerometer (in g, converted to m/s²), gyroscope and magnetometer.
+    public func start() {
+        manager.accelerometerUpdateInterval = 0.01
+        manager.gyroUpdateInterval = 0.01
+        manager.magnetometerUpdateInterval = 0.01
+        manager.startAccelerometerUpdates(to: queue) { [weak self] data, _ in
+            guard let self, let d = data,
+                  let s = AppleSensorConversion.accelerometer(timestamp: d.timestamp, x: d.acceleration.x,
+                                                             y: d.acceleration.y, z: d.acceleration.z) else { return }
+            self.accel.append(s)
+            if self.accel.count >= self.batchSize { _ = try? self.engine.pushAccelerometer(batch: self.accel); self.accel.removeAll() }
+        }
+        manager.startGyroUpdates(to: queue) { [weak self] data, _ in
+            guard let self, let d = data,
+                  let s = AppleSensorConversion.gyroscope(timestamp: d.timestamp, x: d.rotationRate.x,
+                                                         y: d.rotationRate.y, z: d.rotationRate.z) else { return }
+            self.gyro.append(s)
+            if self.gyro.count >= self.batchSize { _ = try? self.engine.pushGyroscope(batch: self.gyro); self.gyro.removeAll() }
+        }
+        manager.startMagnetometerUpdates(to: queue) { [weak self] data, _ in
+            guard let self, let d = data,
+                  let s = AppleSensorConversion.magnetometer(timestamp: d.timestamp, x: d.magneticField.x,
+                                                            y: d.magneticField.y, z: d.magneticField.z) else { return }
+            self.mag.append(s)
+            if self.mag.count >= self.batchSize { _ = try? self.engine.pushMagnetometer(batch: self.mag); self.mag.removeAll() }
+        }
+    }
+
+    /// Stops the sensors.
+    public func stop() {
+        manager.stopAccelerometerUpdates()
+        manager.stopGyroUpdates()
+        manager.stopMagnetometerUpdates()
+    }
+}
+
+public extension PositionEstimate {
+    /// The position as a CLLocation: coordinates from `origin`, `horizontalAccuracy` the 68%
+    /// radius (as iOS defines it), course when the heading is known, the floor level.
+    func toCLLocation(origin: GeoOrigin) -> CLLocation {
+        let g = origin.geo(self)
+        return CLLocation(
+            coordinate: CLLocationCoordinate2D(latitude: g.latitudeDeg, longitude: g.longitudeDeg),
+            altitude: 0, horizontalAccuracy: accuracyM, verticalAccuracy: -1,
+            course: g.courseDeg ?? -1, speed: -1, timestamp: Date())
+    }
+}
+#endif
