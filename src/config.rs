@@ -83,8 +83,12 @@ pub struct EngineConfig {
     /// `distance_heading`). To be checked again on real traces.
     pub transition: TransitionModel,
     /// How raw inertial samples become steps, distance and heading. `declination_rad` and
-    /// `site_rotation_rad` are taken from the site file's `north` when the engine starts.
+    /// `site_rotation_rad` are taken from the site file's `north` when the engine starts,
+    /// unless `north` overrides them.
     pub motion: MotionConfig,
+    /// The site frame's orientation, when the app knows better than the site file (a fresh
+    /// declination from a geomagnetic model, say). `None`: the site file's.
+    pub north: Option<crate::site::North>,
     /// HIPE's parameters, for [`TransitionModel::Hipe`].
     pub hipe: HipeConfig,
     /// Hoang's parameters, for [`TransitionModel::Hoang`].
@@ -136,6 +140,7 @@ impl Default for EngineConfig {
             max_speed_mps: 3.0,
             transition: TransitionModel::default(),
             motion: MotionConfig::default(),
+            north: None,
             hipe: HipeConfig::default(),
             hoang: HoangConfig::default(),
             rssi_weight: None,
@@ -162,6 +167,11 @@ impl EngineConfig {
             return fail(format!("transition_ratio must be finite and >= 1 (got {})", self.transition_ratio));
         }
         self.motion.validate()?;
+        if let Some(n) = self.north {
+            if !(n.declination_rad.is_finite() && n.site_rotation_rad.is_finite()) {
+                return fail("north: angles must be finite".into());
+            }
+        }
         let h = &self.hipe;
         let positive = |v: f64| v.is_finite() && v > 0.0;
         let tolerances_ok = h.distance_tolerance_fraction.is_finite()

@@ -161,8 +161,9 @@ impl Engine {
         let n = site.states().len();
         let reach = ReachTable::build(&site, config.reach_radius_m);
         let mut motion = config.motion.clone();
-        motion.declination_rad = site.north().declination_rad;
-        motion.site_rotation_rad = site.north().site_rotation_rad;
+        let north = config.north.unwrap_or_else(|| site.north());
+        motion.declination_rad = north.declination_rad;
+        motion.site_rotation_rad = north.site_rotation_rad;
         Ok(Self {
             tracker: MotionTracker::new(motion)?,
             viterbi: ViterbiWindow::new(n, config.track_window_epochs),

@@ -128,6 +128,17 @@ fn errors_are_typed() {
         PositioningEngine::new(office.site.to_json(), options),
         Err(PositioningError::InvalidConfig { .. })
     ));
+    let nan_north = EngineOptions { declination_deg: Some(f64::NAN), ..EngineOptions::default() };
+    assert!(matches!(
+        PositioningEngine::new(office.site.to_json(), nan_north),
+        Err(PositioningError::InvalidConfig { .. })
+    ));
+    let north = EngineOptions {
+        declination_deg: Some(7.7),
+        site_rotation_deg: Some(12.0),
+        ..EngineOptions::default()
+    };
+    PositioningEngine::new(office.site.to_json(), north).unwrap();
     let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
     let reading = |bssid: &str, rssi_dbm| WifiReading { bssid: bssid.into(), rssi_dbm, age_ms: 0 };
     let good =

@@ -77,17 +77,29 @@ pub struct EngineOptions {
     /// How many epochs behind the newest the fixed-lag estimate is.
     #[uniffi(default = 3)]
     pub fixed_lag_epochs: u32,
+    /// Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+    #[uniffi(default = None)]
+    pub declination_deg: Option<f64>,
+    /// True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+    #[uniffi(default = None)]
+    pub site_rotation_deg: Option<f64>,
 }
 
 impl Default for EngineOptions {
     fn default() -> Self {
         let core = EngineConfig::default();
-        Self { transition: None, step_length_m: 0.7, fixed_lag_epochs: core.fixed_lag_epochs as u32 }
+        Self {
+            transition: None,
+            step_length_m: 0.7,
+            fixed_lag_epochs: core.fixed_lag_epochs as u32,
+            declination_deg: None,
+            site_rotation_deg: None,
+        }
     }
 }
 
 impl EngineOptions {
-    fn to_config(&self) -> EngineConfig {
+    fn to_config(&self, site: &Site) -> EngineConfig {
         let mut config = EngineConfig {
             transition: match self.transition {
                 None => TransitionModel::default(),
@@ -99,6 +111,15 @@ impl EngineOptions {
             ..EngineConfig::default()
         };
         config.motion.step_length = sensors::StepLengthModel::Constant { length_m: self.step_length_m };
+        if self.declination_deg.is_some() || self.site_rotation_deg.is_some() {
+            let from_site = site.north();
+            config.north = Some(crate::site::North {
+                declination_rad: self.declination_deg.map_or(from_site.declination_rad, f64::to_radians),
+                site_rotation_rad: self
+                    .site_rotation_deg
+                    .map_or(from_site.site_rotation_rad, f64::to_radians),
+            });
+        }
         config
     }
 }
@@ -411,7 +432,8 @@ fn internal(what: &str) -> PositioningError {
 impl PositioningEngine {
     fn create(site: Site, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
         let floor_names: Vec<String> = site.floors().iter().map(|f| f.name.clone()).collect();
-        let mut engine = Engine::new(Arc::new(site), options.to_config())?;
+        let config = options.to_config(&site);
+        let mut engine = Engine::new(Arc::new(site), config)?;
         let queue = Arc::new(Mutex::new(Vec::new()));
         engine.subscribe(Box::new(Collector { queue: Arc::clone(&queue), floor_names: floor_names.clone() }));
         Ok(Arc::new(Self {

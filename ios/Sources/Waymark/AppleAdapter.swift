@@ -58,6 +58,44 @@ public final class MotionAdapter: @unchecked Sendable {
     }
 }
 
+/// Ranges iBeacons with CoreLocation and pushes one scan per ranging callback.
+public final class BeaconAdapter: NSObject, CLLocationManagerDelegate, @unchecked Sendable {
+    private let engine: PositioningEngine
+    private let manager = CLLocationManager()
+    private let constraints: [CLBeaconIdentityConstraint]
+
+    /// Ranges the beacons of the given proximity UUIDs (the site's beacons).
+    public init(engine: PositioningEngine, uuids: [UUID]) {
+        self.engine = engine
+        self.constraints = uuids.map { CLBeaconIdentityConstraint(uuid: $0) }
+        super.init()
+        manager.delegate = self
+    }
+
+    /// Asks for permission and starts ranging.
+    public func start() {
+        manager.requestWhenInUseAuthorization()
+        constraints.forEach { manager.startRangingBeacons(satisfying: $0) }
+    }
+
+    /// Stops ranging.
+    public func stop() {
+        constraints.forEach { manager.stopRangingBeacons(satisfying: $0) }
+    }
+
+    public func locationManager(_ manager: CLLocationManager, didRange beacons: [CLBeacon],
+                                satisfying constraint: CLBeaconIdentityConstraint) {
+        let readings = beacons.compactMap {
+            AppleSensorConversion.beacon(uuid: $0.uuid, major: $0.major.intValue, minor: $0.minor.intValue,
+                                         rssi: $0.rssi, measuredAt: $0.timestamp)
+        }
+        guard !readings.isEmpty,
+              let scan = AppleSensorConversion.scan(uptime: ProcessInfo.processInfo.systemUptime, beacons: readings)
+        else { return }
+        _ = try? engine.pushScan(scan: scan)
+    }
+}
+
 public extension PositionEstimate {
     /// The position as a CLLocation: coordinates from `origin`, `horizontalAccuracy` the 68%
     /// radius (as iOS defines it), course when the heading is known, the floor level.

@@ -1648,6 +1648,14 @@ public struct EngineOptions: Equatable, Hashable {
      * How many epochs behind the newest the fixed-lag estimate is.
      */
     public var fixedLagEpochs: UInt32
+    /**
+     * Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+     */
+    public var declinationDeg: Double?
+    /**
+     * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+     */
+    public var siteRotationDeg: Double?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1660,10 +1668,18 @@ public struct EngineOptions: Equatable, Hashable {
          */stepLengthM: Double = Double(0.7), 
         /**
          * How many epochs behind the newest the fixed-lag estimate is.
-         */fixedLagEpochs: UInt32 = UInt32(3)) {
+         */fixedLagEpochs: UInt32 = UInt32(3), 
+        /**
+         * Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+         */declinationDeg: Double? = nil, 
+        /**
+         * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+         */siteRotationDeg: Double? = nil) {
         self.transition = transition
         self.stepLengthM = stepLengthM
         self.fixedLagEpochs = fixedLagEpochs
+        self.declinationDeg = declinationDeg
+        self.siteRotationDeg = siteRotationDeg
     }
 
     
@@ -1684,7 +1700,9 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
             try EngineOptions(
                 transition: FfiConverterOptionTypeTransitionKind.read(from: &buf), 
                 stepLengthM: FfiConverterDouble.read(from: &buf), 
-                fixedLagEpochs: FfiConverterUInt32.read(from: &buf)
+                fixedLagEpochs: FfiConverterUInt32.read(from: &buf), 
+                declinationDeg: FfiConverterOptionDouble.read(from: &buf), 
+                siteRotationDeg: FfiConverterOptionDouble.read(from: &buf)
         )
     }
 
@@ -1692,6 +1710,8 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
         FfiConverterOptionTypeTransitionKind.write(value.transition, into: &buf)
         FfiConverterDouble.write(value.stepLengthM, into: &buf)
         FfiConverterUInt32.write(value.fixedLagEpochs, into: &buf)
+        FfiConverterOptionDouble.write(value.declinationDeg, into: &buf)
+        FfiConverterOptionDouble.write(value.siteRotationDeg, into: &buf)
     }
 }
 
