@@ -78,8 +78,8 @@ pub struct EngineConfig {
     /// epochs. Hoang et al. §6.1: "a user cannot move faster than 3 m/s".
     pub max_speed_mps: f64,
     /// The transition model. Default Hoang's: with full motion on the pseudo-state site,
-    /// `waymark simulate --runs 100 --json --seed S` for S = 1, 2, 3 gives 0.508 / 0.493 / 0.472 m
-    /// mean error against HIPE's 0.644 / 0.641 / 0.601 m (`rssi_step_pseudo` against
+    /// `waymark simulate --runs 100 --json --seed S` for S = 1, 2, 3 gives 0.489 / 0.474 / 0.457 m
+    /// mean error against HIPE's 0.639 / 0.636 / 0.599 m (`rssi_step_pseudo` against
     /// `distance_heading`). To be checked again on real traces.
     pub transition: TransitionModel,
     /// How raw inertial samples become steps, distance and heading. `declination_rad` and
@@ -102,8 +102,8 @@ pub struct EngineConfig {
     pub track_window_epochs: usize,
     /// Lag of the fixed-lag estimate, epochs: 3 (4.5 s at 1.5 s epochs). Measured with
     /// `waymark simulate --runs 100 --json --seed S`, S = 1, 2, 3: the Viterbi track's mean
-    /// error falls from 0.533 / 0.524 / 0.501 m at lag 0 to 0.448 / 0.437 / 0.424 m at lag 3 and
-    /// stays within 3 mm of that at lags 4-6 (the forward estimate: 0.508 / 0.493 / 0.472 m).
+    /// error falls from 0.507 / 0.501 / 0.486 m at lag 0 to 0.435 / 0.428 / 0.417 m at lag 3 and
+    /// stays within 3 mm of that at lags 4-6 (the forward estimate: 0.489 / 0.474 / 0.457 m).
     pub fixed_lag_epochs: usize,
     /// Ratio K between the high transition probability (reachable states) and the low one
     /// (everything else), HIPE eqs. 5-6. The low one keeps every a_ij > 0 (HIPE eq. 11) so the

@@ -577,7 +577,7 @@ fn hipe_region(config: &EngineConfig, motion: &MotionUpdate, dt_s: f64) -> HipeR
 /// with `waymark simulate --runs 100 --seed 1..3` (M = 5 then): with the full heading
 /// reliability there, heading & assumed speed was no better than assumed speed alone
 /// (1.365 / 1.390 / 1.274 m against 1.365 / 1.354 / 1.234 m); with half, 1.260 / 1.278 /
-/// 1.170 m (with M = 3 now: 1.266 / 1.286 / 1.180 against 1.381 / 1.367 / 1.246 m). r_estimate is how
+/// 1.170 m (with M = 3 now: 1.262 / 1.279 / 1.182 against 1.381 / 1.367 / 1.246 m). r_estimate is how
 /// far the previous 68% radius is within the least distance tolerance (1.5 m).
 fn hipe_ratio(config: &EngineConfig, motion: &MotionUpdate, previous: Option<&Position>) -> f64 {
     let h = &config.hipe;

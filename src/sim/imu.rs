@@ -113,7 +113,7 @@ impl Default for ImuConfig {
             mag_noise_ut: 0.5,
             earth_field_ut: 52.0,
             dip_rad: 75.0 * deg,
-            declination_rad: (7.0 + 43.0 / 60.0) * deg,
+            declination_rad: DEFAULT_DECLINATION_RAD,
             site_rotation_rad: 0.0,
             disturbances: Vec::new(),
             tilt_wobble_rad: 3.0 * deg,
@@ -125,6 +125,10 @@ impl Default for ImuConfig {
         }
     }
 }
+
+/// Magnetic declination of the simulated Earth field: 7°43′ east (HIPE §5.1, Helsinki 2012).
+/// The simulated office's site file records the same, as a survey would.
+pub const DEFAULT_DECLINATION_RAD: f64 = (7.0 + 43.0 / 60.0) * std::f64::consts::PI / 180.0;
 
 /// Raw samples of a simulated phone and the truth behind them.
 #[derive(Clone, Debug, Default, PartialEq)]

@@ -236,6 +236,12 @@ impl Office {
         };
         let mut builder = SiteBuilder::new("waymark simulated office");
         let floor = builder.floor("office", 0.0);
+        // The survey records the site's orientation: +y is true north here, and the Earth
+        // field the simulated phones sense has the default declination.
+        builder.north(crate::site::North {
+            site_rotation_rad: 0.0,
+            declination_rad: imu::DEFAULT_DECLINATION_RAD,
+        });
         for &p in &points {
             let scans =
                 (0..config.training_scans as u64).map(|k| field.scan_at(p, k * EPOCH_NS, &mut rng)).collect();
