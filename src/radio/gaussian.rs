@@ -43,9 +43,12 @@ pub struct FitOptions {
     /// spread below one reporting step is not resolvable; it also keeps eq. 10 finite when all
     /// training readings are equal.
     pub min_std_db: f64,
-    /// EM iterations at most.
+    /// EM iterations at most: 500. The EM converges linearly, slowest when most readings are
+    /// clipped; the property test `em_recovers_clipped_gaussian` (up to 90% clipped) asserts
+    /// convergence within this bound for every case it draws.
     pub max_iterations: usize,
-    /// EM stops when μ and σ both move less than this, dB.
+    /// EM stops when μ and σ both move less than this: 1e-6 dB, a millionth of the 1 dBm
+    /// resolution phones report RSSI in, so the stopping rule never shows in a fit.
     pub tolerance_db: f64,
 }
 

@@ -267,8 +267,9 @@ impl Office {
     }
 
     /// A random walk of about `length_m` on the walkable graph (Hoang §6.1: "random walk on
-    /// the HMM graph ... of about 200 m"), at a steady pace drawn from 0.8-1.4 m/s, a scan every
-    /// 1.5 s. At each state the walker takes a random edge other than the one it came by.
+    /// the HMM graph ... of about 200 m"), at a steady pace drawn from 0.8-1.4 m/s (up to the
+    /// comfortable gait speed of adults, 1.3-1.46 m/s in Bohannon 1997, and down to an office
+    /// stroll), a scan every 1.5 s. At each state the walker takes a random edge other than the one it came by.
     pub fn walk(&self, seed: u64, length_m: f64) -> Walk {
         let mut rng = ChaCha8Rng::seed_from_u64(seed);
         let speed = rng.random_range(0.8..1.4);
