@@ -8,10 +8,12 @@ pub mod error;
 pub mod eval;
 pub mod ffi;
 pub mod hmm;
+pub mod io;
 pub mod radio;
 pub mod sensors;
 pub mod sim;
 pub mod site;
+pub mod survey;
 
 pub use config::EngineConfig;
 pub use engine::{Engine, InputStats, Position, PositionListener, StatusEvent, SubscriptionId, TrackPoint};

@@ -34,6 +34,12 @@ pub enum TransmitterId {
         /// Beacon minor number.
         minor: u16,
     },
+    /// A BLE beacon known only by its advertiser address (Eddystone, or iBeacons left at the
+    /// factory's major = minor = 0, which cannot be told apart otherwise).
+    BleAddress {
+        /// `aa:bb:cc:dd:ee:ff`.
+        mac: String,
+    },
 }
 
 /// The serde shape before normalisation, so a site file with `"AA-BB-..."` loads the same
@@ -43,6 +49,7 @@ pub enum TransmitterId {
 enum TransmitterIdRaw {
     Wifi { bssid: String },
     Ble { uuid: String, major: u16, minor: u16 },
+    BleAddress { mac: String },
 }
 
 impl TryFrom<TransmitterIdRaw> for TransmitterId {
@@ -51,8 +58,19 @@ impl TryFrom<TransmitterIdRaw> for TransmitterId {
         match raw {
             TransmitterIdRaw::Wifi { bssid } => TransmitterId::wifi(&bssid),
             TransmitterIdRaw::Ble { uuid, major, minor } => TransmitterId::ble(&uuid, major, minor),
+            TransmitterIdRaw::BleAddress { mac } => TransmitterId::ble_address(&mac),
         }
     }
+}
+
+/// A MAC address as `aa:bb:cc:dd:ee:ff`, from `AA:BB:..`, `aa-bb-..` or `aabb..`.
+fn mac_address(text: &str) -> Result<String, String> {
+    let hex = hex_digits(text.trim(), &[':', '-', '.']);
+    if hex.len() != 12 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
+        return Err(format!("`{text}` is not a MAC address (six hex bytes)"));
+    }
+    let octets: Vec<&str> = (0..6).map(|i| &hex[2 * i..2 * i + 2]).collect();
+    Ok(octets.join(":"))
 }
 
 /// `text` without `separators`, lower-cased.
@@ -64,12 +82,12 @@ impl TransmitterId {
     /// A WiFi access point from its BSSID in any common notation (`AA:BB:..`, `aa-bb-..`,
     /// `aabb..`).
     pub fn wifi(bssid: &str) -> Result<Self, String> {
-        let hex = hex_digits(bssid.trim(), &[':', '-', '.']);
-        if hex.len() != 12 || !hex.chars().all(|c| c.is_ascii_hexdigit()) {
-            return Err(format!("`{bssid}` is not a BSSID (six hex bytes)"));
-        }
-        let octets: Vec<&str> = (0..6).map(|i| &hex[2 * i..2 * i + 2]).collect();
-        Ok(TransmitterId::Wifi { bssid: octets.join(":") })
+        Ok(TransmitterId::Wifi { bssid: mac_address(bssid)? })
+    }
+
+    /// A BLE beacon by its advertiser MAC address, in any common notation.
+    pub fn ble_address(mac: &str) -> Result<Self, String> {
+        Ok(TransmitterId::BleAddress { mac: mac_address(mac)? })
     }
 
     /// A BLE beacon from its proximity UUID (with or without hyphens), major and minor.
@@ -89,6 +107,7 @@ impl fmt::Display for TransmitterId {
         match self {
             TransmitterId::Wifi { bssid } => write!(f, "wifi {bssid}"),
             TransmitterId::Ble { uuid, major, minor } => write!(f, "ble {uuid} {major}/{minor}"),
+            TransmitterId::BleAddress { mac } => write!(f, "ble {mac}"),
         }
     }
 }
