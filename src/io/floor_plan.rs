@@ -125,7 +125,7 @@ impl FloorPlan {
     /// box frames the plan and there is no outline).
     pub fn from_geojson(geojson: &Value, width_m: f64, height_m: f64) -> Result<FloorPlan, String> {
         let features = geojson["features"].as_array().ok_or("no `features` array")?;
-        let mut shapes: Vec<(bool, String, Vec<Vec<Vec<[f64; 2]>>>)> = Vec::new();
+        let mut shapes: Vec<(bool, String, Vec<LonLatPolygon>)> = Vec::new();
         for (k, f) in features.iter().enumerate() {
             let is_floor = f["properties"]["type"].as_str() == Some("floor");
             let name = f["properties"]["name"].as_str().unwrap_or("").to_owned();
@@ -171,7 +171,7 @@ impl FloorPlan {
                 (p[1] - lo[1]) / (hi[1] - lo[1]) * height_m,
             )
         };
-        let to_polygon = |rings: &Vec<Vec<[f64; 2]>>| Polygon {
+        let to_polygon = |rings: &LonLatPolygon| Polygon {
             rings: rings.iter().map(|r| r.iter().map(to_m).collect()).collect(),
         };
         let mut plan = FloorPlan { width_m, height_m, ..FloorPlan::default() };
@@ -212,8 +212,11 @@ impl FloorPlan {
     }
 }
 
+/// A polygon's rings of `[lon, lat]` points, as GeoJSON has them.
+type LonLatPolygon = Vec<Vec<[f64; 2]>>;
+
 /// GeoJSON polygon rings: `[[[lon, lat], ...], ...]`.
-fn rings(value: &Value) -> Option<Vec<Vec<[f64; 2]>>> {
+fn rings(value: &Value) -> Option<LonLatPolygon> {
     value
         .as_array()?
         .iter()

@@ -257,7 +257,8 @@ impl Trace {
     /// scan after every batch that ends at or before it, beacons folded into scans.
     pub fn events(&self, options: &EventOptions) -> Vec<Event> {
         let mut events: Vec<Event> = Vec::new();
-        let streams: [(&[SensorSample], fn(Vec<SensorSample>) -> Event); 3] = [
+        type Make = fn(Vec<SensorSample>) -> Event;
+        let streams: [(&[SensorSample], Make); 3] = [
             (&self.accelerometer, Event::Accelerometer),
             (&self.gyroscope, Event::Gyroscope),
             (&self.magnetometer, Event::Magnetometer),
