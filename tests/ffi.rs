@@ -63,7 +63,7 @@ fn scan(s: &waymark::Scan) -> RadioScan {
             TransmitterId::Wifi { bssid } => {
                 WifiReading { bssid: bssid.to_uppercase(), rssi_dbm: r.rssi_dbm, age_ms: 0 }
             }
-            TransmitterId::Ble { .. } => unreachable!("the simulator makes WiFi only"),
+            _ => unreachable!("the simulator makes WiFi only"),
         })
         .collect();
     RadioScan { timestamp_ns: s.timestamp_ns, wifi, beacons: vec![] }
