@@ -14,7 +14,9 @@ pub enum TransitionModel {
     Reach,
     /// HIPE's high/low regions from the measured distance and heading (HIPE eqs. 5-11).
     Hipe,
-    /// Hoang's Gaussian on the movement vector over the reachable states (Hoang eqs. 11, 14).
+    /// Hoang's Gaussian on the movement vector over the reachable states (Hoang eqs. 11, 14)
+    /// when distance and heading are both measured; in epochs with only one of them, HIPE's
+    /// ring or sector (which uses it), and with neither, the reachable states.
     #[default]
     Hoang,
 }
@@ -158,6 +160,17 @@ impl Default for EngineConfig {
 }
 
 impl EngineConfig {
+    /// The motion configuration an engine on `site` runs: `motion` with the site's north (or
+    /// the `north` override) applied.
+    pub fn motion_for(&self, site: &crate::Site) -> MotionConfig {
+        let north = self.north.unwrap_or_else(|| site.north());
+        MotionConfig {
+            declination_rad: north.declination_rad,
+            site_rotation_rad: north.site_rotation_rad,
+            ..self.motion.clone()
+        }
+    }
+
     /// Checks every field; the message names the field and the rule.
     pub fn validate(&self) -> Result<(), Error> {
         let fail = |m: String| Err(Error::InvalidConfig(m));

@@ -34,6 +34,8 @@ pub struct Position {
     /// Radius of the circle around (x, y) that holds the true position with probability 0.68
     /// (the configured `accuracy_mass`), m. Always > 0.
     pub accuracy_m: f64,
+    /// Radius of the circle holding the true position with probability 0.95, m; ≥ `accuracy_m`.
+    pub accuracy_95_m: f64,
     /// Direction of travel, radians clockwise from the site's +y axis, when the sensors gave a
     /// trustworthy absolute heading this epoch.
     pub heading_rad: Option<f64>,
@@ -160,12 +162,8 @@ impl Engine {
         config.validate()?;
         let n = site.states().len();
         let reach = ReachTable::build(&site, config.reach_radius_m);
-        let mut motion = config.motion.clone();
-        let north = config.north.unwrap_or_else(|| site.north());
-        motion.declination_rad = north.declination_rad;
-        motion.site_rotation_rad = north.site_rotation_rad;
         Ok(Self {
-            tracker: MotionTracker::new(motion)?,
+            tracker: MotionTracker::new(config.motion_for(&site))?,
             viterbi: ViterbiWindow::new(n, config.track_window_epochs),
             site,
             reach,
@@ -391,6 +389,7 @@ impl Engine {
             x: e.position.x,
             y: e.position.y,
             accuracy_m: e.accuracy_m,
+            accuracy_95_m: e.accuracy_95_m,
             heading_rad: motion.heading_rad,
             heading_accuracy_rad: motion.heading_rad.map(|_| motion.heading_sigma_rad),
             motion_state: motion.motion_state,
@@ -498,6 +497,14 @@ impl Engine {
         let transition: &dyn Transition = match config.transition {
             TransitionModel::Reach => &reach,
             TransitionModel::Hipe => &hipe,
+            // Hoang's Gaussian needs the movement vector; with only a distance or only a
+            // heading, HIPE's ring or sector still uses what was measured (HIPE Table 1).
+            TransitionModel::Hoang
+                if motion.displacement_m.is_none()
+                    && matches!(motion.scenario, MdiScenario::Distance | MdiScenario::HeadingSpeed) =>
+            {
+                &hipe
+            }
             TransitionModel::Hoang => &hoang,
         };
         self.viterbi.step(timestamp_ns, transition, &self.ln_emission);

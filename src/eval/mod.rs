@@ -4,6 +4,9 @@
 
 use serde::Serialize;
 
+pub mod real;
+pub mod replay;
+
 /// One scored epoch.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EpochError {

@@ -15,7 +15,12 @@ pub struct Estimate {
     /// Radius around `position` holding `mass` of the posterior, widened by the cell size, m.
     /// Always > 0.
     pub accuracy_m: f64,
+    /// The same for 95% of the posterior, m; ≥ `accuracy_m`.
+    pub accuracy_95_m: f64,
 }
+
+/// Posterior mass of the second radius [`Estimate::accuracy_95_m`].
+pub const MASS_95: f64 = 0.95;
 
 /// Share of a state's cell, in a corridor of cells `spacing` long, within which the true
 /// position lies with probability 0.68 when it is uniform over the cell: 0.68 · spacing / 2.
@@ -84,21 +89,27 @@ pub fn estimate(
     );
     scratch.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let mut inside = 0.0;
-    let mut radius = f64::INFINITY;
+    // Less than a mass on this floor: the farthest state of the floor bounds what we know.
+    let farthest = scratch.last().map_or(0.0, |&(d, _)| d);
+    let (mut radius, mut radius_95) = (None, None);
     for &(d, p) in scratch.iter() {
         inside += p;
-        if inside >= mass {
-            radius = d;
+        if inside >= mass && radius.is_none() {
+            radius = Some(d);
+        }
+        if inside >= mass.max(MASS_95) {
+            radius_95 = Some(d);
             break;
         }
     }
-    if !radius.is_finite() {
-        // Less than `mass` on this floor: the farthest state of the floor bounds what we know.
-        radius = scratch.last().map_or(0.0, |&(d, _)| d);
-    }
     // Each state stands for a cell around it: the posterior radius alone is 0 when all mass
-    // is on one state. Quantisation and posterior spread add as independent errors.
-    let cell = CELL_RADIUS_PER_SPACING * site.spacing_m();
-    let accuracy_m = (radius * radius + cell * cell).sqrt().max(f64::EPSILON);
-    Estimate { floor, floor_probability, position, accuracy_m }
+    // is on one state. Quantisation and posterior spread add as independent errors; the cell
+    // term holds `mass` of a uniform position over a cell as CELL_RADIUS_PER_SPACING does 0.68.
+    let with_cell = |r: f64, m: f64| {
+        let cell = CELL_RADIUS_PER_SPACING / 0.68 * m * site.spacing_m();
+        (r * r + cell * cell).sqrt().max(f64::EPSILON)
+    };
+    let accuracy_m = with_cell(radius.unwrap_or(farthest), mass);
+    let accuracy_95_m = with_cell(radius_95.unwrap_or(farthest), mass.max(MASS_95)).max(accuracy_m);
+    Estimate { floor, floor_probability, position, accuracy_m, accuracy_95_m }
 }

@@ -43,6 +43,12 @@ pub struct FitOptions {
     /// spread below one reporting step is not resolvable; it also keeps eq. 10 finite when all
     /// training readings are equal.
     pub min_std_db: f64,
+    /// Largest standard deviation a fit may return, dB. A transmitter heard once in a handful
+    /// of scans has no finite censored ML fit (σ → ∞ explains one reading and many misses
+    /// equally well), and real surveys are made of such columns. `INFINITY` (the default) is
+    /// Hoang's unconstrained EM; `waymark survey` caps it (see
+    /// [`SurveyOptions`](crate::survey::SurveyOptions)).
+    pub max_std_db: f64,
     /// EM iterations at most: 500. The EM converges linearly, slowest when most readings are
     /// clipped; the property test `em_recovers_clipped_gaussian` (up to 90% clipped) asserts
     /// convergence within this bound for every case it draws.
@@ -54,7 +60,13 @@ pub struct FitOptions {
 
 impl Default for FitOptions {
     fn default() -> Self {
-        Self { clip_dbm: -100.0, min_std_db: 1.0, max_iterations: 500, tolerance_db: 1e-6 }
+        Self {
+            clip_dbm: -100.0,
+            min_std_db: 1.0,
+            max_std_db: f64::INFINITY,
+            max_iterations: 500,
+            tolerance_db: 1e-6,
+        }
     }
 }
 
@@ -177,7 +189,7 @@ pub fn fit_naive(samples: &[f64], options: &FitOptions) -> Option<Gaussian> {
     if n == 0 {
         return None;
     }
-    Gaussian::new(mean, var.sqrt().max(options.min_std_db))
+    Gaussian::new(mean, var.sqrt().clamp(options.min_std_db, options.max_std_db.max(options.min_std_db)))
 }
 
 /// The censored-Gaussian EM of Hoang eqs. 6-7 over `samples`, where every sample at or below
@@ -196,9 +208,12 @@ pub fn fit_censored(samples: &[f64], options: &FitOptions) -> CensoredFit {
         return CensoredFit { gaussian: None, iterations: 0, converged: true };
     }
     let min_var = options.min_std_db * options.min_std_db;
+    // The M-step's variance projected onto [min, max]: for fixed μ the likelihood is unimodal
+    // in σ², so the projection is the constrained maximum and the EM stays monotone.
+    let max_var = (options.max_std_db * options.max_std_db).max(min_var);
     if n_clipped == 0 {
         return CensoredFit {
-            gaussian: Gaussian::new(obs_mean, obs_var.max(min_var).sqrt()),
+            gaussian: Gaussian::new(obs_mean, obs_var.clamp(min_var, max_var).sqrt()),
             iterations: 0,
             converged: true,
         };
@@ -207,7 +222,7 @@ pub fn fit_censored(samples: &[f64], options: &FitOptions) -> CensoredFit {
     // Start from the fit that puts clipped samples at c: biased, but close, and always finite.
     let (start_mean, start_var, _) = mean_variance(samples.iter().map(|&s| s.max(clip)));
     let mut mu = start_mean;
-    let mut var = start_var.max(min_var);
+    let mut var = start_var.clamp(min_var, max_var);
     let sum_obs = obs_mean * n_obs_f;
     for iteration in 1..=options.max_iterations {
         let sigma = var.sqrt();
@@ -219,7 +234,7 @@ pub fn fit_censored(samples: &[f64], options: &FitOptions) -> CensoredFit {
         let next_mu = (sum_obs + I1_over_I0 * n_clipped_f) / Nf;
         // Eq. 7 (centred on μ^(κ), as printed; the fixed point is the ML estimate either way).
         let observed_ss = obs_var * n_obs_f + n_obs_f * (obs_mean - mu) * (obs_mean - mu);
-        let next_var = ((observed_ss + centred_second.max(0.0) * n_clipped_f) / Nf).max(min_var);
+        let next_var = ((observed_ss + centred_second.max(0.0) * n_clipped_f) / Nf).clamp(min_var, max_var);
         let step = (next_mu - mu).abs().max((next_var.sqrt() - sigma).abs());
         mu = next_mu;
         var = next_var;

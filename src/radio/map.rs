@@ -29,8 +29,20 @@ pub struct RadioMap {
     /// Entries of transmitter `t` are `entries[starts[t]..starts[t + 1]]`.
     starts: Vec<usize>,
     entries: Vec<Entry>,
-    /// Per state: ln p(every transmitter absent | state).
-    all_absent: Vec<f64>,
+    /// Per radio kind (WiFi, BLE), per state: ln p(every transmitter of that kind absent |
+    /// state).
+    all_absent: [Vec<f64>; 2],
+    /// Radio kind of each transmitter (index into `all_absent`).
+    kinds: Vec<u8>,
+}
+
+/// Index of a transmitter's radio in [`RadioMap`]'s per-kind tables: a WiFi scan says nothing
+/// about beacons, and a beacon scan nothing about access points.
+fn kind(id: &TransmitterId) -> u8 {
+    match id {
+        TransmitterId::Wifi { .. } => 0,
+        TransmitterId::Ble { .. } | TransmitterId::BleAddress { .. } => 1,
+    }
 }
 
 /// A scan matched against the map: what the likelihood uses, and what was left out.
@@ -70,7 +82,12 @@ impl RadioMap {
         let mut starts = vec![0usize; ids.len() + 1];
         let mut entries = Vec::with_capacity(triples.len());
         let unheard_ln_absent = model.ln_absent(&unheard, clip_dbm);
-        let mut all_absent = vec![unheard_ln_absent * ids.len() as f64; state_count];
+        let kinds: Vec<u8> = ids.iter().map(kind).collect();
+        let all_absent = [0u8, 1].map(|k| {
+            let count = kinds.iter().filter(|&&x| x == k).count();
+            vec![unheard_ln_absent * count as f64; state_count]
+        });
+        let mut all_absent = all_absent;
         for (k, &(state, tx, g)) in triples.iter().enumerate() {
             if state as usize >= state_count || tx as usize >= ids.len() {
                 return Err(format!("fingerprint entry (state {state}, transmitter {tx}) is out of range"));
@@ -79,14 +96,25 @@ impl RadioMap {
                 return Err(format!("state {state} models transmitter {} twice", ids[tx as usize]));
             }
             let ln_absent = model.ln_absent(&g, clip_dbm);
-            all_absent[state as usize] += ln_absent - unheard_ln_absent;
+            all_absent[kinds[tx as usize] as usize][state as usize] += ln_absent - unheard_ln_absent;
             starts[tx as usize + 1] += 1;
             entries.push(Entry { state, model: g, ln_absent });
         }
         for t in 0..ids.len() {
             starts[t + 1] += starts[t];
         }
-        Ok(Self { model, clip_dbm, unheard, unheard_ln_absent, ids, index, starts, entries, all_absent })
+        Ok(Self {
+            model,
+            clip_dbm,
+            unheard,
+            unheard_ln_absent,
+            ids,
+            index,
+            starts,
+            entries,
+            all_absent,
+            kinds,
+        })
     }
 
     /// The likelihood model.
@@ -111,7 +139,7 @@ impl RadioMap {
 
     /// Number of states the map covers.
     pub fn state_count(&self) -> usize {
-        self.all_absent.len()
+        self.all_absent[0].len()
     }
 
     /// Every `(state, transmitter, model)` of the map, by transmitter.
@@ -147,10 +175,25 @@ impl RadioMap {
 
     /// ln p(scan | state) for every state (Hoang eqs. 9-10), written into `out`.
     ///
-    /// `out.len()` must equal [`state_count`](Self::state_count).
+    /// Eq. 10's "absent" terms cover the transmitters of the radios the scan used — WiFi if it
+    /// heard any access point, BLE if it heard any beacon — so a beacon-only scan is not read
+    /// as "no access point in range". `out.len()` must equal [`state_count`](Self::state_count).
     pub fn ln_likelihood(&self, observations: &[(u32, f64)], out: &mut [f64]) {
-        debug_assert_eq!(out.len(), self.all_absent.len());
-        out.copy_from_slice(&self.all_absent);
+        debug_assert_eq!(out.len(), self.state_count());
+        let mut scanned = [false; 2];
+        for &(t, _) in observations {
+            scanned[self.kinds[t as usize] as usize] = true;
+        }
+        match scanned {
+            [true, true] => {
+                for (o, (w, b)) in out.iter_mut().zip(self.all_absent[0].iter().zip(&self.all_absent[1])) {
+                    *o = w + b;
+                }
+            }
+            [true, false] => out.copy_from_slice(&self.all_absent[0]),
+            [false, true] => out.copy_from_slice(&self.all_absent[1]),
+            [false, false] => out.fill(0.0),
+        }
         let mut shared = 0.0;
         for &(t, rssi) in observations {
             // What hearing `rssi` changes for a state using the unheard model...
@@ -202,10 +245,15 @@ mod tests {
         let model_of = |t: u32| {
             map.fingerprints().find(|&(s, tx, _)| s == state && tx == t).map_or(map.unheard(), |(_, _, g)| g)
         };
+        let scanned = |t: u32| {
+            let k = kind(&map.transmitters()[t as usize]);
+            heard.iter().any(|h| kind(&map.transmitters()[h.0 as usize]) == k)
+        };
         (0..map.transmitters().len() as u32)
             .map(|t| match heard.iter().find(|h| h.0 == t) {
                 Some(&(_, rssi)) => map.model().ln_heard(&model_of(t), rssi, -100.0),
-                None => map.model().ln_absent(&model_of(t), -100.0),
+                None if scanned(t) => map.model().ln_absent(&model_of(t), -100.0),
+                None => 0.0,
             })
             .sum()
     }
@@ -224,6 +272,33 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_beacon_scan_says_nothing_about_access_points() {
+        let beacon = TransmitterId::ble_address("e0:78:a3:3d:b5:d6").unwrap();
+        let fingerprints = vec![(0, 0, g(-60.0, 4.0)), (1, 1, g(-70.0, 4.0)), (1, 0, g(-90.0, 4.0))];
+        let map = RadioMap::new(
+            RssiModel::CensoredGaussian,
+            -100.0,
+            g(-115.0, 5.0),
+            vec![wifi(0), beacon],
+            2,
+            fingerprints,
+        )
+        .unwrap();
+        for heard in [vec![(1, -72.0)], vec![(0, -61.0)], vec![(0, -61.0), (1, -72.0)]] {
+            let mut out = vec![0.0; 2];
+            map.ln_likelihood(&heard, &mut out);
+            for s in 0..2 {
+                assert_relative_eq!(out[s as usize], brute_force(&map, &heard, s), epsilon = 1e-9);
+            }
+        }
+        // Heard only the beacon: the access point's absence is not evidence.
+        let mut out = vec![0.0; 2];
+        map.ln_likelihood(&[(1, -72.0)], &mut out);
+        let only_beacon = |m: &Gaussian| map.model().ln_heard(m, -72.0, -100.0);
+        assert_relative_eq!(out[1], only_beacon(&g(-70.0, 4.0)), epsilon = 1e-12);
     }
 
     #[test]

@@ -1,6 +1,8 @@
 //! `waymark`: the command-line tool for the engineer who surveys a building and measures
 //! accuracy. `waymark demo` runs the engine on a built-in simulated office.
 
+mod real;
+
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
 use waymark::config::TransitionModel;
@@ -26,6 +28,14 @@ enum Command {
     /// Write a simulated site file and one walk (raw IMU batches and WiFi scans per epoch,
     /// with the truth) as JSON, for testing the engine from other languages.
     SimExport(SimExportArgs),
+    /// Build a site file from recorded survey walks (Indoor Location Competition 2.0 format),
+    /// one or more floors of one building.
+    Survey(real::SurveyArgs),
+    /// Replay one recorded walk through the engine as an app would, writing the track.
+    Replay(real::ReplayArgs),
+    /// Survey on the survey walks of the given floors, replay the test walks through every
+    /// configuration, and print the errors (split: file i is a test walk when i % 5 == 4).
+    Eval(real::EvalArgs),
 }
 
 #[derive(clap::Args)]
@@ -108,6 +118,9 @@ fn main() -> ExitCode {
         Command::Demo(args) => demo(&args),
         Command::Simulate(args) => simulate(&args),
         Command::SimExport(args) => sim_export(&args),
+        Command::Survey(args) => real::survey(&args),
+        Command::Replay(args) => real::replay(&args),
+        Command::Eval(args) => real::eval(&args),
     }
 }
 

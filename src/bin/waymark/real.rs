@@ -1,0 +1,281 @@
+//! The verbs for recorded data: `survey`, `replay`, `eval`.
+
+use indicatif::{ProgressBar, ProgressStyle};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::time::Instant;
+use waymark::eval::real::{self as evaluation, EvalOptions, FloorData, CONFIGURATIONS};
+use waymark::eval::replay::{self as replaying, ReplayOptions};
+use waymark::io::Trace;
+use waymark::{Engine, EngineConfig, Site};
+
+#[derive(clap::Args)]
+pub struct SurveyArgs {
+    /// Floor folders of one building (each with `path_data_files/`, and `floor_info.json` +
+    /// `geojson_map.json` if there is a plan). Every walk in them is a survey walk.
+    #[arg(required = true)]
+    floors: Vec<PathBuf>,
+    /// Where to write the site file.
+    #[arg(long)]
+    out: PathBuf,
+    /// The site's name.
+    #[arg(long, default_value = "site")]
+    name: String,
+}
+
+#[derive(clap::Args)]
+pub struct ReplayArgs {
+    /// The site file (from `waymark survey`).
+    #[arg(long)]
+    site: PathBuf,
+    /// The walk (a competition-format text file).
+    walk: PathBuf,
+    /// Where to write the track: `.json` for JSON, anything else CSV. Default: CSV on stdout.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// γ of Hoang eq. 14 (the radio likelihood's weight); default: the site's calibrated one.
+    #[arg(long)]
+    gamma: Option<f64>,
+}
+
+#[derive(clap::Args)]
+pub struct EvalArgs {
+    /// Floor folders of one building: given together, they make one multi-floor site and the
+    /// engine must find the floor itself.
+    #[arg(required = true)]
+    floors: Vec<PathBuf>,
+    /// Print one JSON object instead of the tables.
+    #[arg(long)]
+    json: bool,
+    /// Draw each test walk (floor plan, truth, tracks) and the error CDFs as SVG into DIR.
+    #[arg(long)]
+    plot: Option<PathBuf>,
+    /// Only these configurations (comma-separated keys); default all.
+    #[arg(long, value_delimiter = ',')]
+    configurations: Vec<String>,
+    /// Use only the first N walk files of each floor (by name; the split applies after).
+    #[arg(long)]
+    max_walks: Option<usize>,
+    /// γ of Hoang eq. 14; default: calibrated by the survey.
+    #[arg(long)]
+    gamma: Option<f64>,
+    /// Worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
+    /// Grid spacing of the surveyed states, m (default 2).
+    #[arg(long)]
+    spacing_m: Option<f64>,
+    /// A survey scan trains the states within this distance, m (default 3).
+    #[arg(long)]
+    fingerprint_radius_m: Option<f64>,
+    /// Readings older than this before their scan count as not heard, ms (default 2000).
+    #[arg(long)]
+    max_age_ms: Option<u64>,
+    /// Smallest σ a fitted fingerprint may have, dB.
+    #[arg(long)]
+    min_std_db: Option<f64>,
+    /// Largest σ a fitted fingerprint may have, dB.
+    #[arg(long)]
+    max_std_db: Option<f64>,
+}
+
+fn fail(verb: &str, e: impl std::fmt::Display) -> ExitCode {
+    eprintln!("waymark {verb}: {e}");
+    ExitCode::FAILURE
+}
+
+fn load_floors(dirs: &[PathBuf], max_walks: Option<usize>) -> Result<Vec<FloorData>, evaluation::EvalError> {
+    dirs.iter().map(|d| FloorData::load(d, max_walks)).collect()
+}
+
+pub fn survey(args: &SurveyArgs) -> ExitCode {
+    let floors = match load_floors(&args.floors, None) {
+        Ok(f) => f,
+        Err(e) => return fail("survey", e),
+    };
+    // Every walk surveys: fold the split's test walks back in.
+    let floors: Vec<FloorData> = floors
+        .into_iter()
+        .map(|mut f| {
+            f.survey.append(&mut f.test);
+            f
+        })
+        .collect();
+    let options = EvalOptions::default();
+    let (site, report) = match evaluation::survey_site(&floors, &options) {
+        Ok(s) => s,
+        Err(e) => return fail("survey", e),
+    };
+    if let Err(e) = std::fs::write(&args.out, site.to_json()) {
+        return fail("survey", format!("cannot write {}: {e}", args.out.display()));
+    }
+    for f in &report.floors {
+        println!(
+            "{:>4}: {} walks, {} scans → {} states, {} edges ({} through walls the plan has, walked)",
+            f.name, f.walks, f.scans, f.states, f.edges, f.walked_edges
+        );
+    }
+    println!("{} transmitters; site written to {}", report.transmitters, args.out.display());
+    ExitCode::SUCCESS
+}
+
+pub fn replay(args: &ReplayArgs) -> ExitCode {
+    let site = match Site::load(&args.site) {
+        Ok(s) => Arc::new(s),
+        Err(e) => return fail("replay", e),
+    };
+    let trace = match Trace::read(&args.walk) {
+        Ok(t) => t,
+        Err(e) => return fail("replay", e),
+    };
+    let config = EngineConfig { rssi_weight: args.gamma, ..EngineConfig::default() };
+    let mut engine = match Engine::new(Arc::clone(&site), config) {
+        Ok(e) => e,
+        Err(e) => return fail("replay", e),
+    };
+    let replay = replaying::replay(&mut engine, &trace, &ReplayOptions::default());
+    let floor_name = |f: usize| site.floors().get(f).map_or("?", |fl| fl.name.as_str()).to_owned();
+    let json = args.out.as_ref().is_some_and(|p| p.extension().is_some_and(|e| e == "json"));
+    let text = if json {
+        let rows: Vec<serde_json::Value> = replay
+            .positions
+            .iter()
+            .map(|p| {
+                serde_json::json!({
+                    "timestamp_ms": p.timestamp_ns / 1_000_000,
+                    "floor": floor_name(p.floor),
+                    "x": p.x, "y": p.y,
+                    "accuracy_m": p.accuracy_m, "accuracy_95_m": p.accuracy_95_m,
+                    "heading_deg": p.heading_rad.map(f64::to_degrees),
+                    "scenario": p.scenario, "motion_state": p.motion_state, "steps": p.steps,
+                })
+            })
+            .collect();
+        serde_json::to_string_pretty(&rows).unwrap_or_default()
+    } else {
+        let mut csv = String::from(
+            "timestamp_ms,floor,x,y,accuracy_m,accuracy_95_m,heading_deg,scenario,motion_state,steps\n",
+        );
+        for p in &replay.positions {
+            csv += &format!(
+                "{},{},{:.2},{:.2},{:.2},{:.2},{},{:?},{:?},{}\n",
+                p.timestamp_ns / 1_000_000,
+                floor_name(p.floor),
+                p.x,
+                p.y,
+                p.accuracy_m,
+                p.accuracy_95_m,
+                p.heading_rad.map_or(String::new(), |h| format!("{:.1}", h.to_degrees())),
+                p.scenario,
+                p.motion_state,
+                p.steps
+            );
+        }
+        csv
+    };
+    match &args.out {
+        Some(path) => {
+            if let Err(e) = std::fs::write(path, text) {
+                return fail("replay", format!("cannot write {}: {e}", path.display()));
+            }
+            eprintln!(
+                "{} epochs ({} scans rejected) written to {}",
+                replay.positions.len(),
+                replay.rejected_scans,
+                path.display()
+            );
+        }
+        None => print!("{text}"),
+    }
+    ExitCode::SUCCESS
+}
+
+pub fn eval(args: &EvalArgs) -> ExitCode {
+    let started = Instant::now();
+    let floors = match load_floors(&args.floors, args.max_walks) {
+        Ok(f) => f,
+        Err(e) => return fail("eval", e),
+    };
+    let mut options = EvalOptions { configurations: args.configurations.clone(), ..EvalOptions::default() };
+    if let Some(unknown) = options.configurations.iter().find(|c| !CONFIGURATIONS.contains(&c.as_str())) {
+        return fail(
+            "eval",
+            format!("unknown configuration `{unknown}`; known: {}", CONFIGURATIONS.join(", ")),
+        );
+    }
+    options.engine.rssi_weight = args.gamma;
+    if let Some(s) = args.spacing_m {
+        options.survey.spacing_m = s;
+        options.survey.coverage_m = s;
+    }
+    if let Some(r) = args.fingerprint_radius_m {
+        options.survey.fingerprint_radius_m = r;
+    }
+    if let Some(v) = args.min_std_db {
+        options.survey.build.fit.min_std_db = v;
+    }
+    if let Some(v) = args.max_std_db {
+        options.survey.build.fit.max_std_db = v;
+    }
+    if let Some(ms) = args.max_age_ms {
+        options.survey.max_reading_age_ns = ms * 1_000_000;
+    }
+    if let Some(t) = args.threads {
+        options.threads = t;
+    }
+    let loaded_s = started.elapsed().as_secs_f64();
+    let (site, survey) = match evaluation::survey_site(&floors, &options) {
+        Ok(s) => s,
+        Err(e) => return fail("eval", e),
+    };
+    let surveyed_s = started.elapsed().as_secs_f64();
+    let site = Arc::new(site);
+    let walks: usize = floors.iter().map(|f| f.test.len()).sum();
+    let bar = if args.json { ProgressBar::hidden() } else { ProgressBar::new(walks as u64) };
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} test walks, {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message("replaying");
+    let (configurations, _results) = match evaluation::evaluate_on(&site, &floors, &options, &|| bar.inc(1)) {
+        Ok(r) => r,
+        Err(e) => return fail("eval", e),
+    };
+    bar.finish_and_clear();
+    let report =
+        evaluation::EvalReport { configurations, survey, test_walks: walks, states: site.states().len() };
+    if args.json {
+        println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
+    } else {
+        println!(
+            "{} floors, {} test walks, {} states; read {:.1} s, survey {:.1} s, replay {:.1} s",
+            floors.len(),
+            walks,
+            report.states,
+            loaded_s,
+            surveyed_s - loaded_s,
+            started.elapsed().as_secs_f64() - surveyed_s
+        );
+        println!(
+            "{:<26} {:>7} {:>7} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>7}",
+            "configuration", "mean", "rmse", "p50", "p90", "max", "hit68", "hit95", "floor", "epochs"
+        );
+        for (key, r) in &report.configurations {
+            let m = &r.pooled;
+            println!(
+                "{key:<26} {:>7.2} {:>7.2} {:>7.2} {:>7.2} {:>7.1} {:>6.2} {:>6.2} {:>6.3} {:>7}",
+                m.mean_m,
+                m.rmse_m,
+                m.p50_m,
+                m.p90_m,
+                m.max_m,
+                m.accuracy_68_hit,
+                m.accuracy_95_hit,
+                m.floor_hit,
+                m.epochs
+            );
+        }
+    }
+    ExitCode::SUCCESS
+}

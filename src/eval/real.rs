@@ -1,0 +1,588 @@
+//! `waymark eval`: the survey/test split of recorded floors, a site surveyed from the survey
+//! walks, the test walks replayed through every configuration, and the errors at every epoch
+//! (truth interpolated between waypoints) and at every waypoint.
+//!
+//! No configuration reads a test walk's waypoints except to score it.
+
+use super::replay::{replay, MotionMask, ReplayOptions};
+use crate::engine::Engine;
+use crate::io::{FloorPlan, Trace};
+use crate::radio::Scan;
+use crate::site::{North, Site};
+use crate::survey::{positioned_scans, survey, SurveyFloor, SurveyOptions, SurveyReport};
+use crate::EngineConfig;
+use nalgebra::Point2;
+use serde::Serialize;
+use std::collections::{BTreeMap, HashMap};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+
+/// A wrong floor adds this to the epoch's error, m: the public competition's metric (Indoor
+/// Location Competition 2.0 adds 15 × the floor difference).
+pub const FLOOR_PENALTY_M: f64 = 15.0;
+
+/// Every configuration `waymark eval` scores, by JSON key.
+pub const CONFIGURATIONS: [&str; 9] = [
+    "wifi-knn",
+    "wifi-mle",
+    "forward-auto",
+    "forward-distance-heading",
+    "forward-distance",
+    "forward-heading-speed",
+    "forward-speed",
+    "viterbi-auto",
+    "fixed-lag-auto",
+];
+
+/// One floor's walks, split.
+#[derive(Clone, Debug)]
+pub struct FloorData {
+    /// Floor name (the folder's).
+    pub name: String,
+    /// The folder.
+    pub dir: PathBuf,
+    /// The plan, if the folder has one.
+    pub plan: Option<FloorPlan>,
+    /// Survey walks (file index i with i % 5 != 4 after sorting by name).
+    pub survey: Vec<Trace>,
+    /// Test walks (i % 5 == 4).
+    pub test: Vec<Trace>,
+}
+
+/// Why evaluation could not start.
+#[derive(Debug, thiserror::Error)]
+pub enum EvalError {
+    /// A folder could not be listed.
+    #[error("cannot list {path}: {source}")]
+    Io {
+        /// The folder.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A walk could not be read.
+    #[error(transparent)]
+    Trace(#[from] crate::io::TraceError),
+    /// The survey could not build a site.
+    #[error(transparent)]
+    Site(#[from] crate::site::SiteError),
+    /// The engine rejected its configuration.
+    #[error(transparent)]
+    Engine(#[from] crate::Error),
+    /// Nothing to evaluate.
+    #[error("{0}")]
+    Empty(String),
+}
+
+impl FloorData {
+    /// Reads a floor folder: `path_data_files/*.txt` (or `*.txt` directly inside), and
+    /// `floor_info.json` + `geojson_map.json` if present. `max_walks` keeps only the first
+    /// walks by name (a quick look; the split is applied after).
+    pub fn load(dir: &Path, max_walks: Option<usize>) -> Result<FloorData, EvalError> {
+        let walks_dir =
+            if dir.join("path_data_files").is_dir() { dir.join("path_data_files") } else { dir.to_owned() };
+        let io = |source| EvalError::Io { path: walks_dir.display().to_string(), source };
+        let mut files: Vec<PathBuf> = std::fs::read_dir(&walks_dir)
+            .map_err(io)?
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| p.extension().is_some_and(|e| e == "txt"))
+            .collect();
+        files.sort();
+        files.truncate(max_walks.unwrap_or(usize::MAX));
+        let mut floor = FloorData {
+            name: dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
+            dir: dir.to_owned(),
+            plan: FloorPlan::read(dir).ok(),
+            survey: Vec::new(),
+            test: Vec::new(),
+        };
+        for (i, file) in files.iter().enumerate() {
+            let trace = Trace::read(file)?;
+            if i % 5 == 4 {
+                floor.test.push(trace);
+            } else {
+                floor.survey.push(trace);
+            }
+        }
+        Ok(floor)
+    }
+}
+
+/// Error figures of one configuration over a set of scored points.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Metrics {
+    /// Mean error, m (a wrong floor adds [`FLOOR_PENALTY_M`]).
+    pub mean_m: f64,
+    /// Root mean square error, m.
+    pub rmse_m: f64,
+    /// Median error, m.
+    pub p50_m: f64,
+    /// 90th percentile, m.
+    pub p90_m: f64,
+    /// Largest error, m.
+    pub max_m: f64,
+    /// Share of points whose horizontal error is within the reported 68% radius.
+    pub accuracy_68_hit: f64,
+    /// Share within the reported 95% radius.
+    pub accuracy_95_hit: f64,
+    /// Median reported 68% radius, m.
+    pub accuracy_68_median_m: f64,
+    /// Share of points on the right floor.
+    pub floor_hit: f64,
+    /// Points scored.
+    pub epochs: usize,
+}
+
+/// One scored estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scored {
+    /// Horizontal error, m, without the floor penalty.
+    pub error_m: f64,
+    /// Reported 68% radius, m.
+    pub accuracy_m: f64,
+    /// Reported 95% radius, m.
+    pub accuracy_95_m: f64,
+    /// Whether the floor was right.
+    pub floor_correct: bool,
+}
+
+impl Scored {
+    /// The error with the floor penalty.
+    pub fn penalised_m(&self) -> f64 {
+        self.error_m + if self.floor_correct { 0.0 } else { FLOOR_PENALTY_M }
+    }
+}
+
+/// Nearest-rank quantile of sorted values.
+fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = (q * sorted.len() as f64).ceil().max(1.0) as usize;
+    sorted[rank.min(sorted.len()) - 1]
+}
+
+impl Metrics {
+    /// Figures over `points`.
+    pub fn new(points: &[Scored]) -> Metrics {
+        let n = points.len();
+        if n == 0 {
+            return Metrics::default();
+        }
+        let mut errors: Vec<f64> = points.iter().map(Scored::penalised_m).collect();
+        errors.sort_by(f64::total_cmp);
+        let share = |f: &dyn Fn(&Scored) -> bool| points.iter().filter(|p| f(p)).count() as f64 / n as f64;
+        let mut radii: Vec<f64> = points.iter().map(|p| p.accuracy_m).collect();
+        radii.sort_by(f64::total_cmp);
+        Metrics {
+            mean_m: errors.iter().sum::<f64>() / n as f64,
+            rmse_m: (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt(),
+            p50_m: quantile(&errors, 0.5),
+            p90_m: quantile(&errors, 0.9),
+            max_m: errors[n - 1],
+            accuracy_68_hit: share(&|p| p.error_m <= p.accuracy_m),
+            accuracy_95_hit: share(&|p| p.error_m <= p.accuracy_95_m),
+            accuracy_68_median_m: quantile(&radii, 0.5),
+            floor_hit: share(&|p| p.floor_correct),
+            epochs: n,
+        }
+    }
+}
+
+/// One configuration's figures.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct ConfigurationReport {
+    /// All floors together, scored at every epoch (scan or timer) between the first and
+    /// last waypoint of each test walk.
+    pub pooled: Metrics,
+    /// Per floor.
+    pub floors: BTreeMap<String, Metrics>,
+    /// All floors, scored at the test walks' waypoints (the latest estimate at or before each).
+    pub waypoints: Metrics,
+}
+
+/// An estimate in time, for scoring.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// When, ns.
+    pub timestamp_ns: u64,
+    /// Floor index in the site.
+    pub floor: usize,
+    /// Position, m.
+    pub x: f64,
+    /// Position, m.
+    pub y: f64,
+    /// 68% radius, m.
+    pub accuracy_m: f64,
+    /// 95% radius, m.
+    pub accuracy_95_m: f64,
+}
+
+/// Scores a walk's estimates: at each estimate's own time (within the waypoints' span), and
+/// at each waypoint with the latest estimate at or before it. Returns (epochs, waypoints).
+pub fn score(trace: &Trace, floor: usize, estimates: &[Estimate]) -> (Vec<Scored>, Vec<Scored>) {
+    let scored = |e: &Estimate, (x, y): (f64, f64)| Scored {
+        error_m: (e.x - x).hypot(e.y - y),
+        accuracy_m: e.accuracy_m,
+        accuracy_95_m: e.accuracy_95_m,
+        floor_correct: e.floor == floor,
+    };
+    let epochs =
+        estimates.iter().filter_map(|e| trace.position_at(e.timestamp_ns).map(|p| scored(e, p))).collect();
+    let waypoints = trace
+        .waypoints
+        .iter()
+        .filter_map(|w| {
+            let k = estimates.partition_point(|e| e.timestamp_ns <= w.timestamp_ns);
+            k.checked_sub(1).map(|k| scored(&estimates[k], (w.x, w.y)))
+        })
+        .collect();
+    (epochs, waypoints)
+}
+
+/// Weighted k-NN on raw survey scans (k = 5, weights 1/(d + 1 dB), a missing reading counts
+/// as the clip level): the classic fingerprinting baseline, one scan at a time.
+pub struct Knn {
+    k: usize,
+    clip_dbm: f64,
+    /// Reference (floor, position, Σ (rssi − clip)²).
+    references: Vec<(usize, Point2<f64>, f64)>,
+    /// Per transmitter: (reference, rssi − clip).
+    by_transmitter: HashMap<crate::TransmitterId, Vec<(u32, f64)>>,
+}
+
+impl Knn {
+    /// From positioned survey scans per floor.
+    pub fn new(k: usize, clip_dbm: f64, scans: impl IntoIterator<Item = (usize, Point2<f64>, Scan)>) -> Knn {
+        let mut knn = Knn { k, clip_dbm, references: Vec::new(), by_transmitter: HashMap::new() };
+        for (floor, p, scan) in scans {
+            let r = knn.references.len() as u32;
+            let mut energy = 0.0;
+            for (id, v) in knn.levels(&scan) {
+                energy += v * v;
+                knn.by_transmitter.entry(id).or_default().push((r, v));
+            }
+            knn.references.push((floor, p, energy));
+        }
+        knn
+    }
+
+    /// (transmitter, rssi − clip) once per transmitter, the strongest reading kept.
+    fn levels(&self, scan: &Scan) -> Vec<(crate::TransmitterId, f64)> {
+        let mut best: HashMap<&crate::TransmitterId, f64> = HashMap::new();
+        for r in scan.readings.iter().filter(|r| r.rssi_dbm.is_finite()) {
+            let v = (r.rssi_dbm - self.clip_dbm).max(0.0);
+            let e = best.entry(&r.transmitter).or_insert(v);
+            *e = e.max(v);
+        }
+        best.into_iter().map(|(id, v)| (id.clone(), v)).collect()
+    }
+
+    /// The estimate for one scan: floor by weighted vote, position the weighted mean of the k
+    /// nearest on that floor; the radius is the weighted RMS spread of those neighbours.
+    pub fn locate(&self, scan: &Scan) -> Option<(usize, Point2<f64>, f64)> {
+        let levels = self.levels(scan);
+        let own: f64 = levels.iter().map(|(_, v)| v * v).sum();
+        // ‖a − b‖² = Σa² + Σb² − 2 Σ_common a·b.
+        let mut cross = vec![0.0; self.references.len()];
+        for (id, v) in &levels {
+            for &(r, w) in self.by_transmitter.get(id).map_or(&[][..], |l| &l[..]) {
+                cross[r as usize] += v * w;
+            }
+        }
+        let mut d: Vec<(f64, usize)> = self
+            .references
+            .iter()
+            .enumerate()
+            .map(|(r, (_, _, energy))| ((own + energy - 2.0 * cross[r]).max(0.0).sqrt(), r))
+            .collect();
+        let k = self.k.min(d.len());
+        if k == 0 {
+            return None;
+        }
+        d.select_nth_unstable_by(k - 1, |a, b| a.0.total_cmp(&b.0));
+        let nearest = &d[..k];
+        let weight = |dist: f64| 1.0 / (dist + 1.0);
+        let mut votes: BTreeMap<usize, f64> = BTreeMap::new();
+        for &(dist, r) in nearest {
+            *votes.entry(self.references[r].0).or_default() += weight(dist);
+        }
+        let floor = votes.into_iter().max_by(|a, b| a.1.total_cmp(&b.1))?.0;
+        let on_floor: Vec<(f64, Point2<f64>)> = nearest
+            .iter()
+            .filter(|(_, r)| self.references[*r].0 == floor)
+            .map(|&(dist, r)| (weight(dist), self.references[r].1))
+            .collect();
+        let total: f64 = on_floor.iter().map(|w| w.0).sum();
+        let mean = on_floor.iter().fold(Point2::origin(), |acc, (w, p)| acc + p.coords * (w / total));
+        let spread =
+            (on_floor.iter().map(|(w, p)| w * (p - mean).norm_squared()).sum::<f64>() / total).sqrt();
+        Some((floor, mean, spread))
+    }
+}
+
+/// How `waymark eval` runs.
+#[derive(Clone, Debug)]
+pub struct EvalOptions {
+    /// How the site is surveyed.
+    pub survey: SurveyOptions,
+    /// The engine as shipped (γ, models...).
+    pub engine: EngineConfig,
+    /// How walks are replayed.
+    pub replay: ReplayOptions,
+    /// The site's north, when not estimated from the survey.
+    pub north: North,
+    /// Configurations to run (keys of [`CONFIGURATIONS`]); empty: all.
+    pub configurations: Vec<String>,
+    /// Worker threads for replays.
+    pub threads: usize,
+}
+
+impl Default for EvalOptions {
+    fn default() -> Self {
+        Self {
+            survey: SurveyOptions::default(),
+            engine: EngineConfig::default(),
+            replay: ReplayOptions::default(),
+            north: North::default(),
+            configurations: Vec::new(),
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+        }
+    }
+}
+
+/// What `waymark eval` prints.
+#[derive(Clone, Debug, Serialize)]
+pub struct EvalReport {
+    /// Per configuration key.
+    pub configurations: BTreeMap<String, ConfigurationReport>,
+    /// What the survey built.
+    pub survey: SurveyReport,
+    /// Test walks replayed.
+    pub test_walks: usize,
+    /// States in the site.
+    pub states: usize,
+}
+
+/// One test walk's estimates per configuration, for plots.
+#[derive(Clone, Debug, Default)]
+pub struct WalkResult {
+    /// Floor index.
+    pub floor: usize,
+    /// Walk name.
+    pub name: String,
+    /// Estimates per configuration key.
+    pub estimates: BTreeMap<String, Vec<Estimate>>,
+}
+
+/// Builds the site from the survey walks of `floors` (one multi-floor site).
+pub fn survey_site(floors: &[FloorData], options: &EvalOptions) -> Result<(Site, SurveyReport), EvalError> {
+    let inputs: Vec<SurveyFloor> = floors
+        .iter()
+        .map(|f| SurveyFloor {
+            name: f.name.clone(),
+            plan: f.plan.as_ref(),
+            walks: f.survey.iter().collect(),
+        })
+        .collect();
+    Ok(survey("eval", &inputs, options.north, &options.survey)?)
+}
+
+/// Runs every configuration over every test walk of `floors` on `site`.
+pub fn evaluate_on(
+    site: &Arc<Site>,
+    floors: &[FloorData],
+    options: &EvalOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(BTreeMap<String, ConfigurationReport>, Vec<WalkResult>), EvalError> {
+    let wanted =
+        |key: &str| options.configurations.is_empty() || options.configurations.iter().any(|c| c == key);
+    let mut engine_config = options.engine.clone();
+    engine_config.max_reading_age_ns =
+        engine_config.max_reading_age_ns.or(Some(options.survey.max_reading_age_ns));
+    // The Viterbi configuration smooths whole walks: a window longer than any test walk.
+    let longest =
+        floors.iter().flat_map(|f| &f.test).map(|t| t.wifi_scans.len() * 2 + 64).max().unwrap_or(64);
+    Engine::new(Arc::clone(site), engine_config.clone())?;
+    let knn = wanted("wifi-knn").then(|| {
+        Knn::new(
+            5,
+            options.survey.build.fit.clip_dbm,
+            floors.iter().enumerate().flat_map(|(f, floor)| {
+                floor.survey.iter().flat_map(move |w| {
+                    positioned_scans(w, &options.survey).into_iter().map(move |(p, s)| (f, p, s))
+                })
+            }),
+        )
+    });
+    let jobs: Vec<(usize, &Trace)> =
+        floors.iter().enumerate().flat_map(|(f, floor)| floor.test.iter().map(move |t| (f, t))).collect();
+    let run_walk = |&(floor, trace): &(usize, &Trace)| -> WalkResult {
+        let mut result = WalkResult { floor, name: trace.name.clone(), ..WalkResult::default() };
+        let scans: Vec<Scan> = trace
+            .scans(&options.replay.events)
+            .into_iter()
+            .map(|mut s| {
+                s.readings.retain(|r| r.age_ns <= options.survey.max_reading_age_ns);
+                s
+            })
+            .collect();
+        if let Some(knn) = &knn {
+            let estimates = scans
+                .iter()
+                .filter_map(|s| {
+                    let (f, p, spread) = knn.locate(s)?;
+                    Some(Estimate {
+                        timestamp_ns: s.timestamp_ns,
+                        floor: f,
+                        x: p.x,
+                        y: p.y,
+                        accuracy_m: spread,
+                        accuracy_95_m: 2.0 * spread,
+                    })
+                })
+                .collect();
+            result.estimates.insert("wifi-knn".into(), estimates);
+        }
+        if wanted("wifi-mle") {
+            let radio = site.radio();
+            let mut ln = vec![0.0; site.states().len()];
+            let estimates = scans
+                .iter()
+                .filter_map(|s| {
+                    let resolved = radio.resolve(s, None);
+                    if resolved.observations.is_empty() {
+                        return None;
+                    }
+                    radio.ln_likelihood(&resolved.observations, &mut ln);
+                    let best = (0..ln.len()).max_by(|&a, &b| ln[a].total_cmp(&ln[b]))?;
+                    let state = &site.states()[best];
+                    let cell = site.spacing_m() / 2.0;
+                    Some(Estimate {
+                        timestamp_ns: s.timestamp_ns,
+                        floor: state.floor,
+                        x: state.position.x,
+                        y: state.position.y,
+                        accuracy_m: cell,
+                        accuracy_95_m: 2.0 * cell,
+                    })
+                })
+                .collect();
+            result.estimates.insert("wifi-mle".into(), estimates);
+        }
+        let engine_runs: [(&str, MotionMask); 5] = [
+            ("forward-auto", MotionMask::Auto),
+            ("forward-distance-heading", MotionMask::DistanceHeading),
+            ("forward-distance", MotionMask::Distance),
+            ("forward-heading-speed", MotionMask::HeadingSpeed),
+            ("forward-speed", MotionMask::Speed),
+        ];
+        for (key, mask) in engine_runs {
+            let smoothing = key == "forward-auto" && (wanted("viterbi-auto") || wanted("fixed-lag-auto"));
+            if !wanted(key) && !smoothing {
+                continue;
+            }
+            let mut config = engine_config.clone();
+            if smoothing {
+                config.track_window_epochs = longest;
+            }
+            let Ok(mut engine) = Engine::new(Arc::clone(site), config) else { continue };
+            let r = replay(&mut engine, trace, &ReplayOptions { mask, ..options.replay });
+            let live: Vec<Estimate> = r
+                .positions
+                .iter()
+                .map(|p| Estimate {
+                    timestamp_ns: p.timestamp_ns,
+                    floor: p.floor,
+                    x: p.x,
+                    y: p.y,
+                    accuracy_m: p.accuracy_m,
+                    accuracy_95_m: p.accuracy_95_m,
+                })
+                .collect();
+            // Smoothed points carry the live radius of their epoch.
+            let radius: HashMap<u64, (f64, f64)> =
+                live.iter().map(|e| (e.timestamp_ns, (e.accuracy_m, e.accuracy_95_m))).collect();
+            let smoothed = |points: &[crate::TrackPoint]| -> Vec<Estimate> {
+                points
+                    .iter()
+                    .map(|p| {
+                        let (a68, a95) = radius.get(&p.timestamp_ns).copied().unwrap_or((f64::NAN, f64::NAN));
+                        Estimate {
+                            timestamp_ns: p.timestamp_ns,
+                            floor: p.floor,
+                            x: p.x,
+                            y: p.y,
+                            accuracy_m: a68,
+                            accuracy_95_m: a95,
+                        }
+                    })
+                    .collect()
+            };
+            if smoothing {
+                if wanted("viterbi-auto") {
+                    result.estimates.insert("viterbi-auto".into(), smoothed(&r.track));
+                }
+                if wanted("fixed-lag-auto") {
+                    let mut lagged = smoothed(&r.fixed_lag);
+                    lagged.dedup_by_key(|e| e.timestamp_ns);
+                    result.estimates.insert("fixed-lag-auto".into(), lagged);
+                }
+            }
+            if wanted(key) {
+                result.estimates.insert(key.into(), live);
+            }
+        }
+        progress();
+        result
+    };
+    let threads = options.threads.max(1).min(jobs.len().max(1));
+    let results: Vec<WalkResult> = if threads == 1 {
+        jobs.iter().map(run_walk).collect()
+    } else {
+        let next = std::sync::atomic::AtomicUsize::new(0);
+        let mut slots: Vec<Option<WalkResult>> = vec![None; jobs.len()];
+        let done: Vec<(usize, WalkResult)> = std::thread::scope(|scope| {
+            let workers: Vec<_> = (0..threads)
+                .map(|_| {
+                    scope.spawn(|| {
+                        let mut mine = Vec::new();
+                        loop {
+                            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                            let Some(job) = jobs.get(k) else { break };
+                            mine.push((k, run_walk(job)));
+                        }
+                        mine
+                    })
+                })
+                .collect();
+            workers.into_iter().flat_map(|w| w.join().unwrap_or_default()).collect()
+        });
+        for (k, r) in done {
+            slots[k] = Some(r);
+        }
+        slots.into_iter().flatten().collect()
+    };
+    let mut reports = BTreeMap::new();
+    for key in CONFIGURATIONS.iter().filter(|k| wanted(k)) {
+        let mut pooled = Vec::new();
+        let mut at_waypoints = Vec::new();
+        let mut per_floor: BTreeMap<String, Vec<Scored>> = BTreeMap::new();
+        for (result, &(f, trace)) in results.iter().zip(&jobs) {
+            let Some(estimates) = result.estimates.get(*key) else { continue };
+            let (epochs, waypoints) = score(trace, f, estimates);
+            per_floor.entry(floors[f].name.clone()).or_default().extend_from_slice(&epochs);
+            pooled.extend(epochs);
+            at_waypoints.extend(waypoints);
+        }
+        reports.insert(
+            key.to_string(),
+            ConfigurationReport {
+                pooled: Metrics::new(&pooled),
+                floors: per_floor.iter().map(|(name, points)| (name.clone(), Metrics::new(points))).collect(),
+                waypoints: Metrics::new(&at_waypoints),
+            },
+        );
+    }
+    Ok((reports, results))
+}

@@ -1,0 +1,165 @@
+//! A recorded walk through the engine exactly as an app feeds it: sensor batches, then the scan
+//! they lead up to; a timer epoch when no scan came for a while; optionally with motion
+//! information withheld to force one of HIPE's scenarios.
+
+use crate::engine::{Engine, Position, TrackPoint};
+use crate::io::ilc::{Event, EventOptions};
+use crate::io::Trace;
+use crate::sensors::{MdiScenario, MotionTracker, MotionUpdate};
+use serde::{Deserialize, Serialize};
+
+/// Which motion information the engine may use (HIPE Table 1), forced by withholding it.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum MotionMask {
+    /// Whatever the sensors give, scenario picked per epoch.
+    #[default]
+    Auto,
+    /// Distance and heading (the heading is kept even when judged disturbed).
+    DistanceHeading,
+    /// Steps only: the heading is withheld.
+    Distance,
+    /// Heading only: the step distance is withheld.
+    HeadingSpeed,
+    /// Neither: the assumed speed only.
+    Speed,
+}
+
+impl MotionMask {
+    /// `update` with what this mask withholds removed.
+    pub fn apply(self, mut update: MotionUpdate) -> MotionUpdate {
+        let scenario = match self {
+            MotionMask::Auto => return update,
+            MotionMask::DistanceHeading => MdiScenario::DistanceHeading,
+            MotionMask::Distance => MdiScenario::Distance,
+            MotionMask::HeadingSpeed => MdiScenario::HeadingSpeed,
+            MotionMask::Speed => MdiScenario::Speed,
+        };
+        if matches!(scenario, MdiScenario::Distance | MdiScenario::Speed) {
+            update.heading_rad = None;
+        }
+        if matches!(scenario, MdiScenario::HeadingSpeed | MdiScenario::Speed) {
+            update.distance_m = None;
+        }
+        update.displacement_m = match (update.distance_m, update.heading_rad) {
+            (Some(d), Some(h)) => Some([d * h.sin(), d * h.cos()]),
+            _ => None,
+        };
+        // A scenario is only what the measurements support.
+        update.scenario = match (update.distance_m.is_some(), update.heading_rad.is_some()) {
+            (true, true) => MdiScenario::DistanceHeading,
+            (true, false) => MdiScenario::Distance,
+            (false, true) => MdiScenario::HeadingSpeed,
+            (false, false) => MdiScenario::Speed,
+        };
+        update
+    }
+}
+
+/// How a walk is replayed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReplayOptions {
+    /// Batching and radios.
+    pub events: EventOptions,
+    /// A motion-only epoch when this long has passed without an epoch, ns (an app's timer).
+    /// 2 s: about one scan interval of an unthrottled Android phone, so epochs keep coming at
+    /// a scan's pace when scans stop (Android 9+ throttles to 4 scans in 2 minutes).
+    pub timer_ns: Option<u64>,
+    /// Scans closer than this to the previous one kept are dropped, ns: `Some(30 s)` replays
+    /// a foreground app under Android 9+'s throttling.
+    pub min_scan_interval_ns: Option<u64>,
+    /// Motion withheld.
+    pub mask: MotionMask,
+}
+
+impl Default for ReplayOptions {
+    fn default() -> Self {
+        Self {
+            events: EventOptions::default(),
+            timer_ns: Some(2_000_000_000),
+            min_scan_interval_ns: None,
+            mask: MotionMask::Auto,
+        }
+    }
+}
+
+/// What the engine said during a walk.
+#[derive(Clone, Debug, Default)]
+pub struct Replay {
+    /// Every epoch's live position, in time order.
+    pub positions: Vec<Position>,
+    /// The fixed-lag estimate available after each epoch (older than that epoch by the lag).
+    pub fixed_lag: Vec<TrackPoint>,
+    /// The Viterbi path at the end of the walk (as long as the engine's track window).
+    pub track: Vec<TrackPoint>,
+    /// Scans the engine rejected (no known transmitter, ...).
+    pub rejected_scans: usize,
+}
+
+/// Feeds `trace` to `engine` as an app would.
+pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Replay {
+    let mut out = Replay::default();
+    // Forced scenarios run their own tracker on the same configuration and hand the engine
+    // the masked motion; `Auto` lets the engine's tracker do it.
+    let mut tracker = match options.mask {
+        MotionMask::Auto => None,
+        _ => MotionTracker::new(engine.config().motion_for(engine.site())).ok(),
+    };
+    let mut last_epoch: Option<u64> = None;
+    let mut last_scan: Option<u64> = None;
+    for event in trace.events(&options.events) {
+        let t = event.timestamp_ns();
+        let result = match event {
+            Event::Accelerometer(batch) => {
+                engine.push_accelerometer(&batch);
+                tracker.as_mut().map(|k| k.push_accelerometer(&batch));
+                None
+            }
+            Event::Gyroscope(batch) => {
+                engine.push_gyroscope(&batch);
+                tracker.as_mut().map(|k| k.push_gyroscope(&batch));
+                None
+            }
+            Event::Magnetometer(batch) => {
+                engine.push_magnetometer(&batch);
+                tracker.as_mut().map(|k| k.push_magnetometer(&batch));
+                None
+            }
+            Event::Scan(scan) => {
+                if options.min_scan_interval_ns.is_some_and(|gap| last_scan.is_some_and(|l| t < l + gap)) {
+                    None
+                } else {
+                    last_scan = Some(t);
+                    let r = match tracker.as_mut() {
+                        Some(k) if !last_epoch.is_some_and(|l| t <= l) => {
+                            let motion = options.mask.apply(k.update(t));
+                            engine.push_scan_with_motion(&scan, &motion)
+                        }
+                        _ => engine.push_scan(&scan),
+                    };
+                    if r.is_err() {
+                        out.rejected_scans += 1;
+                    }
+                    Some(r)
+                }
+            }
+        };
+        let result = result.or_else(|| {
+            let due = options.timer_ns.is_some_and(|gap| last_epoch.is_some_and(|l| t >= l + gap));
+            due.then(|| match tracker.as_mut() {
+                Some(k) => {
+                    let motion = options.mask.apply(k.update(t));
+                    engine.advance_with_motion(t, &motion)
+                }
+                None => engine.advance(t),
+            })
+        });
+        if let Some(Ok(position)) = result {
+            last_epoch = Some(position.timestamp_ns);
+            out.positions.push(position);
+            out.fixed_lag.extend(engine.fixed_lag_position());
+        }
+    }
+    out.track = engine.track();
+    out
+}
