@@ -4,6 +4,9 @@
 
 use serde::Serialize;
 
+#[cfg(feature = "plot")]
+pub mod plot;
+
 /// One scored epoch.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EpochError {
