@@ -5,8 +5,8 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use waymark::ffi::uniffi::{
-    EngineOptions, MotionSample, PositionEstimate, PositionListener, PositioningEngine, PositioningError,
-    RadioScan, StatusUpdate, WifiReading,
+    BeaconReading, EngineOptions, MotionSample, PositionEstimate, PositionListener, PositioningEngine,
+    PositioningError, RadioScan, StatusUpdate, WifiReading,
 };
 use waymark::radio::TransmitterId;
 use waymark::sim::{imu, Office, OfficeConfig};
@@ -217,6 +217,51 @@ fn an_injected_panic_is_an_error_and_the_engine_goes_on() {
     let boom = RadioScan { timestamp_ns: FAULT_INJECTION_TIMESTAMP_NS, wifi: wifi.clone(), beacons: vec![] };
     assert!(matches!(engine.push_scan(boom), Err(PositioningError::Internal { .. })));
     engine.push_scan(RadioScan { timestamp_ns: 10, wifi, beacons: vec![] }).unwrap();
+}
+
+/// The simulated site with its first access point turned into a BLE beacon known by its
+/// advertiser address only (as Eddystone beacons are).
+fn site_with_an_address_beacon(office: &Office) -> String {
+    let json = office.site.to_json();
+    let wifi = r#"{"wifi":{"bssid":"02:00:00:00:00:00"}}"#;
+    assert!(json.contains(wifi), "the simulator's first access point moved");
+    json.replace(wifi, r#"{"ble_address":{"mac":"02:00:00:00:00:00"}}"#)
+}
+
+#[test]
+fn beacons_known_by_address_only() {
+    let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
+    let engine =
+        PositioningEngine::new(site_with_an_address_beacon(&office), EngineOptions::default()).unwrap();
+    let beacon = |uuid: &str, major, minor, address: Option<&str>| BeaconReading {
+        uuid: uuid.into(),
+        major,
+        minor,
+        rssi_dbm: -60.0,
+        age_ms: 0,
+        address: address.map(Into::into),
+    };
+    let scan = |timestamp_ns, beacons| RadioScan { timestamp_ns, wifi: vec![], beacons };
+    const UUID: &str = "fda50693-a4e2-4fb1-afcf-c6eb07647825";
+    // By address: no UUID, or an iBeacon left at major = minor = 0; any MAC notation.
+    engine.push_scan(scan(10, vec![beacon("", 0, 0, Some("02-00-00-00-00-00"))])).unwrap();
+    engine.push_scan(scan(20, vec![beacon(UUID, 0, 0, Some("02:00:00:00:00:00"))])).unwrap();
+    // The same address as a WiFi BSSID, or an iBeacon with a major/minor, is another
+    // transmitter, unknown here.
+    let rejected = |result: Result<PositionEstimate, PositioningError>| {
+        assert!(matches!(result, Err(PositioningError::InputRejected { .. })), "{result:?}")
+    };
+    let bssid = WifiReading { bssid: "02:00:00:00:00:00".into(), rssi_dbm: -60.0, age_ms: 0 };
+    rejected(engine.push_scan(RadioScan { timestamp_ns: 30, wifi: vec![bssid], beacons: vec![] }));
+    rejected(engine.push_scan(scan(30, vec![beacon(UUID, 1, 2, Some("02:00:00:00:00:00"))])));
+    // Bad input is a typed error, and the engine goes on.
+    rejected(engine.push_scan(scan(30, vec![beacon("", 0, 0, None)])));
+    rejected(engine.push_scan(scan(30, vec![beacon("", 0, 0, Some(""))])));
+    rejected(engine.push_scan(scan(30, vec![beacon("", 0, 0, Some("02:00:00:00:00"))])));
+    rejected(engine.push_scan(scan(30, vec![beacon("", 0, 0, Some("not a mac address"))])));
+    rejected(engine.push_scan(scan(30, vec![beacon(UUID, 1, 2, Some("zz:00:00:00:00:00"))])));
+    let position = engine.push_scan(scan(30, vec![beacon("", 0, 0, Some("02:00:00:00:00:00"))])).unwrap();
+    assert_eq!(position.timestamp_ns, 30);
 }
 
 #[test]

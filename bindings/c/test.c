@@ -161,12 +161,64 @@ static void error_paths(const char *site_path) {
     CHECK(waymark_engine_push_accelerometer(engine, NULL, 3, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "null samples");
     CHECK(waymark_engine_push_scan(engine, 5, NULL, 0, NULL, 0, &p) == WAYMARK_RESULT_INPUT_REJECTED, "empty scan");
     CHECK(waymark_engine_push_scan(engine, 5, NULL, 2, NULL, 0, &p) == WAYMARK_RESULT_NULL_PARAMETER, "null wifi");
-    waymark_beacon_reading beacon = {"fda50693-a4e2-4fb1-afcf-c6eb07647825", 1, 2, -70.0, 0};
+    waymark_beacon_reading beacon = {"fda50693-a4e2-4fb1-afcf-c6eb07647825", 1, 2, -70.0, 0, NULL};
     CHECK(waymark_engine_push_scan(engine, 5, NULL, 0, &beacon, 1, &p) == WAYMARK_RESULT_INPUT_REJECTED,
           "unknown beacon only");
     free(json);
     waymark_engine_free(engine);
     CHECK(strcmp(waymark_version(), WAYMARK_VERSION) == 0, "version %s", waymark_version());
+}
+
+/* The site with its first access point turned into a BLE beacon known by its advertiser
+ * address only (as Eddystone beacons are): a malloc'd copy of `json`, or NULL. */
+static char *with_address_beacon(const char *json) {
+    const char *wifi = "{\"wifi\":{\"bssid\":\"02:00:00:00:00:00\"}}";
+    const char *ble = "{\"ble_address\":{\"mac\":\"02:00:00:00:00:00\"}}";
+    const char *at = strstr(json, wifi);
+    if (!at) return NULL;
+    size_t head = (size_t)(at - json), len = strlen(json) - strlen(wifi) + strlen(ble);
+    char *out = malloc(len + 1);
+    if (!out) return NULL;
+    memcpy(out, json, head);
+    strcpy(out + head, ble);
+    strcat(out, at + strlen(wifi));
+    return out;
+}
+
+static void address_beacons(const char *site_path) {
+    size_t len = 0;
+    char *json = read_file(site_path, &len);
+    char *site = json ? with_address_beacon(json) : NULL;
+    free(json);
+    CHECK(site != NULL, "the simulated site's first access point");
+    if (!site) return;
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new((const uint8_t *)site, strlen(site), &engine) == WAYMARK_RESULT_OK, "site");
+    free(site);
+    const char *uuid = "fda50693-a4e2-4fb1-afcf-c6eb07647825";
+    waymark_position p;
+    /* By address: no UUID (NULL or empty), or an iBeacon left at major = minor = 0. */
+    waymark_beacon_reading by_address = {.uuid = NULL, .rssi_dbm = -60.0, .address = "02-00-00-00-00-00"};
+    CHECK(waymark_engine_push_scan(engine, 10, NULL, 0, &by_address, 1, &p) == WAYMARK_RESULT_OK, "address");
+    CHECK(p.timestamp_ns == 10, "position at %llu", (unsigned long long)p.timestamp_ns);
+    waymark_beacon_reading factory = {.uuid = uuid, .rssi_dbm = -60.0, .address = "02:00:00:00:00:00"};
+    CHECK(waymark_engine_push_scan(engine, 20, NULL, 0, &factory, 1, &p) == WAYMARK_RESULT_OK, "0/0 iBeacon");
+    /* The same address as an iBeacon with a major/minor is another, unknown, beacon. */
+    waymark_beacon_reading ibeacon = {.uuid = uuid, .major = 1, .minor = 2, .rssi_dbm = -60.0,
+                                      .address = "02:00:00:00:00:00"};
+    CHECK(waymark_engine_push_scan(engine, 30, NULL, 0, &ibeacon, 1, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+          "iBeacon");
+    /* Bad input: an error code and a message, and the engine goes on. */
+    const char *bad[] = {NULL, "", "02:00:00:00:00", "not a mac address"};
+    for (size_t i = 0; i < sizeof bad / sizeof *bad; i++) {
+        waymark_beacon_reading reading = {.uuid = "", .rssi_dbm = -60.0, .address = bad[i]};
+        CHECK(waymark_engine_push_scan(engine, 30, NULL, 0, &reading, 1, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+              "bad address %zu", i);
+        CHECK(waymark_last_error(NULL, 0) > 0, "message for bad address %zu", i);
+    }
+    by_address.uuid = "";
+    CHECK(waymark_engine_push_scan(engine, 30, NULL, 0, &by_address, 1, &p) == WAYMARK_RESULT_OK, "goes on");
+    waymark_engine_free(engine);
 }
 
 int main(int argc, char **argv) {
@@ -175,6 +227,7 @@ int main(int argc, char **argv) {
         return 2;
     }
     error_paths(argv[1]);
+    address_beacons(argv[1]);
     walk(argv[1], argv[2]);
     printf("%d passed, %d failed\n", checks - failures, failures);
     return failures ? 1 : 0;

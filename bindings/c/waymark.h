@@ -109,11 +109,16 @@ typedef struct {
 } waymark_wifi_reading;
 
 /**
- * A BLE beacon heard in a scan.
+ * A BLE beacon heard in a scan: an iBeacon by its UUID, major and minor, or any beacon
+ * (Eddystone, an iBeacon left at major = minor = 0) by its advertiser address.
+ *
+ * With an `address`, a beacon whose `uuid` is NULL or empty, or whose major and minor are both
+ * 0, is identified by the address; otherwise by UUID, major and minor (the address must still
+ * be valid). Neither a UUID nor an address, or one that does not parse: `InputRejected`.
  */
 typedef struct {
   /**
-   * NUL-terminated proximity UUID.
+   * NUL-terminated proximity UUID; NULL or empty for a beacon known by its address only.
    */
   const char *uuid;
   /**
@@ -132,6 +137,10 @@ typedef struct {
    * How long before the scan it was measured, ms.
    */
   uint64_t age_ms;
+  /**
+   * NUL-terminated advertiser MAC address, any common notation; NULL or empty when unknown.
+   */
+  const char *address;
 } waymark_beacon_reading;
 
 /**

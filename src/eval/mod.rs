@@ -4,6 +4,8 @@
 
 use serde::Serialize;
 
+#[cfg(feature = "plot")]
+pub mod plot;
 pub mod real;
 pub mod replay;
 

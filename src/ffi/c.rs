@@ -78,11 +78,16 @@ pub struct waymark_wifi_reading {
     pub age_ms: u64,
 }
 
-/// A BLE beacon heard in a scan.
+/// A BLE beacon heard in a scan: an iBeacon by its UUID, major and minor, or any beacon
+/// (Eddystone, an iBeacon left at major = minor = 0) by its advertiser address.
+///
+/// With an `address`, a beacon whose `uuid` is NULL or empty, or whose major and minor are both
+/// 0, is identified by the address; otherwise by UUID, major and minor (the address must still
+/// be valid). Neither a UUID nor an address, or one that does not parse: `InputRejected`.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct waymark_beacon_reading {
-    /// NUL-terminated proximity UUID.
+    /// NUL-terminated proximity UUID; NULL or empty for a beacon known by its address only.
     pub uuid: *const c_char,
     /// Major.
     pub major: u16,
@@ -92,6 +97,8 @@ pub struct waymark_beacon_reading {
     pub rssi_dbm: f64,
     /// How long before the scan it was measured, ms.
     pub age_ms: u64,
+    /// NUL-terminated advertiser MAC address, any common notation; NULL or empty when unknown.
+    pub address: *const c_char,
 }
 
 /// A position.
@@ -327,6 +334,15 @@ fn string_arg(text: *const c_char, what: &str) -> Result<String, waymark_result>
     }
 }
 
+/// As `string_arg`, with NULL as `None`.
+fn optional_string_arg(text: *const c_char, what: &str) -> Result<Option<String>, waymark_result> {
+    if text.is_null() {
+        Ok(None)
+    } else {
+        string_arg(text, what).map(Some)
+    }
+}
+
 /// Runs an epoch under the lock, then calls the callback with no lock held and writes `out`.
 fn epoch(
     engine: *mut waymark_engine,
@@ -392,8 +408,9 @@ pub extern "C" fn waymark_engine_push_scan(
         if beacon_count > 0 {
             // SAFETY: checked non-NULL above; the caller guarantees `beacon_count` elements.
             for b in unsafe { std::slice::from_raw_parts(beacons, beacon_count) } {
-                let uuid = string_arg(b.uuid, "uuid")?;
-                let transmitter = TransmitterId::ble(&uuid, b.major, b.minor)
+                let uuid = optional_string_arg(b.uuid, "uuid")?.unwrap_or_default();
+                let address = optional_string_arg(b.address, "address")?;
+                let transmitter = super::beacon_id(&uuid, b.major, b.minor, address.as_deref())
                     .map_err(|m| fail(waymark_result::InputRejected, m))?;
                 readings.push(Reading {
                     transmitter,

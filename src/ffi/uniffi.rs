@@ -151,20 +151,33 @@ pub struct WifiReading {
     pub age_ms: u64,
 }
 
-/// A BLE beacon heard in a scan.
+/// A BLE beacon heard in a scan: an iBeacon by its UUID, major and minor, or any beacon
+/// (Eddystone, an iBeacon left at major = minor = 0) by its advertiser address.
+///
+/// Which one it is: with an `address`, a beacon whose `uuid` is empty or whose major and
+/// minor are both 0 is identified by the address; otherwise by UUID, major and minor (the
+/// address must still be valid). A reading with neither a UUID nor an address, or with one
+/// that does not parse, makes `push_scan` throw `InputRejected`.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
 pub struct BeaconReading {
-    /// Proximity UUID.
+    /// Proximity UUID, with or without hyphens; empty for a beacon known by its address only.
+    #[uniffi(default = "")]
     pub uuid: String,
     /// Major number.
+    #[uniffi(default = 0)]
     pub major: u16,
     /// Minor number.
+    #[uniffi(default = 0)]
     pub minor: u16,
     /// Signal strength, dBm.
     pub rssi_dbm: f64,
     /// How long before the scan this reading was measured, ms (0 if fresh).
     #[uniffi(default = 0)]
     pub age_ms: u64,
+    /// The advertiser's MAC address (Android `ScanResult.getDevice().getAddress()`), any common
+    /// notation; `null` / `nil` or empty when unknown (iOS never reports it).
+    #[uniffi(default = None)]
+    pub address: Option<String>,
 }
 
 /// Everything heard at one moment.
@@ -541,7 +554,7 @@ impl PositioningEngine {
             });
         }
         for b in &scan.beacons {
-            let transmitter = TransmitterId::ble(&b.uuid, b.major, b.minor)
+            let transmitter = super::beacon_id(&b.uuid, b.major, b.minor, b.address.as_deref())
                 .map_err(|reason| PositioningError::InputRejected { reason })?;
             readings.push(Reading {
                 transmitter,

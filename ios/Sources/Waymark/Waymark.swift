@@ -1534,11 +1534,17 @@ public func FfiConverterTypeSubscription_lower(_ value: Subscription) -> UInt64 
 
 
 /**
- * A BLE beacon heard in a scan.
+ * A BLE beacon heard in a scan: an iBeacon by its UUID, major and minor, or any beacon
+ * (Eddystone, an iBeacon left at major = minor = 0) by its advertiser address.
+ *
+ * Which one it is: with an `address`, a beacon whose `uuid` is empty or whose major and
+ * minor are both 0 is identified by the address; otherwise by UUID, major and minor (the
+ * address must still be valid). A reading with neither a UUID nor an address, or with one
+ * that does not parse, makes `push_scan` throw `InputRejected`.
  */
 public struct BeaconReading: Equatable, Hashable {
     /**
-     * Proximity UUID.
+     * Proximity UUID, with or without hyphens; empty for a beacon known by its address only.
      */
     public var uuid: String
     /**
@@ -1557,30 +1563,40 @@ public struct BeaconReading: Equatable, Hashable {
      * How long before the scan this reading was measured, ms (0 if fresh).
      */
     public var ageMs: UInt64
+    /**
+     * The advertiser's MAC address (Android `ScanResult.getDevice().getAddress()`), any common
+     * notation; `null` / `nil` or empty when unknown (iOS never reports it).
+     */
+    public var address: String?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
     public init(
         /**
-         * Proximity UUID.
-         */uuid: String, 
+         * Proximity UUID, with or without hyphens; empty for a beacon known by its address only.
+         */uuid: String = "", 
         /**
          * Major number.
-         */major: UInt16, 
+         */major: UInt16 = UInt16(0), 
         /**
          * Minor number.
-         */minor: UInt16, 
+         */minor: UInt16 = UInt16(0), 
         /**
          * Signal strength, dBm.
          */rssiDbm: Double, 
         /**
          * How long before the scan this reading was measured, ms (0 if fresh).
-         */ageMs: UInt64 = UInt64(0)) {
+         */ageMs: UInt64 = UInt64(0), 
+        /**
+         * The advertiser's MAC address (Android `ScanResult.getDevice().getAddress()`), any common
+         * notation; `null` / `nil` or empty when unknown (iOS never reports it).
+         */address: String? = nil) {
         self.uuid = uuid
         self.major = major
         self.minor = minor
         self.rssiDbm = rssiDbm
         self.ageMs = ageMs
+        self.address = address
     }
 
     
@@ -1603,7 +1619,8 @@ public struct FfiConverterTypeBeaconReading: FfiConverterRustBuffer {
                 major: FfiConverterUInt16.read(from: &buf), 
                 minor: FfiConverterUInt16.read(from: &buf), 
                 rssiDbm: FfiConverterDouble.read(from: &buf), 
-                ageMs: FfiConverterUInt64.read(from: &buf)
+                ageMs: FfiConverterUInt64.read(from: &buf), 
+                address: FfiConverterOptionString.read(from: &buf)
         )
     }
 
@@ -1613,6 +1630,7 @@ public struct FfiConverterTypeBeaconReading: FfiConverterRustBuffer {
         FfiConverterUInt16.write(value.minor, into: &buf)
         FfiConverterDouble.write(value.rssiDbm, into: &buf)
         FfiConverterUInt64.write(value.ageMs, into: &buf)
+        FfiConverterOptionString.write(value.address, into: &buf)
     }
 }
 
@@ -2881,6 +2899,30 @@ fileprivate struct FfiConverterOptionDouble: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterDouble.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
+    typealias SwiftType = String?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterString.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterString.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }

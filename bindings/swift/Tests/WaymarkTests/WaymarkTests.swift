@@ -184,6 +184,40 @@ final class WaymarkTests: XCTestCase {
         XCTAssertNotNil(engine.position())
     }
 
+    // A BLE beacon known by its advertiser address only (Eddystone, or an iBeacon left at
+    // major = minor = 0). The site is the simulated one with its first access point turned
+    // into such a beacon.
+    func testBeaconsKnownByAddressOnly() throws {
+        let wifi = #"{"wifi":{"bssid":"02:00:00:00:00:00"}}"#
+        let json = try siteJson()
+        XCTAssertTrue(json.contains(wifi), "the simulator's first access point moved")
+        let site = json.replacingOccurrences(of: wifi, with: #"{"ble_address":{"mac":"02:00:00:00:00:00"}}"#)
+        let engine = try PositioningEngine(siteJson: site, options: EngineOptions())
+        let uuid = "fda50693-a4e2-4fb1-afcf-c6eb07647825"
+        let scan = { (t: UInt64, beacon: BeaconReading) in RadioScan(timestampNs: t, wifi: [], beacons: [beacon]) }
+        // UUID, major and minor default to "", 0 and 0: the address alone identifies it.
+        let first = try engine.pushScan(scan: scan(10, BeaconReading(rssiDbm: -60, address: "02-00-00-00-00-00")))
+        XCTAssertEqual(first.timestampNs, 10)
+        _ = try engine.pushScan(scan: scan(20, BeaconReading(uuid: uuid, rssiDbm: -60, address: "02:00:00:00:00:00")))
+        for rejected in [
+            // An iBeacon with a major/minor is another, unknown, beacon.
+            BeaconReading(uuid: uuid, major: 1, minor: 2, rssiDbm: -60, address: "02:00:00:00:00:00"),
+            BeaconReading(rssiDbm: -60),  // neither UUID nor address
+            BeaconReading(rssiDbm: -60, address: ""),
+            BeaconReading(rssiDbm: -60, address: "02:00:00:00:00"),
+            BeaconReading(rssiDbm: -60, address: "not a mac address"),
+        ] {
+            XCTAssertThrowsError(try engine.pushScan(scan: scan(30, rejected))) {
+                guard case PositioningError.InputRejected(let reason) = $0 else {
+                    return XCTFail("expected inputRejected, got \($0)")
+                }
+                XCTAssertFalse(reason.isEmpty)
+            }
+        }
+        let last = try engine.pushScan(scan: scan(30, BeaconReading(rssiDbm: -60, address: "02:00:00:00:00:00")))
+        XCTAssertEqual(last.timestampNs, 30)
+    }
+
     // (c) A throwing listener is reported, never fatal, and does not starve the others.
     func testAThrowingListenerDoesNotBreakTheEngine() throws {
         let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())

@@ -217,6 +217,42 @@ class WaymarkTest {
         }
     }
 
+    /**
+     * A BLE beacon known by its advertiser address only (Eddystone, or an iBeacon left at
+     * major = minor = 0), as an Android app reads it from `ScanResult.getDevice().getAddress()`.
+     * The site is the simulated one with its first access point turned into such a beacon.
+     */
+    @Test
+    fun beaconsKnownByAddressOnly() {
+        val wifi = "{\"wifi\":{\"bssid\":\"02:00:00:00:00:00\"}}"
+        assertTrue("the simulator's first access point moved", siteJson.contains(wifi))
+        val site = siteJson.replace(wifi, "{\"ble_address\":{\"mac\":\"02:00:00:00:00:00\"}}")
+        val uuid = "fda50693-a4e2-4fb1-afcf-c6eb07647825"
+        PositioningEngine(site, EngineOptions()).use { engine ->
+            fun scan(t: Long, beacon: BeaconReading) = RadioScan(t.toULong(), emptyList(), listOf(beacon))
+            // UUID, major and minor default to "", 0 and 0: the address alone identifies it.
+            assertEquals(10uL, engine.pushScan(scan(10, BeaconReading(rssiDbm = -60.0, address = "02-00-00-00-00-00"))).timestampNs)
+            engine.pushScan(scan(20, BeaconReading(uuid = uuid, rssiDbm = -60.0, address = "02:00:00:00:00:00")))
+            val rejected = mapOf(
+                "an iBeacon with a major/minor (another, unknown beacon)" to
+                    BeaconReading(uuid = uuid, major = 1u, minor = 2u, rssiDbm = -60.0, address = "02:00:00:00:00:00"),
+                "neither UUID nor address" to BeaconReading(rssiDbm = -60.0),
+                "an empty address" to BeaconReading(rssiDbm = -60.0, address = ""),
+                "a short address" to BeaconReading(rssiDbm = -60.0, address = "02:00:00:00:00"),
+                "not an address" to BeaconReading(rssiDbm = -60.0, address = "not a mac address"),
+            )
+            for ((what, beacon) in rejected) {
+                try {
+                    engine.pushScan(scan(30, beacon))
+                    fail("$what was accepted")
+                } catch (e: PositioningException.InputRejected) {
+                    assertTrue(e.reason.isNotEmpty())
+                }
+            }
+            assertEquals(30uL, engine.pushScan(scan(30, BeaconReading(rssiDbm = -60.0, address = "02:00:00:00:00:00"))).timestampNs)
+        }
+    }
+
     @Test
     fun aThrowingListenerBreaksNothing() {
         // Count (and silence) what JNA's callback dispatcher reports: the kotlin.Errors.
