@@ -327,7 +327,8 @@ fn fit_linear(walks: &[WalkSums]) -> Option<StepLengthModel> {
         sfp += w * s.frequency * s.path_m;
     }
     let det = snn * sff - snf * snf;
-    if !(det.abs() > 1e-9 * snn * sff) {
+    // Also catches NaN.
+    if det.is_nan() || det.abs() <= 1e-9 * snn * sff {
         return None;
     }
     let a = (sff * snp - snf * sfp) / det;
