@@ -7,7 +7,7 @@
 //! ```
 //!
 //! On ILC 2.0 site 1 (`/work/main/target/ilc/site1/{B1,F1,F2,F3,F4}/path_data_files`, one
-//! OPPO PBCM10 at 50 Hz; commit of this example) with the default `MotionConfig`, calibrated
+//! OPPO PBCM10 at 50 Hz) with the default `MotionConfig`, calibrated
 //! on all 459 survey walks and scored on the 112 test walks: distance error mean 10.8 %,
 //! median 6.8 %, pooled 0.5 %; heading RMSE 18.4°, median |error| 10.7° over 5 767 steps.
 //! Per floor (each calibrated on its own survey walks), mean / pooled distance error and
