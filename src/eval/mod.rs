@@ -2,6 +2,8 @@
 //! (HIPE Table 5 reports RMSE, mean and maximum), CDF points (Hoang eq. 15), and how often the
 //! reported accuracy radius held the truth.
 
+pub mod pdr;
+
 use serde::Serialize;
 
 #[cfg(feature = "plot")]

@@ -642,13 +642,13 @@ mod tests {
         for k in 0..20u64 {
             v.offer(raw(10_000 + 1250 * (k / 2) + if k % 2 == 1 { 450 } else { 0 }), (), &mut out);
         }
-        // Regular but strong.
+        // Regular but strong: above `max_step_acceleration_mps2` (25).
         for k in 0..20u64 {
             let s = RawStep {
                 t_ns: (40_000 + 500 * k) * 1_000_000,
-                raw_max: 15.0,
+                raw_max: 30.0,
                 raw_min: -5.0,
-                smooth_p2p: 10.0,
+                smooth_p2p: 17.5,
             };
             v.offer(s, (), &mut out);
         }

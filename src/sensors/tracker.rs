@@ -57,6 +57,12 @@ pub struct StepEvent {
     pub heading_rad: Option<f64>,
     /// One standard deviation of the heading at that step, rad.
     pub heading_sigma_rad: f64,
+    /// The step's period (time since the previous step), s: what the frequency step-length
+    /// model uses, and what calibrating it needs.
+    pub period_s: f64,
+    /// Peak-to-peak gravity-free acceleration norm over the step, m/s²: what the Weinberg
+    /// step-length model uses, and what calibrating it needs.
+    pub peak_to_peak_mps2: f64,
 }
 
 /// The heading filter's current state, trusted or not.
@@ -268,6 +274,8 @@ impl MotionTracker {
                             length_m,
                             heading_rad,
                             heading_sigma_rad,
+                            period_s: step.period_s,
+                            peak_to_peak_mps2: step.peak_to_peak,
                         });
                     }
                     self.gait_out = out;

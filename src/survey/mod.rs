@@ -6,6 +6,10 @@
 //! States never sit on the labelled waypoints: they are grid points, so a method that snaps to
 //! the grid gains nothing from the surveyors' habit of revisiting the same waypoints.
 
+pub mod motion;
+
+pub use motion::{calibrate_motion, MotionCalibration};
+
 use crate::io::ilc::EventOptions;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::{FitOptions, Reading, Scan, TransmitterId};
