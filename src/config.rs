@@ -65,11 +65,22 @@ pub struct HoangConfig {
     /// per axis, so Σ_v + (s²/6)·I. Hoang's simulated walker stands on the states, where this
     /// is 0; a real one does not. Default on; `waymark simulate` measures both.
     pub quantisation_variance: bool,
+    /// Whether Σ_v also grows by the tracker's own spreads of the epoch: the distance's
+    /// along the movement and distance × heading spread across it (the error propagation of
+    /// v = d·(sin θ, cos θ)). Hoang's simulated walker has a fixed 0.25 m²; a phone's step
+    /// count and compass err more on some epochs than on others. Default on; the paper
+    /// experiments (`waymark simulate`) turn it off to reproduce Table 1.
+    pub measured_spread: bool,
 }
 
 impl Default for HoangConfig {
     fn default() -> Self {
-        Self { movement_variance_m2: 0.25, mahalanobis_cap: 3.0, quantisation_variance: true }
+        Self {
+            movement_variance_m2: 0.25,
+            mahalanobis_cap: 3.0,
+            quantisation_variance: true,
+            measured_spread: true,
+        }
     }
 }
 
@@ -99,6 +110,10 @@ pub struct EngineConfig {
     /// 1 - γ. `None` is eq. 3 (both to the power 1), as in Hoang's simulations (§6.1); the
     /// field-data value is chosen per site by jackknife (Hoang §6.2 found 0.003).
     pub rssi_weight: Option<f64>,
+    /// γ in epochs without a movement likelihood (no steps or no heading, or a model other
+    /// than Hoang's), where the radio is weighed against the reachability prior alone. `None`:
+    /// `rssi_weight`, else the site's calibrated value.
+    pub rssi_weight_without_movement: Option<f64>,
     /// Epochs the Viterbi tracker keeps (HIPE §4.1 tracks by Viterbi): 64 epochs, 96 s at
     /// Hoang's 1.5 s epoch, bounding its memory to 64 × 4 bytes per state.
     pub track_window_epochs: usize,
@@ -132,6 +147,11 @@ pub struct EngineConfig {
     /// re-reports cached access points). `None` keeps every reading: the age limit is chosen
     /// on real traces, not on the simulator, whose readings are all fresh.
     pub max_reading_age_ns: Option<u64>,
+    /// Whether the site file's [`Calibration`](crate::site::Calibration) applies: its γ when
+    /// `rssi_weight` is `None`, its surveyors' step length model in place of
+    /// `motion.step_length`, and its accuracy scales. Default on: a surveyed site's own
+    /// measurements beat generic defaults. Turn it off to give a user's own step length.
+    pub site_calibration: bool,
     /// Probability mass inside the reported `accuracy_m` circle: 0.68, as Android's
     /// `Location.getAccuracy()` and iOS's `horizontalAccuracy` define it.
     pub accuracy_mass: f64,
@@ -147,6 +167,7 @@ impl Default for EngineConfig {
             hipe: HipeConfig::default(),
             hoang: HoangConfig::default(),
             rssi_weight: None,
+            rssi_weight_without_movement: None,
             track_window_epochs: 64,
             fixed_lag_epochs: 3,
             transition_ratio: 200_000.0,
@@ -155,6 +176,7 @@ impl Default for EngineConfig {
             max_reach_passes: 16,
             max_reading_age_ns: None,
             accuracy_mass: 0.68,
+            site_calibration: true,
         }
     }
 }
@@ -164,10 +186,37 @@ impl EngineConfig {
     /// the `north` override) applied.
     pub fn motion_for(&self, site: &crate::Site) -> MotionConfig {
         let north = self.north.unwrap_or_else(|| site.north());
+        let step_length = match (self.site_calibration, site.calibration().step_length) {
+            (true, Some(model)) => model,
+            _ => self.motion.step_length,
+        };
         MotionConfig {
             declination_rad: north.declination_rad,
             site_rotation_rad: north.site_rotation_rad,
+            step_length,
             ..self.motion.clone()
+        }
+    }
+
+    /// γ of Hoang eq. 14 an engine on `site` uses in epochs with a movement likelihood and in
+    /// epochs without one: `rssi_weight` for both, else the site's calibrated ones (with
+    /// `site_calibration`), else none (eq. 3).
+    pub fn rssi_weight_for(&self, site: &crate::Site) -> [Option<f64>; 2] {
+        let c = if self.site_calibration { *site.calibration() } else { crate::site::Calibration::default() };
+        [
+            self.rssi_weight.or(c.rssi_weight),
+            self.rssi_weight_without_movement
+                .or(self.rssi_weight)
+                .or(c.rssi_weight_without_movement)
+                .or(c.rssi_weight),
+        ]
+    }
+
+    /// Factors on the 68% and 95% radii for `site`: the site's calibrated ones, else 1.
+    pub fn accuracy_scale_for(&self, site: &crate::Site) -> [f64; 2] {
+        match (self.site_calibration, site.calibration().accuracy_scale) {
+            (true, Some(scale)) => scale,
+            _ => [1.0, 1.0],
         }
     }
 

@@ -154,6 +154,11 @@ pub struct Engine {
     listeners: Vec<(SubscriptionId, Box<dyn PositionListener>)>,
     next_subscription: u64,
     stats: InputStats,
+    /// γ in effect (the configuration's, else the site's) in epochs with and without a
+    /// movement likelihood.
+    rssi_weight: [Option<f64>; 2],
+    /// Factors on the 68% and 95% radii (the site's calibration).
+    accuracy_scale: [f64; 2],
 }
 
 impl Engine {
@@ -162,6 +167,8 @@ impl Engine {
         config.validate()?;
         let n = site.states().len();
         let reach = ReachTable::build(&site, config.reach_radius_m);
+        let rssi_weight = config.rssi_weight_for(&site);
+        let accuracy_scale = config.accuracy_scale_for(&site);
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,
             viterbi: ViterbiWindow::new(n, config.track_window_epochs),
@@ -176,6 +183,8 @@ impl Engine {
             listeners: Vec::new(),
             next_subscription: 0,
             stats: InputStats::default(),
+            rssi_weight,
+            accuracy_scale,
             config,
         })
     }
@@ -354,14 +363,17 @@ impl Engine {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
         self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
-        if let Some(gamma) = self.config.rssi_weight {
-            // Hoang eq. 14: p(o | s)^γ.
+        // Accepted from here on: the state changes.
+        let motion = self.motion_until(scan.timestamp_ns, motion);
+        // Hoang eq. 14: p(o | s)^γ, with the γ of an epoch with or without a movement
+        // likelihood to balance against.
+        let with_movement =
+            self.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some();
+        if let Some(gamma) = if with_movement { self.rssi_weight[0] } else { self.rssi_weight[1] } {
             for e in self.ln_emission.iter_mut() {
                 *e *= gamma;
             }
         }
-        // Accepted from here on: the state changes.
-        let motion = self.motion_until(scan.timestamp_ns, motion);
         self.stats.scans_accepted += 1;
         self.stats.readings_unknown += resolved.unknown as u64;
         self.stats.readings_duplicate += resolved.duplicates as u64;
@@ -388,8 +400,9 @@ impl Engine {
             floor_probability: e.floor_probability,
             x: e.position.x,
             y: e.position.y,
-            accuracy_m: e.accuracy_m,
-            accuracy_95_m: e.accuracy_95_m,
+            accuracy_m: e.accuracy_m * self.accuracy_scale[0],
+            accuracy_95_m: (e.accuracy_95_m * self.accuracy_scale[1])
+                .max(e.accuracy_m * self.accuracy_scale[0]),
             heading_rad: motion.heading_rad,
             heading_accuracy_rad: motion.heading_rad.map(|_| motion.heading_sigma_rad),
             motion_state: motion.motion_state,
@@ -483,16 +496,22 @@ impl Engine {
             region: hipe_region,
             ratio: hipe_ratio(config, motion, self.latest.as_ref()),
         };
+        let base_variance = config.hoang.movement_variance_m2
+            + if config.hoang.quantisation_variance { self.site.spacing_m().powi(2) / 6.0 } else { 0.0 };
+        let spread = match (config.hoang.measured_spread, motion.distance_m) {
+            (true, Some(d)) => (motion.distance_sigma_m.powi(2), (d * motion.heading_sigma_rad).powi(2)),
+            _ => (0.0, 0.0),
+        };
         let hoang = HoangTransition {
             site: &self.site,
             table: &self.reach,
             reach_m: speed_reach,
             ratio: ratio_max,
             movement_m: motion.displacement_m,
-            variance_m2: config.hoang.movement_variance_m2
-                + if config.hoang.quantisation_variance { self.site.spacing_m().powi(2) / 6.0 } else { 0.0 },
+            variance_m2: base_variance + spread.0,
+            across_variance_m2: base_variance + spread.1,
             mahalanobis_cap: config.hoang.mahalanobis_cap,
-            exponent: config.rssi_weight.map_or(1.0, |g| 1.0 - g),
+            exponent: self.rssi_weight[0].map_or(1.0, |g| 1.0 - g),
         };
         let transition: &dyn Transition = match config.transition {
             TransitionModel::Reach => &reach,

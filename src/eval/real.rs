@@ -8,7 +8,7 @@ use super::replay::{replay, MotionMask, ReplayOptions};
 use crate::engine::Engine;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::Scan;
-use crate::site::{North, Site};
+use crate::site::{Calibration, North, Site};
 use crate::survey::{positioned_scans, survey, SurveyFloor, SurveyOptions, SurveyReport};
 use crate::EngineConfig;
 use nalgebra::Point2;
@@ -358,10 +358,16 @@ pub struct EvalReport {
     pub configurations: BTreeMap<String, ConfigurationReport>,
     /// What the survey built.
     pub survey: SurveyReport,
+    /// What the survey calibrated (γ, radius factors, step length, north).
+    pub calibration: CalibrationReport,
+    /// Step counting × step length and heading against the test walks' waypoints.
+    pub pdr: super::pdr::PdrReport,
     /// Test walks replayed.
     pub test_walks: usize,
     /// States in the site.
     pub states: usize,
+    /// Wall-clock time of the whole evaluation, s.
+    pub seconds: f64,
 }
 
 /// One test walk's estimates per configuration, for plots.
@@ -404,13 +410,18 @@ pub fn evaluate_on(
     let longest =
         floors.iter().flat_map(|f| &f.test).map(|t| t.wifi_scans.len() * 2 + 64).max().unwrap_or(64);
     Engine::new(Arc::clone(site), engine_config.clone())?;
+    let wifi_only = SurveyOptions {
+        events: crate::io::ilc::EventOptions { beacons: false, ..options.survey.events },
+        ..options.survey.clone()
+    };
+    let wifi_only = &wifi_only;
     let knn = wanted("wifi-knn").then(|| {
         Knn::new(
             5,
             options.survey.build.fit.clip_dbm,
             floors.iter().enumerate().flat_map(|(f, floor)| {
                 floor.survey.iter().flat_map(move |w| {
-                    positioned_scans(w, &options.survey).into_iter().map(move |(p, s)| (f, p, s))
+                    positioned_scans(w, wifi_only).into_iter().map(move |(p, s)| (f, p, s))
                 })
             }),
         )
@@ -419,8 +430,9 @@ pub fn evaluate_on(
         floors.iter().enumerate().flat_map(|(f, floor)| floor.test.iter().map(move |t| (f, t))).collect();
     let run_walk = |&(floor, trace): &(usize, &Trace)| -> WalkResult {
         let mut result = WalkResult { floor, name: trace.name.clone(), ..WalkResult::default() };
+        // The single-scan baselines are WiFi fingerprinting, as their names say.
         let scans: Vec<Scan> = trace
-            .scans(&options.replay.events)
+            .scans(&wifi_only.events)
             .into_iter()
             .map(|mut s| {
                 s.readings.retain(|r| r.age_ns <= options.survey.max_reading_age_ns);
@@ -488,18 +500,7 @@ pub fn evaluate_on(
             }
             let Ok(mut engine) = Engine::new(Arc::clone(site), config) else { continue };
             let r = replay(&mut engine, trace, &ReplayOptions { mask, ..options.replay });
-            let live: Vec<Estimate> = r
-                .positions
-                .iter()
-                .map(|p| Estimate {
-                    timestamp_ns: p.timestamp_ns,
-                    floor: p.floor,
-                    x: p.x,
-                    y: p.y,
-                    accuracy_m: p.accuracy_m,
-                    accuracy_95_m: p.accuracy_95_m,
-                })
-                .collect();
+            let live = live_estimates(&r.positions);
             // Smoothed points carry the live radius of their epoch.
             let radius: HashMap<u64, (f64, f64)> =
                 live.iter().map(|e| (e.timestamp_ns, (e.accuracy_m, e.accuracy_95_m))).collect();
@@ -524,7 +525,12 @@ pub fn evaluate_on(
                     result.estimates.insert("viterbi-auto".into(), smoothed(&r.track));
                 }
                 if wanted("fixed-lag-auto") {
+                    // The last `lag` epochs get their estimate when the walk ends: from the
+                    // final track, as an app flushing at the end of a session would.
                     let mut lagged = smoothed(&r.fixed_lag);
+                    let last = lagged.last().map(|e| e.timestamp_ns);
+                    let tail = r.track.iter().filter(|p| !last.is_some_and(|l| p.timestamp_ns <= l));
+                    lagged.extend(smoothed(&tail.cloned().collect::<Vec<_>>()));
                     lagged.dedup_by_key(|e| e.timestamp_ns);
                     result.estimates.insert("fixed-lag-auto".into(), lagged);
                 }
@@ -536,33 +542,7 @@ pub fn evaluate_on(
         progress();
         result
     };
-    let threads = options.threads.max(1).min(jobs.len().max(1));
-    let results: Vec<WalkResult> = if threads == 1 {
-        jobs.iter().map(run_walk).collect()
-    } else {
-        let next = std::sync::atomic::AtomicUsize::new(0);
-        let mut slots: Vec<Option<WalkResult>> = vec![None; jobs.len()];
-        let done: Vec<(usize, WalkResult)> = std::thread::scope(|scope| {
-            let workers: Vec<_> = (0..threads)
-                .map(|_| {
-                    scope.spawn(|| {
-                        let mut mine = Vec::new();
-                        loop {
-                            let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                            let Some(job) = jobs.get(k) else { break };
-                            mine.push((k, run_walk(job)));
-                        }
-                        mine
-                    })
-                })
-                .collect();
-            workers.into_iter().flat_map(|w| w.join().unwrap_or_default()).collect()
-        });
-        for (k, r) in done {
-            slots[k] = Some(r);
-        }
-        slots.into_iter().flatten().collect()
-    };
+    let results: Vec<WalkResult> = parallel_map(&jobs, options.threads, run_walk);
     let mut reports = BTreeMap::new();
     for key in CONFIGURATIONS.iter().filter(|k| wanted(k)) {
         let mut pooled = Vec::new();
@@ -585,4 +565,213 @@ pub fn evaluate_on(
         );
     }
     Ok((reports, results))
+}
+
+/// `f` over `items` on `threads` worker threads, results in input order.
+fn parallel_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = threads.max(1).min(items.len().max(1));
+    if threads == 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut done: Vec<(usize, R)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(item) = items.get(k) else { break };
+                        mine.push((k, f(item)));
+                    }
+                    mine
+                })
+            })
+            .collect();
+        // A worker that panicked loses its share; the caller sees fewer results.
+        workers.into_iter().flat_map(|w| w.join().unwrap_or_default()).collect()
+    });
+    done.sort_by_key(|(k, _)| *k);
+    done.into_iter().map(|(_, r)| r).collect()
+}
+
+/// γ values the survey's cross-validation tries: log-spaced from eq. 3's 1 down to 0.01,
+/// towards the 0.003 Hoang §6.2 found by jackknife on field data.
+pub const GAMMA_GRID: [f64; 5] = [0.01, 0.03, 0.1, 0.3, 1.0];
+
+/// Folds of the survey's cross-validation: 4, so each site it builds keeps three quarters
+/// of the survey walks.
+pub const CALIBRATION_FOLDS: usize = 4;
+
+/// What the survey's calibration measured.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CalibrationReport {
+    /// Mean held-out error at each γ of [`GAMMA_GRID`], m (floor penalty included).
+    pub gamma_mean_error_m: Vec<(f64, f64)>,
+    /// The same with the motion withheld.
+    pub gamma_without_movement_mean_error_m: Vec<(f64, f64)>,
+    /// The γ chosen.
+    pub rssi_weight: Option<f64>,
+    /// The γ chosen for epochs without a movement likelihood.
+    pub rssi_weight_without_movement: Option<f64>,
+    /// The radius factors chosen (68%, 95%).
+    pub accuracy_scale: Option<[f64; 2]>,
+    /// Held-out epochs scored.
+    pub epochs: usize,
+    /// The step length and north fitted on the survey walks.
+    pub motion: Option<MotionSummary>,
+}
+
+/// The motion calibration, for reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MotionSummary {
+    /// The chosen step length model.
+    pub step_length: crate::sensors::StepLengthModel,
+    /// Site heading = magnetic azimuth + this, degrees.
+    pub heading_offset_deg: f64,
+    /// Walks used.
+    pub walks: usize,
+}
+
+/// Calibrates a site from its survey walks: the walkers' step length and the site's north
+/// (from waypoints and steps, [`crate::survey::calibrate_motion`]), then γ and the accuracy
+/// scales by [`CALIBRATION_FOLDS`]-fold cross-validation: a site surveyed without a fold's
+/// walks replays them with the engine as shipped at each γ of [`GAMMA_GRID`]; the γ of least
+/// mean error wins, and the radius factors are the 68th and 95th percentiles of error ÷
+/// radius at that γ. Test walks are never read.
+pub fn calibrate(
+    floors: &[FloorData],
+    options: &EvalOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(Calibration, North, CalibrationReport), EvalError> {
+    let mut report = CalibrationReport::default();
+    let all: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
+    let motion = crate::survey::calibrate_motion(&all, &options.engine.motion);
+    let north = motion.as_ref().map_or(options.north, |m| m.north());
+    let mut calibration =
+        Calibration { step_length: motion.as_ref().map(|m| m.step_length), ..Calibration::default() };
+    report.motion = motion.as_ref().map(|m| MotionSummary {
+        step_length: m.step_length,
+        heading_offset_deg: m.heading_offset_rad.to_degrees(),
+        walks: m.walks,
+    });
+    // Per γ: every held-out epoch, scored.
+    let mut per_gamma: Vec<Vec<Scored>> = vec![Vec::new(); GAMMA_GRID.len()];
+    let mut per_gamma_still: Vec<Vec<Scored>> = vec![Vec::new(); GAMMA_GRID.len()];
+    for fold in 0..CALIBRATION_FOLDS {
+        let in_fold = |i: usize| i % CALIBRATION_FOLDS == fold;
+        let training: Vec<FloorData> = floors
+            .iter()
+            .map(|f| FloorData {
+                survey: f
+                    .survey
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| !in_fold(*i))
+                    .map(|(_, t)| t.clone())
+                    .collect(),
+                test: Vec::new(),
+                ..f.clone()
+            })
+            .collect();
+        let held_out: Vec<(usize, &Trace)> = floors
+            .iter()
+            .enumerate()
+            .flat_map(|(k, f)| {
+                f.survey.iter().enumerate().filter(|(i, _)| in_fold(*i)).map(move |(_, t)| (k, t))
+            })
+            .collect();
+        if held_out.is_empty() || training.iter().all(|f| f.survey.is_empty()) {
+            continue;
+        }
+        let Ok((site, _)) = survey_site(&training, &EvalOptions { north, ..options.clone() }) else {
+            continue;
+        };
+        let site = Arc::new(site.with_calibration(calibration)?);
+        // Each γ with the motion as the sensors give it, and with the motion withheld.
+        let masks = [MotionMask::Auto, MotionMask::Speed];
+        let mut jobs: Vec<(usize, usize, usize, &Trace)> = Vec::new();
+        for g in 0..GAMMA_GRID.len() {
+            for m in 0..masks.len() {
+                jobs.extend(held_out.iter().map(|&(k, t)| (g, m, k, t)));
+            }
+        }
+        let scored = parallel_map(&jobs, options.threads, |&(g, m, floor, trace)| {
+            let config = EngineConfig {
+                rssi_weight: Some(GAMMA_GRID[g]),
+                max_reading_age_ns: options
+                    .engine
+                    .max_reading_age_ns
+                    .or(Some(options.survey.max_reading_age_ns)),
+                ..options.engine.clone()
+            };
+            let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else { return (g, m, Vec::new()) };
+            let r = replay(&mut engine, trace, &ReplayOptions { mask: masks[m], ..options.replay });
+            (g, m, score(trace, floor, &live_estimates(&r.positions)).0)
+        });
+        for (g, m, points) in scored {
+            if m == 0 {
+                per_gamma[g].extend(points);
+            } else {
+                per_gamma_still[g].extend(points);
+            }
+        }
+        progress();
+    }
+    let means = |per: &[Vec<Scored>]| -> Vec<(f64, f64)> {
+        GAMMA_GRID
+            .iter()
+            .zip(per)
+            .filter(|(_, p)| !p.is_empty())
+            .map(|(&g, p)| (g, p.iter().map(Scored::penalised_m).sum::<f64>() / p.len() as f64))
+            .collect()
+    };
+    report.gamma_mean_error_m = means(&per_gamma);
+    report.gamma_without_movement_mean_error_m = means(&per_gamma_still);
+    calibration.rssi_weight_without_movement =
+        report.gamma_without_movement_mean_error_m.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map(|&(g, _)| g);
+    if let Some(&(best, _)) = report.gamma_mean_error_m.iter().min_by(|a, b| a.1.total_cmp(&b.1)) {
+        let points = &per_gamma[GAMMA_GRID.iter().position(|&g| g == best).unwrap_or(0)];
+        let ratio = |q: f64, radius: fn(&Scored) -> f64| {
+            let mut r: Vec<f64> = points.iter().map(|p| p.error_m / radius(p).max(1e-9)).collect();
+            r.sort_by(f64::total_cmp);
+            quantile(&r, q)
+        };
+        let scale = [ratio(0.68, |p| p.accuracy_m), ratio(0.95, |p| p.accuracy_95_m)];
+        calibration.rssi_weight = Some(best);
+        if scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+            calibration.accuracy_scale = Some(scale);
+        }
+        report.epochs = points.len();
+    }
+    report.rssi_weight = calibration.rssi_weight;
+    report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
+    report.accuracy_scale = calibration.accuracy_scale;
+    Ok((calibration, north, report))
+}
+
+/// [`calibrate`], then the site from all survey walks with that calibration and north.
+pub fn survey_calibrated(
+    floors: &[FloorData],
+    options: &EvalOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(Site, SurveyReport, CalibrationReport), EvalError> {
+    let (calibration, north, report) = calibrate(floors, options, progress)?;
+    let (site, survey) = survey_site(floors, &EvalOptions { north, ..options.clone() })?;
+    Ok((site.with_calibration(calibration)?, survey, report))
+}
+
+/// The engine's live positions as estimates.
+fn live_estimates(positions: &[crate::Position]) -> Vec<Estimate> {
+    positions
+        .iter()
+        .map(|p| Estimate {
+            timestamp_ns: p.timestamp_ns,
+            floor: p.floor,
+            x: p.x,
+            y: p.y,
+            accuracy_m: p.accuracy_m,
+            accuracy_95_m: p.accuracy_95_m,
+        })
+        .collect()
 }

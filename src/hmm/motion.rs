@@ -145,8 +145,12 @@ pub struct HoangTransition<'a> {
     pub ratio: f64,
     /// The measured movement vector v_t in the site frame, m; `None`: no movement term.
     pub movement_m: Option<[f64; 2]>,
-    /// Σ_v = variance · I, m² (Hoang §6.1: 0.25 m²).
+    /// Σ_v along the measured movement, m² (Hoang §6.1: Σ_v = 0.25 m² · I).
     pub variance_m2: f64,
+    /// Σ_v across the measured movement, m²: equal to `variance_m2` for Hoang's isotropic Σ_v;
+    /// with measured spreads, along-track error comes from the step count and length,
+    /// across-track from the heading.
+    pub across_variance_m2: f64,
     /// Largest Mahalanobis distance taken at face value.
     pub mahalanobis_cap: f64,
     /// 1 - γ of eq. 14 (1 for eq. 3).
@@ -154,12 +158,27 @@ pub struct HoangTransition<'a> {
 }
 
 impl HoangTransition<'_> {
-    /// ln N(v; Δ, σ²I) with the capped Mahalanobis distance, times the exponent.
+    /// ln N(v; Δ, Σ_v) with the capped Mahalanobis distance, times the exponent.
     fn ln_movement(&self, delta: Vector2<f64>) -> f64 {
         let Some([vx, vy]) = self.movement_m else { return 0.0 };
-        let r2 = ((Vector2::new(vx, vy) - delta).norm_squared() / self.variance_m2)
-            .min(self.mahalanobis_cap * self.mahalanobis_cap);
-        self.exponent * (-0.5 * r2 - (std::f64::consts::TAU * self.variance_m2).ln())
+        let v = Vector2::new(vx, vy);
+        let residual = v - delta;
+        let r2 = match v.try_normalize(1e-9) {
+            Some(u) if self.across_variance_m2 != self.variance_m2 => {
+                let along = residual.dot(&u);
+                let across = residual.perp(&u);
+                along * along / self.variance_m2 + across * across / self.across_variance_m2
+            }
+            // No direction to be along: the larger spread both ways.
+            _ => residual.norm_squared() / self.variance_m2.max(self.across_variance_m2),
+        }
+        .min(self.mahalanobis_cap * self.mahalanobis_cap);
+        self.exponent * (-0.5 * r2 - self.ln_normaliser())
+    }
+
+    /// ln(2π √det Σ_v).
+    fn ln_normaliser(&self) -> f64 {
+        (std::f64::consts::TAU * (self.variance_m2 * self.across_variance_m2).sqrt()).ln()
     }
 }
 
@@ -181,9 +200,7 @@ impl Transition for HoangTransition<'_> {
             row.push((j, high * self.ln_movement(delta).exp()));
         }
         let cap = self.movement_m.map_or(0.0, |_| {
-            self.exponent
-                * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap
-                    - (std::f64::consts::TAU * self.variance_m2).ln())
+            self.exponent * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - self.ln_normaliser())
         });
         low * cap.exp()
     }
@@ -274,6 +291,7 @@ mod tests {
             ratio: 200_000.0,
             movement_m: Some([1.0, 0.0]),
             variance_m2: 0.25,
+            across_variance_m2: 0.25,
             mahalanobis_cap: 3.0,
             exponent: 1.0,
         };
@@ -292,6 +310,27 @@ mod tests {
             epsilon = 1e-12
         );
         assert_relative_eq!(floor, low / (std::f64::consts::TAU * 0.25) * (-4.5f64).exp(), epsilon = 1e-15);
+    }
+
+    #[test]
+    fn anisotropic_movement_spread_is_along_and_across_the_movement() {
+        let site = grid();
+        let table = ReachTable::build(&site, 9.0);
+        let t = HoangTransition {
+            site: &site,
+            table: &table,
+            reach_m: 4.5,
+            ratio: 200_000.0,
+            movement_m: Some([1.0, 0.0]),
+            variance_m2: 1.0,
+            across_variance_m2: 0.25,
+            mahalanobis_cap: 10.0,
+            exponent: 1.0,
+        };
+        // 1 m short along the movement (staying put): 1σ along; 1 m beside the target: 2σ across.
+        let normaliser = std::f64::consts::TAU * (1.0f64 * 0.25).sqrt();
+        assert_relative_eq!(t.ln_movement(Vector2::new(0.0, 0.0)), -0.5 - normaliser.ln(), epsilon = 1e-12);
+        assert_relative_eq!(t.ln_movement(Vector2::new(1.0, 1.0)), -2.0 - normaliser.ln(), epsilon = 1e-12);
     }
 
     #[test]

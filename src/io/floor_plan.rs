@@ -204,11 +204,19 @@ impl FloorPlan {
 
     /// Whether the straight line `a`–`b` crosses a wall: the outline's or a room's edge.
     pub fn crosses_wall(&self, a: Point2<f64>, b: Point2<f64>) -> bool {
-        self.outline
+        self.crosses_wall_except(a, b, &[])
+    }
+
+    /// [`crosses_wall`](Self::crosses_wall) ignoring the rooms whose indices are in `open`
+    /// (sorted): areas known to be walked through, whose plan outline is not a wall.
+    pub fn crosses_wall_except(&self, a: Point2<f64>, b: Point2<f64>, open: &[usize]) -> bool {
+        let rooms = self
+            .rooms
             .iter()
-            .chain(self.rooms.iter().map(|r| &r.polygon))
-            .flat_map(Polygon::edges)
-            .any(|(c, d)| segments_cross(a, b, c, d))
+            .enumerate()
+            .filter(|(i, _)| open.binary_search(i).is_err())
+            .map(|(_, r)| &r.polygon);
+        self.outline.iter().chain(rooms).flat_map(Polygon::edges).any(|(c, d)| segments_cross(a, b, c, d))
     }
 }
 

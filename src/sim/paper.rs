@@ -147,7 +147,12 @@ pub fn run_papers(experiment: &PaperExperiment) -> Result<PaperReport, Error> {
     let surveyed = Arc::new(office_em.site.clone());
     let pseudo = Arc::new(office_em.site.with_pseudo_states(PSEUDO_SPACING_M));
     let naive = Arc::new(office_naive.site.clone());
-    let with = |transition| EngineConfig { transition, ..EngineConfig::default() };
+    // Hoang's fixed Σ_v, as the paper simulates it.
+    let with = |transition| {
+        let mut config = EngineConfig { transition, ..EngineConfig::default() };
+        config.hoang.measured_spread = false;
+        config
+    };
     let methods = [
         Method {
             name: "rssi_only",

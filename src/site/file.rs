@@ -1,7 +1,7 @@
 //! Site file v1: serde JSON with a `format_version`. Loading checks everything an engine relies
 //! on and names what is wrong and where; it never panics.
 
-use super::{Edge, Floor, North, Site, State, StateKind};
+use super::{Calibration, Edge, Floor, North, Site, State, StateKind};
 use crate::radio::{Gaussian, RadioMap, RssiModel, TransmitterId};
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
@@ -74,6 +74,8 @@ struct SiteFile {
     states: Vec<StateFile>,
     #[serde(default)]
     edges: Vec<EdgeFile>,
+    #[serde(default, skip_serializing_if = "Calibration::is_empty")]
+    calibration: Calibration,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -242,6 +244,7 @@ impl Site {
                     EdgeFile { from: a.id, to: b.id, length_m: (!straight).then_some(e.length_m) }
                 })
                 .collect(),
+            calibration: self.calibration,
         };
         serde_json::to_string(&file).expect("a site serialises: every float in it is finite")
     }
@@ -351,7 +354,7 @@ impl Site {
         if !(file.north.site_rotation_rad.is_finite() && file.north.declination_rad.is_finite()) {
             return Err(invalid("north", "angles must be finite"));
         }
-        Ok(Site::from_parts(file.name, floors, states, edges, map, file.north))
+        Site::from_parts(file.name, floors, states, edges, map, file.north).with_calibration(file.calibration)
     }
 }
 

@@ -74,6 +74,60 @@ pub struct Edge {
     pub length_m: f64,
 }
 
+/// What the survey measured about how this site's radio and walkers behave, applied by
+/// engines unless their configuration says otherwise (see
+/// [`EngineConfig::site_calibration`](crate::EngineConfig::site_calibration)). Every field is
+/// optional: a hand-made site file has none.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Calibration {
+    /// γ of Hoang eq. 14 in epochs with a movement likelihood (steps and heading), chosen by
+    /// cross-validation on the survey walks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rssi_weight: Option<f64>,
+    /// γ in epochs without one (the radio then only competes with the reachability prior),
+    /// chosen the same way with the motion withheld.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rssi_weight_without_movement: Option<f64>,
+    /// Factors on the posterior's 68% and 95% radii so that, on held-out survey walks, the
+    /// circles held the truth 68% and 95% of the time.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub accuracy_scale: Option<[f64; 2]>,
+    /// The surveyors' step length model, fitted on the survey walks.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub step_length: Option<crate::sensors::StepLengthModel>,
+}
+
+impl Calibration {
+    /// Whether nothing is calibrated.
+    pub fn is_empty(&self) -> bool {
+        *self == Calibration::default()
+    }
+
+    /// The first invalid field, as (path, message).
+    pub fn check(&self) -> Result<(), (String, String)> {
+        for (name, gamma) in [
+            ("rssi_weight", self.rssi_weight),
+            ("rssi_weight_without_movement", self.rssi_weight_without_movement),
+        ] {
+            if let Some(g) = gamma {
+                if !(g > 0.0 && g <= 1.0) {
+                    return Err((format!("calibration.{name}"), format!("must be in (0, 1], got {g}")));
+                }
+            }
+        }
+        if let Some(scale) = self.accuracy_scale {
+            if !scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+                return Err((
+                    "calibration.accuracy_scale".into(),
+                    format!("must be finite and > 0, got {scale:?}"),
+                ));
+            }
+        }
+        Ok(())
+    }
+}
+
 /// A validated site, ready for engines. Immutable; share it with `Arc`.
 #[derive(Clone, Debug)]
 pub struct Site {
@@ -87,6 +141,7 @@ pub struct Site {
     radio: RadioMap,
     north: North,
     spacing_m: f64,
+    calibration: Calibration,
 }
 
 impl Site {
@@ -119,7 +174,18 @@ impl Site {
             fill[e.b as usize] += 1;
         }
         let spacing_m = median_edge_length(&edges);
-        Self { name, floors, states, edges, adjacency_starts, adjacency, radio, north, spacing_m }
+        Self {
+            name,
+            floors,
+            states,
+            edges,
+            adjacency_starts,
+            adjacency,
+            radio,
+            north,
+            spacing_m,
+            calibration: Calibration::default(),
+        }
     }
 
     /// The site's name.
@@ -155,6 +221,24 @@ impl Site {
     /// The site frame's orientation on the Earth.
     pub fn north(&self) -> North {
         self.north
+    }
+
+    /// What the survey calibrated.
+    pub fn calibration(&self) -> &Calibration {
+        &self.calibration
+    }
+
+    /// The site with `calibration`; `Err((path, message))` if a value is out of range.
+    pub fn with_calibration(mut self, calibration: Calibration) -> Result<Site, SiteError> {
+        calibration.check().map_err(|(path, message)| SiteError::Invalid { path, message })?;
+        self.calibration = calibration;
+        Ok(self)
+    }
+
+    /// The site with `north`.
+    pub fn with_north(mut self, north: North) -> Site {
+        self.north = north;
+        self
     }
 
     /// Typical distance between neighbouring states (median edge length), m: the size of the

@@ -83,7 +83,10 @@ impl Site {
             triples,
         )
         .expect("pseudo states add valid, distinct (state, transmitter) pairs to a valid map");
-        Site::from_parts(self.name.clone(), self.floors.clone(), states, edges, map, self.north)
+        let mut site =
+            Site::from_parts(self.name.clone(), self.floors.clone(), states, edges, map, self.north);
+        site.calibration = self.calibration;
+        site
     }
 }
 

@@ -75,6 +75,15 @@ pub struct EvalArgs {
     /// Smallest σ a fitted fingerprint may have, dB.
     #[arg(long)]
     min_std_db: Option<f64>,
+    /// Lag of the fixed-lag estimate, epochs.
+    #[arg(long)]
+    fixed_lag: Option<usize>,
+    /// Ignore the floor plans' walls (the walkable graph then comes from the walks alone).
+    #[arg(long)]
+    no_plan: bool,
+    /// Leave BLE beacons out (survey and replay).
+    #[arg(long)]
+    no_beacons: bool,
     /// Largest σ a fitted fingerprint may have, dB.
     #[arg(long)]
     max_std_db: Option<f64>,
@@ -191,12 +200,24 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
+fn progress_bar(hidden: bool, len: u64, message: &'static str) -> ProgressBar {
+    let bar = if hidden { ProgressBar::hidden() } else { ProgressBar::new(len) };
+    bar.set_style(
+        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len}, {elapsed}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar()),
+    );
+    bar.set_message(message);
+    bar
+}
+
 pub fn eval(args: &EvalArgs) -> ExitCode {
     let started = Instant::now();
     let floors = match load_floors(&args.floors, args.max_walks) {
         Ok(f) => f,
         Err(e) => return fail("eval", e),
     };
+    let floors: Vec<FloorData> =
+        floors.into_iter().map(|f| if args.no_plan { FloorData { plan: None, ..f } } else { f }).collect();
     let mut options = EvalOptions { configurations: args.configurations.clone(), ..EvalOptions::default() };
     if let Some(unknown) = options.configurations.iter().find(|c| !CONFIGURATIONS.contains(&c.as_str())) {
         return fail(
@@ -215,6 +236,13 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     if let Some(v) = args.min_std_db {
         options.survey.build.fit.min_std_db = v;
     }
+    if let Some(lag) = args.fixed_lag {
+        options.engine.fixed_lag_epochs = lag;
+    }
+    if args.no_beacons {
+        options.survey.events.beacons = false;
+        options.replay.events.beacons = false;
+    }
     if let Some(v) = args.max_std_db {
         options.survey.build.fit.max_std_db = v;
     }
@@ -225,26 +253,32 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         options.threads = t;
     }
     let loaded_s = started.elapsed().as_secs_f64();
-    let (site, survey) = match evaluation::survey_site(&floors, &options) {
+    let bar = progress_bar(args.json, evaluation::CALIBRATION_FOLDS as u64, "calibrating (folds)");
+    let (site, survey, calibration) = match evaluation::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
         Ok(s) => s,
         Err(e) => return fail("eval", e),
     };
+    bar.finish_and_clear();
     let surveyed_s = started.elapsed().as_secs_f64();
     let site = Arc::new(site);
     let walks: usize = floors.iter().map(|f| f.test.len()).sum();
-    let bar = if args.json { ProgressBar::hidden() } else { ProgressBar::new(walks as u64) };
-    bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len} test walks, {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar.set_message("replaying");
+    let bar = progress_bar(args.json, walks as u64, "replaying test walks");
     let (configurations, _results) = match evaluation::evaluate_on(&site, &floors, &options, &|| bar.inc(1)) {
         Ok(r) => r,
         Err(e) => return fail("eval", e),
     };
     bar.finish_and_clear();
-    let report =
-        evaluation::EvalReport { configurations, survey, test_walks: walks, states: site.states().len() };
+    let test: Vec<&Trace> = floors.iter().flat_map(|f| &f.test).collect();
+    let pdr = waymark::eval::pdr::evaluate_pdr(&test, &options.engine.motion_for(&site));
+    let report = evaluation::EvalReport {
+        configurations,
+        survey,
+        calibration,
+        pdr,
+        test_walks: walks,
+        states: site.states().len(),
+        seconds: started.elapsed().as_secs_f64(),
+    };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
     } else {
