@@ -494,7 +494,15 @@ impl Engine {
             site: &self.site,
             table: &self.reach,
             region: hipe_region,
-            ratio: hipe_ratio(config, motion, self.latest.as_ref()),
+            // Under Hoang's model the regions only stand in for a missing distance or
+            // heading, with the same floor K as its other epochs. HIPE's adaptive K reaches
+            // down to 200, which on a multi-floor site of thousands of states leaks most of
+            // the mass everywhere each epoch (measured: `waymark eval` on the five floors lost
+            // the floor in 6-7% of such epochs).
+            ratio: match config.transition {
+                TransitionModel::Hoang => ratio_max,
+                _ => hipe_ratio(config, motion, self.latest.as_ref()),
+            },
         };
         let base_variance = config.hoang.movement_variance_m2
             + if config.hoang.quantisation_variance { self.site.spacing_m().powi(2) / 6.0 } else { 0.0 };

@@ -172,6 +172,10 @@ typedef struct {
    */
   double accuracy_m;
   /**
+   * Radius of the 95% circle, m.
+   */
+  double accuracy_95_m;
+  /**
    * Direction of travel, degrees clockwise from the site's +y axis; NaN when unknown.
    */
   double heading_deg;

@@ -117,6 +117,8 @@ pub struct waymark_position {
     pub floor_probability: f64,
     /// Radius of the 68% circle, m.
     pub accuracy_m: f64,
+    /// Radius of the 95% circle, m.
+    pub accuracy_95_m: f64,
     /// Direction of travel, degrees clockwise from the site's +y axis; NaN when unknown.
     pub heading_deg: f64,
     /// One standard deviation of the heading, degrees; NaN when unknown.
@@ -159,6 +161,7 @@ fn convert(p: &Position) -> waymark_position {
         floor: p.floor as u32,
         floor_probability: p.floor_probability,
         accuracy_m: p.accuracy_m,
+        accuracy_95_m: p.accuracy_95_m,
         heading_deg: p.heading_rad.map_or(f64::NAN, f64::to_degrees),
         heading_accuracy_deg: p.heading_accuracy_rad.map_or(f64::NAN, f64::to_degrees),
         motion_state: match p.motion_state {

@@ -233,6 +233,8 @@ pub struct PositionEstimate {
     /// Radius of the 68% circle, m, as Android's `getAccuracy()` and iOS's
     /// `horizontalAccuracy`.
     pub accuracy_m: f64,
+    /// Radius of the 95% circle, m.
+    pub accuracy_95_m: f64,
     /// Direction of travel, degrees clockwise from the site's +y axis, when known.
     pub heading_deg: Option<f64>,
     /// One standard deviation of the heading, degrees.
@@ -348,6 +350,7 @@ fn estimate(p: &engine::Position, floor_names: &[String]) -> PositionEstimate {
         floor_name: floor_names.get(p.floor).cloned().unwrap_or_default(),
         floor_probability: p.floor_probability,
         accuracy_m: p.accuracy_m,
+        accuracy_95_m: p.accuracy_95_m,
         heading_deg: p.heading_rad.map(f64::to_degrees),
         heading_accuracy_deg: p.heading_accuracy_rad.map(f64::to_degrees),
         motion_state: motion_state(p.motion_state),

@@ -70,8 +70,7 @@ impl SiteBuilder {
             .collect();
         let index: BTreeMap<&TransmitterId, u32> =
             ids.iter().enumerate().map(|(i, id)| (id, i as u32)).collect();
-        let mut triples = Vec::new();
-        for (s, (_, scans)) in self.states.iter().enumerate() {
+        let fit_state = |s: usize, scans: &[TrainingScan]| -> Vec<(u32, u32, Gaussian)> {
             let mut samples: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
             for (k, scan) in scans.iter().enumerate() {
                 for r in scan.readings.iter().filter(|r| r.rssi_dbm.is_finite()) {
@@ -81,12 +80,39 @@ impl SiteBuilder {
                     column[k] = column[k].max(r.rssi_dbm.max(clip));
                 }
             }
-            for (tx, column) in samples {
-                if let Some(g) = options.model.fit(&column, &options.fit) {
-                    triples.push((s as u32, tx, g));
-                }
-            }
-        }
+            samples
+                .into_iter()
+                .filter_map(|(tx, column)| {
+                    options.model.fit(&column, &options.fit).map(|g| (s as u32, tx, g))
+                })
+                .collect()
+        };
+        // States fit independently: one chunk per core (a building's survey is thousands of
+        // states with hundreds of transmitters each).
+        let threads =
+            std::thread::available_parallelism().map_or(1, |n| n.get()).min(self.states.len().max(1));
+        let chunk = self.states.len().div_ceil(threads);
+        let triples: Vec<(u32, u32, Gaussian)> = std::thread::scope(|scope| {
+            let workers: Vec<_> = self
+                .states
+                .chunks(chunk)
+                .enumerate()
+                .map(|(c, states)| {
+                    let fit_state = &fit_state;
+                    scope.spawn(move || {
+                        states
+                            .iter()
+                            .enumerate()
+                            .flat_map(|(k, (_, scans))| fit_state(c * chunk + k, scans))
+                            .collect::<Vec<_>>()
+                    })
+                })
+                .collect();
+            workers
+                .into_iter()
+                .flat_map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                .collect()
+        });
         let average_std = if triples.is_empty() {
             options.fit.min_std_db
         } else {

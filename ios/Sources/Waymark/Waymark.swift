@@ -1874,6 +1874,10 @@ public struct PositionEstimate: Equatable, Hashable {
      */
     public var accuracyM: Double
     /**
+     * Radius of the 95% circle, m.
+     */
+    public var accuracy95M: Double
+    /**
      * Direction of travel, degrees clockwise from the site's +y axis, when known.
      */
     public var headingDeg: Double?
@@ -1920,6 +1924,9 @@ public struct PositionEstimate: Equatable, Hashable {
          * `horizontalAccuracy`.
          */accuracyM: Double, 
         /**
+         * Radius of the 95% circle, m.
+         */accuracy95M: Double, 
+        /**
          * Direction of travel, degrees clockwise from the site's +y axis, when known.
          */headingDeg: Double?, 
         /**
@@ -1941,6 +1948,7 @@ public struct PositionEstimate: Equatable, Hashable {
         self.floorName = floorName
         self.floorProbability = floorProbability
         self.accuracyM = accuracyM
+        self.accuracy95M = accuracy95M
         self.headingDeg = headingDeg
         self.headingAccuracyDeg = headingAccuracyDeg
         self.motionState = motionState
@@ -1971,6 +1979,7 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
                 floorName: FfiConverterString.read(from: &buf), 
                 floorProbability: FfiConverterDouble.read(from: &buf), 
                 accuracyM: FfiConverterDouble.read(from: &buf), 
+                accuracy95M: FfiConverterDouble.read(from: &buf), 
                 headingDeg: FfiConverterOptionDouble.read(from: &buf), 
                 headingAccuracyDeg: FfiConverterOptionDouble.read(from: &buf), 
                 motionState: FfiConverterTypeMotionState.read(from: &buf), 
@@ -1987,6 +1996,7 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
         FfiConverterString.write(value.floorName, into: &buf)
         FfiConverterDouble.write(value.floorProbability, into: &buf)
         FfiConverterDouble.write(value.accuracyM, into: &buf)
+        FfiConverterDouble.write(value.accuracy95M, into: &buf)
         FfiConverterOptionDouble.write(value.headingDeg, into: &buf)
         FfiConverterOptionDouble.write(value.headingAccuracyDeg, into: &buf)
         FfiConverterTypeMotionState.write(value.motionState, into: &buf)

@@ -75,6 +75,10 @@ pub struct EvalArgs {
     /// Smallest σ a fitted fingerprint may have, dB.
     #[arg(long)]
     min_std_db: Option<f64>,
+    /// Replay as a foreground app under Android 9+'s scan throttling: at most one scan every
+    /// 30 s (4 per 2 minutes) reaches the engine; timer epochs carry the motion between.
+    #[arg(long)]
+    throttle: bool,
     /// Lag of the fixed-lag estimate, epochs.
     #[arg(long)]
     fixed_lag: Option<usize>,
@@ -112,10 +116,12 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         })
         .collect();
     let options = EvalOptions::default();
-    let (site, report) = match evaluation::survey_site(&floors, &options) {
+    let bar = progress_bar(false, evaluation::CALIBRATION_FOLDS as u64, "calibrating (folds)");
+    let (site, report, calibration) = match evaluation::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
         Ok(s) => s,
         Err(e) => return fail("survey", e),
     };
+    bar.finish_and_clear();
     if let Err(e) = std::fs::write(&args.out, site.to_json()) {
         return fail("survey", format!("cannot write {}: {e}", args.out.display()));
     }
@@ -125,6 +131,14 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
             f.name, f.walks, f.scans, f.states, f.edges, f.walked_edges
         );
     }
+    println!(
+        "calibrated: γ {:?} (without movement {:?}), accuracy scales {:?}, step length {:?}, heading offset {:.1}°",
+        calibration.rssi_weight,
+        calibration.rssi_weight_without_movement,
+        calibration.accuracy_scale,
+        calibration.motion.as_ref().map(|m| m.step_length),
+        calibration.motion.as_ref().map_or(0.0, |m| m.heading_offset_deg)
+    );
     println!("{} transmitters; site written to {}", report.transmitters, args.out.display());
     ExitCode::SUCCESS
 }
@@ -236,6 +250,9 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     if let Some(v) = args.min_std_db {
         options.survey.build.fit.min_std_db = v;
     }
+    if args.throttle {
+        options.replay.min_scan_interval_ns = Some(30_000_000_000);
+    }
     if let Some(lag) = args.fixed_lag {
         options.engine.fixed_lag_epochs = lag;
     }
@@ -263,11 +280,16 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     let site = Arc::new(site);
     let walks: usize = floors.iter().map(|f| f.test.len()).sum();
     let bar = progress_bar(args.json, walks as u64, "replaying test walks");
-    let (configurations, _results) = match evaluation::evaluate_on(&site, &floors, &options, &|| bar.inc(1)) {
+    let (configurations, results) = match evaluation::evaluate_on(&site, &floors, &options, &|| bar.inc(1)) {
         Ok(r) => r,
         Err(e) => return fail("eval", e),
     };
     bar.finish_and_clear();
+    if let Some(dir) = &args.plot {
+        if let Err(e) = plot(dir, &floors, &results) {
+            return fail("eval", e);
+        }
+    }
     let test: Vec<&Trace> = floors.iter().flat_map(|f| &f.test).collect();
     let pdr = waymark::eval::pdr::evaluate_pdr(&test, &options.engine.motion_for(&site));
     let report = evaluation::EvalReport {
@@ -312,4 +334,40 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         }
     }
     ExitCode::SUCCESS
+}
+
+/// One SVG per test walk (plan, truth, the live, Viterbi and k-NN tracks) and the pooled error
+/// CDF of every configuration.
+fn plot(
+    dir: &std::path::Path,
+    floors: &[FloorData],
+    results: &[evaluation::WalkResult],
+) -> Result<(), String> {
+    use waymark::eval::plot::{plot_cdf, plot_walk, Track};
+    std::fs::create_dir_all(dir).map_err(|e| format!("cannot create {}: {e}", dir.display()))?;
+    let tests: Vec<(usize, &Trace)> =
+        floors.iter().enumerate().flat_map(|(f, floor)| floor.test.iter().map(move |t| (f, t))).collect();
+    let mut errors: std::collections::BTreeMap<&str, Vec<f64>> = std::collections::BTreeMap::new();
+    for (result, &(f, trace)) in results.iter().zip(&tests) {
+        let truth: Vec<(f64, f64)> = trace.waypoints.iter().map(|w| (w.x, w.y)).collect();
+        let shown = ["forward-auto", "viterbi-auto", "wifi-knn"];
+        let points: Vec<(&str, Vec<(f64, f64)>)> = shown
+            .iter()
+            .filter_map(|key| {
+                result.estimates.get(*key).map(|e| (*key, e.iter().map(|p| (p.x, p.y)).collect()))
+            })
+            .collect();
+        let tracks: Vec<Track> = points.iter().map(|(label, p)| Track { label, points: p }).collect();
+        let title = format!("{} {} ({:.0} m)", floors[f].name, trace.name, trace.path_length_m());
+        let path = dir.join(format!("{}-{}.svg", floors[f].name, trace.name));
+        plot_walk(&path, &title, floors[f].plan.as_ref(), &truth, &tracks).map_err(|e| e.to_string())?;
+        for (key, estimates) in &result.estimates {
+            let (epochs, _) = evaluation::score(trace, f, estimates);
+            errors.entry(key).or_default().extend(epochs.iter().map(|s| s.penalised_m()));
+        }
+    }
+    let curves: Vec<(&str, &[f64])> = errors.iter().map(|(k, v)| (*k, v.as_slice())).collect();
+    plot_cdf(&dir.join("error-cdf.svg"), "Error CDF, all test walks", &curves).map_err(|e| e.to_string())?;
+    eprintln!("{} walk plots and error-cdf.svg written to {}", results.len(), dir.display());
+    Ok(())
 }

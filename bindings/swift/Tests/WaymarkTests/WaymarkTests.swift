@@ -118,6 +118,7 @@ final class WaymarkTests: XCTestCase {
                 XCTAssertEqual(p.timestampNs, epoch.timestampNs)
                 XCTAssertEqual(p.floorName, "office")
                 XCTAssertGreaterThan(p.accuracyM, 0)
+                XCTAssertGreaterThanOrEqual(p.accuracy95M, p.accuracyM)
                 errors.append(hypot(p.x - epoch.truth[0], p.y - epoch.truth[1]))
             } catch PositioningError.InputRejected {
                 // A scan with no known transmitter: the engine goes on.
@@ -287,7 +288,7 @@ final class WaymarkTests: XCTestCase {
     func testGeoOrigin() throws {
         func at(_ x: Double, _ y: Double, _ heading: Double?) -> PositionEstimate {
             PositionEstimate(timestampNs: 1, x: x, y: y, floor: 0, floorName: "G", floorProbability: 1,
-                             accuracyM: 2.5, headingDeg: heading, headingAccuracyDeg: heading.map { _ in 5 },
+                             accuracyM: 2.5, accuracy95M: 5.0, headingDeg: heading, headingAccuracyDeg: heading.map { _ in 5 },
                              motionState: .walking, scenario: .distanceHeading, steps: 2)
         }
         let origin = GeoOrigin(latitudeDeg: 60, longitudeDeg: 24, siteRotationDeg: 0)

@@ -35,7 +35,7 @@ class ConversionsTest {
 
 class GeoConversionsTest {
     private fun position(x: Double, y: Double, heading: Double?) = PositionEstimate(
-        timestampNs = 1UL, x = x, y = y, floor = 0U, floorName = "G", floorProbability = 1.0, accuracyM = 2.5,
+        timestampNs = 1UL, x = x, y = y, floor = 0U, floorName = "G", floorProbability = 1.0, accuracyM = 2.5, accuracy95M = 5.0,
         headingDeg = heading, headingAccuracyDeg = heading?.let { 5.0 }, motionState = MotionState.WALKING,
         scenario = MotionScenario.DISTANCE_HEADING, steps = 2U,
     )

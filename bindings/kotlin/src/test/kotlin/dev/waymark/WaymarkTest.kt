@@ -132,6 +132,7 @@ class WaymarkTest {
                 errors.add(hypot(p.x - epoch.truthX, p.y - epoch.truthY))
                 assertEquals("office", p.floorName)
                 assertTrue(p.accuracyM > 0.0)
+                assertTrue(p.accuracy95M >= p.accuracyM)
             }
             assertTrue("most scans are accepted", errors.size > walk.size / 2)
             assertEquals("one position per accepted scan", errors.size, counter.positions.get())

@@ -1,0 +1,67 @@
+//! The recorded-data pipeline on a slice of the competition data in `../shared/data`: read,
+//! survey with calibration, replay, score. Skips, saying so, when the data is not there.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use waymark::eval::real::{self, EvalOptions, FloorData};
+use waymark::Site;
+
+/// F1 unpacked under `target/`, or `None` (with a message) without the archive or `tar`.
+fn floor_dir() -> Option<PathBuf> {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    let unpacked = root.join("target/ilc/site1/F1");
+    if unpacked.join("path_data_files").is_dir() {
+        return Some(unpacked);
+    }
+    let archive = root.join("../shared/data/ilc20-site1/F1.tar.xz");
+    if !archive.is_file() {
+        eprintln!("skipping: {} not found", archive.display());
+        return None;
+    }
+    let into = root.join("target/ilc");
+    std::fs::create_dir_all(&into).ok()?;
+    let status = std::process::Command::new("tar").arg("-xJf").arg(&archive).arg("-C").arg(&into).status();
+    match status {
+        Ok(s) if s.success() => Some(unpacked),
+        _ => {
+            eprintln!("skipping: could not unpack {}", archive.display());
+            None
+        }
+    }
+}
+
+#[test]
+fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
+    let Some(dir) = floor_dir() else { return };
+    // The first 15 walk files: 12 survey walks, 3 test walks.
+    let floor = FloorData::load(&dir, Some(15)).expect("the floor reads");
+    assert_eq!((floor.survey.len(), floor.test.len()), (12, 3));
+    assert!(floor.plan.is_some(), "F1 has a plan");
+    let cached: usize = floor.survey.iter().map(|t| t.stats.cached_wifi).sum();
+    assert!(cached > 0, "Android re-reports cached access points: the reader keeps their age");
+
+    let options = EvalOptions { configurations: vec![], ..EvalOptions::default() };
+    let floors = vec![floor];
+    let (site, survey, calibration) = real::survey_calibrated(&floors, &options, &|| {}).expect("survey");
+    assert!(survey.floors[0].states > 50, "{survey:?}");
+    let gamma = calibration.rssi_weight.expect("γ calibrated");
+    assert!(real::GAMMA_GRID.contains(&gamma));
+    let scale = calibration.accuracy_scale.expect("radii calibrated");
+    assert!(scale.iter().all(|s| s.is_finite() && *s > 0.0));
+    assert!(calibration.motion.is_some(), "step length and north fitted");
+
+    // The calibrated site survives its file format.
+    let site = Arc::new(Site::from_json(site.to_json().as_bytes()).expect("reloads"));
+    assert_eq!(site.calibration().rssi_weight, Some(gamma));
+
+    let (reports, walks) = real::evaluate_on(&site, &floors, &options, &|| {}).expect("replays");
+    assert_eq!(walks.len(), 3);
+    for key in real::CONFIGURATIONS {
+        let m = &reports[key].pooled;
+        assert!(m.epochs > 0, "{key} scored nothing");
+        assert!(m.mean_m.is_finite() && m.mean_m < 40.0, "{key}: {m:?}");
+        assert_eq!(m.floor_hit, 1.0, "one floor: {key}");
+    }
+    // The fused engine beats a single scan on average even on this small survey.
+    assert!(reports["forward-auto"].pooled.mean_m < reports["wifi-mle"].pooled.mean_m + 1.0);
+}
