@@ -86,7 +86,7 @@ static void walk(const char *site_path, const char *walk_path) {
             positions++;
             error_sum += hypot(p.x - tx, p.y - ty);
             CHECK(p.accuracy_m > 0 && isfinite(p.x) && isfinite(p.y), "finite position");
-            CHECK(p.accuracy_95_m >= p.accuracy_m, "95% circle at least the 68% one");
+            CHECK(p.accuracy_95_m >= p.accuracy_m, "the 95 percent circle holds the 68 percent one");
         } else {
             CHECK(r == WAYMARK_RESULT_INPUT_REJECTED, "scan result %d", (int)r);
         }
