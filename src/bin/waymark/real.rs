@@ -79,6 +79,9 @@ pub struct EvalArgs {
     /// 30 s (4 per 2 minutes) reaches the engine; timer epochs carry the motion between.
     #[arg(long)]
     throttle: bool,
+    /// M of Hoang eq. 4: the most likely states averaged into the estimate.
+    #[arg(long)]
+    top_m: Option<usize>,
     /// Lag of the fixed-lag estimate, epochs.
     #[arg(long)]
     fixed_lag: Option<usize>,
@@ -252,6 +255,9 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     }
     if args.throttle {
         options.replay.min_scan_interval_ns = Some(30_000_000_000);
+    }
+    if let Some(m) = args.top_m {
+        options.engine.estimate_states = m;
     }
     if let Some(lag) = args.fixed_lag {
         options.engine.fixed_lag_epochs = lag;
