@@ -132,7 +132,8 @@ pub struct EngineConfig {
     /// --seed S` over seeds 1-5 (not the demo's seed 0): 1.363 / 1.146 / 1.125 / 1.121 /
     /// 1.121 m for M = 1 / 2 / 3 / 5 / 8. Fused on the pseudo-state grid, `waymark demo --json
     /// --walks 30 --top-m M --seed S` over seeds 1-3: 0.506 / 0.484 / 0.495 / 0.513 m for
-    /// M = 1 / 3 / 5 / 8.
+    /// M = 1 / 3 / 5 / 8; re-measured after Σ_v gained the tracker's spreads
+    /// (`HoangConfig::measured_spread`): 0.505 / 0.479 / 0.489 / 0.505 m.
     pub estimate_states: usize,
     /// Radius of the precomputed walking-distance table, m. A larger reach (a long gap between
     /// scans) is covered by several passes of the table. Default: the reach of two of Hoang's
