@@ -351,6 +351,17 @@ impl Default for EvalOptions {
     }
 }
 
+impl EvalOptions {
+    /// The engine's configuration: `engine`, with the survey's reading-age limit unless it
+    /// sets its own, so stale readings mean the same at survey and replay time.
+    pub fn engine_config(&self) -> EngineConfig {
+        EngineConfig {
+            max_reading_age_ns: self.engine.max_reading_age_ns.or(Some(self.survey.max_reading_age_ns)),
+            ..self.engine.clone()
+        }
+    }
+}
+
 /// What `waymark eval` prints.
 #[derive(Clone, Debug, Serialize)]
 pub struct EvalReport {
@@ -403,9 +414,7 @@ pub fn evaluate_on(
 ) -> Result<(BTreeMap<String, ConfigurationReport>, Vec<WalkResult>), EvalError> {
     let wanted =
         |key: &str| options.configurations.is_empty() || options.configurations.iter().any(|c| c == key);
-    let mut engine_config = options.engine.clone();
-    engine_config.max_reading_age_ns =
-        engine_config.max_reading_age_ns.or(Some(options.survey.max_reading_age_ns));
+    let engine_config = options.engine_config();
     // The Viterbi configuration smooths whole walks: a window longer than any test walk.
     let longest =
         floors.iter().flat_map(|f| &f.test).map(|t| t.wifi_scans.len() * 2 + 64).max().unwrap_or(64);
@@ -699,14 +708,7 @@ pub fn calibrate(
             }
         }
         let scored = parallel_map(&jobs, options.threads, |&(g, m, floor, trace)| {
-            let config = EngineConfig {
-                rssi_weight: Some(GAMMA_GRID[g]),
-                max_reading_age_ns: options
-                    .engine
-                    .max_reading_age_ns
-                    .or(Some(options.survey.max_reading_age_ns)),
-                ..options.engine.clone()
-            };
+            let config = EngineConfig { rssi_weight: Some(GAMMA_GRID[g]), ..options.engine_config() };
             let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else { return (g, m, Vec::new()) };
             let r = replay(&mut engine, trace, &ReplayOptions { mask: masks[m], ..options.replay });
             (g, m, score(trace, floor, &live_estimates(&r.positions)).0)

@@ -280,21 +280,31 @@ mod tests {
         );
     }
 
+    /// Hoang's model on the grid with a measured movement of 1 m east, Σ_v (along, across).
+    fn one_metre_east<'a>(
+        site: &'a Site,
+        table: &'a ReachTable,
+        [along, across]: [f64; 2],
+        cap: f64,
+    ) -> HoangTransition<'a> {
+        HoangTransition {
+            site,
+            table,
+            reach_m: 4.5,
+            ratio: 200_000.0,
+            movement_m: Some([1.0, 0.0]),
+            variance_m2: along,
+            across_variance_m2: across,
+            mahalanobis_cap: cap,
+            exponent: 1.0,
+        }
+    }
+
     #[test]
     fn hoang_movement_likelihood_peaks_at_the_measured_vector() {
         let site = grid();
         let table = ReachTable::build(&site, 9.0);
-        let t = HoangTransition {
-            site: &site,
-            table: &table,
-            reach_m: 4.5,
-            ratio: 200_000.0,
-            movement_m: Some([1.0, 0.0]),
-            variance_m2: 0.25,
-            across_variance_m2: 0.25,
-            mahalanobis_cap: 3.0,
-            exponent: 1.0,
-        };
+        let t = one_metre_east(&site, &table, [0.25, 0.25], 3.0);
         let mut row = Vec::new();
         let floor = t.row(12, &mut row);
         let weight = |j: u32| row.iter().find(|e| e.0 == j).unwrap().1;
@@ -316,17 +326,7 @@ mod tests {
     fn anisotropic_movement_spread_is_along_and_across_the_movement() {
         let site = grid();
         let table = ReachTable::build(&site, 9.0);
-        let t = HoangTransition {
-            site: &site,
-            table: &table,
-            reach_m: 4.5,
-            ratio: 200_000.0,
-            movement_m: Some([1.0, 0.0]),
-            variance_m2: 1.0,
-            across_variance_m2: 0.25,
-            mahalanobis_cap: 10.0,
-            exponent: 1.0,
-        };
+        let t = one_metre_east(&site, &table, [1.0, 0.25], 10.0);
         // 1 m short along the movement (staying put): 1σ along; 1 m beside the target: 2σ across.
         let normaliser = std::f64::consts::TAU * (1.0f64 * 0.25).sqrt();
         assert_relative_eq!(t.ln_movement(Vector2::new(0.0, 0.0)), -0.5 - normaliser.ln(), epsilon = 1e-12);

@@ -155,7 +155,8 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
         Ok(t) => t,
         Err(e) => return fail("replay", e),
     };
-    let config = EngineConfig { rssi_weight: args.gamma, ..EngineConfig::default() };
+    // The engine as `eval` runs it: stale readings dropped at the survey's age limit.
+    let config = EngineConfig { rssi_weight: args.gamma, ..EvalOptions::default().engine_config() };
     let mut engine = match Engine::new(Arc::clone(&site), config) {
         Ok(e) => e,
         Err(e) => return fail("replay", e),
