@@ -15,7 +15,8 @@ pub enum MotionMask {
     /// Whatever the sensors give, scenario picked per epoch.
     #[default]
     Auto,
-    /// Distance and heading (the heading is kept even when judged disturbed).
+    /// Distance and heading, as measured (an epoch without a trustworthy heading stays
+    /// without one: nothing is invented).
     DistanceHeading,
     /// Steps only: the heading is withheld.
     Distance,
@@ -26,7 +27,7 @@ pub enum MotionMask {
 }
 
 impl MotionMask {
-    /// `update` with what this mask withholds removed.
+    /// `update` with what this mask withholds removed, and the scenario set to what is left.
     pub fn apply(self, mut update: MotionUpdate) -> MotionUpdate {
         let scenario = match self {
             MotionMask::Auto => return update,
@@ -41,10 +42,11 @@ impl MotionMask {
         if matches!(scenario, MdiScenario::HeadingSpeed | MdiScenario::Speed) {
             update.distance_m = None;
         }
-        update.displacement_m = match (update.distance_m, update.heading_rad) {
-            (Some(d), Some(h)) => Some([d * h.sin(), d * h.cos()]),
-            _ => None,
-        };
+        // The tracker's displacement sums its steps' own headings; it stands only while
+        // neither distance nor heading was withheld.
+        if update.distance_m.is_none() || update.heading_rad.is_none() {
+            update.displacement_m = None;
+        }
         // A scenario is only what the measurements support.
         update.scenario = match (update.distance_m.is_some(), update.heading_rad.is_some()) {
             (true, true) => MdiScenario::DistanceHeading,
@@ -162,4 +164,49 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
     }
     out.track = engine.track();
     out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn walking() -> MotionUpdate {
+        MotionUpdate {
+            distance_m: Some(2.0),
+            heading_rad: Some(0.5),
+            displacement_m: Some([0.9, 1.8]),
+            scenario: MdiScenario::DistanceHeading,
+            ..MotionUpdate::default()
+        }
+    }
+
+    #[test]
+    fn masks_withhold_what_they_name_and_keep_the_rest() {
+        assert_eq!(MotionMask::Auto.apply(walking()), walking());
+        assert_eq!(
+            MotionMask::DistanceHeading.apply(walking()),
+            walking(),
+            "the tracker's displacement stays"
+        );
+        let d = MotionMask::Distance.apply(walking());
+        assert_eq!(
+            (d.distance_m, d.heading_rad, d.displacement_m, d.scenario),
+            (Some(2.0), None, None, MdiScenario::Distance)
+        );
+        let h = MotionMask::HeadingSpeed.apply(walking());
+        assert_eq!(
+            (h.distance_m, h.heading_rad, h.displacement_m, h.scenario),
+            (None, Some(0.5), None, MdiScenario::HeadingSpeed)
+        );
+        let s = MotionMask::Speed.apply(walking());
+        assert_eq!((s.distance_m, s.heading_rad, s.scenario), (None, None, MdiScenario::Speed));
+        // Forcing distance-heading cannot invent a heading the tracker did not trust.
+        let no_heading = MotionUpdate {
+            heading_rad: None,
+            displacement_m: None,
+            scenario: MdiScenario::Distance,
+            ..walking()
+        };
+        assert_eq!(MotionMask::DistanceHeading.apply(no_heading).scenario, MdiScenario::Distance);
+    }
 }
