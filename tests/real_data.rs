@@ -65,3 +65,27 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // The fused engine beats a single scan on average even on this small survey.
     assert!(reports["forward-auto"].pooled.mean_m < reports["wifi-mle"].pooled.mean_m + 1.0);
 }
+
+/// A real floor plan (hundreds of rooms in lon/lat) drawn under a walk: every ring of the plan
+/// and the walk's truth end up in the SVG.
+#[cfg(feature = "plot")]
+#[test]
+fn a_real_floor_plan_draws_under_a_walk() {
+    use waymark::eval::plot::{plot_walk, Track};
+    let Some(dir) = floor_dir() else { return };
+    let plan = waymark::io::FloorPlan::read(&dir).expect("F1's plan reads");
+    let rings: usize =
+        plan.outline.iter().chain(plan.rooms.iter().map(|r| &r.polygon)).map(|p| p.rings.len()).sum();
+    assert!(rings > 100, "F1 has over a hundred shop outlines, got {rings}");
+    let out = std::env::temp_dir().join(format!("waymark-real-plan-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let file = out.join("walk.svg");
+    let truth = [(plan.width_m * 0.2, plan.height_m * 0.2), (plan.width_m * 0.8, plan.height_m * 0.7)];
+    let estimate = [(plan.width_m * 0.25, plan.height_m * 0.2)];
+    plot_walk(&file, "F1", Some(&plan), &truth, &[Track { label: "estimate", points: &estimate }]).unwrap();
+    let svg = std::fs::read_to_string(&file).unwrap();
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    assert!(svg.matches("<polyline").count() > rings, "every ring and the truth are drawn");
+    assert!(svg.contains("estimate"), "the legend names the track");
+    std::fs::remove_dir_all(out).ok();
+}

@@ -492,27 +492,4 @@ mod tests {
         assert!(matches!(result, Err(PlotError::Io { .. })), "{result:?}");
         std::fs::remove_dir_all(dir).ok();
     }
-
-    /// The competition's real plans, when this machine has them (`WAYMARK_ILC_FLOOR`, a floor
-    /// folder with `floor_info.json` and `geojson_map.json`).
-    #[test]
-    fn real_floor_plan_when_available() {
-        let Some(floor) = std::env::var_os("WAYMARK_ILC_FLOOR").map(PathBuf::from) else {
-            return;
-        };
-        let plan = FloorPlan::read(&floor).unwrap();
-        let dir = temp_dir("ilc");
-        let file = dir.join("floor.svg");
-        let truth = [(plan.width_m * 0.2, plan.height_m * 0.2), (plan.width_m * 0.8, plan.height_m * 0.7)];
-        plot_walk(&file, "floor", Some(&plan), &truth, &[]).unwrap();
-        let svg = std::fs::read_to_string(&file).unwrap();
-        let rings = plan_rings(&plan).len();
-        svg_elements(&svg);
-        assert_eq!(polylines(&svg, WALL), rings);
-        assert_eq!(polylines(&svg, DATA), 2);
-        if let Some(keep) = std::env::var_os("WAYMARK_PLOT_KEEP") {
-            std::fs::copy(&file, keep).unwrap();
-        }
-        std::fs::remove_dir_all(dir).ok();
-    }
 }
