@@ -240,8 +240,10 @@ pub fn score(trace: &Trace, floor: usize, estimates: &[Estimate]) -> (Vec<Scored
     (epochs, waypoints)
 }
 
-/// Weighted k-NN on raw survey scans (k = 5, weights 1/(d + 1 dB), a missing reading counts
-/// as the clip level): the classic fingerprinting baseline, one scan at a time.
+/// Weighted k-NN on raw survey scans (k = 5 as the issue specifies, weights 1/(d + 1 dB) —
+/// the 1 dB, one RSSI reporting step, only keeps an exact match finite — and a missing
+/// reading counts as the clip level): the classic fingerprinting baseline, one scan at a
+/// time. On F1 it gives 6.78 m, the 6.7 m of the issue's independent Python baseline.
 pub struct Knn {
     k: usize,
     clip_dbm: f64,

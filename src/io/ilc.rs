@@ -120,8 +120,9 @@ pub struct EventOptions {
     /// the scan they lead up to.
     pub batch_ns: u64,
     /// How long beacon readings wait for a WiFi scan to ride on before they form a scan of
-    /// their own, ns. 2 s: about one WiFi scan interval of this data set (the median gap
-    /// between scans of the survey walks is 1.6-2 s).
+    /// their own, ns. 2 s: one WiFi scan interval, so a beacon waits at most for the next
+    /// scan (measured: the median gap between a walk's WiFi scans is 2.0 s on every floor of
+    /// the competition data, `SurveyReport`'s `scan_interval_median_s`).
     pub beacon_wait_ns: u64,
     /// Whether beacon readings are used at all.
     pub beacons: bool,

@@ -23,8 +23,8 @@ use std::collections::{BTreeMap, BTreeSet, HashMap};
 pub struct SurveyOptions {
     /// Distance between neighbouring grid states, m. 2 m: the 2-3 m range, at its fine
     /// end because WiFi fingerprints of a mall change over a few metres (the survey scans are
-    /// 1.5-2 s ≈ 2-3 m apart along a walk, so a finer grid would have states with no scan of
-    /// their own).
+    /// 2 s ≈ 2-3 m apart along a walk, see `scan_interval_median_s`, so a finer grid would
+    /// have states with no scan of their own).
     pub spacing_m: f64,
     /// A grid point becomes a state when a survey walk passed within this distance, m. One
     /// spacing: the grid then covers a corridor two to three states wide around each walk.
@@ -44,9 +44,11 @@ pub struct SurveyOptions {
     /// near survey walks). Turn on for plans whose polygons are real walls.
     pub walls: bool,
     /// Readings older than this, ns, were not heard in the scan's own sweep: in training they
-    /// count as "not heard" (Android re-reports cached access points for ~30 s). 2 s: the
-    /// length of one Android WiFi sweep over all channels (the median gap between the survey
-    /// walks' scans here is 1.6-2 s); `waymark eval` prints the share of entries beyond it.
+    /// count as "not heard" (Android re-reports cached access points for ~30 s). 2 s: one
+    /// scan interval, so an entry not refreshed by the latest sweep is out. Measured: the
+    /// median gap between consecutive WiFi scans of the 459 survey walks is 2.0 s on every
+    /// floor (`waymark eval target/ilc/site1/{B1,F1,F2,F3,F4} --json`,
+    /// `survey.floors[].scan_interval_median_s`).
     pub max_reading_age_ns: u64,
     /// Censored EM or naive fit, clip level, σ floor and cap.
     pub build: BuildOptions,
@@ -113,6 +115,9 @@ pub struct FloorSurvey {
     pub walled_edges: usize,
     /// Plan polygons survey walks went inside, whose outlines are therefore not walls.
     pub open_rooms: usize,
+    /// Median time between consecutive WiFi scans of a walk, s (the phones' scan interval,
+    /// which sets the reading-age limit and the timer epoch's period).
+    pub scan_interval_median_s: f64,
 }
 
 /// The survey's outcome.
@@ -228,6 +233,15 @@ pub fn survey(
             }
             paths.push(points);
         }
+        let mut gaps: Vec<f64> = floor
+            .walks
+            .iter()
+            .flat_map(|w| {
+                w.wifi_scans.windows(2).map(|p| (p[1].timestamp_ns - p[0].timestamp_ns) as f64 * 1e-9)
+            })
+            .collect();
+        gaps.sort_by(f64::total_cmp);
+        report.scan_interval_median_s = gaps.get(gaps.len() / 2).copied().unwrap_or(f64::NAN);
         // Scans train every cell within the fingerprint radius.
         let mut training: HashMap<(i64, i64), Vec<Scan>> = HashMap::new();
         let r = (options.fingerprint_radius_m / s).ceil() as i64;

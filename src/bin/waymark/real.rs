@@ -79,6 +79,9 @@ pub struct EvalArgs {
     /// 30 s (4 per 2 minutes) reaches the engine; timer epochs carry the motion between.
     #[arg(long)]
     throttle: bool,
+    /// Hoang's fixed Σ_v, without the tracker's own distance and heading spreads.
+    #[arg(long)]
+    fixed_movement_variance: bool,
     /// M of Hoang eq. 4: the most likely states averaged into the estimate.
     #[arg(long)]
     top_m: Option<usize>,
@@ -256,6 +259,9 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     }
     if args.throttle {
         options.replay.min_scan_interval_ns = Some(30_000_000_000);
+    }
+    if args.fixed_movement_variance {
+        options.engine.hoang.measured_spread = false;
     }
     if let Some(m) = args.top_m {
         options.engine.estimate_states = m;
