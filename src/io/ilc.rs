@@ -115,9 +115,10 @@ impl Event {
 /// How [`Trace::events`] batches sensors and beacons.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct EventOptions {
-    /// Sensor batch length, ns. 200 ms: Android's `SensorManager` with a batching latency of a
-    /// few hundred ms delivers about this; the engine is indifferent as long as batches precede
-    /// the scan they lead up to.
+    /// Sensor batch length, ns: how a replay imitates an app, not a model parameter. 200 ms,
+    /// the order of Android `SensorManager`'s batching latency; the tracker buffers samples
+    /// and processes them only up to each epoch, so any length works as long as the batches
+    /// before a scan are pushed before it (which [`Trace::events`] guarantees).
     pub batch_ns: u64,
     /// How long beacon readings wait for a WiFi scan to ride on before they form a scan of
     /// their own, ns. 2 s: one WiFi scan interval, so a beacon waits at most for the next
