@@ -64,9 +64,10 @@ pub struct ReplayOptions {
     /// Batching and radios.
     pub events: EventOptions,
     /// A motion-only epoch when this long has passed without an epoch, ns (an app's timer).
-    /// 2 s: one scan interval of an unthrottled Android phone (the competition walks' median,
-    /// `SurveyReport`'s `scan_interval_median_s`), so epochs keep coming at a scan's pace when
-    /// scans stop (Android 9+ throttles to 4 scans in 2 minutes).
+    /// 2 s: one scan interval of an unthrottled Android phone (the competition walks'
+    /// medians are 1.9-2.3 s by floor, `SurveyReport`'s `scan_interval_median_s`), so epochs
+    /// keep coming at a scan's pace when scans stop (Android 9+ throttles to 4 scans in 2
+    /// minutes).
     pub timer_ns: Option<u64>,
     /// Scans closer than this to the previous one kept are dropped, ns: `Some(30 s)` replays
     /// a foreground app under Android 9+'s throttling.

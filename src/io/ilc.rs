@@ -122,8 +122,8 @@ pub struct EventOptions {
     pub batch_ns: u64,
     /// How long beacon readings wait for a WiFi scan to ride on before they form a scan of
     /// their own, ns. 2 s: one WiFi scan interval, so a beacon waits at most for the next
-    /// scan (measured: the median gap between a walk's WiFi scans is 2.0 s on every floor of
-    /// the competition data, `SurveyReport`'s `scan_interval_median_s`).
+    /// scan (measured: the median gap between a walk's WiFi scans is 1.9-2.3 s across the
+    /// competition data's five floors, `SurveyReport`'s `scan_interval_median_s`).
     pub beacon_wait_ns: u64,
     /// Whether beacon readings are used at all.
     pub beacons: bool,

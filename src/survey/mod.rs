@@ -46,8 +46,8 @@ pub struct SurveyOptions {
     /// Readings older than this, ns, were not heard in the scan's own sweep: in training they
     /// count as "not heard" (Android re-reports cached access points for ~30 s). 2 s: one
     /// scan interval, so an entry not refreshed by the latest sweep is out. Measured: the
-    /// median gap between consecutive WiFi scans of the 459 survey walks is 2.0 s on every
-    /// floor (`waymark eval target/ilc/site1/{B1,F1,F2,F3,F4} --json`,
+    /// median gap between consecutive WiFi scans of the 459 survey walks is 1.9-2.3 s across
+    /// the five floors (`waymark eval target/ilc/site1/{B1,F1,F2,F3,F4} --json`,
     /// `survey.floors[].scan_interval_median_s`).
     pub max_reading_age_ns: u64,
     /// Censored EM or naive fit, clip level, σ floor and cap.
