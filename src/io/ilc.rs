@@ -269,7 +269,8 @@ impl Trace {
             let mut start = 0;
             while start < samples.len() {
                 let end_ns = samples[start].timestamp_ns.saturating_add(options.batch_ns);
-                let end = start + samples[start..].partition_point(|s| s.timestamp_ns < end_ns);
+                // At least one sample per batch: with `batch_ns` 0 none is before `end_ns`.
+                let end = start + samples[start..].partition_point(|s| s.timestamp_ns < end_ns).max(1);
                 events.push(make(samples[start..end].to_vec()));
                 start = end;
             }
@@ -479,6 +480,16 @@ bogus line\n\
             assert!(s.readings.iter().all(|r| r.age_ns <= 2_000 * NS_PER_MS));
         }
         assert_eq!(scans.iter().map(|s| s.readings.len()).sum::<usize>(), 10);
+    }
+
+    #[test]
+    fn a_zero_batch_length_makes_one_sample_batches() {
+        // Found by the `ilc_trace` fuzz harness: no batch ever ended, and `events` looped forever.
+        let t = Trace::parse(WALK, "walk");
+        let options = EventOptions { batch_ns: 0, ..EventOptions::default() };
+        let events = t.events(&options);
+        let batches = events.iter().filter(|e| !matches!(e, Event::Scan(_))).count();
+        assert_eq!(batches, t.accelerometer.len() + t.gyroscope.len() + t.magnetometer.len());
     }
 
     #[test]
