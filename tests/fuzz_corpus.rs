@@ -61,7 +61,7 @@ fn write_engine_calls_seeds() {
         ("walk-hoang", 0, 2, 3),
         ("walk-two-floors", 1, 2, 4),
     ] {
-        let bytes = harness::engine_calls::walk_seed(fixture, transition, seed, 25.0);
+        let bytes = harness::engine_calls::walk_seed(fixture, transition, seed, 12.0);
         harness::engine_calls::run(&bytes);
         std::fs::write(dir.join(format!("seed-{name}")), bytes).unwrap();
     }

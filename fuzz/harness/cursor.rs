@@ -112,15 +112,18 @@ impl Writer {
         self.bytes.extend_from_slice(&v.to_le_bytes());
     }
 
-    /// `v` on the finest grid of [`Cursor::f64`] that holds it.
-    pub fn f64(&mut self, v: f64) {
+    /// `v` on the finest grid of [`Cursor::f64`] that holds it; returns what will be read back.
+    pub fn f64(&mut self, v: f64) -> f64 {
         let fine = (v * 1024.0).round();
         if fine.abs() < 32767.0 {
             self.u8(24);
             self.u16(fine as i16 as u16);
+            fine / 1024.0
         } else {
+            let coarse = (v * 16.0).round().clamp(-32768.0, 32767.0);
             self.u8(128);
-            self.u16((v * 16.0).round().clamp(-32768.0, 32767.0) as i16 as u16);
+            self.u16(coarse as i16 as u16);
+            coarse / 16.0
         }
     }
 }

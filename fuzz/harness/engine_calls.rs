@@ -47,11 +47,74 @@ impl Fixture {
     }
 }
 
-/// The simulated office (81 states, 15 access points; 60 training scans per state, which
-/// is enough for fingerprints and fast to fit once per process).
+/// The simulated office (81 states; 8 access points and 60 training scans per state, enough
+/// for fingerprints and fast to fit once per process).
 fn office() -> &'static Office {
     static OFFICE: OnceLock<Office> = OnceLock::new();
-    OFFICE.get_or_init(|| Office::generate(&OfficeConfig { training_scans: 60, ..OfficeConfig::default() }))
+    OFFICE.get_or_init(|| {
+        Office::generate(&OfficeConfig { access_points: 8, training_scans: 60, ..OfficeConfig::default() })
+    })
+}
+
+/// `site` as a site file with every number rounded to 0.01: the FFI engine parses it for every
+/// input, and `Site::to_json`'s 17-digit floats made that most of an input's time.
+fn compact_json(site: &Site) -> String {
+    let mut fingerprints = vec![Vec::new(); site.states().len()];
+    for (state, tx, g) in site.radio().fingerprints() {
+        fingerprints[state as usize]
+            .push(format!(r#"{{"tx":{tx},"mean_dbm":{:.2},"std_db":{:.2}}}"#, g.mean_dbm, g.std_db));
+    }
+    let states: Vec<String> = site
+        .states()
+        .iter()
+        .zip(&fingerprints)
+        .map(|(s, f)| {
+            format!(
+                r#"{{"id":{},"floor":{},"x":{:.2},"y":{:.2},"training_scans":{},"fingerprint":[{}]}}"#,
+                s.id,
+                s.floor,
+                s.position.x,
+                s.position.y,
+                s.training_scans,
+                f.join(",")
+            )
+        })
+        .collect();
+    let edges: Vec<String> = site
+        .edges()
+        .iter()
+        .map(|e| {
+            let (a, b) = (&site.states()[e.a as usize], &site.states()[e.b as usize]);
+            format!(r#"{{"from":{},"to":{},"length_m":{:.2}}}"#, a.id, b.id, e.length_m)
+        })
+        .collect();
+    let transmitters: Vec<String> = site
+        .radio()
+        .transmitters()
+        .iter()
+        .map(|t| match t {
+            TransmitterId::Wifi { bssid } => format!(r#"{{"wifi":{{"bssid":"{bssid}"}}}}"#),
+            other => panic!("the office has only access points, not {other}"),
+        })
+        .collect();
+    let floors: Vec<String> = site
+        .floors()
+        .iter()
+        .map(|f| format!(r#"{{"name":"{}","elevation_m":{:.2}}}"#, f.name, f.elevation_m))
+        .collect();
+    let (north, unheard) = (site.north(), site.radio().unheard());
+    format!(
+        r#"{{"format_version":1,"name":"fuzz office","north":{{"site_rotation_rad":{:.4},"declination_rad":{:.4}}},"floors":[{}],"radio":{{"clip_dbm":{:.2},"unheard":{{"mean_dbm":{:.2},"std_db":{:.2}}},"transmitters":[{}]}},"states":[{}],"edges":[{}]}}"#,
+        north.site_rotation_rad,
+        north.declination_rad,
+        floors.join(","),
+        site.radio().clip_dbm(),
+        unheard.mean_dbm,
+        unheard.std_db,
+        transmitters.join(","),
+        states.join(","),
+        edges.join(",")
+    )
 }
 
 /// Two floors joined by stairs, WiFi and both kinds of beacon, and a calibration (γ with and
@@ -84,7 +147,7 @@ const TWO_FLOORS: &str = r#"{
 /// The sites an input can pick, built once per process.
 pub fn fixtures() -> &'static [Fixture; 2] {
     static FIXTURES: OnceLock<[Fixture; 2]> = OnceLock::new();
-    FIXTURES.get_or_init(|| [Fixture::new(office().site.to_json()), Fixture::new(TWO_FLOORS.to_owned())])
+    FIXTURES.get_or_init(|| [Fixture::new(compact_json(&office().site)), Fixture::new(TWO_FLOORS.to_owned())])
 }
 
 const TRANSITIONS: [TransitionModel; 3] =
@@ -147,9 +210,9 @@ fn same_config(options: &ffi::EngineOptions, transition: TransitionModel) -> boo
 }
 
 fn batch(c: &mut Cursor, clock: &mut Clock, budget: &mut usize) -> Vec<SensorSample> {
-    let mode = c.u8() % 4;
+    let mode = c.u8() % 5;
     let wanted = match mode {
-        0 | 3 => usize::from(c.u8()),
+        0 | 3 | 4 => usize::from(c.u8()),
         1 => usize::from(c.u16()) % 4097,
         _ => 0,
     };
@@ -191,13 +254,32 @@ fn batch(c: &mut Cursor, clock: &mut Clock, budget: &mut usize) -> Vec<SensorSam
         }
         2 => Vec::new(),
         // One value, going back in time.
-        _ => {
+        3 => {
             let start = clock.time(c);
             let dt = u64::from(c.u16()) * 1_000;
             let (x, y, z) = (c.f64(), c.f64(), c.f64());
             (0..n as u64)
                 .map(|i| SensorSample { timestamp_ns: start.saturating_sub(dt * i), x, y, z })
                 .collect()
+        }
+        // A recorded stream, compactly: a fixed interval, then each axis as i8 steps of 2^-shift.
+        _ => {
+            let start = clock.time(c);
+            let dt = u64::from(c.u16()) * 1_000;
+            let step = 0.5f64.powi(i32::from(c.u8() % 24));
+            let mut v = [c.f64(), c.f64(), c.f64()];
+            let samples: Vec<SensorSample> = (0..n as u64)
+                .map(|i| {
+                    for axis in &mut v {
+                        *axis += f64::from(c.u8() as i8) * step;
+                    }
+                    SensorSample { timestamp_ns: start.saturating_add(dt * i), x: v[0], y: v[1], z: v[2] }
+                })
+                .collect();
+            if let Some(last) = samples.last() {
+                clock.now = last.timestamp_ns;
+            }
+            samples
         }
     }
 }
@@ -731,41 +813,56 @@ pub fn walk_seed(fixture: u8, transition: u8, seed: u64, length_m: f64) -> Vec<u
     w.u8(fixture);
     w.u8(transition);
     w.u8(0); // default FFI options
-    let mut now = 0u64;
-    // Times as µs (mode 1) or ms (mode 0) steps from the clock, else absolute (mode 4).
-    let mut time = |w: &mut Writer, t: u64| {
+             // Times as µs steps from the decoder's clock (mode 1), else absolute (mode 4).
+    let mut clock = Clock { now: 0 };
+    let time = |w: &mut Writer, clock: &mut Clock, t: u64| {
         let t = t / 1_000 * 1_000;
-        let delta = t.saturating_sub(now);
-        if t >= now && delta / 1_000 <= 65_535 {
+        let delta = t.saturating_sub(clock.now);
+        if t >= clock.now && delta / 1_000 <= 65_535 {
             w.u8(1);
             w.u16((delta / 1_000) as u16);
         } else {
             w.u8(4);
             w.u64(t);
         }
-        now = t;
+        clock.now = t;
     };
-    let streams = [(0u8, &trace.accelerometer), (3, &trace.gyroscope), (4, &trace.magnetometer)];
+    // Steps of 2^-shift: 1/16 m/s², 1/128 rad/s, 1/8 µT.
+    let streams = [(0u8, &trace.accelerometer, 4u8), (3, &trace.gyroscope, 7), (4, &trace.magnetometer, 3)];
     let mut sent = [0usize; 3];
+    let period_ns = (1e9 / config.rate_hz) as u64;
     for epoch in &walk.epochs {
         let t_scan = epoch.scan.timestamp_ns;
-        for (k, (op, samples)) in streams.iter().enumerate() {
+        for (k, (op, samples, shift)) in streams.iter().enumerate() {
             let upto = samples.partition_point(|s| s.timestamp_ns <= t_scan);
             for chunk in samples[sent[k]..upto].chunks(255) {
+                // Resampled on the nominal grid from the chunk's first time (jitter is lost).
                 w.u8(*op);
-                w.u8(0); // one by one
+                w.u8(4); // delta-coded
                 w.u8(chunk.len() as u8);
-                for s in chunk {
-                    time(&mut w, s.timestamp_ns);
-                    w.f64(s.x);
-                    w.f64(s.y);
-                    w.f64(s.z);
+                time(&mut w, &mut clock, chunk[0].timestamp_ns);
+                w.u16((period_ns / 1_000) as u16);
+                w.u8(*shift);
+                let step = 0.5f64.powi(i32::from(*shift));
+                let first = [chunk[0].x, chunk[0].y, chunk[0].z];
+                let mut v = [0.0; 3];
+                for (value, start) in v.iter_mut().zip(first) {
+                    // What the decoder reads back, so that the deltas below track it.
+                    *value = w.f64(start);
                 }
+                for s in chunk {
+                    for (value, target) in v.iter_mut().zip([s.x, s.y, s.z]) {
+                        let d = ((target - *value) / step).round().clamp(-128.0, 127.0);
+                        w.u8(d as i8 as u8);
+                        *value += d * step;
+                    }
+                }
+                clock.now += (chunk.len() as u64 - 1) * (period_ns / 1_000 * 1_000);
             }
             sent[k] = upto;
         }
         w.u8(5); // scan
-        time(&mut w, t_scan);
+        time(&mut w, &mut clock, t_scan);
         w.u8(0); // readings one by one
         w.u8(epoch.scan.readings.len().min(23) as u8);
         for r in epoch.scan.readings.iter().take(23) {
