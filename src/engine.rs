@@ -131,6 +131,9 @@ pub struct InputStats {
     pub readings_duplicate: u64,
     /// Readings older than `max_reading_age_ns` (in accepted scans).
     pub readings_stale: u64,
+    /// Scans and advances rejected because the motion given with them was invalid
+    /// ([`InputError::InvalidMotion`]).
+    pub motions_invalid: u64,
     /// Epochs without a scan ([`Engine::advance`]).
     pub motion_epochs: u64,
     /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
@@ -299,6 +302,7 @@ impl Engine {
                 InputError::EmptyScan => &mut self.stats.scans_empty,
                 InputError::NonFiniteRssi { .. } => &mut self.stats.scans_non_finite,
                 InputError::NoKnownTransmitter { .. } => &mut self.stats.scans_no_known_transmitter,
+                InputError::InvalidMotion { .. } => &mut self.stats.motions_invalid,
             };
             *counter += 1;
             log::debug!("scan rejected: {e}");
@@ -329,6 +333,9 @@ impl Engine {
         motion: Option<&MotionUpdate>,
     ) -> Result<Position, InputError> {
         self.check_time(timestamp_ns)?;
+        if let Some(m) = motion {
+            check_motion(m).inspect_err(|_| self.stats.motions_invalid += 1)?;
+        }
         let motion = self.motion_until(timestamp_ns, motion);
         self.ln_emission.fill(0.0);
         self.stats.motion_epochs += 1;
@@ -361,6 +368,9 @@ impl Engine {
         let resolved = self.site.radio().resolve(scan, self.config.max_reading_age_ns);
         if resolved.observations.is_empty() {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
+        }
+        if let Some(m) = motion {
+            check_motion(m)?;
         }
         self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
         // Accepted from here on: the state changes.
@@ -577,6 +587,27 @@ impl Engine {
         self.filter.reset();
         self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
     }
+}
+
+/// A motion measured outside Waymark must be a measurement: finite, with distances and spreads
+/// not negative. Found by fuzzing (`engine_calls`): a NaN or infinite heading went straight
+/// into the published position, and NaN spreads into the transition.
+fn check_motion(m: &MotionUpdate) -> Result<(), InputError> {
+    let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+    let field = if !m.distance_m.map_or(true, non_negative) {
+        "distance_m"
+    } else if !non_negative(m.distance_sigma_m) {
+        "distance_sigma_m"
+    } else if !m.heading_rad.map_or(true, f64::is_finite) {
+        "heading_rad"
+    } else if !non_negative(m.heading_sigma_rad) {
+        "heading_sigma_rad"
+    } else if !m.displacement_m.map_or(true, |d| d.iter().all(|v| v.is_finite())) {
+        "displacement_m"
+    } else {
+        return Ok(());
+    };
+    Err(InputError::InvalidMotion { field })
 }
 
 /// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).

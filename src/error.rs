@@ -39,6 +39,14 @@ pub enum InputError {
         /// Its transmitter.
         transmitter: String,
     },
+    /// The motion given with a scan or advance (`Engine::push_scan_with_motion`,
+    /// `Engine::advance_with_motion`) has a NaN or infinite value, or a negative distance or
+    /// spread: the producer is corrupt.
+    #[error("the motion given has an invalid {field}")]
+    InvalidMotion {
+        /// The first invalid field of the `MotionUpdate`.
+        field: &'static str,
+    },
     /// None of the scan's readings is of a transmitter in the site's radio map (after dropping
     /// duplicates and stale readings): it says nothing about where the phone is.
     #[error("no reading is of a transmitter this site knows ({unknown} unknown, {stale} stale)")]

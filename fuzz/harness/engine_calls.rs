@@ -406,6 +406,16 @@ fn motion(c: &mut Cursor, clock: &mut Clock) -> MotionUpdate {
     }
 }
 
+/// Whether a motion given from outside is a measurement: finite, distances and spreads ≥ 0.
+fn valid_motion(m: &MotionUpdate) -> bool {
+    let non_negative = |v: f64| v.is_finite() && v >= 0.0;
+    m.distance_m.map_or(true, non_negative)
+        && non_negative(m.distance_sigma_m)
+        && m.heading_rad.map_or(true, f64::is_finite)
+        && non_negative(m.heading_sigma_rad)
+        && m.displacement_m.map_or(true, |d| d.iter().all(|v| v.is_finite()))
+}
+
 /// Why a scan must be rejected, by the documented rules; `None` if it must be taken.
 fn rejection(scan: &Scan, last_epoch: Option<u64>, fixture: &Fixture) -> Option<&'static str> {
     if last_epoch.is_some_and(|last| scan.timestamp_ns <= last) {
@@ -427,6 +437,7 @@ fn error_kind(e: &InputError) -> &'static str {
         InputError::EmptyScan => "empty",
         InputError::NonFiniteRssi { .. } => "non-finite",
         InputError::NoKnownTransmitter { .. } => "no known transmitter",
+        InputError::InvalidMotion { .. } => "invalid motion",
     }
 }
 
@@ -781,16 +792,18 @@ pub fn run(data: &[u8]) {
                 s.lockstep = false;
                 let with_scan = c.u8() % 2 == 0;
                 let m = motion(&mut c, &mut clock);
+                // Checked after everything else about the call.
+                let invalid = (!valid_motion(&m)).then_some("invalid motion");
                 if with_scan {
                     let input = scan(&mut c, fixture, &mut clock);
-                    let why = rejection(&input.core, s.core_last, fixture);
+                    let why = rejection(&input.core, s.core_last, fixture).or(invalid);
                     s.core_epoch(input.core.timestamp_ns, why, true, |e| {
                         e.push_scan_with_motion(&input.core, &m)
                     });
                 } else {
                     let t = clock.time(&mut c);
                     let why = s.core_last.is_some_and(|last| t <= last).then_some("out of order");
-                    s.core_epoch(t, why, false, |e| e.advance_with_motion(t, &m));
+                    s.core_epoch(t, why.or(invalid), false, |e| e.advance_with_motion(t, &m));
                 }
             }
         }
