@@ -18,6 +18,13 @@ use crate::sensors::{
 use crate::site::{ReachTable, Site};
 use std::sync::Arc;
 
+/// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
+/// BLE transmit at most +36 dBm EIRP. A higher value is a corrupt producer, and one far higher
+/// (found by fuzzing, `engine_calls`: `f64::MAX` dBm) makes every state's log-likelihood
+/// -∞, so no state explains the scan. Values at or below the clip level are fine: they read as
+/// "not heard".
+pub const MAX_RSSI_DBM: f64 = 100.0;
+
 /// Where the phone is, after one epoch.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Position {
@@ -123,6 +130,8 @@ pub struct InputStats {
     pub scans_empty: u64,
     /// Scans rejected for a NaN or infinite RSSI.
     pub scans_non_finite: u64,
+    /// Scans rejected for an RSSI above [`MAX_RSSI_DBM`].
+    pub scans_rssi_too_high: u64,
     /// Scans rejected because no reading was of a known transmitter.
     pub scans_no_known_transmitter: u64,
     /// Readings of transmitters not in the site (in accepted scans).
@@ -301,6 +310,7 @@ impl Engine {
                 InputError::OutOfOrder { .. } => &mut self.stats.scans_out_of_order,
                 InputError::EmptyScan => &mut self.stats.scans_empty,
                 InputError::NonFiniteRssi { .. } => &mut self.stats.scans_non_finite,
+                InputError::RssiTooHigh { .. } => &mut self.stats.scans_rssi_too_high,
                 InputError::NoKnownTransmitter { .. } => &mut self.stats.scans_no_known_transmitter,
                 InputError::InvalidMotion { .. } => &mut self.stats.motions_invalid,
             };
@@ -364,6 +374,10 @@ impl Engine {
         }
         if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !r.rssi_dbm.is_finite()) {
             return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
+        }
+        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| r.rssi_dbm > MAX_RSSI_DBM) {
+            let transmitter = r.transmitter.to_string();
+            return Err(InputError::RssiTooHigh { index, transmitter, rssi_dbm: r.rssi_dbm });
         }
         let resolved = self.site.radio().resolve(scan, self.config.max_reading_age_ns);
         if resolved.observations.is_empty() {

@@ -39,6 +39,17 @@ pub enum InputError {
         /// Its transmitter.
         transmitter: String,
     },
+    /// A reading's RSSI is above [`MAX_RSSI_DBM`](crate::engine::MAX_RSSI_DBM) (+100 dBm), which
+    /// no receiver reports: the scan is corrupt and is rejected whole.
+    #[error("reading {index} ({transmitter}) has an RSSI of {rssi_dbm} dBm, above any receiver's")]
+    RssiTooHigh {
+        /// Position of the reading in the scan.
+        index: usize,
+        /// Its transmitter.
+        transmitter: String,
+        /// The RSSI, dBm.
+        rssi_dbm: f64,
+    },
     /// The motion given with a scan or advance (`Engine::push_scan_with_motion`,
     /// `Engine::advance_with_motion`) has a NaN or infinite value, or a negative distance or
     /// spread: the producer is corrupt.

@@ -424,6 +424,8 @@ fn rejection(scan: &Scan, last_epoch: Option<u64>, fixture: &Fixture) -> Option<
         Some("empty")
     } else if scan.readings.iter().any(|r| !r.rssi_dbm.is_finite()) {
         Some("non-finite")
+    } else if scan.readings.iter().any(|r| r.rssi_dbm > waymark::engine::MAX_RSSI_DBM) {
+        Some("rssi too high")
     } else if !scan.readings.iter().any(|r| fixture.knows(&r.transmitter)) {
         Some("no known transmitter")
     } else {
@@ -436,6 +438,7 @@ fn error_kind(e: &InputError) -> &'static str {
         InputError::OutOfOrder { .. } => "out of order",
         InputError::EmptyScan => "empty",
         InputError::NonFiniteRssi { .. } => "non-finite",
+        InputError::RssiTooHigh { .. } => "rssi too high",
         InputError::NoKnownTransmitter { .. } => "no known transmitter",
         InputError::InvalidMotion { .. } => "invalid motion",
     }
