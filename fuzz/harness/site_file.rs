@@ -39,7 +39,8 @@ pub fn run(data: &[u8]) {
     }
 }
 
-/// Two scans of the site's first transmitters and an advance between them.
+/// Scans of the site's first transmitters (a typical RSSI, a weak one, the highest accepted)
+/// and an advance after the first.
 fn exercise(mut engine: Engine) {
     let site = Arc::clone(engine.site());
     let (states, floors) = (site.states().len(), site.floors().len());
@@ -52,7 +53,7 @@ fn exercise(mut engine: Engine) {
             .map(|t| Reading { transmitter: t.clone(), rssi_dbm, age_ns: 0 })
             .collect(),
     };
-    for (k, rssi) in [(1u64, -60.0), (4, -85.0)] {
+    for (k, rssi) in [(1u64, -60.0), (4, -85.0), (5, waymark::engine::MAX_RSSI_DBM)] {
         match engine.push_scan(&scan(k * 1_000_000_000, rssi)) {
             Ok(p) => checks::position(&p, floors),
             Err(InputError::EmptyScan) => assert!(transmitters.is_empty()),
