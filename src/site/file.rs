@@ -283,7 +283,7 @@ impl Site {
             return Err(invalid("states", "more states than a u32 can index"));
         }
         let radio = &file.radio;
-        if !(radio.clip_dbm.abs() <= MAX_ABS_DBM) {
+        if !radio.clip_dbm.is_finite() || radio.clip_dbm.abs() > MAX_ABS_DBM {
             return Err(invalid("radio.clip_dbm", format!("must be within ±{MAX_ABS_DBM}")));
         }
         let unheard = gaussian("radio.unheard", &radio.unheard)?;
@@ -302,7 +302,8 @@ impl Site {
                     format!("floor {} does not exist (the site has {} floors)", s.floor, file.floors.len()),
                 ));
             }
-            if !(s.x.abs() <= MAX_COORDINATE_M && s.y.abs() <= MAX_COORDINATE_M) {
+            let inside = |v: f64| v.is_finite() && v.abs() <= MAX_COORDINATE_M;
+            if !(inside(s.x) && inside(s.y)) {
                 return Err(invalid(at("x"), format!("coordinates must be within ±{MAX_COORDINATE_M} m")));
             }
             let mut seen = std::collections::HashSet::new();
