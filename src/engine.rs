@@ -11,7 +11,7 @@ use crate::hmm::{
     estimate, ForwardFilter, HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach,
     ViterbiWindow,
 };
-use crate::radio::Scan;
+use crate::radio::{Scan, ScanHasher};
 use crate::sensors::{
     BatchReport, MdiScenario, MotionState, MotionStats, MotionTracker, MotionUpdate, SensorSample,
 };
@@ -159,12 +159,16 @@ pub struct Engine {
     rssi_weight: [Option<f64>; 2],
     /// Factors on the 68% and 95% radii (the site's calibration).
     accuracy_scale: [f64; 2],
+    /// Hashes scans' ids with the site's salt when the site's ids are hashed.
+    id_hasher: Option<ScanHasher>,
 }
 
 impl Engine {
     /// A session on `site`. Precomputes the walking-distance table: all allocation happens here.
+    /// A site whose transmitter ids are hashed needs its salt in `config.site_salt`.
     pub fn new(site: Arc<Site>, config: EngineConfig) -> Result<Self, Error> {
         config.validate()?;
+        let id_hasher = site.scan_hasher(config.site_salt.as_ref())?;
         let n = site.states().len();
         let reach = ReachTable::build(&site, config.reach_radius_m);
         let rssi_weight = config.rssi_weight_for(&site);
@@ -185,6 +189,7 @@ impl Engine {
             stats: InputStats::default(),
             rssi_weight,
             accuracy_scale,
+            id_hasher,
             config,
         })
     }
@@ -358,7 +363,11 @@ impl Engine {
         if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !r.rssi_dbm.is_finite()) {
             return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
         }
-        let resolved = self.site.radio().resolve(scan, self.config.max_reading_age_ns);
+        let max_age_ns = self.config.max_reading_age_ns;
+        let resolved = match &mut self.id_hasher {
+            Some(hasher) => self.site.radio().resolve(hasher.hash_scan(scan), max_age_ns),
+            None => self.site.radio().resolve(scan, max_age_ns),
+        };
         if resolved.observations.is_empty() {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }

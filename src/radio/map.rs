@@ -40,8 +40,8 @@ pub struct RadioMap {
 /// about beacons, and a beacon scan nothing about access points.
 fn kind(id: &TransmitterId) -> u8 {
     match id {
-        TransmitterId::Wifi { .. } => 0,
-        TransmitterId::Ble { .. } | TransmitterId::BleAddress { .. } => 1,
+        TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. } => 0,
+        TransmitterId::Ble { .. } | TransmitterId::BleAddress { .. } | TransmitterId::HashedBle { .. } => 1,
     }
 }
 
