@@ -36,6 +36,9 @@ enum Command {
     /// Survey on the survey walks of the given floors, replay the test walks through every
     /// configuration, and print the errors (split: file i is a test walk when i % 5 == 4).
     Eval(real::EvalArgs),
+    /// Site files: hash their transmitter ids with a salt (`site hash`), check a salt
+    /// (`site check`).
+    Site(real::SiteArgs),
 }
 
 #[derive(clap::Args)]
@@ -121,6 +124,7 @@ fn main() -> ExitCode {
         Command::Survey(args) => real::survey(&args),
         Command::Replay(args) => real::replay(&args),
         Command::Eval(args) => real::eval(&args),
+        Command::Site(args) => real::site(&args),
     }
 }
 
