@@ -30,6 +30,13 @@ pub enum PositioningError {
         /// Why.
         reason: String,
     },
+    /// The site's transmitter ids are salted hashes and `EngineOptions.siteSalt` is missing or
+    /// is not the salt they were hashed with: get the venue's salt for this site file.
+    #[error("salt mismatch: {reason}")]
+    SaltMismatch {
+        /// Missing or wrong (the salt itself is never in the message).
+        reason: String,
+    },
     /// A bug in Waymark or in a listener: the call had no effect.
     #[error("internal error: {reason}")]
     Internal {
@@ -48,6 +55,9 @@ impl From<crate::Error> for PositioningError {
     fn from(e: crate::Error) -> Self {
         match e {
             crate::Error::InvalidConfig(reason) => PositioningError::InvalidConfig { reason },
+            crate::Error::Site(s @ (crate::SiteError::SaltRequired | crate::SiteError::WrongSalt)) => {
+                PositioningError::SaltMismatch { reason: s.to_string() }
+            }
             crate::Error::Site(s) => PositioningError::InvalidSite { reason: s.to_string() },
             crate::Error::Input(i) => PositioningError::InputRejected { reason: i.to_string() },
         }
@@ -66,7 +76,7 @@ pub enum TransitionKind {
 }
 
 /// Engine settings an app may change; every field has a default.
-#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+#[derive(Clone, PartialEq, uniffi::Record)]
 pub struct EngineOptions {
     /// Transition model; `null` / `nil` for the default (Hoang's).
     #[uniffi(default = None)]
@@ -83,6 +93,27 @@ pub struct EngineOptions {
     /// True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
     #[uniffi(default = None)]
     pub site_rotation_deg: Option<f64>,
+    /// The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
+    /// `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
+    /// Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+    /// hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
+    /// site file's download and out of logs.
+    #[uniffi(default = None)]
+    pub site_salt: Option<Vec<u8>>,
+}
+
+/// By hand, so the salt never reaches a log.
+impl std::fmt::Debug for EngineOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EngineOptions")
+            .field("transition", &self.transition)
+            .field("step_length_m", &self.step_length_m)
+            .field("fixed_lag_epochs", &self.fixed_lag_epochs)
+            .field("declination_deg", &self.declination_deg)
+            .field("site_rotation_deg", &self.site_rotation_deg)
+            .field("site_salt", &self.site_salt.as_ref().map(|s| format!("<{} bytes, redacted>", s.len())))
+            .finish()
+    }
 }
 
 impl Default for EngineOptions {
@@ -94,12 +125,13 @@ impl Default for EngineOptions {
             fixed_lag_epochs: core.fixed_lag_epochs as u32,
             declination_deg: None,
             site_rotation_deg: None,
+            site_salt: None,
         }
     }
 }
 
 impl EngineOptions {
-    fn to_config(&self, site: &Site) -> EngineConfig {
+    fn to_config(&self, site: &Site) -> Result<EngineConfig, PositioningError> {
         let mut config = EngineConfig {
             transition: match self.transition {
                 None => TransitionModel::default(),
@@ -120,7 +152,14 @@ impl EngineOptions {
                     .map_or(from_site.site_rotation_rad, f64::to_radians),
             });
         }
-        config
+        config.site_salt = match &self.site_salt {
+            None => None,
+            Some(bytes) => Some(
+                crate::Salt::new(bytes.clone())
+                    .map_err(|m| PositioningError::InvalidConfig { reason: format!("site_salt: {m}") })?,
+            ),
+        };
+        Ok(config)
     }
 }
 
@@ -448,7 +487,7 @@ fn internal(what: &str) -> PositioningError {
 impl PositioningEngine {
     fn create(site: Site, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
         let floor_names: Vec<String> = site.floors().iter().map(|f| f.name.clone()).collect();
-        let config = options.to_config(&site);
+        let config = options.to_config(&site)?;
         let mut engine = Engine::new(Arc::new(site), config)?;
         let queue = Arc::new(Mutex::new(Vec::new()));
         engine.subscribe(Box::new(Collector { queue: Arc::clone(&queue), floor_names: floor_names.clone() }));

@@ -578,6 +578,24 @@ fileprivate struct FfiConverterString: FfiConverter {
     }
 }
 
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterData: FfiConverterRustBuffer {
+    typealias SwiftType = Data
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Data {
+        let len: Int32 = try readInt(&buf)
+        return Data(try readBytes(&buf, count: Int(len)))
+    }
+
+    public static func write(_ value: Data, into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        writeBytes(&buf, value)
+    }
+}
+
 
 
 
@@ -1674,6 +1692,14 @@ public struct EngineOptions: Equatable, Hashable {
      * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
      */
     public var siteRotationDeg: Double?
+    /**
+     * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
+     * `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
+     * Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+     * hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
+     * site file's download and out of logs.
+     */
+    public var siteSalt: Data?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1692,12 +1718,20 @@ public struct EngineOptions: Equatable, Hashable {
          */declinationDeg: Double? = nil, 
         /**
          * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
-         */siteRotationDeg: Double? = nil) {
+         */siteRotationDeg: Double? = nil, 
+        /**
+         * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
+         * `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
+         * Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+         * hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
+         * site file's download and out of logs.
+         */siteSalt: Data? = nil) {
         self.transition = transition
         self.stepLengthM = stepLengthM
         self.fixedLagEpochs = fixedLagEpochs
         self.declinationDeg = declinationDeg
         self.siteRotationDeg = siteRotationDeg
+        self.siteSalt = siteSalt
     }
 
     
@@ -1720,7 +1754,8 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
                 stepLengthM: FfiConverterDouble.read(from: &buf), 
                 fixedLagEpochs: FfiConverterUInt32.read(from: &buf), 
                 declinationDeg: FfiConverterOptionDouble.read(from: &buf), 
-                siteRotationDeg: FfiConverterOptionDouble.read(from: &buf)
+                siteRotationDeg: FfiConverterOptionDouble.read(from: &buf), 
+                siteSalt: FfiConverterOptionData.read(from: &buf)
         )
     }
 
@@ -1730,6 +1765,7 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.fixedLagEpochs, into: &buf)
         FfiConverterOptionDouble.write(value.declinationDeg, into: &buf)
         FfiConverterOptionDouble.write(value.siteRotationDeg, into: &buf)
+        FfiConverterOptionData.write(value.siteSalt, into: &buf)
     }
 }
 
@@ -2587,6 +2623,15 @@ enum PositioningError: Swift.Error, Equatable, Hashable, Foundation.LocalizedErr
          */reason: String
     )
     /**
+     * The site's transmitter ids are salted hashes and `EngineOptions.siteSalt` is missing or
+     * is not the salt they were hashed with: get the venue's salt for this site file.
+     */
+    case SaltMismatch(
+        /**
+         * Missing or wrong (the salt itself is never in the message).
+         */reason: String
+    )
+    /**
      * A bug in Waymark or in a listener: the call had no effect.
      */
     case Internal(
@@ -2632,7 +2677,10 @@ public struct FfiConverterTypePositioningError: FfiConverterRustBuffer {
         case 3: return .InputRejected(
             reason: try FfiConverterString.read(from: &buf)
             )
-        case 4: return .Internal(
+        case 4: return .SaltMismatch(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 5: return .Internal(
             reason: try FfiConverterString.read(from: &buf)
             )
 
@@ -2662,8 +2710,13 @@ public struct FfiConverterTypePositioningError: FfiConverterRustBuffer {
             FfiConverterString.write(reason, into: &buf)
             
         
-        case let .Internal(reason):
+        case let .SaltMismatch(reason):
             writeInt(&buf, Int32(4))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case let .Internal(reason):
+            writeInt(&buf, Int32(5))
             FfiConverterString.write(reason, into: &buf)
             
         }
@@ -2933,6 +2986,30 @@ fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterString.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionData: FfiConverterRustBuffer {
+    typealias SwiftType = Data?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterData.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterData.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }
