@@ -592,6 +592,9 @@ mod tests {
             |s: &Site| s.radio().fingerprints().map(|(a, b, g)| (a, b, g.mean_dbm)).collect::<Vec<_>>();
         assert_eq!(fingerprints(&again), fingerprints(&raw));
         assert!(matches!(hashed.hashed(&salt), Err(SiteError::Invalid { .. })), "hashed twice");
+        let pseudo = hashed.with_pseudo_states(1.0);
+        assert!(pseudo.states().len() > hashed.states().len());
+        assert_eq!(pseudo.id_hashing(), hashed.id_hashing(), "pseudo states keep the hashing");
     }
 
     #[test]
