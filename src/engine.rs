@@ -121,7 +121,7 @@ pub struct InputStats {
     pub scans_out_of_order: u64,
     /// Scans rejected for having no readings.
     pub scans_empty: u64,
-    /// Scans rejected for a NaN or infinite RSSI.
+    /// Scans rejected for a NaN, infinite or impossible (beyond ±1000 dBm) RSSI.
     pub scans_non_finite: u64,
     /// Scans rejected because no reading was of a known transmitter.
     pub scans_no_known_transmitter: u64,
@@ -355,7 +355,8 @@ impl Engine {
         if scan.readings.is_empty() {
             return Err(InputError::EmptyScan);
         }
-        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !r.rssi_dbm.is_finite()) {
+        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !plausible_rssi(r.rssi_dbm))
+        {
             return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
         }
         let resolved = self.site.radio().resolve(scan, self.config.max_reading_age_ns);
@@ -577,6 +578,13 @@ impl Engine {
         self.filter.reset();
         self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
     }
+}
+
+/// Whether an RSSI can be a measurement: finite and within ±1000 dBm (receivers report about
+/// -120 to +20). Beyond that it is a corrupt producer, as NaN is; and near ±1e154 the squared
+/// deviation of every fingerprint overflows, so no state could explain the scan.
+fn plausible_rssi(rssi_dbm: f64) -> bool {
+    rssi_dbm.is_finite() && rssi_dbm.abs() <= 1000.0
 }
 
 /// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).

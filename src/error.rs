@@ -31,8 +31,9 @@ pub enum InputError {
     /// A scan with no readings.
     #[error("the scan has no readings")]
     EmptyScan,
-    /// A reading's RSSI is NaN or infinite: the scan is corrupt and is rejected whole.
-    #[error("reading {index} ({transmitter}) has a non-finite RSSI")]
+    /// A reading's RSSI is NaN, infinite or beyond ±1000 dBm: the scan is corrupt and is
+    /// rejected whole.
+    #[error("reading {index} ({transmitter}) has a non-finite or impossible RSSI")]
     NonFiniteRssi {
         /// Position of the reading in the scan.
         index: usize,
