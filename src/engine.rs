@@ -125,6 +125,9 @@ pub struct InputStats {
     pub scans_non_finite: u64,
     /// Scans rejected because no reading was of a known transmitter.
     pub scans_no_known_transmitter: u64,
+    /// Scans rejected because the motion given with them was invalid
+    /// ([`Engine::push_scan_with_motion`]).
+    pub scans_invalid_motion: u64,
     /// Readings of transmitters not in the site (in accepted scans).
     pub readings_unknown: u64,
     /// Repeated readings of one transmitter within a scan (in accepted scans).
@@ -282,7 +285,8 @@ impl Engine {
     }
 
     /// Takes a scan with motion measured outside Waymark (a platform step detector, a test)
-    /// instead of the engine's own inertial tracker.
+    /// instead of the engine's own inertial tracker. Motion with a non-finite value or a
+    /// negative distance or spread rejects the scan.
     pub fn push_scan_with_motion(
         &mut self,
         scan: &Scan,
@@ -299,6 +303,7 @@ impl Engine {
                 InputError::EmptyScan => &mut self.stats.scans_empty,
                 InputError::NonFiniteRssi { .. } => &mut self.stats.scans_non_finite,
                 InputError::NoKnownTransmitter { .. } => &mut self.stats.scans_no_known_transmitter,
+                InputError::InvalidMotion { .. } => &mut self.stats.scans_invalid_motion,
             };
             *counter += 1;
             log::debug!("scan rejected: {e}");
@@ -329,6 +334,7 @@ impl Engine {
         motion: Option<&MotionUpdate>,
     ) -> Result<Position, InputError> {
         self.check_time(timestamp_ns)?;
+        motion.map_or(Ok(()), check_motion)?;
         let motion = self.motion_until(timestamp_ns, motion);
         self.ln_emission.fill(0.0);
         self.stats.motion_epochs += 1;
@@ -352,6 +358,7 @@ impl Engine {
 
     fn scan_epoch(&mut self, scan: &Scan, motion: Option<&MotionUpdate>) -> Result<Position, InputError> {
         self.check_time(scan.timestamp_ns)?;
+        motion.map_or(Ok(()), check_motion)?;
         if scan.readings.is_empty() {
             return Err(InputError::EmptyScan);
         }
@@ -577,6 +584,23 @@ impl Engine {
         self.stats.filter_restarts += 1;
         self.filter.reset();
         self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
+    }
+}
+
+/// Motion measured outside Waymark must be finite, with distances and spreads not negative:
+/// the transitions take it as it is.
+fn check_motion(m: &MotionUpdate) -> Result<(), InputError> {
+    let fields = [
+        ("distance_m", m.distance_m.unwrap_or(0.0), true),
+        ("distance_sigma_m", m.distance_sigma_m, true),
+        ("heading_rad", m.heading_rad.unwrap_or(0.0), false),
+        ("heading_sigma_rad", m.heading_sigma_rad, true),
+        ("displacement_m[0]", m.displacement_m.map_or(0.0, |d| d[0]), false),
+        ("displacement_m[1]", m.displacement_m.map_or(0.0, |d| d[1]), false),
+    ];
+    match fields.into_iter().find(|&(_, v, positive)| !v.is_finite() || (positive && v < 0.0)) {
+        Some((field, value, _)) => Err(InputError::InvalidMotion { field, value }),
+        None => Ok(()),
     }
 }
 

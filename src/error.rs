@@ -40,6 +40,15 @@ pub enum InputError {
         /// Its transmitter.
         transmitter: String,
     },
+    /// Motion given with an epoch (`push_scan_with_motion`, `advance_with_motion`) has a
+    /// non-finite value, or a negative distance or spread.
+    #[error("invalid motion: {field} is {value}")]
+    InvalidMotion {
+        /// The field of the `MotionUpdate`.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
     /// None of the scan's readings is of a transmitter in the site's radio map (after dropping
     /// duplicates and stale readings): it says nothing about where the phone is.
     #[error("no reading is of a transmitter this site knows ({unknown} unknown, {stale} stale)")]
