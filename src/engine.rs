@@ -141,6 +141,28 @@ pub struct InputStats {
     pub filter_restarts: u64,
 }
 
+/// Everything an engine holds that decides its later answers, for tests that check a call
+/// changed nothing (a rejected scan must leave the engine as it was). Not a stable API: the
+/// internals are compared through their `Debug` renderings, which show every field.
+#[doc(hidden)]
+#[derive(Clone, Debug, PartialEq)]
+pub struct EngineSnapshot {
+    /// Time of the last epoch.
+    pub last_epoch_ns: Option<u64>,
+    /// The latest position.
+    pub position: Option<Position>,
+    /// The posterior over the site's states.
+    pub posterior: Vec<f64>,
+    /// The track as last published to listeners.
+    pub published_track: Vec<TrackPoint>,
+    /// Counts of accepted and dropped input (a test decides whether these count as state).
+    pub stats: InputStats,
+    /// The active subscriptions, and the next id.
+    pub subscriptions: (Vec<SubscriptionId>, u64),
+    /// `Debug` of the forward filter, the Viterbi window and the motion tracker.
+    pub internals: String,
+}
+
 /// A positioning session on one site.
 pub struct Engine {
     site: Arc<Site>,
@@ -225,6 +247,20 @@ impl Engine {
     /// Bytes held by the Viterbi window (bounded by `track_window_epochs`).
     pub fn track_memory_bytes(&self) -> usize {
         self.viterbi.memory_bytes()
+    }
+
+    /// The engine's state, for tests (see [`EngineSnapshot`]).
+    #[doc(hidden)]
+    pub fn snapshot(&self) -> EngineSnapshot {
+        EngineSnapshot {
+            last_epoch_ns: self.last_epoch_ns,
+            position: self.latest.clone(),
+            posterior: self.filter.posterior().to_vec(),
+            published_track: self.published_track.clone(),
+            stats: self.stats.clone(),
+            subscriptions: (self.listeners.iter().map(|(id, _)| *id).collect(), self.next_subscription),
+            internals: format!("{:?}\n{:?}\n{:?}", self.filter, self.viterbi, self.tracker),
+        }
     }
 
     /// Calls `listener` with everything published until [`unsubscribe`](Self::unsubscribe).

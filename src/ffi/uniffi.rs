@@ -667,6 +667,14 @@ impl PositioningEngine {
 }
 
 impl PositioningEngine {
+    /// The core engine's state and the last position in FFI form, for tests that check a
+    /// failed call changed nothing. Not part of the Kotlin / Swift API.
+    #[doc(hidden)]
+    pub fn snapshot(&self) -> (engine::EngineSnapshot, Option<PositionEstimate>) {
+        let inner = lock(&self.inner);
+        (inner.engine.snapshot(), inner.latest.clone())
+    }
+
     fn epoch(
         &self,
         f: impl FnOnce(&mut Engine) -> Result<engine::Position, crate::InputError>,
