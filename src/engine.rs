@@ -121,10 +121,13 @@ pub struct InputStats {
     pub scans_out_of_order: u64,
     /// Scans rejected for having no readings.
     pub scans_empty: u64,
-    /// Scans rejected for a NaN or infinite RSSI.
+    /// Scans rejected for a NaN, infinite or impossible (beyond ±1000 dBm) RSSI.
     pub scans_non_finite: u64,
     /// Scans rejected because no reading was of a known transmitter.
     pub scans_no_known_transmitter: u64,
+    /// Scans rejected because the motion given with them was invalid
+    /// ([`Engine::push_scan_with_motion`]).
+    pub scans_invalid_motion: u64,
     /// Readings of transmitters not in the site (in accepted scans).
     pub readings_unknown: u64,
     /// Repeated readings of one transmitter within a scan (in accepted scans).
@@ -136,6 +139,28 @@ pub struct InputStats {
     /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
     /// when no state could explain a scan.
     pub filter_restarts: u64,
+}
+
+/// Everything an engine holds that decides its later answers, for tests that check a call
+/// changed nothing (a rejected scan must leave the engine as it was). Not a stable API: the
+/// internals are compared through their `Debug` renderings, which show every field.
+#[doc(hidden)]
+#[derive(Clone, Debug, PartialEq)]
+pub struct EngineSnapshot {
+    /// Time of the last epoch.
+    pub last_epoch_ns: Option<u64>,
+    /// The latest position.
+    pub position: Option<Position>,
+    /// The posterior over the site's states.
+    pub posterior: Vec<f64>,
+    /// The track as last published to listeners.
+    pub published_track: Vec<TrackPoint>,
+    /// Counts of accepted and dropped input (a test decides whether these count as state).
+    pub stats: InputStats,
+    /// The active subscriptions, and the next id.
+    pub subscriptions: (Vec<SubscriptionId>, u64),
+    /// `Debug` of the forward filter, the Viterbi window and the motion tracker.
+    pub internals: String,
 }
 
 /// A positioning session on one site.
@@ -229,6 +254,20 @@ impl Engine {
         self.viterbi.memory_bytes()
     }
 
+    /// The engine's state, for tests (see [`EngineSnapshot`]).
+    #[doc(hidden)]
+    pub fn snapshot(&self) -> EngineSnapshot {
+        EngineSnapshot {
+            last_epoch_ns: self.last_epoch_ns,
+            position: self.latest.clone(),
+            posterior: self.filter.posterior().to_vec(),
+            published_track: self.published_track.clone(),
+            stats: self.stats.clone(),
+            subscriptions: (self.listeners.iter().map(|(id, _)| *id).collect(), self.next_subscription),
+            internals: format!("{:?}\n{:?}\n{:?}", self.filter, self.viterbi, self.tracker),
+        }
+    }
+
     /// Calls `listener` with everything published until [`unsubscribe`](Self::unsubscribe).
     pub fn subscribe(&mut self, listener: Box<dyn PositionListener>) -> SubscriptionId {
         let id = SubscriptionId(self.next_subscription);
@@ -287,7 +326,8 @@ impl Engine {
     }
 
     /// Takes a scan with motion measured outside Waymark (a platform step detector, a test)
-    /// instead of the engine's own inertial tracker.
+    /// instead of the engine's own inertial tracker. Motion with a non-finite value or a
+    /// negative distance or spread rejects the scan.
     pub fn push_scan_with_motion(
         &mut self,
         scan: &Scan,
@@ -304,6 +344,7 @@ impl Engine {
                 InputError::EmptyScan => &mut self.stats.scans_empty,
                 InputError::NonFiniteRssi { .. } => &mut self.stats.scans_non_finite,
                 InputError::NoKnownTransmitter { .. } => &mut self.stats.scans_no_known_transmitter,
+                InputError::InvalidMotion { .. } => &mut self.stats.scans_invalid_motion,
             };
             *counter += 1;
             log::debug!("scan rejected: {e}");
@@ -334,6 +375,7 @@ impl Engine {
         motion: Option<&MotionUpdate>,
     ) -> Result<Position, InputError> {
         self.check_time(timestamp_ns)?;
+        motion.map_or(Ok(()), check_motion)?;
         let motion = self.motion_until(timestamp_ns, motion);
         self.ln_emission.fill(0.0);
         self.stats.motion_epochs += 1;
@@ -357,10 +399,12 @@ impl Engine {
 
     fn scan_epoch(&mut self, scan: &Scan, motion: Option<&MotionUpdate>) -> Result<Position, InputError> {
         self.check_time(scan.timestamp_ns)?;
+        motion.map_or(Ok(()), check_motion)?;
         if scan.readings.is_empty() {
             return Err(InputError::EmptyScan);
         }
-        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !r.rssi_dbm.is_finite()) {
+        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !plausible_rssi(r.rssi_dbm))
+        {
             return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
         }
         let max_age_ns = self.config.max_reading_age_ns;
@@ -586,6 +630,30 @@ impl Engine {
         self.filter.reset();
         self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
     }
+}
+
+/// Motion measured outside Waymark must be finite, with distances and spreads not negative:
+/// the transitions take it as it is.
+fn check_motion(m: &MotionUpdate) -> Result<(), InputError> {
+    let fields = [
+        ("distance_m", m.distance_m.unwrap_or(0.0), true),
+        ("distance_sigma_m", m.distance_sigma_m, true),
+        ("heading_rad", m.heading_rad.unwrap_or(0.0), false),
+        ("heading_sigma_rad", m.heading_sigma_rad, true),
+        ("displacement_m[0]", m.displacement_m.map_or(0.0, |d| d[0]), false),
+        ("displacement_m[1]", m.displacement_m.map_or(0.0, |d| d[1]), false),
+    ];
+    match fields.into_iter().find(|&(_, v, positive)| !v.is_finite() || (positive && v < 0.0)) {
+        Some((field, value, _)) => Err(InputError::InvalidMotion { field, value }),
+        None => Ok(()),
+    }
+}
+
+/// Whether an RSSI can be a measurement: finite and within ±1000 dBm (receivers report about
+/// -120 to +20). Beyond that it is a corrupt producer, as NaN is; and near ±1e154 the squared
+/// deviation of every fingerprint overflows, so no state could explain the scan.
+fn plausible_rssi(rssi_dbm: f64) -> bool {
+    rssi_dbm.is_finite() && rssi_dbm.abs() <= 1000.0
 }
 
 /// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).

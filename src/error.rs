@@ -31,13 +31,23 @@ pub enum InputError {
     /// A scan with no readings.
     #[error("the scan has no readings")]
     EmptyScan,
-    /// A reading's RSSI is NaN or infinite: the scan is corrupt and is rejected whole.
-    #[error("reading {index} ({transmitter}) has a non-finite RSSI")]
+    /// A reading's RSSI is NaN, infinite or beyond ±1000 dBm: the scan is corrupt and is
+    /// rejected whole.
+    #[error("reading {index} ({transmitter}) has a non-finite or impossible RSSI")]
     NonFiniteRssi {
         /// Position of the reading in the scan.
         index: usize,
         /// Its transmitter.
         transmitter: String,
+    },
+    /// Motion given with an epoch (`push_scan_with_motion`, `advance_with_motion`) has a
+    /// non-finite value, or a negative distance or spread.
+    #[error("invalid motion: {field} is {value}")]
+    InvalidMotion {
+        /// The field of the `MotionUpdate`.
+        field: &'static str,
+        /// Its value.
+        value: f64,
     },
     /// None of the scan's readings is of a transmitter in the site's radio map (after dropping
     /// duplicates and stale readings): it says nothing about where the phone is.

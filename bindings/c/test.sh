@@ -42,14 +42,20 @@ cargo run --features cli --locked --quiet -- site hash --salt-file "$work/salt.h
 cargo build --lib --locked --quiet --features fault-injection
 python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
 flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -I bindings/c)
-gcc "${flags[@]}" bindings/c/test.c -L "$target/debug" -lwaymark -lm -o "$work/test_shared"
-gcc "${flags[@]}" bindings/c/test.c "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/test_static"
+for test in test robustness; do
+    gcc "${flags[@]}" "bindings/c/$test.c" -L "$target/debug" -lwaymark -lm -o "$work/${test}_shared"
+    gcc "${flags[@]}" "bindings/c/$test.c" "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/${test}_static"
+done
 
 for kind in shared static; do
     echo "-- $kind library under valgrind"
     LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
         --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
         "$work/test_$kind" "$work/site.json" "$work/walk.txt" "$work/site-hashed.json" "$work/salt.hex"
+    echo "-- bad input, $kind library under valgrind"
+    LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
+        --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
+        "$work/robustness_$kind" "$work/site.json"
 done
 
 echo "-- no networking"

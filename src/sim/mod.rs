@@ -6,6 +6,7 @@ mod experiment;
 pub mod imu;
 pub mod motion_eval;
 mod paper;
+pub mod scale;
 mod trajectory;
 
 pub use experiment::{

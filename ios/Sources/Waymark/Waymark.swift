@@ -816,8 +816,11 @@ public func FfiConverterTypeLogSink_lower(_ value: LogSink) -> UInt64 {
 
 
 /**
- * Receives positions and status on the thread that pushed the input, after the engine's
- * lock is released. Throwing from a method is reported, never fatal.
+ * Receives positions and status after the engine's lock is released, in the order they
+ * happened, on a thread that called the engine (usually the one that pushed the input; while
+ * one thread is delivering, input pushed by others is delivered by it). Never called from two
+ * threads at once. A listener may call the engine, subscribe and cancel from its methods.
+ * Throwing from a method is reported, never fatal.
  */
 public protocol PositionListener: AnyObject, Sendable {
     
@@ -839,8 +842,11 @@ public protocol PositionListener: AnyObject, Sendable {
     
 }
 /**
- * Receives positions and status on the thread that pushed the input, after the engine's
- * lock is released. Throwing from a method is reported, never fatal.
+ * Receives positions and status after the engine's lock is released, in the order they
+ * happened, on a thread that called the engine (usually the one that pushed the input; while
+ * one thread is delivering, input pushed by others is delivered by it). Never called from two
+ * threads at once. A listener may call the engine, subscribe and cancel from its methods.
+ * Throwing from a method is reported, never fatal.
  */
 open class PositionListenerImpl: PositionListener, @unchecked Sendable {
     fileprivate let handle: UInt64
@@ -1162,7 +1168,7 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     
     /**
      * Calls `listener` with every position and status change until the returned subscription
-     * is cancelled or dropped. Listeners run on the pushing thread, with no lock held.
+     * is cancelled or dropped. Listeners run with no lock held, never two calls at once.
      */
     func subscribe(listener: PositionListener)  -> Subscription
     
@@ -1351,7 +1357,7 @@ open func pushScan(scan: RadioScan)throws  -> PositionEstimate  {
     
     /**
      * Calls `listener` with every position and status change until the returned subscription
-     * is cancelled or dropped. Listeners run on the pushing thread, with no lock held.
+     * is cancelled or dropped. Listeners run with no lock held, never two calls at once.
      */
 open func subscribe(listener: PositionListener) -> Subscription  {
     return try!  FfiConverterTypeSubscription_lift(try! rustCall() {
@@ -3274,7 +3280,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_push_scan() != 50876) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_subscribe() != 58171) {
+    if (uniffi_waymark_checksum_method_positioningengine_subscribe() != 5158) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_track() != 56838) {

@@ -1,6 +1,7 @@
 //! `waymark`: the command-line tool for the engineer who surveys a building and measures
 //! accuracy. `waymark demo` runs the engine on a built-in simulated office.
 
+mod bench;
 mod real;
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -36,6 +37,8 @@ enum Command {
     /// Survey on the survey walks of the given floors, replay the test walks through every
     /// configuration, and print the errors (split: file i is a test walk when i % 5 == 4).
     Eval(real::EvalArgs),
+    /// Speed and memory at building scale (1 000 to 50 000 states), as one JSON object.
+    Bench(bench::BenchArgs),
     /// Site files: hash their transmitter ids with a salt (`site hash`), check a salt
     /// (`site check`).
     Site(real::SiteArgs),
@@ -124,6 +127,7 @@ fn main() -> ExitCode {
         Command::Survey(args) => real::survey(&args),
         Command::Replay(args) => real::replay(&args),
         Command::Eval(args) => real::eval(&args),
+        Command::Bench(args) => bench::bench(&args),
         Command::Site(args) => real::site(&args),
     }
 }
