@@ -260,6 +260,14 @@ static void salted(const char *hashed_path, const uint8_t *salt, size_t salt_len
           "short salt");
     CHECK(waymark_engine_new_from_path_with_salt(hashed_path, NULL, 32, &engine) == WAYMARK_RESULT_NULL_PARAMETER,
           "NULL salt with a length");
+    CHECK(waymark_engine_new_from_path_with_salt(hashed_path, salt, salt_len, NULL) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL out");
+    CHECK(waymark_engine_new_from_path_with_salt(NULL, salt, salt_len, &engine) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL path");
+    CHECK(waymark_engine_new_from_path_with_salt("\xff\xfe", salt, salt_len, &engine) == WAYMARK_RESULT_INVALID_UTF8,
+          "path not UTF-8");
+    CHECK(waymark_engine_new_with_salt(NULL, 10, salt, salt_len, &engine) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL json");
 
     size_t len = 0;
     char *json = read_file(hashed_path, &len);
