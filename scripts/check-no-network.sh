@@ -7,8 +7,9 @@
 #      (nm -D --undefined-only): code that is not linked in cannot be called.
 # Usage: bash scripts/check-no-network.sh [libwaymark.so ...]
 #        With no argument, builds and checks the release library ($CARGO_TARGET_DIR/release).
-# What it cannot see: a raw syscall(2) of socket(2), which no Waymark code or dependency makes
-# (check 1 and the dependency list are the evidence for that).
+# What check 3 cannot see: system calls made without libc. The one dependency that makes them,
+# rustix (through uniffi -> tempfile), has socket code only with its `net` feature, which check 2
+# requires to be off.
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/.." && pwd)
 cd "$repo"
@@ -29,6 +30,12 @@ if found=$(grep -E "$network_crates" <<<"$deps"); then
     status=1
 fi
 echo "   $(wc -l <<<"$deps") crates, none of them networking"
+# rustix (uniffi -> tempfile) makes system calls itself, invisible to check 3: its sockets
+# exist only with its `net` feature.
+if cargo tree --locked -e features -i rustix --target all 2>/dev/null | grep -q 'rustix feature "net"'; then
+    echo "check-no-network: rustix is built with its \"net\" feature (raw socket syscalls)" >&2
+    status=1
+fi
 
 echo "-- 3. no socket or resolver function imported by the shared library"
 libs=("$@")
