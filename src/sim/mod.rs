@@ -7,6 +7,7 @@ pub mod imu;
 pub mod longrun;
 pub mod motion_eval;
 mod paper;
+pub mod recovery;
 pub mod scale;
 pub mod session;
 mod trajectory;
