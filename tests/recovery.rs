@@ -25,4 +25,8 @@ fn the_engine_recovers_from_a_kidnap_and_a_radio_outage_within_ten_epochs() {
             assert_eq!(run.errors_m.len(), config.after_epochs);
         }
     }
+    // After the outage the engine soon says exactly what its undisturbed twin says.
+    for run in &report.radio_outage.runs {
+        assert!(run.epochs_to_forget.is_some_and(|r| r <= TARGET_EPOCHS), "{run:?}");
+    }
 }

@@ -40,6 +40,12 @@ use super::longrun::{BATCH_SAMPLES, SCAN_INTERVAL_NS};
 /// 2 s), so a single lucky epoch is not a recovery. A definition, not a tuned value.
 pub const HOLD_EPOCHS: usize = 5;
 
+/// Two engines report "the same place" within 0.1 m: a fifth of the normal median error on
+/// the simulated office (0.41 m) and of the pseudo-state spacing (0.75 m, Hoang §5). A
+/// definition, not a tuned value: engines that have forgotten their differences agree to
+/// within rounding.
+pub const SAME_PLACE_M: f64 = 0.1;
+
 /// Epochs a twin is given to converge from its cold start before its errors count as normal:
 /// 10, the 90th percentile of a fresh engine's epochs to recover on the simulated office
 /// (8 after an outage, 10 after a kidnap, 20 seeds: `waymark simulate --experiment recovery`).
@@ -118,6 +124,14 @@ pub struct RecoveryRun {
     pub cold_epochs_to_recover: Option<usize>,
     /// Error at the recovery epoch, m.
     pub error_at_recovery_m: Option<f64>,
+    /// Epochs of good data until the disturbed engine reports the same place (within
+    /// [`SAME_PLACE_M`], for [`HOLD_EPOCHS`] epochs) as an engine that had the same input
+    /// from the first good epoch on but no disturbance before it: the twin after an outage, the
+    /// fresh engine after a kidnap. `None`: not within the scored epochs, or no such engine.
+    pub epochs_to_forget: Option<usize>,
+    /// Whether there was an engine to compare with for `epochs_to_forget`.
+    #[serde(skip)]
+    pub forget_measured: bool,
     /// Filter restarts of the disturbed engine.
     pub filter_restarts: u64,
 }
@@ -154,6 +168,9 @@ pub struct ScenarioReport {
     pub recovery: RecoveryDistribution,
     /// The same rule on the undisturbed twins.
     pub twin_recovery: RecoveryDistribution,
+    /// Epochs until the disturbed engine reports what an engine with the same input and no
+    /// disturbance reports (`None` without the cold-start passes for the kidnap).
+    pub forget: Option<RecoveryDistribution>,
     /// The same rule on fresh engines started at the first epoch of good data (`None`
     /// without the cold-start passes).
     pub cold_recovery: Option<RecoveryDistribution>,
@@ -248,6 +265,8 @@ fn building(seed: u64) -> Result<(Office, Arc<Site>), Error> {
 struct Pass {
     errors: Vec<f64>,
     truths: Vec<Point2<f64>>,
+    /// The live estimate at every epoch (`None` if the epoch was rejected).
+    positions: Vec<Option<Point2<f64>>>,
     restarts: u64,
 }
 
@@ -285,11 +304,9 @@ fn pass(
         // The scan is drawn whether or not it is delivered, so both twins see the same radio.
         let scan = office.field.scan_at(truth, t, &mut scan_rng);
         let result = if radio(k, t) { engine.push_scan(&scan) } else { engine.advance(t) };
-        let error = match result {
-            Ok(p) => nalgebra::distance(&truth, &Point2::new(p.x, p.y)),
-            Err(_) => f64::INFINITY,
-        };
-        out.errors.push(error);
+        let position = result.ok().map(|p| Point2::new(p.x, p.y));
+        out.errors.push(position.map_or(f64::INFINITY, |p| nalgebra::distance(&truth, &p)));
+        out.positions.push(position);
         out.truths.push(truth);
     }
     out.restarts = engine.stats().filter_restarts;
@@ -320,7 +337,14 @@ fn kidnapped_run(config: &RecoveryConfig, seed: u64) -> Result<RecoveryRun, Erro
         true => pass(&office, &site, config, seed, epochs, teleport, |_, _| true, Some(before + 1))?,
         false => Pass::default(),
     };
-    Ok(run_result(seed, disturbance_m, before, [&disturbed, &twin, &cold]))
+    // The kidnapped engine has forgotten its past when it says what a fresh engine says.
+    Ok(run_result(
+        seed,
+        disturbance_m,
+        before,
+        [&disturbed, &twin, &cold],
+        config.cold_start.then_some(&cold),
+    ))
 }
 
 fn outage_run(config: &RecoveryConfig, seed: u64) -> Result<RecoveryRun, Error> {
@@ -339,7 +363,9 @@ fn outage_run(config: &RecoveryConfig, seed: u64) -> Result<RecoveryRun, Error> 
     // the epochs (a lower bound of the path).
     let walked: f64 =
         disturbed.truths[before..=before + outage].windows(2).map(|w| nalgebra::distance(&w[0], &w[1])).sum();
-    Ok(run_result(seed, walked, before + outage, [&disturbed, &twin, &cold]))
+    // After the outage the twin has had the same input; the disturbed engine has forgotten the
+    // outage when it says what the twin says.
+    Ok(run_result(seed, walked, before + outage, [&disturbed, &twin, &cold], Some(&twin)))
 }
 
 /// Splits the disturbed, twin and cold-start passes at the last epoch before good data
@@ -349,8 +375,22 @@ fn run_result(
     disturbance_m: f64,
     last_bad: usize,
     [disturbed, twin, cold]: [&Pass; 3],
+    same_input: Option<&Pass>,
 ) -> RecoveryRun {
+    let epochs_to_forget = same_input.and_then(|reference| {
+        let apart: Vec<f64> = disturbed.positions[last_bad..]
+            .iter()
+            .zip(&reference.positions[last_bad..])
+            .map(|(a, b)| match (a, b) {
+                (Some(a), Some(b)) => nalgebra::distance(a, b),
+                _ => f64::INFINITY,
+            })
+            .collect();
+        epochs_to_recover(&apart, SAME_PLACE_M, HOLD_EPOCHS)
+    });
     RecoveryRun {
+        epochs_to_forget,
+        forget_measured: same_input.is_some(),
         seed,
         disturbance_m,
         error_before_m: last_bad.checked_sub(1).map_or(f64::NAN, |i| disturbed.errors[i]),
@@ -416,6 +456,7 @@ fn score(scenario: &str, mut runs: Vec<RecoveryRun>, after_epochs: usize) -> Sce
             e.iter().skip(TARGET_EPOCHS).copied()
         }))
     };
+    let has_reference = runs.iter().all(|r| r.forget_measured);
     let of = |f: fn(&RecoveryRun) -> Option<usize>| {
         distribution(&runs.iter().map(f).collect::<Vec<_>>(), after_epochs)
     };
@@ -426,6 +467,7 @@ fn score(scenario: &str, mut runs: Vec<RecoveryRun>, after_epochs: usize) -> Sce
         tolerance_m: tolerance,
         recovery: of(|r| r.epochs_to_recover),
         twin_recovery: of(|r| r.twin_epochs_to_recover),
+        forget: has_reference.then(|| of(|r| r.epochs_to_forget)),
         cold_recovery: runs
             .iter()
             .all(|r| !r.cold_errors_m.is_empty())

@@ -371,8 +371,8 @@ fn long_run(args: &SimulateArgs) -> ExitCode {
             "  {:>6} {:>7} {:>8} {:>8} {:>9} {:>6} {:>6} {:>9} {:>7} {:>7} {:>6} {:>6} {:>8} {:>7} {:>8}",
             "hour",
             "wall s",
-            "RSS MB",
-            "HWM MB",
+            "RSS MiB",
+            "HWM MiB",
             "track B",
             "window",
             "epochs",
@@ -430,7 +430,7 @@ fn long_run(args: &SimulateArgs) -> ExitCode {
     } else {
         let last = report.intervals.last();
         println!(
-            "\nRSS at 1 h: {} MB; at {} h: {} MB; ratio {}",
+            "\nRSS at 1 h: {} MiB; at {} h: {} MiB; ratio {}",
             mb(report.rss_1h_kb),
             args.hours,
             mb(report.rss_end_kb),
@@ -445,7 +445,7 @@ fn long_run(args: &SimulateArgs) -> ExitCode {
             report.fixed_lag_epochs
         );
         println!(
-            "Generator: largest segment held {:.1} MB. Positions: {} epochs, {} non-finite; mean error {:.2} m. FFI/core mismatches: {}",
+            "Generator: largest segment held {:.1} MiB. Positions: {} epochs, {} non-finite; mean error {:.2} m. FFI/core mismatches: {}",
             report.generator_peak_bytes as f64 / 1048576.0,
             report.epochs,
             report.non_finite_positions,
@@ -531,6 +531,18 @@ fn recovery(args: &SimulateArgs) -> ExitCode {
             report.target_epochs,
             100.0 * t.within_target
         );
+        if let Some(f) = &s.forget {
+            println!(
+                "  epochs until it reports what an undisturbed engine with the same input reports (within {} m): \
+                 median {}, p90 {}, max {}, within {}: {:.0}%",
+                recovery::SAME_PLACE_M,
+                f.median,
+                f.p90,
+                f.max,
+                report.target_epochs,
+                100.0 * f.within_target
+            );
+        }
         if let Some(c) = &s.cold_recovery {
             println!(
                 "  the same rule on a fresh engine started at the first good epoch: median {}, p90 {}, max {}, within {}: {:.0}%",
