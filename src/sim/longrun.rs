@@ -95,7 +95,8 @@ impl InputCounts {
             scans_rejected: s.scans_out_of_order
                 + s.scans_empty
                 + s.scans_non_finite
-                + s.scans_no_known_transmitter,
+                + s.scans_no_known_transmitter
+                + s.scans_invalid_motion,
             readings_dropped: s.readings_unknown + s.readings_duplicate + s.readings_stale,
             filter_restarts: s.filter_restarts,
             samples_accepted: streams.iter().map(|x| x.accepted).sum(),
