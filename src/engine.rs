@@ -18,6 +18,13 @@ use crate::sensors::{
 use crate::site::{ReachTable, Site};
 use std::sync::Arc;
 
+/// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
+/// BLE transmit at most +36 dBm EIRP. A higher value is a corrupt producer, and one far higher
+/// (found by fuzzing, `engine_calls`: `f64::MAX` dBm) makes every state's log-likelihood
+/// -∞, so no state explains the scan. Values at or below the clip level are fine: they read as
+/// "not heard".
+pub const MAX_RSSI_DBM: f64 = 100.0;
+
 /// Where the phone is, after one epoch.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Position {
@@ -121,8 +128,10 @@ pub struct InputStats {
     pub scans_out_of_order: u64,
     /// Scans rejected for having no readings.
     pub scans_empty: u64,
-    /// Scans rejected for a NaN, infinite or impossible (beyond ±1000 dBm) RSSI.
+    /// Scans rejected for a NaN, infinite or impossible (below -1000 dBm) RSSI.
     pub scans_non_finite: u64,
+    /// Scans rejected for an RSSI above [`MAX_RSSI_DBM`].
+    pub scans_rssi_too_high: u64,
     /// Scans rejected because no reading was of a known transmitter.
     pub scans_no_known_transmitter: u64,
     /// Scans rejected because the motion given with them was invalid
@@ -343,6 +352,7 @@ impl Engine {
                 InputError::OutOfOrder { .. } => &mut self.stats.scans_out_of_order,
                 InputError::EmptyScan => &mut self.stats.scans_empty,
                 InputError::NonFiniteRssi { .. } => &mut self.stats.scans_non_finite,
+                InputError::RssiTooHigh { .. } => &mut self.stats.scans_rssi_too_high,
                 InputError::NoKnownTransmitter { .. } => &mut self.stats.scans_no_known_transmitter,
                 InputError::InvalidMotion { .. } => &mut self.stats.scans_invalid_motion,
             };
@@ -407,6 +417,10 @@ impl Engine {
         {
             return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
         }
+        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| r.rssi_dbm > MAX_RSSI_DBM) {
+            let transmitter = r.transmitter.to_string();
+            return Err(InputError::RssiTooHigh { index, transmitter, rssi_dbm: r.rssi_dbm });
+        }
         let max_age_ns = self.config.max_reading_age_ns;
         let resolved = match &mut self.id_hasher {
             Some(hasher) => self.site.radio().resolve(hasher.hash_scan(scan), max_age_ns),
@@ -414,6 +428,9 @@ impl Engine {
         };
         if resolved.observations.is_empty() {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
+        }
+        if let Some(m) = motion {
+            check_motion(m)?;
         }
         self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
         // Accepted from here on: the state changes.
@@ -649,11 +666,12 @@ fn check_motion(m: &MotionUpdate) -> Result<(), InputError> {
     }
 }
 
-/// Whether an RSSI can be a measurement: finite and within ±1000 dBm (receivers report about
-/// -120 to +20). Beyond that it is a corrupt producer, as NaN is; and near ±1e154 the squared
-/// deviation of every fingerprint overflows, so no state could explain the scan.
+/// Whether an RSSI can be a measurement, as far as its lower end goes: finite and not below
+/// -1000 dBm (receivers report about -120 to +20). Below that it is a corrupt producer, as NaN
+/// is, and near -1e154 the squared deviation of every fingerprint overflows, so no state could
+/// explain the scan. Above [`MAX_RSSI_DBM`] is `RssiTooHigh`.
 fn plausible_rssi(rssi_dbm: f64) -> bool {
-    rssi_dbm.is_finite() && rssi_dbm.abs() <= 1000.0
+    rssi_dbm.is_finite() && rssi_dbm >= -1000.0
 }
 
 /// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).

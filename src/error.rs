@@ -31,7 +31,7 @@ pub enum InputError {
     /// A scan with no readings.
     #[error("the scan has no readings")]
     EmptyScan,
-    /// A reading's RSSI is NaN, infinite or beyond ±1000 dBm: the scan is corrupt and is
+    /// A reading's RSSI is NaN, infinite or below -1000 dBm: the scan is corrupt and is
     /// rejected whole.
     #[error("reading {index} ({transmitter}) has a non-finite or impossible RSSI")]
     NonFiniteRssi {
@@ -39,6 +39,17 @@ pub enum InputError {
         index: usize,
         /// Its transmitter.
         transmitter: String,
+    },
+    /// A reading's RSSI is above [`MAX_RSSI_DBM`](crate::engine::MAX_RSSI_DBM) (+100 dBm), which
+    /// no receiver reports: the scan is corrupt and is rejected whole.
+    #[error("reading {index} ({transmitter}) has an RSSI of {rssi_dbm} dBm, above any receiver's")]
+    RssiTooHigh {
+        /// Position of the reading in the scan.
+        index: usize,
+        /// Its transmitter.
+        transmitter: String,
+        /// The RSSI, dBm.
+        rssi_dbm: f64,
     },
     /// Motion given with an epoch (`push_scan_with_motion`, `advance_with_motion`) has a
     /// non-finite value, or a negative distance or spread.

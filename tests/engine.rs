@@ -118,3 +118,19 @@ fn invalid_config_is_refused() {
     let err = Engine::new(Arc::new(two_floor_site()), config).err().unwrap();
     assert!(err.to_string().contains("estimate_states"));
 }
+
+#[test]
+fn an_rssi_no_receiver_reports_rejects_the_scan() {
+    // Found by fuzzing (`engine_calls`): at f64::MAX dBm every state's log-likelihood was -inf,
+    // the filter restarted, and the position carried a radio_log_evidence of -inf.
+    let mut engine = engine();
+    let first = engine.push_scan(&scan(10 * SECOND, &readings_at(0, 3.0))).unwrap();
+    for rssi in [f64::MAX, 1e300, 100.5] {
+        let high = engine.push_scan(&scan(11 * SECOND, &[(0, -60.0), (1, rssi)]));
+        assert!(matches!(high, Err(InputError::RssiTooHigh { index: 1, .. })), "{rssi}: {high:?}");
+    }
+    assert_eq!(engine.stats().scans_rssi_too_high, 3);
+    assert_eq!(engine.position(), Some(&first));
+    let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark::engine::MAX_RSSI_DBM)])).unwrap();
+    assert!(loud.radio_log_evidence.is_some_and(f64::is_finite));
+}

@@ -7,7 +7,7 @@ use common::{scan, two_floor_site};
 use std::sync::{Arc, Mutex};
 use waymark::config::TransitionModel;
 use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
-use waymark::{Engine, EngineConfig, Position, PositionListener, StatusEvent, TrackPoint};
+use waymark::{Engine, EngineConfig, InputError, Position, PositionListener, StatusEvent, TrackPoint};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -182,4 +182,32 @@ fn motion_epochs_move_the_estimate_without_radio() {
     assert!(p.x > 6.0, "{p:?}");
     assert_eq!(engine.stats().motion_epochs, 4);
     assert!(engine.advance_with_motion(SECOND, &walking(1)).is_err());
+}
+
+#[test]
+fn motion_with_a_nan_or_negative_field_is_rejected_and_changes_nothing() {
+    // Found by fuzzing (`engine_calls`): a NaN heading given with a scan came out as the
+    // position's heading.
+    let mut engine = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
+    let first = engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
+    let posterior = engine.posterior().to_vec();
+    let bad = [
+        MotionUpdate { heading_rad: Some(f64::NAN), ..walking(4) },
+        MotionUpdate { heading_sigma_rad: f64::INFINITY, ..walking(4) },
+        MotionUpdate { heading_sigma_rad: -0.25, ..walking(4) },
+        MotionUpdate { distance_m: Some(-1.0), ..walking(4) },
+        MotionUpdate { distance_sigma_m: f64::NAN, ..walking(4) },
+        MotionUpdate { displacement_m: Some([f64::NEG_INFINITY, 0.0]), ..walking(4) },
+    ];
+    for (k, motion) in bad.iter().enumerate() {
+        let scanned = engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), motion);
+        assert!(matches!(scanned, Err(InputError::InvalidMotion { .. })), "{k}: {scanned:?}");
+        let advanced = engine.advance_with_motion(2 * SECOND, motion);
+        assert!(matches!(advanced, Err(InputError::InvalidMotion { .. })), "{k}: {advanced:?}");
+    }
+    assert_eq!(engine.stats().scans_invalid_motion, bad.len() as u64);
+    assert_eq!(engine.posterior(), &posterior[..]);
+    assert_eq!(engine.position(), Some(&first));
+    let p = engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), &walking(4)).unwrap();
+    assert!(p.heading_rad.is_some_and(f64::is_finite));
 }

@@ -461,6 +461,7 @@ fn count(stats: &mut InputStats, e: &InputError) {
         InputError::OutOfOrder { .. } => &mut stats.scans_out_of_order,
         InputError::EmptyScan => &mut stats.scans_empty,
         InputError::NonFiniteRssi { .. } => &mut stats.scans_non_finite,
+        InputError::RssiTooHigh { .. } => &mut stats.scans_rssi_too_high,
         InputError::NoKnownTransmitter { .. } => &mut stats.scans_no_known_transmitter,
         InputError::InvalidMotion { .. } => &mut stats.scans_invalid_motion,
     } += 1;
@@ -471,12 +472,14 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
     let sum = s.scans_out_of_order
         + s.scans_empty
         + s.scans_non_finite
+        + s.scans_rssi_too_high
         + s.scans_no_known_transmitter
         + s.scans_invalid_motion;
     let rest = InputStats {
         scans_out_of_order: 0,
         scans_empty: 0,
         scans_non_finite: 0,
+        scans_rssi_too_high: 0,
         scans_no_known_transmitter: 0,
         scans_invalid_motion: 0,
         ..s.clone()
@@ -924,25 +927,22 @@ fn an_impossible_rssi_is_rejected_like_nan() {
     let f = &FIXTURES[0];
     let mut engine = Engine::new(Arc::clone(&f.site), EngineConfig::default()).unwrap();
     let known = f.site.radio().transmitters()[0].clone();
-    for (k, rssi_dbm) in [f64::MAX, -f64::MAX, 1e200, -1001.0, 1001.0].into_iter().enumerate() {
+    // Below -1000 dBm: as NaN. Above +100 dBm: too high for any receiver.
+    for rssi_dbm in [f64::MAX, -f64::MAX, 1e200, -1001.0, 1001.0] {
         let scan = Scan {
             timestamp_ns: SECOND,
             readings: vec![Reading { transmitter: known.clone(), rssi_dbm, age_ns: 0 }],
         };
         let before = engine.snapshot();
-        assert!(
-            matches!(engine.push_scan(&scan), Err(InputError::NonFiniteRssi { index: 0, .. })),
-            "{rssi_dbm}"
-        );
-        assert_eq!(engine.stats().scans_non_finite, k as u64 + 1);
+        let result = engine.push_scan(&scan);
+        if rssi_dbm > 0.0 {
+            assert!(matches!(result, Err(InputError::RssiTooHigh { index: 0, .. })), "{rssi_dbm}");
+        } else {
+            assert!(matches!(result, Err(InputError::NonFiniteRssi { index: 0, .. })), "{rssi_dbm}");
+        }
         assert_eq!(without_stats(engine.snapshot()), without_stats(before));
     }
-    let scan = Scan {
-        timestamp_ns: SECOND,
-        readings: vec![Reading { transmitter: known, rssi_dbm: -1000.0, age_ns: 0 }],
-    };
-    let p = engine.push_scan(&scan).unwrap();
-    assert!(p.radio_log_evidence.is_some_and(f64::is_finite), "{p:?}");
+    assert_eq!((engine.stats().scans_non_finite, engine.stats().scans_rssi_too_high), (2, 3));
 }
 
 /// Motion from outside Waymark went into the transitions unchecked: a negative heading spread

@@ -269,7 +269,8 @@ impl Trace {
             let mut start = 0;
             while start < samples.len() {
                 let end_ns = samples[start].timestamp_ns.saturating_add(options.batch_ns);
-                let end = start + samples[start..].partition_point(|s| s.timestamp_ns < end_ns);
+                // At least one sample per batch: with `batch_ns` 0 none is before `end_ns`.
+                let end = start + samples[start..].partition_point(|s| s.timestamp_ns < end_ns).max(1);
                 events.push(make(samples[start..end].to_vec()));
                 start = end;
             }
@@ -295,7 +296,7 @@ impl Trace {
         for scan in wifi {
             while b < beacons.len() && beacons[b].0 <= scan.timestamp_ns {
                 if let Some(first) = pending.first() {
-                    if beacons[b].0 > first.0 + options.beacon_wait_ns {
+                    if beacons[b].0 > first.0.saturating_add(options.beacon_wait_ns) {
                         let at = pending.last().map_or(first.0, |p| p.0);
                         out.push(flush(&mut pending, at, Vec::new()));
                     }
@@ -304,7 +305,8 @@ impl Trace {
                 b += 1;
             }
             // Beacons that waited too long go out on their own, strictly before the WiFi scan.
-            let stale = pending.partition_point(|p| p.0 + options.beacon_wait_ns < scan.timestamp_ns);
+            let stale =
+                pending.partition_point(|p| p.0.saturating_add(options.beacon_wait_ns) < scan.timestamp_ns);
             if stale > 0 {
                 let at = pending[stale - 1].0;
                 let mut rest = pending.split_off(stale);
@@ -314,7 +316,7 @@ impl Trace {
             out.push(flush(&mut pending, scan.timestamp_ns, scan.readings.clone()));
         }
         for beacon in &beacons[b..] {
-            if pending.first().is_some_and(|p| beacon.0 > p.0 + options.beacon_wait_ns) {
+            if pending.first().is_some_and(|p| beacon.0 > p.0.saturating_add(options.beacon_wait_ns)) {
                 let at = pending.last().map_or(0, |p| p.0);
                 out.push(flush(&mut pending, at, Vec::new()));
             }
@@ -479,6 +481,39 @@ bogus line\n\
             assert!(s.readings.iter().all(|r| r.age_ns <= 2_000 * NS_PER_MS));
         }
         assert_eq!(scans.iter().map(|s| s.readings.len()).sum::<usize>(), 10);
+    }
+
+    #[test]
+    fn a_zero_batch_length_makes_one_sample_batches() {
+        // Found by the `ilc_trace` fuzz harness: no batch ever ended, and `events` looped forever.
+        let t = Trace::parse(WALK, "walk");
+        let options = EventOptions { batch_ns: 0, ..EventOptions::default() };
+        let events = t.events(&options);
+        let batches = events.iter().filter(|e| !matches!(e, Event::Scan(_))).count();
+        assert_eq!(batches, t.accelerometer.len() + t.gyroscope.len() + t.magnetometer.len());
+    }
+
+    #[test]
+    fn beacon_waits_do_not_overflow_at_the_end_of_time() {
+        // Found by the `ilc_trace` fuzz harness: the wait was added to the beacon's time unchecked, so
+        // a timestamp near u64::MAX ns (or a wait of u64::MAX) overflowed.
+        let beacon = |ms: &str| {
+            format!("{ms}\tTYPE_BEACON\tFDA50693-A4E2-4FB1-AFCF-C6EB07647825\t1\t2\t-59\t-80\t3.2\tE0:78:A3:3D:B5:D6\t0\n")
+        };
+        // 18446744073709 ms is the last whole millisecond before u64::MAX ns.
+        let text = beacon("1000")
+            + &beacon("18446744073708")
+            + &beacon("18446744073709")
+            + "18446744073709\tTYPE_WIFI\tnet\tAA:BB:CC:DD:EE:01\t-50\t2412\t0\n";
+        let t = Trace::parse(&text, "late");
+        for options in
+            [EventOptions::default(), EventOptions { beacon_wait_ns: u64::MAX, ..EventOptions::default() }]
+        {
+            let scans = t.scans(&options);
+            assert_eq!(scans.iter().map(|s| s.readings.len()).sum::<usize>(), 4);
+        }
+        let long_wait = t.scans(&EventOptions { beacon_wait_ns: u64::MAX, ..EventOptions::default() });
+        assert_eq!(long_wait.len(), 1, "every beacon waits for the one WiFi scan");
     }
 
     #[test]

@@ -205,12 +205,30 @@ fn json_error(e: &serde_json::Error) -> SiteError {
     }
 }
 
+/// Largest |x| and |y| of a state, m. Found with the `site_file` fuzz harness: states at
+/// ±1e308 m made distances overflow to an infinite accuracy radius. 1000 km is more than any
+/// building's frame, and keeps every distance and its square finite.
+const MAX_COORDINATE_M: f64 = 1e6;
+
+/// Largest |value| of an RSSI level in the file (means, the clip level), dBm.
+const MAX_ABS_DBM: f64 = 1000.0;
+
+/// Smallest standard deviation of an RSSI model, dB. Found with the `site_file` fuzz harness:
+/// with σ of 1e-300 dB every reading off the mean had a likelihood of exactly 0 at every
+/// state, and no state explained any scan. Phones report whole dBm and the survey's fits stop
+/// at 1 dB; with σ ≥ 0.01 dB and the levels within ±1000 dBm, every accepted reading (at most
+/// +100 dBm) has a finite log-likelihood.
+const MIN_STD_DB: f64 = 0.01;
+
 /// A validated Gaussian; `path` (formatted only on error) says where it was in the file.
 fn gaussian(path: impl FnOnce() -> String, g: &GaussianFile) -> Result<Gaussian, SiteError> {
-    Gaussian::new(g.mean_dbm, g.std_db).ok_or_else(|| {
+    let (mean, std) = (g.mean_dbm, g.std_db);
+    Gaussian::new(mean, std).filter(|_| mean.abs() <= MAX_ABS_DBM && std >= MIN_STD_DB).ok_or_else(|| {
         invalid(
             path(),
-            format!("mean_dbm must be finite and std_db finite and > 0 (got {}, {})", g.mean_dbm, g.std_db),
+            format!(
+                "mean_dbm must be within ±{MAX_ABS_DBM} and std_db finite and ≥ {MIN_STD_DB} (got {mean}, {std})"
+            ),
         )
     })
 }
@@ -345,8 +363,8 @@ impl Site {
             return Err(invalid("states", "more states than a u32 can index"));
         }
         let radio = &file.radio;
-        if !(radio.clip_dbm.is_finite()) {
-            return Err(invalid("radio.clip_dbm", "must be finite"));
+        if !radio.clip_dbm.is_finite() || radio.clip_dbm.abs() > MAX_ABS_DBM {
+            return Err(invalid("radio.clip_dbm", format!("must be within ±{MAX_ABS_DBM}")));
         }
         let unheard = gaussian(|| "radio.unheard".into(), &radio.unheard)?;
         let id_hashing = id_hashing(radio)?;
@@ -366,8 +384,9 @@ impl Site {
                     format!("floor {} does not exist (the site has {} floors)", s.floor, file.floors.len()),
                 ));
             }
-            if !(s.x.is_finite() && s.y.is_finite()) {
-                return Err(invalid(at("x"), "coordinates must be finite"));
+            let inside = |v: f64| v.is_finite() && v.abs() <= MAX_COORDINATE_M;
+            if !(inside(s.x) && inside(s.y)) {
+                return Err(invalid(at("x"), format!("coordinates must be within ±{MAX_COORDINATE_M} m")));
             }
             for (k, f) in s.fingerprint.iter().enumerate() {
                 // Paths are formatted only for an error: once per entry, they were a third of
@@ -672,6 +691,31 @@ mod tests {
                 other => panic!("expected Invalid at {path}, got {other:?}"),
             }
         }
+    }
+
+    #[test]
+    fn values_too_large_or_too_small_to_compute_with_are_refused() {
+        // Found with the `site_file` fuzz harness: each of these loaded, and then gave an
+        // infinite accuracy radius or a -inf likelihood at every state.
+        let cases = [
+            (GOOD.replace("\"x\": 3, \"y\": 4", "\"x\": 1e308, \"y\": -1e308"), "states[1].x"),
+            (GOOD.replace("\"std_db\": 4", "\"std_db\": 1e-300"), "states[0].fingerprint[0]"),
+            (GOOD.replace("\"mean_dbm\": -60", "\"mean_dbm\": -1e300"), "states[0].fingerprint[0]"),
+            (GOOD.replace("\"std_db\": 5", "\"std_db\": 0.001"), "radio.unheard"),
+            (GOOD.replace("\"clip_dbm\": -100", "\"clip_dbm\": -1e5"), "radio.clip_dbm"),
+        ];
+        for (text, path) in cases {
+            match err(&text) {
+                SiteError::Invalid { path: p, .. } => {
+                    assert!(p.starts_with(path), "expected {path}, got {p}")
+                }
+                other => panic!("expected Invalid at {path}, got {other:?}"),
+            }
+        }
+        let edge = GOOD
+            .replace("\"x\": 3, \"y\": 4", "\"x\": 1e6, \"y\": -1e6")
+            .replace("\"std_db\": 4", "\"std_db\": 0.01");
+        assert!(Site::from_json(edge.as_bytes()).is_ok(), "the limits themselves load");
     }
 
     #[test]
