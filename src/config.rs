@@ -159,6 +159,13 @@ pub struct EngineConfig {
     /// Probability mass inside the reported `accuracy_m` circle: 0.68, as Android's
     /// `Location.getAccuracy()` and iOS's `horizontalAccuracy` define it.
     pub accuracy_mass: f64,
+    /// The salt the site's transmitter ids were hashed with, for a site file that holds
+    /// hashes instead of MAC addresses ([`Site::hashed`](crate::Site::hashed)); scans are
+    /// hashed with it before matching. `None` for a site with raw ids. An engine on a hashed
+    /// site fails to start without it or with another salt
+    /// ([`SiteError::SaltRequired`](crate::SiteError::SaltRequired),
+    /// [`SiteError::WrongSalt`](crate::SiteError::WrongSalt)).
+    pub site_salt: Option<crate::radio::Salt>,
 }
 
 impl Default for EngineConfig {
@@ -181,6 +188,7 @@ impl Default for EngineConfig {
             max_reading_age_ns: None,
             accuracy_mass: 0.68,
             site_calibration: true,
+            site_salt: None,
         }
     }
 }

@@ -11,7 +11,7 @@ use crate::hmm::{
     estimate, ForwardFilter, HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach,
     ViterbiWindow,
 };
-use crate::radio::Scan;
+use crate::radio::{Scan, ScanHasher};
 use crate::sensors::{
     BatchReport, MdiScenario, MotionState, MotionStats, MotionTracker, MotionUpdate, SensorSample,
 };
@@ -128,26 +128,48 @@ pub struct InputStats {
     pub scans_out_of_order: u64,
     /// Scans rejected for having no readings.
     pub scans_empty: u64,
-    /// Scans rejected for a NaN or infinite RSSI.
+    /// Scans rejected for a NaN, infinite or impossible (below -1000 dBm) RSSI.
     pub scans_non_finite: u64,
     /// Scans rejected for an RSSI above [`MAX_RSSI_DBM`].
     pub scans_rssi_too_high: u64,
     /// Scans rejected because no reading was of a known transmitter.
     pub scans_no_known_transmitter: u64,
+    /// Scans rejected because the motion given with them was invalid
+    /// ([`Engine::push_scan_with_motion`]).
+    pub scans_invalid_motion: u64,
     /// Readings of transmitters not in the site (in accepted scans).
     pub readings_unknown: u64,
     /// Repeated readings of one transmitter within a scan (in accepted scans).
     pub readings_duplicate: u64,
     /// Readings older than `max_reading_age_ns` (in accepted scans).
     pub readings_stale: u64,
-    /// Scans and advances rejected because the motion given with them was invalid
-    /// ([`InputError::InvalidMotion`]).
-    pub motions_invalid: u64,
     /// Epochs without a scan ([`Engine::advance`]).
     pub motion_epochs: u64,
     /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
     /// when no state could explain a scan.
     pub filter_restarts: u64,
+}
+
+/// Everything an engine holds that decides its later answers, for tests that check a call
+/// changed nothing (a rejected scan must leave the engine as it was). Not a stable API: the
+/// internals are compared through their `Debug` renderings, which show every field.
+#[doc(hidden)]
+#[derive(Clone, Debug, PartialEq)]
+pub struct EngineSnapshot {
+    /// Time of the last epoch.
+    pub last_epoch_ns: Option<u64>,
+    /// The latest position.
+    pub position: Option<Position>,
+    /// The posterior over the site's states.
+    pub posterior: Vec<f64>,
+    /// The track as last published to listeners.
+    pub published_track: Vec<TrackPoint>,
+    /// Counts of accepted and dropped input (a test decides whether these count as state).
+    pub stats: InputStats,
+    /// The active subscriptions, and the next id.
+    pub subscriptions: (Vec<SubscriptionId>, u64),
+    /// `Debug` of the forward filter, the Viterbi window and the motion tracker.
+    pub internals: String,
 }
 
 /// A positioning session on one site.
@@ -171,12 +193,16 @@ pub struct Engine {
     rssi_weight: [Option<f64>; 2],
     /// Factors on the 68% and 95% radii (the site's calibration).
     accuracy_scale: [f64; 2],
+    /// Hashes scans' ids with the site's salt when the site's ids are hashed.
+    id_hasher: Option<ScanHasher>,
 }
 
 impl Engine {
     /// A session on `site`. Precomputes the walking-distance table: all allocation happens here.
+    /// A site whose transmitter ids are hashed needs its salt in `config.site_salt`.
     pub fn new(site: Arc<Site>, config: EngineConfig) -> Result<Self, Error> {
         config.validate()?;
+        let id_hasher = site.scan_hasher(config.site_salt.as_ref())?;
         let n = site.states().len();
         let reach = ReachTable::build(&site, config.reach_radius_m);
         let rssi_weight = config.rssi_weight_for(&site);
@@ -197,6 +223,7 @@ impl Engine {
             stats: InputStats::default(),
             rssi_weight,
             accuracy_scale,
+            id_hasher,
             config,
         })
     }
@@ -234,6 +261,20 @@ impl Engine {
     /// Bytes held by the Viterbi window (bounded by `track_window_epochs`).
     pub fn track_memory_bytes(&self) -> usize {
         self.viterbi.memory_bytes()
+    }
+
+    /// The engine's state, for tests (see [`EngineSnapshot`]).
+    #[doc(hidden)]
+    pub fn snapshot(&self) -> EngineSnapshot {
+        EngineSnapshot {
+            last_epoch_ns: self.last_epoch_ns,
+            position: self.latest.clone(),
+            posterior: self.filter.posterior().to_vec(),
+            published_track: self.published_track.clone(),
+            stats: self.stats.clone(),
+            subscriptions: (self.listeners.iter().map(|(id, _)| *id).collect(), self.next_subscription),
+            internals: format!("{:?}\n{:?}\n{:?}", self.filter, self.viterbi, self.tracker),
+        }
     }
 
     /// Calls `listener` with everything published until [`unsubscribe`](Self::unsubscribe).
@@ -294,7 +335,8 @@ impl Engine {
     }
 
     /// Takes a scan with motion measured outside Waymark (a platform step detector, a test)
-    /// instead of the engine's own inertial tracker.
+    /// instead of the engine's own inertial tracker. Motion with a non-finite value or a
+    /// negative distance or spread rejects the scan.
     pub fn push_scan_with_motion(
         &mut self,
         scan: &Scan,
@@ -312,7 +354,7 @@ impl Engine {
                 InputError::NonFiniteRssi { .. } => &mut self.stats.scans_non_finite,
                 InputError::RssiTooHigh { .. } => &mut self.stats.scans_rssi_too_high,
                 InputError::NoKnownTransmitter { .. } => &mut self.stats.scans_no_known_transmitter,
-                InputError::InvalidMotion { .. } => &mut self.stats.motions_invalid,
+                InputError::InvalidMotion { .. } => &mut self.stats.scans_invalid_motion,
             };
             *counter += 1;
             log::debug!("scan rejected: {e}");
@@ -343,9 +385,7 @@ impl Engine {
         motion: Option<&MotionUpdate>,
     ) -> Result<Position, InputError> {
         self.check_time(timestamp_ns)?;
-        if let Some(m) = motion {
-            check_motion(m).inspect_err(|_| self.stats.motions_invalid += 1)?;
-        }
+        motion.map_or(Ok(()), check_motion)?;
         let motion = self.motion_until(timestamp_ns, motion);
         self.ln_emission.fill(0.0);
         self.stats.motion_epochs += 1;
@@ -369,17 +409,23 @@ impl Engine {
 
     fn scan_epoch(&mut self, scan: &Scan, motion: Option<&MotionUpdate>) -> Result<Position, InputError> {
         self.check_time(scan.timestamp_ns)?;
+        motion.map_or(Ok(()), check_motion)?;
         if scan.readings.is_empty() {
             return Err(InputError::EmptyScan);
         }
-        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !r.rssi_dbm.is_finite()) {
+        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !plausible_rssi(r.rssi_dbm))
+        {
             return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
         }
         if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| r.rssi_dbm > MAX_RSSI_DBM) {
             let transmitter = r.transmitter.to_string();
             return Err(InputError::RssiTooHigh { index, transmitter, rssi_dbm: r.rssi_dbm });
         }
-        let resolved = self.site.radio().resolve(scan, self.config.max_reading_age_ns);
+        let max_age_ns = self.config.max_reading_age_ns;
+        let resolved = match &mut self.id_hasher {
+            Some(hasher) => self.site.radio().resolve(hasher.hash_scan(scan), max_age_ns),
+            None => self.site.radio().resolve(scan, max_age_ns),
+        };
         if resolved.observations.is_empty() {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
@@ -603,25 +649,29 @@ impl Engine {
     }
 }
 
-/// A motion measured outside Waymark must be a measurement: finite, with distances and spreads
-/// not negative. Found by fuzzing (`engine_calls`): a NaN or infinite heading went straight
-/// into the published position, and NaN spreads into the transition.
+/// Motion measured outside Waymark must be finite, with distances and spreads not negative:
+/// the transitions take it as it is.
 fn check_motion(m: &MotionUpdate) -> Result<(), InputError> {
-    let non_negative = |v: f64| v.is_finite() && v >= 0.0;
-    let field = if !m.distance_m.map_or(true, non_negative) {
-        "distance_m"
-    } else if !non_negative(m.distance_sigma_m) {
-        "distance_sigma_m"
-    } else if !m.heading_rad.map_or(true, f64::is_finite) {
-        "heading_rad"
-    } else if !non_negative(m.heading_sigma_rad) {
-        "heading_sigma_rad"
-    } else if !m.displacement_m.map_or(true, |d| d.iter().all(|v| v.is_finite())) {
-        "displacement_m"
-    } else {
-        return Ok(());
-    };
-    Err(InputError::InvalidMotion { field })
+    let fields = [
+        ("distance_m", m.distance_m.unwrap_or(0.0), true),
+        ("distance_sigma_m", m.distance_sigma_m, true),
+        ("heading_rad", m.heading_rad.unwrap_or(0.0), false),
+        ("heading_sigma_rad", m.heading_sigma_rad, true),
+        ("displacement_m[0]", m.displacement_m.map_or(0.0, |d| d[0]), false),
+        ("displacement_m[1]", m.displacement_m.map_or(0.0, |d| d[1]), false),
+    ];
+    match fields.into_iter().find(|&(_, v, positive)| !v.is_finite() || (positive && v < 0.0)) {
+        Some((field, value, _)) => Err(InputError::InvalidMotion { field, value }),
+        None => Ok(()),
+    }
+}
+
+/// Whether an RSSI can be a measurement, as far as its lower end goes: finite and not below
+/// -1000 dBm (receivers report about -120 to +20). Below that it is a corrupt producer, as NaN
+/// is, and near -1e154 the squared deviation of every fingerprint overflows, so no state could
+/// explain the scan. Above [`MAX_RSSI_DBM`] is `RssiTooHigh`.
+fn plausible_rssi(rssi_dbm: f64) -> bool {
+    rssi_dbm.is_finite() && rssi_dbm >= -1000.0
 }
 
 /// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).

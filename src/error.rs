@@ -31,8 +31,9 @@ pub enum InputError {
     /// A scan with no readings.
     #[error("the scan has no readings")]
     EmptyScan,
-    /// A reading's RSSI is NaN or infinite: the scan is corrupt and is rejected whole.
-    #[error("reading {index} ({transmitter}) has a non-finite RSSI")]
+    /// A reading's RSSI is NaN, infinite or below -1000 dBm: the scan is corrupt and is
+    /// rejected whole.
+    #[error("reading {index} ({transmitter}) has a non-finite or impossible RSSI")]
     NonFiniteRssi {
         /// Position of the reading in the scan.
         index: usize,
@@ -50,13 +51,14 @@ pub enum InputError {
         /// The RSSI, dBm.
         rssi_dbm: f64,
     },
-    /// The motion given with a scan or advance (`Engine::push_scan_with_motion`,
-    /// `Engine::advance_with_motion`) has a NaN or infinite value, or a negative distance or
-    /// spread: the producer is corrupt.
-    #[error("the motion given has an invalid {field}")]
+    /// Motion given with an epoch (`push_scan_with_motion`, `advance_with_motion`) has a
+    /// non-finite value, or a negative distance or spread.
+    #[error("invalid motion: {field} is {value}")]
     InvalidMotion {
-        /// The first invalid field of the `MotionUpdate`.
+        /// The field of the `MotionUpdate`.
         field: &'static str,
+        /// Its value.
+        value: f64,
     },
     /// None of the scan's readings is of a transmitter in the site's radio map (after dropping
     /// duplicates and stale readings): it says nothing about where the phone is.

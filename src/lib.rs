@@ -18,7 +18,7 @@ pub mod survey;
 pub use config::EngineConfig;
 pub use engine::{Engine, InputStats, Position, PositionListener, StatusEvent, SubscriptionId, TrackPoint};
 pub use error::{Error, InputError};
-pub use radio::{Reading, Scan, TransmitterId};
+pub use radio::{Reading, Salt, Scan, TransmitterId};
 pub use site::{Site, SiteError};
 
 uniffi::setup_scaffolding!();

@@ -169,6 +169,32 @@ fn errors_are_typed() {
 }
 
 #[test]
+fn a_hashed_site_needs_its_salt() {
+    let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
+    let salt: Vec<u8> = (0u8..32).collect();
+    let hashed = office.site.hashed(&waymark::Salt::new(salt.clone()).unwrap()).unwrap().to_json();
+    let with = |site_salt: Option<Vec<u8>>| EngineOptions { site_salt, ..EngineOptions::default() };
+    let engine = PositioningEngine::new(hashed.clone(), with(Some(salt.clone()))).unwrap();
+    let walk = office.walk(5, 20.0);
+    for epoch in &walk.epochs {
+        engine.push_scan(scan(&epoch.scan)).unwrap();
+    }
+    for options in [with(None), with(Some(vec![7; 32]))] {
+        match PositioningEngine::new(hashed.clone(), options) {
+            Err(PositioningError::SaltMismatch { reason }) => assert!(!reason.contains("0001"), "{reason}"),
+            other => panic!("expected SaltMismatch, got {:?}", other.map(|_| ())),
+        }
+    }
+    assert!(matches!(
+        PositioningEngine::new(hashed, with(Some(vec![1; 8]))),
+        Err(PositioningError::InvalidConfig { .. })
+    ));
+    // The salt stays out of Debug output, and a raw site takes (and ignores) one.
+    assert!(!format!("{:?}", with(Some(salt.clone()))).contains("[0, 1, 2"));
+    PositioningEngine::new(office.site.to_json(), with(Some(salt))).unwrap();
+}
+
+#[test]
 fn eight_threads_at_once() {
     let office = Office::generate(&OfficeConfig { training_scans: 50, ..OfficeConfig::default() });
     let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();

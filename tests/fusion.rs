@@ -205,7 +205,7 @@ fn motion_with_a_nan_or_negative_field_is_rejected_and_changes_nothing() {
         let advanced = engine.advance_with_motion(2 * SECOND, motion);
         assert!(matches!(advanced, Err(InputError::InvalidMotion { .. })), "{k}: {advanced:?}");
     }
-    assert_eq!(engine.stats().motions_invalid, 2 * bad.len() as u64);
+    assert_eq!(engine.stats().scans_invalid_motion, bad.len() as u64);
     assert_eq!(engine.posterior(), &posterior[..]);
     assert_eq!(engine.position(), Some(&first));
     let p = engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), &walking(4)).unwrap();

@@ -1,6 +1,8 @@
 /* The C test of Waymark: loads a simulated site, replays a walk's raw IMU batches and WiFi
  * scans through the C ABI, checks positions against the truth, and exercises the error paths
- * (NULL, bad JSON, out-of-order time, NaN samples). Run under valgrind by test.sh. */
+ * (NULL, bad JSON, out-of-order time, NaN samples). The walk is replayed again on the same site
+ * with its transmitter ids hashed, with the salt; without it or with another one the engine
+ * refuses to start. Run under valgrind by test.sh. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -54,9 +56,25 @@ static waymark_sample *read_samples(FILE *f, size_t n) {
     return s;
 }
 
-static void walk(const char *site_path, const char *walk_path) {
+/* The salt file's hex digits as bytes into `salt` (at most `cap`); the byte count, or 0. */
+static size_t read_salt(const char *path, uint8_t *salt, size_t cap) {
+    size_t len = 0, n = 0;
+    char *text = read_file(path, &len);
+    if (!text) return 0;
+    for (size_t i = 0; i + 1 < len && n < cap; i += 2) {
+        unsigned int byte;
+        if (sscanf(text + i, "%2x", &byte) != 1) break;
+        salt[n++] = (uint8_t)byte;
+    }
+    free(text);
+    return n;
+}
+
+static void walk(const char *site_path, const char *walk_path, const uint8_t *salt, size_t salt_len) {
     waymark_engine *engine = NULL;
-    CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "load site");
+    callbacks = 0;
+    CHECK(waymark_engine_new_from_path_with_salt(site_path, salt, salt_len, &engine) == WAYMARK_RESULT_OK,
+          "load site %s", site_path);
     CHECK(waymark_engine_set_callback(engine, on_position, &callbacks) == WAYMARK_RESULT_OK, "callback");
     FILE *f = fopen(walk_path, "r");
     CHECK(f != NULL, "open walk");
@@ -96,7 +114,8 @@ static void walk(const char *site_path, const char *walk_path) {
     }
     fclose(f);
     double mean = positions ? error_sum / positions : INFINITY;
-    printf("walk: %d epochs, %d positions, mean error %.2f m, %d callbacks\n", epochs, positions, mean, callbacks);
+    printf("walk (%s ids): %d epochs, %d positions, mean error %.2f m, %d callbacks\n", salt ? "hashed" : "raw",
+           epochs, positions, mean, callbacks);
     CHECK(epochs > 10 && positions > epochs / 2, "positions");
     CHECK(mean < 1.5, "mean error %.2f", mean);
     CHECK(callbacks == positions, "callbacks %d positions %d", callbacks, positions);
@@ -222,14 +241,66 @@ static void address_beacons(const char *site_path) {
     waymark_engine_free(engine);
 }
 
+/* A hashed site: the right salt works, none or another is SALT_MISMATCH, a short one is
+ * INVALID_CONFIG, and the message never holds the salt. */
+static void salted(const char *hashed_path, const uint8_t *salt, size_t salt_len) {
+    waymark_engine *engine = NULL;
+    char message[512];
+    CHECK(waymark_engine_new_from_path(hashed_path, &engine) == WAYMARK_RESULT_SALT_MISMATCH, "no salt");
+    waymark_last_error(message, sizeof message);
+    CHECK(strstr(message, "salt") != NULL, "message: %s", message);
+    CHECK(waymark_engine_new_from_path_with_salt(hashed_path, NULL, 0, &engine) == WAYMARK_RESULT_SALT_MISMATCH,
+          "NULL salt");
+    uint8_t wrong[32];
+    memcpy(wrong, salt, sizeof wrong);
+    wrong[0] ^= 1;
+    CHECK(waymark_engine_new_from_path_with_salt(hashed_path, wrong, sizeof wrong, &engine) ==
+              WAYMARK_RESULT_SALT_MISMATCH, "wrong salt");
+    CHECK(waymark_engine_new_from_path_with_salt(hashed_path, salt, 8, &engine) == WAYMARK_RESULT_INVALID_CONFIG,
+          "short salt");
+    CHECK(waymark_engine_new_from_path_with_salt(hashed_path, NULL, 32, &engine) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL salt with a length");
+    CHECK(waymark_engine_new_from_path_with_salt(hashed_path, salt, salt_len, NULL) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL out");
+    CHECK(waymark_engine_new_from_path_with_salt(NULL, salt, salt_len, &engine) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL path");
+    CHECK(waymark_engine_new_from_path_with_salt("\xff\xfe", salt, salt_len, &engine) == WAYMARK_RESULT_INVALID_UTF8,
+          "path not UTF-8");
+    CHECK(waymark_engine_new_with_salt(NULL, 10, salt, salt_len, &engine) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL json");
+
+    size_t len = 0;
+    char *json = read_file(hashed_path, &len);
+    CHECK(json != NULL && strstr(json, "02:00:00") == NULL && strstr(json, "\"id_hash\"") != NULL,
+          "the hashed file holds no BSSID");
+    if (!json) return;
+    CHECK(waymark_engine_new((const uint8_t *)json, len, &engine) == WAYMARK_RESULT_SALT_MISMATCH, "bytes, no salt");
+    CHECK(waymark_engine_new_with_salt((const uint8_t *)json, len, salt, salt_len, &engine) == WAYMARK_RESULT_OK,
+          "bytes, salt");
+    free(json);
+    /* Scans carry raw BSSIDs, in any notation; the engine hashes them. */
+    waymark_wifi_reading known[2] = {{"02:00:00:00:00:00", -60.0, 0}, {"02-00-00-00-00-01", -65.0, 0}};
+    waymark_position p;
+    CHECK(waymark_engine_push_scan(engine, 10, known, 2, NULL, 0, &p) == WAYMARK_RESULT_OK, "hashed match");
+    waymark_wifi_reading unknown = {"aa:aa:aa:aa:aa:aa", -60.0, 0};
+    CHECK(waymark_engine_push_scan(engine, 20, &unknown, 1, NULL, 0, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+          "unknown through the hash");
+    waymark_engine_free(engine);
+}
+
 int main(int argc, char **argv) {
-    if (argc != 3) {
-        fprintf(stderr, "usage: %s site.json walk.txt\n", argv[0]);
+    if (argc != 5) {
+        fprintf(stderr, "usage: %s site.json walk.txt site-hashed.json salt.hex\n", argv[0]);
         return 2;
     }
+    uint8_t salt[64];
+    size_t salt_len = read_salt(argv[4], salt, sizeof salt);
+    CHECK(salt_len >= 16, "salt file %s", argv[4]);
     error_paths(argv[1]);
     address_beacons(argv[1]);
-    walk(argv[1], argv[2]);
+    walk(argv[1], argv[2], NULL, 0);
+    walk(argv[3], argv[2], salt, salt_len);
+    salted(argv[3], salt, salt_len);
     printf("%d passed, %d failed\n", checks - failures, failures);
     return failures ? 1 : 0;
 }

@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The C ABI test: checks the committed header is what cbindgen makes from src/ffi/c.rs, builds
 # the library, compiles bindings/c/test.c against the header and the library (shared and
-# static), and runs both under valgrind: zero errors, zero leaks.
+# static), and runs both under valgrind: zero errors, zero leaks. Then checks that the shared
+# library imports no networking function (scripts/check-no-network.sh).
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$repo"
@@ -33,16 +34,29 @@ echo "-- build"
 # The CLI first: building it with --features cli rebuilds the library with that feature; the
 # `--lib` build after it leaves the library the test links against.
 cargo run --features cli --locked --quiet -- sim-export --walk-length-m 40 --out "$work"
+# The same site with its transmitter ids hashed, under a fixed test salt.
+echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$work/salt.hex"
+cargo run --features cli --locked --quiet -- site hash --salt-file "$work/salt.hex" \
+    "$work/site.json" "$work/site-hashed.json" >/dev/null
 # A test build: a scan at UINT64_MAX - 7 panics inside the engine (feature fault-injection).
 cargo build --lib --locked --quiet --features fault-injection
 python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
 flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -I bindings/c)
-gcc "${flags[@]}" bindings/c/test.c -L "$target/debug" -lwaymark -lm -o "$work/test_shared"
-gcc "${flags[@]}" bindings/c/test.c "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/test_static"
+for test in test robustness; do
+    gcc "${flags[@]}" "bindings/c/$test.c" -L "$target/debug" -lwaymark -lm -o "$work/${test}_shared"
+    gcc "${flags[@]}" "bindings/c/$test.c" "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/${test}_static"
+done
 
 for kind in shared static; do
     echo "-- $kind library under valgrind"
     LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
         --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
-        "$work/test_$kind" "$work/site.json" "$work/walk.txt"
+        "$work/test_$kind" "$work/site.json" "$work/walk.txt" "$work/site-hashed.json" "$work/salt.hex"
+    echo "-- bad input, $kind library under valgrind"
+    LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
+        --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
+        "$work/robustness_$kind" "$work/site.json"
 done
+
+echo "-- no networking"
+bash scripts/check-no-network.sh "$target/debug/libwaymark.so"

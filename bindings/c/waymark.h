@@ -49,6 +49,11 @@ enum waymark_result
    */
   WAYMARK_RESULT_INVALID_UTF8 = 6,
   /**
+   * The site's transmitter ids are salted hashes and no salt, or not the salt they were
+   * hashed with, was given (`waymark_engine_new_with_salt`).
+   */
+  WAYMARK_RESULT_SALT_MISMATCH = 7,
+  /**
    * Waymark panicked; the call had no effect and the engine stays usable.
    */
   WAYMARK_RESULT_PANIC = 99,
@@ -209,13 +214,37 @@ extern "C" {
 /**
  * Creates an engine from site-file JSON (`len` bytes at `site_json`, not NUL-terminated
  * necessarily). On success `*out` holds the engine; free it with `waymark_engine_free`.
+ * A site whose transmitter ids are hashed needs `waymark_engine_new_with_salt`.
  */
 waymark_result waymark_engine_new(const uint8_t *site_json, size_t len, waymark_engine **out);
 
 /**
  * Creates an engine from the site file at the NUL-terminated `path`.
+ * A site whose transmitter ids are hashed needs `waymark_engine_new_from_path_with_salt`.
  */
 waymark_result waymark_engine_new_from_path(const char *path, waymark_engine **out);
+
+/**
+ * As `waymark_engine_new`, for a site file whose transmitter ids are salted hashes
+ * (`waymark survey --salt-file`, `waymark site hash`): `salt` points to `salt_len` bytes (at
+ * least 16; the bytes the salt file's hex digits stand for), copied before the call returns.
+ * Scans are hashed with it before matching. A hashed site with no salt (`salt` NULL,
+ * `salt_len` 0) or another salt returns `WAYMARK_RESULT_SALT_MISMATCH`; a salt given for a
+ * site with raw ids is not needed and is ignored.
+ */
+waymark_result waymark_engine_new_with_salt(const uint8_t *site_json,
+                                            size_t len,
+                                            const uint8_t *salt,
+                                            size_t salt_len,
+                                            waymark_engine **out);
+
+/**
+ * As `waymark_engine_new_from_path`, with the site's salt as in `waymark_engine_new_with_salt`.
+ */
+waymark_result waymark_engine_new_from_path_with_salt(const char *path,
+                                                      const uint8_t *salt,
+                                                      size_t salt_len,
+                                                      waymark_engine **out);
 
 /**
  * Frees an engine. NULL is ignored.

@@ -75,6 +75,9 @@ cargo build --features bindgen --bin uniffi-bindgen
 step "waymark sim-export --out $SIM"
 cargo build --features cli --bin waymark
 "$TARGET/debug/waymark" sim-export --out "$SIM"
+# The same site with its transmitter ids hashed, under a fixed test salt.
+echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$SIM/salt.hex"
+"$TARGET/debug/waymark" site hash --salt-file "$SIM/salt.hex" "$SIM/site.json" "$SIM/site-hashed.json" >&2
 # The shipped library, without the bindgen (or cli) feature: the one the JVM loads.
 step "cargo build --lib"
 # A test build: a scan at ULong.MAX - 7 panics inside the engine (feature fault-injection).
@@ -105,6 +108,7 @@ step "JUnit 4"
 set +e
 java -Djna.library.path="$TARGET/debug" \
     -Dwaymark.site="$SIM/site.json" -Dwaymark.walk="$SIM/walk.json" \
+    -Dwaymark.hashedSite="$SIM/site-hashed.json" -Dwaymark.salt="$SIM/salt.hex" \
     -cp "$OUT/classes:$run_cp" dev.waymark.RunTests 2>&1 | tee "$OUT/junit.log"
 status=${PIPESTATUS[0]}
 set -e

@@ -42,6 +42,10 @@ cargo build --quiet --features bindgen --bin uniffi-bindgen
 # The simulated site and walk the XCTest replays (building the CLI rebuilds the library with
 # its feature, so the library comes last).
 cargo run --quiet --features cli --bin waymark -- sim-export --out "$TARGET/sim-export" >/dev/null
+# The same site with its transmitter ids hashed, under a fixed test salt.
+echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$TARGET/sim-export/salt.hex"
+cargo run --quiet --features cli --bin waymark -- site hash --salt-file "$TARGET/sim-export/salt.hex" \
+    "$TARGET/sim-export/site.json" "$TARGET/sim-export/site-hashed.json" >/dev/null
 # A test build: a scan at UInt64.max - 7 panics inside the engine (feature fault-injection).
 cargo build --quiet --lib --features fault-injection
 LIB="$TARGET/debug/libwaymark.so"

@@ -203,6 +203,8 @@ fn options(c: &mut Cursor) -> ffi::EngineOptions {
         fixed_lag_epochs: if c.u8() % 2 == 0 { u32::from(c.u8()) } else { c.u32() },
         declination_deg: optional(c),
         site_rotation_deg: optional(c),
+        // The harness's sites hold raw ids; salts are fuzzed by tests/properties.rs.
+        site_salt: None,
     }
 }
 
@@ -387,6 +389,8 @@ fn scan(c: &mut Cursor, fixture: &Fixture, clock: &mut Clock) -> ScanInput {
                 age_ms,
                 address: Some(if broken { "nope".into() } else { mac.clone() }),
             }),
+            // Readings are drawn from the harness's sites, which hold raw ids.
+            TransmitterId::HashedWifi { .. } | TransmitterId::HashedBle { .. } => {}
         }
     }
     // The FFI puts WiFi readings before beacons; the core gets the same order.

@@ -36,6 +36,9 @@ pub enum waymark_result {
     NoPosition = 5,
     /// A string was not UTF-8.
     InvalidUtf8 = 6,
+    /// The site's transmitter ids are salted hashes and no salt, or not the salt they were
+    /// hashed with, was given (`waymark_engine_new_with_salt`).
+    SaltMismatch = 7,
     /// Waymark panicked; the call had no effect and the engine stays usable.
     Panic = 99,
 }
@@ -179,13 +182,25 @@ fn convert(p: &Position) -> waymark_position {
     }
 }
 
-fn create(site: Result<Site, crate::SiteError>, out: *mut *mut waymark_engine) -> waymark_result {
+fn create(
+    site: Result<Site, crate::SiteError>,
+    salt: Option<&[u8]>,
+    out: *mut *mut waymark_engine,
+) -> waymark_result {
     let site = match site {
         Ok(site) => site,
         Err(e) => return fail(waymark_result::InvalidSite, e.to_string()),
     };
-    let engine = match Engine::new(Arc::new(site), EngineConfig::default()) {
+    let site_salt = match salt.map(crate::Salt::new).transpose() {
+        Ok(salt) => salt,
+        Err(m) => return fail(waymark_result::InvalidConfig, format!("salt: {m}")),
+    };
+    let engine = match Engine::new(Arc::new(site), EngineConfig { site_salt, ..EngineConfig::default() }) {
         Ok(engine) => engine,
+        Err(e @ crate::Error::Site(crate::SiteError::SaltRequired | crate::SiteError::WrongSalt)) => {
+            return fail(waymark_result::SaltMismatch, e.to_string())
+        }
+        Err(e @ crate::Error::Site(_)) => return fail(waymark_result::InvalidSite, e.to_string()),
         Err(e) => return fail(waymark_result::InvalidConfig, e.to_string()),
     };
     let handle = Box::new(waymark_engine { inner: Mutex::new(Inner { engine, callback: None }) });
@@ -195,40 +210,107 @@ fn create(site: Result<Site, crate::SiteError>, out: *mut *mut waymark_engine) -
     waymark_result::Ok
 }
 
-/// Creates an engine from site-file JSON (`len` bytes at `site_json`, not NUL-terminated
-/// necessarily). On success `*out` holds the engine; free it with `waymark_engine_free`.
-#[no_mangle]
-pub extern "C" fn waymark_engine_new(
+/// The salt argument: `None` for NULL with length 0.
+fn salt_arg<'a>(salt: *const u8, salt_len: usize) -> Result<Option<&'a [u8]>, waymark_result> {
+    match (salt.is_null(), salt_len) {
+        (true, 0) => Ok(None),
+        (true, _) => Err(fail(waymark_result::NullParameter, "salt must not be NULL when salt_len > 0")),
+        // SAFETY: a non-NULL `salt` points to `salt_len` readable bytes (the header's contract).
+        (false, _) => Ok(Some(unsafe { std::slice::from_raw_parts(salt, salt_len) })),
+    }
+}
+
+fn new_from_json(
     site_json: *const u8,
     len: usize,
+    salt: *const u8,
+    salt_len: usize,
     out: *mut *mut waymark_engine,
 ) -> waymark_result {
     boundary(|| {
         if site_json.is_null() || out.is_null() {
             return fail(waymark_result::NullParameter, "site_json and out must not be NULL");
         }
+        let salt = match salt_arg(salt, salt_len) {
+            Ok(salt) => salt,
+            Err(code) => return code,
+        };
         // SAFETY: the caller guarantees `site_json` points to `len` readable bytes.
         let bytes = unsafe { std::slice::from_raw_parts(site_json, len) };
-        create(Site::from_json(bytes), out)
+        create(Site::from_json(bytes), salt, out)
     })
 }
 
-/// Creates an engine from the site file at the NUL-terminated `path`.
-#[no_mangle]
-pub extern "C" fn waymark_engine_new_from_path(
+fn new_from_path(
     path: *const c_char,
+    salt: *const u8,
+    salt_len: usize,
     out: *mut *mut waymark_engine,
 ) -> waymark_result {
     boundary(|| {
         if path.is_null() || out.is_null() {
             return fail(waymark_result::NullParameter, "path and out must not be NULL");
         }
+        let salt = match salt_arg(salt, salt_len) {
+            Ok(salt) => salt,
+            Err(code) => return code,
+        };
         // SAFETY: the caller guarantees a NUL-terminated string at `path`.
         let Ok(path) = unsafe { CStr::from_ptr(path) }.to_str() else {
             return fail(waymark_result::InvalidUtf8, "path is not UTF-8");
         };
-        create(Site::load(path), out)
+        create(Site::load(path), salt, out)
     })
+}
+
+/// Creates an engine from site-file JSON (`len` bytes at `site_json`, not NUL-terminated
+/// necessarily). On success `*out` holds the engine; free it with `waymark_engine_free`.
+/// A site whose transmitter ids are hashed needs `waymark_engine_new_with_salt`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_new(
+    site_json: *const u8,
+    len: usize,
+    out: *mut *mut waymark_engine,
+) -> waymark_result {
+    new_from_json(site_json, len, std::ptr::null(), 0, out)
+}
+
+/// Creates an engine from the site file at the NUL-terminated `path`.
+/// A site whose transmitter ids are hashed needs `waymark_engine_new_from_path_with_salt`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_new_from_path(
+    path: *const c_char,
+    out: *mut *mut waymark_engine,
+) -> waymark_result {
+    new_from_path(path, std::ptr::null(), 0, out)
+}
+
+/// As `waymark_engine_new`, for a site file whose transmitter ids are salted hashes
+/// (`waymark survey --salt-file`, `waymark site hash`): `salt` points to `salt_len` bytes (at
+/// least 16; the bytes the salt file's hex digits stand for), copied before the call returns.
+/// Scans are hashed with it before matching. A hashed site with no salt (`salt` NULL,
+/// `salt_len` 0) or another salt returns `WAYMARK_RESULT_SALT_MISMATCH`; a salt given for a
+/// site with raw ids is not needed and is ignored.
+#[no_mangle]
+pub extern "C" fn waymark_engine_new_with_salt(
+    site_json: *const u8,
+    len: usize,
+    salt: *const u8,
+    salt_len: usize,
+    out: *mut *mut waymark_engine,
+) -> waymark_result {
+    new_from_json(site_json, len, salt, salt_len, out)
+}
+
+/// As `waymark_engine_new_from_path`, with the site's salt as in `waymark_engine_new_with_salt`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_new_from_path_with_salt(
+    path: *const c_char,
+    salt: *const u8,
+    salt_len: usize,
+    out: *mut *mut waymark_engine,
+) -> waymark_result {
+    new_from_path(path, salt, salt_len, out)
 }
 
 /// Frees an engine. NULL is ignored.

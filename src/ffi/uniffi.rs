@@ -6,7 +6,8 @@ use crate::engine::{self, Engine, PositionListener as CoreListener};
 use crate::radio::{Reading, Scan, TransmitterId};
 use crate::sensors::{self, SensorSample};
 use crate::site::Site;
-use std::sync::{Arc, Mutex, Weak};
+use std::collections::VecDeque;
+use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
 
 /// Errors an app can act on.
 #[derive(Debug, thiserror::Error, uniffi::Error)]
@@ -30,6 +31,13 @@ pub enum PositioningError {
         /// Why.
         reason: String,
     },
+    /// The site's transmitter ids are salted hashes and `EngineOptions.siteSalt` is missing or
+    /// is not the salt they were hashed with: get the venue's salt for this site file.
+    #[error("salt mismatch: {reason}")]
+    SaltMismatch {
+        /// Missing or wrong (the salt itself is never in the message).
+        reason: String,
+    },
     /// A bug in Waymark or in a listener: the call had no effect.
     #[error("internal error: {reason}")]
     Internal {
@@ -48,6 +56,9 @@ impl From<crate::Error> for PositioningError {
     fn from(e: crate::Error) -> Self {
         match e {
             crate::Error::InvalidConfig(reason) => PositioningError::InvalidConfig { reason },
+            crate::Error::Site(s @ (crate::SiteError::SaltRequired | crate::SiteError::WrongSalt)) => {
+                PositioningError::SaltMismatch { reason: s.to_string() }
+            }
             crate::Error::Site(s) => PositioningError::InvalidSite { reason: s.to_string() },
             crate::Error::Input(i) => PositioningError::InputRejected { reason: i.to_string() },
         }
@@ -66,7 +77,7 @@ pub enum TransitionKind {
 }
 
 /// Engine settings an app may change; every field has a default.
-#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+#[derive(Clone, PartialEq, uniffi::Record)]
 pub struct EngineOptions {
     /// Transition model; `null` / `nil` for the default (Hoang's).
     #[uniffi(default = None)]
@@ -83,6 +94,27 @@ pub struct EngineOptions {
     /// True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
     #[uniffi(default = None)]
     pub site_rotation_deg: Option<f64>,
+    /// The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
+    /// `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
+    /// Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+    /// hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
+    /// site file's download and out of logs.
+    #[uniffi(default = None)]
+    pub site_salt: Option<Vec<u8>>,
+}
+
+/// By hand, so the salt never reaches a log.
+impl std::fmt::Debug for EngineOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EngineOptions")
+            .field("transition", &self.transition)
+            .field("step_length_m", &self.step_length_m)
+            .field("fixed_lag_epochs", &self.fixed_lag_epochs)
+            .field("declination_deg", &self.declination_deg)
+            .field("site_rotation_deg", &self.site_rotation_deg)
+            .field("site_salt", &self.site_salt.as_ref().map(|s| format!("<{} bytes, redacted>", s.len())))
+            .finish()
+    }
 }
 
 impl Default for EngineOptions {
@@ -94,12 +126,13 @@ impl Default for EngineOptions {
             fixed_lag_epochs: core.fixed_lag_epochs as u32,
             declination_deg: None,
             site_rotation_deg: None,
+            site_salt: None,
         }
     }
 }
 
 impl EngineOptions {
-    fn to_config(&self, site: &Site) -> EngineConfig {
+    fn to_config(&self, site: &Site) -> Result<EngineConfig, PositioningError> {
         let mut config = EngineConfig {
             transition: match self.transition {
                 None => TransitionModel::default(),
@@ -120,7 +153,14 @@ impl EngineOptions {
                     .map_or(from_site.site_rotation_rad, f64::to_radians),
             });
         }
-        config
+        config.site_salt = match &self.site_salt {
+            None => None,
+            Some(bytes) => Some(
+                crate::Salt::new(bytes.clone())
+                    .map_err(|m| PositioningError::InvalidConfig { reason: format!("site_salt: {m}") })?,
+            ),
+        };
+        Ok(config)
     }
 }
 
@@ -286,8 +326,11 @@ pub enum StatusUpdate {
     },
 }
 
-/// Receives positions and status on the thread that pushed the input, after the engine's
-/// lock is released. Throwing from a method is reported, never fatal.
+/// Receives positions and status after the engine's lock is released, in the order they
+/// happened, on a thread that called the engine (usually the one that pushed the input; while
+/// one thread is delivering, input pushed by others is delivered by it). Never called from two
+/// threads at once. A listener may call the engine, subscribe and cancel from its methods.
+/// Throwing from a method is reported, never fatal.
 #[uniffi::export(with_foreign)]
 pub trait PositionListener: Send + Sync {
     /// A new position.
@@ -327,17 +370,30 @@ enum Event {
     Error(String),
 }
 
-/// Collects the core engine's publications into a queue.
+/// What was published and not yet delivered, oldest first, and whether a thread is
+/// delivering it.
+#[derive(Default)]
+struct Queue {
+    events: VecDeque<Event>,
+    delivering: bool,
+}
+
+/// Locks `mutex`, even if a panic elsewhere poisoned it: nothing behind these locks is left
+/// half-changed by a panic (the engine's own calls run under `catch_unwind`).
+fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
+    mutex.lock().unwrap_or_else(PoisonError::into_inner)
+}
+
+/// Collects the core engine's publications into the queue (under the engine's lock, so in
+/// the order of the epochs).
 struct Collector {
-    queue: Arc<Mutex<Vec<Event>>>,
+    queue: Arc<Mutex<Queue>>,
     floor_names: Vec<String>,
 }
 
 impl Collector {
     fn push(&self, event: Event) {
-        if let Ok(mut q) = self.queue.lock() {
-            q.push(event);
-        }
+        lock(&self.queue).events.push_back(event);
     }
 }
 
@@ -396,7 +452,7 @@ struct Inner {
 #[derive(uniffi::Object)]
 pub struct PositioningEngine {
     inner: Mutex<Inner>,
-    queue: Arc<Mutex<Vec<Event>>>,
+    queue: Arc<Mutex<Queue>>,
     listeners: Mutex<Vec<(u64, Arc<dyn PositionListener>)>>,
     next_listener: Mutex<u64>,
 }
@@ -448,9 +504,9 @@ fn internal(what: &str) -> PositioningError {
 impl PositioningEngine {
     fn create(site: Site, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
         let floor_names: Vec<String> = site.floors().iter().map(|f| f.name.clone()).collect();
-        let config = options.to_config(&site);
+        let config = options.to_config(&site)?;
         let mut engine = Engine::new(Arc::new(site), config)?;
-        let queue = Arc::new(Mutex::new(Vec::new()));
+        let queue = Arc::new(Mutex::new(Queue::default()));
         engine.subscribe(Box::new(Collector { queue: Arc::clone(&queue), floor_names: floor_names.clone() }));
         Ok(Arc::new(Self {
             inner: Mutex::new(Inner { engine, floor_names, latest: None }),
@@ -468,34 +524,72 @@ impl PositioningEngine {
         f: impl FnOnce(&mut Inner) -> Result<T, PositioningError>,
     ) -> Result<T, PositioningError> {
         let result = {
-            let mut inner = self.inner.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
-            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&mut inner)))
-                .unwrap_or_else(|_| Err(internal("engine")))
-        };
-        if let Err(e) = &result {
-            if let Ok(mut q) = self.queue.lock() {
-                q.push(Event::Error(e.to_string()));
+            let mut inner = lock(&self.inner);
+            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&mut inner)))
+                .unwrap_or_else(|_| Err(internal("engine")));
+            // Queued under the engine's lock, so listeners hear it in the order of the calls.
+            if let Err(e) = &result {
+                lock(&self.queue).events.push_back(Event::Error(e.to_string()));
             }
-        }
+            result
+        };
         self.deliver();
         result
     }
 
+    /// Input rejected before it reached the engine (a malformed transmitter id): reported to
+    /// the listeners' `on_error` as the engine's own rejections are.
+    fn reject(&self, reason: String) -> PositioningError {
+        let error = PositioningError::InputRejected { reason };
+        lock(&self.queue).events.push_back(Event::Error(error.to_string()));
+        self.deliver();
+        error
+    }
+
+    /// Delivers the queue to the listeners, oldest event first, with no lock held during a
+    /// call. One thread delivers at a time: a thread that finds another delivering leaves its
+    /// events to that one, which delivers until the queue is empty. So two threads' epochs
+    /// cannot reach a listener in the wrong order (nor a listener from two threads at once),
+    /// and a listener that calls the engine from its callback does not recurse: what its call
+    /// publishes is delivered after the current event. A listener subscribed during an event
+    /// hears the events after it; one cancelled during an event hears nothing more.
     fn deliver(&self) {
-        let events: Vec<Event> = match self.queue.lock() {
-            Ok(mut q) => std::mem::take(&mut *q),
-            Err(_) => return,
-        };
-        if events.is_empty() {
-            return;
+        {
+            let mut queue = lock(&self.queue);
+            if queue.delivering || queue.events.is_empty() {
+                return;
+            }
+            queue.delivering = true;
         }
-        let listeners: Vec<Arc<dyn PositionListener>> = match self.listeners.lock() {
-            Ok(l) => l.iter().map(|(_, l)| Arc::clone(l)).collect(),
-            Err(_) => return,
-        };
-        for event in &events {
-            for listener in &listeners {
-                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match event {
+        // Should anything below unwind, the next call takes over the delivery.
+        struct Delivering<'a>(&'a Mutex<Queue>, bool);
+        impl Drop for Delivering<'_> {
+            fn drop(&mut self) {
+                if self.1 {
+                    lock(self.0).delivering = false;
+                }
+            }
+        }
+        let mut delivering = Delivering(&self.queue, true);
+        loop {
+            let event = {
+                let mut queue = lock(&self.queue);
+                match queue.events.pop_front() {
+                    Some(event) => event,
+                    None => {
+                        queue.delivering = false;
+                        delivering.1 = false;
+                        return;
+                    }
+                }
+            };
+            let listeners = lock(&self.listeners).clone();
+            for (id, listener) in &listeners {
+                // Cancelled by a callback earlier in this event.
+                if !lock(&self.listeners).iter().any(|(l, _)| l == id) {
+                    continue;
+                }
+                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| match &event {
                     Event::Position(p) => listener.on_position(p.clone()),
                     Event::Status(s) => listener.on_status(s.clone()),
                     Event::Error(m) => listener.on_error(m.clone()),
@@ -548,8 +642,7 @@ impl PositioningEngine {
     pub fn push_scan(&self, scan: RadioScan) -> Result<PositionEstimate, PositioningError> {
         let mut readings = Vec::with_capacity(scan.wifi.len() + scan.beacons.len());
         for w in &scan.wifi {
-            let transmitter =
-                TransmitterId::wifi(&w.bssid).map_err(|reason| PositioningError::InputRejected { reason })?;
+            let transmitter = TransmitterId::wifi(&w.bssid).map_err(|reason| self.reject(reason))?;
             readings.push(Reading {
                 transmitter,
                 rssi_dbm: w.rssi_dbm,
@@ -558,7 +651,7 @@ impl PositioningEngine {
         }
         for b in &scan.beacons {
             let transmitter = super::beacon_id(&b.uuid, b.major, b.minor, b.address.as_deref())
-                .map_err(|reason| PositioningError::InputRejected { reason })?;
+                .map_err(|reason| self.reject(reason))?;
             readings.push(Reading {
                 transmitter,
                 rssi_dbm: b.rssi_dbm,
@@ -571,9 +664,8 @@ impl PositioningEngine {
             fault_injection(core.timestamp_ns);
             let result = engine.push_scan(&core);
             if let Err(crate::InputError::NoKnownTransmitter { .. }) = result {
-                if let Ok(mut q) = queue.lock() {
-                    q.push(Event::Status(StatusUpdate::NoSiteCoverage { timestamp_ns: core.timestamp_ns }));
-                }
+                let coverage = StatusUpdate::NoSiteCoverage { timestamp_ns: core.timestamp_ns };
+                lock(&queue).events.push_back(Event::Status(coverage));
             }
             result
         })
@@ -601,7 +693,7 @@ impl PositioningEngine {
     }
 
     /// Calls `listener` with every position and status change until the returned subscription
-    /// is cancelled or dropped. Listeners run on the pushing thread, with no lock held.
+    /// is cancelled or dropped. Listeners run with no lock held, never two calls at once.
     pub fn subscribe(self: Arc<Self>, listener: Arc<dyn PositionListener>) -> Arc<Subscription> {
         let id = {
             let mut next = self.next_listener.lock().unwrap_or_else(|p| p.into_inner());
@@ -614,6 +706,14 @@ impl PositioningEngine {
 }
 
 impl PositioningEngine {
+    /// The core engine's state and the last position in FFI form, for tests that check a
+    /// failed call changed nothing. Not part of the Kotlin / Swift API.
+    #[doc(hidden)]
+    pub fn snapshot(&self) -> (engine::EngineSnapshot, Option<PositionEstimate>) {
+        let inner = lock(&self.inner);
+        (inner.engine.snapshot(), inner.latest.clone())
+    }
+
     fn epoch(
         &self,
         f: impl FnOnce(&mut Engine) -> Result<engine::Position, crate::InputError>,

@@ -1,5 +1,6 @@
 //! From posterior to position: Hoang eq. 4 on the most likely floor, and a 68% radius.
 
+use super::transition::PRUNE_MASS;
 use crate::site::Site;
 use nalgebra::Point2;
 
@@ -78,19 +79,24 @@ pub fn estimate(
     };
 
     // The radius holding `mass` of the whole posterior: states of other floors never count
-    // as inside. scratch now holds (distance, p).
+    // as inside. scratch now holds (distance, p), for the states with at least PRUNE_MASS
+    // (those below hold under N · 1e-15 together: sorting them would only cost time).
+    // Less than a mass on this floor: the farthest state of the floor with any mass bounds
+    // what we know.
+    let mut farthest: f64 = 0.0;
     scratch.clear();
-    scratch.extend(
-        states
-            .iter()
-            .zip(posterior)
-            .filter(|(s, &p)| s.floor == floor && p > 0.0)
-            .map(|(s, &p)| (nalgebra::distance(&s.position, &position), p)),
-    );
+    for (s, &p) in states.iter().zip(posterior) {
+        if s.floor != floor || p <= 0.0 {
+            continue;
+        }
+        let d = nalgebra::distance(&s.position, &position);
+        farthest = farthest.max(d);
+        if p >= PRUNE_MASS {
+            scratch.push((d, p));
+        }
+    }
     scratch.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
     let mut inside = 0.0;
-    // Less than a mass on this floor: the farthest state of the floor bounds what we know.
-    let farthest = scratch.last().map_or(0.0, |&(d, _)| d);
     let (mut radius, mut radius_95) = (None, None);
     for &(d, p) in scratch.iter() {
         inside += p;

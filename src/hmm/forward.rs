@@ -74,6 +74,23 @@ impl ForwardFilter {
             Some(t) => predict(t, &self.posterior, &mut self.predicted, &mut self.row),
             None => self.predicted.copy_from_slice(&self.posterior),
         }
+        // Fast path, in linear space: w_j = pred_j · exp(e_j - max e), one exponential per
+        // state. It underflows only when every likely state explains the observation more
+        // than ~700 nats worse than the best one; then the log-space path below decides.
+        let max_e = ln_emission.iter().copied().filter(|e| !e.is_nan()).fold(f64::NEG_INFINITY, f64::max);
+        if max_e.is_finite() {
+            let mut total = 0.0;
+            for ((w, &p), &e) in self.weights.iter_mut().zip(&self.predicted).zip(ln_emission) {
+                *w = if e.is_nan() { 0.0 } else { p * (e - max_e).exp() };
+                total += *w;
+            }
+            if total > 1e-250 {
+                for (post, &w) in self.posterior.iter_mut().zip(&self.weights) {
+                    *post = w / total;
+                }
+                return Ok(max_e + total.ln());
+            }
+        }
         // w_j = ln pred_j + ln p(o | j); the max is subtracted before exponentiating.
         let mut max = f64::NEG_INFINITY;
         for ((w, &p), &e) in self.weights.iter_mut().zip(&self.predicted).zip(ln_emission) {

@@ -40,8 +40,8 @@ pub struct RadioMap {
 /// about beacons, and a beacon scan nothing about access points.
 fn kind(id: &TransmitterId) -> u8 {
     match id {
-        TransmitterId::Wifi { .. } => 0,
-        TransmitterId::Ble { .. } | TransmitterId::BleAddress { .. } => 1,
+        TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. } => 0,
+        TransmitterId::Ble { .. } | TransmitterId::BleAddress { .. } | TransmitterId::HashedBle { .. } => 1,
     }
 }
 
@@ -77,31 +77,44 @@ impl RadioMap {
                 return Err(format!("transmitter {id} is listed twice"));
             }
         }
-        let mut triples: Vec<(u32, u32, Gaussian)> = fingerprints.into_iter().collect();
-        triples.sort_by_key(|&(state, tx, _)| (tx, state));
-        let mut starts = vec![0usize; ids.len() + 1];
-        let mut entries = Vec::with_capacity(triples.len());
+        let triples: Vec<(u32, u32, Gaussian)> = fingerprints.into_iter().collect();
         let unheard_ln_absent = model.ln_absent(&unheard, clip_dbm);
         let kinds: Vec<u8> = ids.iter().map(kind).collect();
-        let all_absent = [0u8, 1].map(|k| {
+        let mut all_absent = [0u8, 1].map(|k| {
             let count = kinds.iter().filter(|&&x| x == k).count();
             vec![unheard_ln_absent * count as f64; state_count]
         });
-        let mut all_absent = all_absent;
-        for (k, &(state, tx, g)) in triples.iter().enumerate() {
+        // Bucket by transmitter (a counting sort: O(entries), where sorting took a quarter of
+        // the load time of a 10 000-state site), keeping the given order within a bucket.
+        let mut starts = vec![0usize; ids.len() + 1];
+        for &(state, tx, _) in &triples {
             if state as usize >= state_count || tx as usize >= ids.len() {
                 return Err(format!("fingerprint entry (state {state}, transmitter {tx}) is out of range"));
             }
-            if k > 0 && triples[k - 1].0 == state && triples[k - 1].1 == tx {
-                return Err(format!("state {state} models transmitter {} twice", ids[tx as usize]));
-            }
-            let ln_absent = model.ln_absent(&g, clip_dbm);
-            all_absent[kinds[tx as usize] as usize][state as usize] += ln_absent - unheard_ln_absent;
             starts[tx as usize + 1] += 1;
-            entries.push(Entry { state, model: g, ln_absent });
         }
         for t in 0..ids.len() {
             starts[t + 1] += starts[t];
+        }
+        let mut fill = starts.clone();
+        let placeholder = Entry { state: 0, model: unheard, ln_absent: 0.0 };
+        let mut entries = vec![placeholder; triples.len()];
+        for (state, tx, g) in triples {
+            let ln_absent = model.ln_absent(&g, clip_dbm);
+            all_absent[kinds[tx as usize] as usize][state as usize] += ln_absent - unheard_ln_absent;
+            entries[fill[tx as usize]] = Entry { state, model: g, ln_absent };
+            fill[tx as usize] += 1;
+        }
+        // Site files list entries state by state, so buckets come out sorted; any other
+        // order is sorted here. Then a repeated state is a transmitter modelled twice.
+        for t in 0..ids.len() {
+            let bucket = &mut entries[starts[t]..starts[t + 1]];
+            if !bucket.windows(2).all(|w| w[0].state <= w[1].state) {
+                bucket.sort_by_key(|e| e.state);
+            }
+            if let Some(w) = bucket.windows(2).find(|w| w[0].state == w[1].state) {
+                return Err(format!("state {} models transmitter {} twice", w[0].state, ids[t]));
+            }
         }
         Ok(Self {
             model,

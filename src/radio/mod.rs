@@ -2,11 +2,15 @@
 //! radio map that turns a scan into one log-likelihood per state.
 
 mod gaussian;
+mod hash;
 mod map;
 
 pub use gaussian::{
     fit_censored, fit_naive, ln_std_normal_cdf, ln_std_normal_pdf, lower_tail_hazard, unheard_model,
     CensoredFit, FitOptions, Gaussian, RssiModel,
+};
+pub use hash::{
+    Salt, ScanHasher, HASH_HEX_DIGITS, ID_CACHE_CAPACITY, ID_HASH_SCHEME, ID_HASH_VERSION, MIN_SALT_BYTES,
 };
 pub use map::{RadioMap, ResolvedScan};
 
@@ -16,7 +20,9 @@ use std::fmt;
 /// A radio transmitter the phone can hear: a WiFi access point or a BLE beacon.
 ///
 /// Identifiers are normalised on construction (lower-case hex, `:`-separated MAC, hyphenated
-/// UUID) so that the same transmitter reported by Android and iOS compares equal.
+/// UUID) so that the same transmitter reported by Android and iOS compares equal. A site file
+/// may hold salted hashes of them instead ([`Salt::hash`]): scans are then hashed with the same
+/// salt before they are matched.
 #[derive(Clone, Debug, PartialEq, Eq, Hash, PartialOrd, Ord, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case", try_from = "TransmitterIdRaw")]
 pub enum TransmitterId {
@@ -40,6 +46,16 @@ pub enum TransmitterId {
         /// `aa:bb:cc:dd:ee:ff`.
         mac: String,
     },
+    /// A WiFi access point known by the salted hash of its BSSID ([`Salt::hash`]).
+    HashedWifi {
+        /// 32 lower-case hex digits.
+        hash: String,
+    },
+    /// A BLE beacon known by the salted hash of its UUID, major and minor, or of its address.
+    HashedBle {
+        /// 32 lower-case hex digits.
+        hash: String,
+    },
 }
 
 /// The serde shape before normalisation, so a site file with `"AA-BB-..."` loads the same
@@ -50,6 +66,8 @@ enum TransmitterIdRaw {
     Wifi { bssid: String },
     Ble { uuid: String, major: u16, minor: u16 },
     BleAddress { mac: String },
+    HashedWifi { hash: String },
+    HashedBle { hash: String },
 }
 
 impl TryFrom<TransmitterIdRaw> for TransmitterId {
@@ -59,6 +77,12 @@ impl TryFrom<TransmitterIdRaw> for TransmitterId {
             TransmitterIdRaw::Wifi { bssid } => TransmitterId::wifi(&bssid),
             TransmitterIdRaw::Ble { uuid, major, minor } => TransmitterId::ble(&uuid, major, minor),
             TransmitterIdRaw::BleAddress { mac } => TransmitterId::ble_address(&mac),
+            TransmitterIdRaw::HashedWifi { hash } => {
+                Ok(TransmitterId::HashedWifi { hash: hash::hash_digits(&hash)? })
+            }
+            TransmitterIdRaw::HashedBle { hash } => {
+                Ok(TransmitterId::HashedBle { hash: hash::hash_digits(&hash)? })
+            }
         }
     }
 }
@@ -100,6 +124,11 @@ impl TransmitterId {
             format!("{}-{}-{}-{}-{}", &hex[0..8], &hex[8..12], &hex[12..16], &hex[16..20], &hex[20..32]);
         Ok(TransmitterId::Ble { uuid, major, minor })
     }
+
+    /// Whether this is a salted hash rather than a raw id.
+    pub fn is_hashed(&self) -> bool {
+        matches!(self, TransmitterId::HashedWifi { .. } | TransmitterId::HashedBle { .. })
+    }
 }
 
 impl fmt::Display for TransmitterId {
@@ -108,6 +137,8 @@ impl fmt::Display for TransmitterId {
             TransmitterId::Wifi { bssid } => write!(f, "wifi {bssid}"),
             TransmitterId::Ble { uuid, major, minor } => write!(f, "ble {uuid} {major}/{minor}"),
             TransmitterId::BleAddress { mac } => write!(f, "ble {mac}"),
+            TransmitterId::HashedWifi { hash } => write!(f, "wifi #{hash}"),
+            TransmitterId::HashedBle { hash } => write!(f, "ble #{hash}"),
         }
     }
 }
@@ -160,5 +191,14 @@ mod tests {
         let text = serde_json::to_string(&id).unwrap();
         assert_eq!(serde_json::from_str::<TransmitterId>(&text).unwrap(), id);
         assert!(serde_json::from_str::<TransmitterId>(r#"{"wifi":{"bssid":"nope"}}"#).is_err());
+        let hashed: TransmitterId =
+            serde_json::from_str(r#"{"hashed_wifi":{"hash":"3728DED7B1265406DEB8486DD6C8705E"}}"#).unwrap();
+        assert_eq!(hashed, TransmitterId::HashedWifi { hash: "3728ded7b1265406deb8486dd6c8705e".into() });
+        assert!(hashed.is_hashed());
+        assert_eq!(
+            serde_json::from_str::<TransmitterId>(&serde_json::to_string(&hashed).unwrap()).unwrap(),
+            hashed
+        );
+        assert!(serde_json::from_str::<TransmitterId>(r#"{"hashed_ble":{"hash":"abc"}}"#).is_err());
     }
 }

@@ -4,8 +4,12 @@
 
 mod experiment;
 pub mod imu;
+pub mod longrun;
 pub mod motion_eval;
 mod paper;
+pub mod recovery;
+pub mod scale;
+pub mod session;
 mod trajectory;
 
 pub use experiment::{

@@ -1,8 +1,16 @@
 //! Site file v1: serde JSON with a `format_version`. Loading checks everything an engine relies
 //! on and names what is wrong and where; it never panics.
+//!
+//! A site file may hold salted hashes of its transmitter ids instead of raw MAC addresses and
+//! UUIDs: `radio.id_hash` then names the scheme and stores the salt check, and every entry of
+//! `radio.transmitters` is `hashed_wifi` or `hashed_ble` (see [`crate::radio::Salt`]). Files
+//! without `id_hash` are read exactly as before.
 
 use super::{Calibration, Edge, Floor, North, Site, State, StateKind};
-use crate::radio::{Gaussian, RadioMap, RssiModel, TransmitterId};
+use crate::radio::{
+    Gaussian, RadioMap, RssiModel, Salt, ScanHasher, TransmitterId, HASH_HEX_DIGITS, ID_HASH_SCHEME,
+    ID_HASH_VERSION,
+};
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
@@ -56,6 +64,28 @@ pub enum SiteError {
         /// What is wrong.
         message: String,
     },
+    /// The transmitter ids are hashed with a scheme this build does not know (a newer one).
+    #[error(
+        "site file hashes its transmitter ids with {scheme} version {version}; this build knows {} version {}",
+        ID_HASH_SCHEME,
+        ID_HASH_VERSION
+    )]
+    UnsupportedIdHash {
+        /// The scheme in the file.
+        scheme: String,
+        /// Its version.
+        version: u32,
+    },
+    /// The site's transmitter ids are salted hashes and no salt was given, so no scan could
+    /// match.
+    #[error("the site's transmitter ids are hashed ({ID_HASH_SCHEME} version {ID_HASH_VERSION}): the engine needs the site's salt")]
+    SaltRequired,
+    /// The salt given is not the one the site's ids were hashed with (its salt check differs),
+    /// so no scan could match.
+    #[error(
+        "the salt given is not the one this site's transmitter ids were hashed with (the salt check differs)"
+    )]
+    WrongSalt,
 }
 
 fn invalid(path: impl Into<String>, message: impl Into<String>) -> SiteError {
@@ -93,7 +123,35 @@ struct RadioFile {
     model: RssiModel,
     clip_dbm: f64,
     unheard: GaussianFile,
+    /// Present when `transmitters` are salted hashes.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    id_hash: Option<IdHashFile>,
     transmitters: Vec<TransmitterId>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct IdHashFile {
+    /// `hmac-sha256-128`.
+    scheme: String,
+    /// 1.
+    version: u32,
+    /// HMAC-SHA256(salt, "waymark salt check"), 128 bits as hex.
+    salt_check: String,
+}
+
+/// How a site's transmitter ids are hashed: [`ID_HASH_SCHEME`] version [`ID_HASH_VERSION`]
+/// (the only one this build reads), and the salt check that tells the right salt.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct IdHashing {
+    salt_check: String,
+}
+
+impl IdHashing {
+    /// HMAC-SHA256(salt, `waymark salt check`), 128 bits as 32 lower-case hex digits.
+    pub fn salt_check(&self) -> &str {
+        &self.salt_check
+    }
 }
 
 #[derive(Serialize, Deserialize)]
@@ -162,11 +220,12 @@ const MAX_ABS_DBM: f64 = 1000.0;
 /// +100 dBm) has a finite log-likelihood.
 const MIN_STD_DB: f64 = 0.01;
 
-fn gaussian(path: &str, g: &GaussianFile) -> Result<Gaussian, SiteError> {
+/// A validated Gaussian; `path` (formatted only on error) says where it was in the file.
+fn gaussian(path: impl FnOnce() -> String, g: &GaussianFile) -> Result<Gaussian, SiteError> {
     let (mean, std) = (g.mean_dbm, g.std_db);
     Gaussian::new(mean, std).filter(|_| mean.abs() <= MAX_ABS_DBM && std >= MIN_STD_DB).ok_or_else(|| {
         invalid(
-            path,
+            path(),
             format!(
                 "mean_dbm must be within ±{MAX_ABS_DBM} and std_db finite and ≥ {MIN_STD_DB} (got {mean}, {std})"
             ),
@@ -174,32 +233,48 @@ fn gaussian(path: &str, g: &GaussianFile) -> Result<Gaussian, SiteError> {
     })
 }
 
+/// Why a file that does not parse is not a site file of this version, if it is not: a
+/// missing or other `format_version` says more than the first field that fails to parse.
+fn check_version(bytes: &[u8]) -> Result<(), SiteError> {
+    #[derive(Deserialize)]
+    struct Version {
+        format_version: Option<serde_json::Value>,
+    }
+    let version: Version = serde_json::from_slice(bytes).map_err(|e| json_error(&e))?;
+    match version.format_version {
+        None => Err(invalid("format_version", "missing: is this a Waymark site file?")),
+        Some(v) => match v.as_u64() {
+            Some(found) if found == u64::from(FORMAT_VERSION) => Ok(()),
+            Some(found) => Err(SiteError::UnsupportedVersion { found, supported: FORMAT_VERSION }),
+            None => Err(invalid("format_version", format!("expected an integer, found {v}"))),
+        },
+    }
+}
+
 impl Site {
     /// Loads a site file from JSON bytes.
     pub fn from_json(bytes: &[u8]) -> Result<Site, SiteError> {
-        #[derive(Deserialize)]
-        struct Version {
-            format_version: Option<serde_json::Value>,
-        }
-        let version: Version = serde_json::from_slice(bytes).map_err(|e| json_error(&e))?;
-        match version.format_version {
-            None => return Err(invalid("format_version", "missing: is this a Waymark site file?")),
-            Some(v) => match v.as_u64() {
-                Some(found) if found == u64::from(FORMAT_VERSION) => {}
-                Some(found) => {
-                    return Err(SiteError::UnsupportedVersion { found, supported: FORMAT_VERSION })
-                }
-                None => return Err(invalid("format_version", format!("expected an integer, found {v}"))),
-            },
-        }
         let mut de = serde_json::Deserializer::from_slice(bytes);
-        let file: SiteFile = serde_path_to_error::deserialize(&mut de).map_err(|e| {
-            let inner = e.inner();
-            match inner.classify() {
-                serde_json::error::Category::Data => invalid(e.path().to_string(), inner.to_string()),
-                _ => json_error(inner),
+        let parsed: Result<SiteFile, _> = serde_path_to_error::deserialize(&mut de);
+        // The version is checked first only when the file does not parse as this version:
+        // reading the document twice doubled the load time of a 10 000-state site.
+        let file = match parsed {
+            Ok(file) if file.format_version == FORMAT_VERSION => file,
+            Ok(file) => {
+                return Err(SiteError::UnsupportedVersion {
+                    found: u64::from(file.format_version),
+                    supported: FORMAT_VERSION,
+                })
             }
-        })?;
+            Err(e) => {
+                check_version(bytes)?;
+                let inner = e.inner();
+                return Err(match inner.classify() {
+                    serde_json::error::Category::Data => invalid(e.path().to_string(), inner.to_string()),
+                    _ => json_error(inner),
+                });
+            }
+        };
         Site::from_file(file)
     }
 
@@ -236,6 +311,11 @@ impl Site {
                 model: self.radio.model(),
                 clip_dbm: self.radio.clip_dbm(),
                 unheard: GaussianFile { mean_dbm: unheard.mean_dbm, std_db: unheard.std_db },
+                id_hash: self.id_hashing.as_ref().map(|h| IdHashFile {
+                    scheme: ID_HASH_SCHEME.to_owned(),
+                    version: ID_HASH_VERSION,
+                    salt_check: h.salt_check.clone(),
+                }),
                 transmitters: self.radio.transmitters().to_vec(),
             },
             states: self
@@ -286,11 +366,13 @@ impl Site {
         if !radio.clip_dbm.is_finite() || radio.clip_dbm.abs() > MAX_ABS_DBM {
             return Err(invalid("radio.clip_dbm", format!("must be within ±{MAX_ABS_DBM}")));
         }
-        let unheard = gaussian("radio.unheard", &radio.unheard)?;
+        let unheard = gaussian(|| "radio.unheard".into(), &radio.unheard)?;
+        let id_hashing = id_hashing(radio)?;
         let tx_count = radio.transmitters.len();
         let mut ids = HashMap::with_capacity(file.states.len());
         let mut states = Vec::with_capacity(file.states.len());
-        let mut triples = Vec::new();
+        let mut triples = Vec::with_capacity(file.states.iter().map(|s| s.fingerprint.len()).sum());
+        let mut seen_in = vec![0usize; tx_count];
         for (i, s) in file.states.iter().enumerate() {
             let at = |field: &str| format!("states[{i}].{field}");
             if let Some(first) = ids.insert(s.id, i) {
@@ -306,22 +388,25 @@ impl Site {
             if !(inside(s.x) && inside(s.y)) {
                 return Err(invalid(at("x"), format!("coordinates must be within ±{MAX_COORDINATE_M} m")));
             }
-            let mut seen = std::collections::HashSet::new();
             for (k, f) in s.fingerprint.iter().enumerate() {
-                let path = format!("states[{i}].fingerprint[{k}]");
+                // Paths are formatted only for an error: once per entry, they were a third of
+                // the load time of a 10 000-state site.
+                let path = || format!("states[{i}].fingerprint[{k}]");
                 if f.tx >= tx_count {
                     return Err(invalid(
-                        format!("{path}.tx"),
+                        format!("{}.tx", path()),
                         format!("transmitter {} does not exist (radio.transmitters has {tx_count})", f.tx),
                     ));
                 }
-                if !seen.insert(f.tx) {
+                // seen_in[t] holds 1 + the last state that modelled transmitter t.
+                if seen_in[f.tx] == i + 1 {
                     return Err(invalid(
-                        format!("{path}.tx"),
+                        format!("{}.tx", path()),
                         format!("transmitter {} is modelled twice", f.tx),
                     ));
                 }
-                let g = gaussian(&path, &GaussianFile { mean_dbm: f.mean_dbm, std_db: f.std_db })?;
+                seen_in[f.tx] = i + 1;
+                let g = gaussian(path, &GaussianFile { mean_dbm: f.mean_dbm, std_db: f.std_db })?;
                 triples.push((i as u32, f.tx as u32, g));
             }
             states.push(State {
@@ -373,8 +458,83 @@ impl Site {
         if !(file.north.site_rotation_rad.is_finite() && file.north.declination_rad.is_finite()) {
             return Err(invalid("north", "angles must be finite"));
         }
-        Site::from_parts(file.name, floors, states, edges, map, file.north).with_calibration(file.calibration)
+        let site = Site::from_parts(file.name, floors, states, edges, map, file.north);
+        Ok(Site { id_hashing, ..site.with_calibration(file.calibration)? })
     }
+
+    /// The same site with every transmitter id replaced by its hash under `salt`
+    /// ([`Salt::hash`]) and the salt check recorded, ready to ship without raw MAC addresses.
+    /// Engines on it need the same salt ([`EngineConfig::site_salt`](crate::EngineConfig::site_salt)).
+    pub fn hashed(&self, salt: &Salt) -> Result<Site, SiteError> {
+        if self.id_hashing.is_some() {
+            return Err(invalid("radio.id_hash", "the site's transmitter ids are hashed already"));
+        }
+        let radio = &self.radio;
+        let ids = radio.transmitters().iter().map(|id| salt.hash(id)).collect();
+        let map = RadioMap::new(
+            radio.model(),
+            radio.clip_dbm(),
+            radio.unheard(),
+            ids,
+            radio.state_count(),
+            radio.fingerprints(),
+        )
+        .map_err(|m| invalid("radio.transmitters", m))?;
+        Ok(Site {
+            radio: map,
+            id_hashing: Some(IdHashing { salt_check: salt.check_value() }),
+            ..self.clone()
+        })
+    }
+
+    /// What an engine on this site matches scans with: `None` for raw ids, a [`ScanHasher`]
+    /// for hashed ones. Fails when the ids are hashed and `salt` is missing or is not the one
+    /// they were hashed with. A salt given for a site with raw ids is not needed and is
+    /// ignored (with a log warning).
+    pub fn scan_hasher(&self, salt: Option<&Salt>) -> Result<Option<ScanHasher>, SiteError> {
+        match (&self.id_hashing, salt) {
+            (None, None) => Ok(None),
+            (None, Some(_)) => {
+                log::warn!("a salt was given, but the site's transmitter ids are not hashed: it is not used");
+                Ok(None)
+            }
+            (Some(_), None) => Err(SiteError::SaltRequired),
+            (Some(h), Some(salt)) if salt.matches_check(&h.salt_check) => {
+                Ok(Some(ScanHasher::new(salt.clone())))
+            }
+            (Some(_), Some(_)) => Err(SiteError::WrongSalt),
+        }
+    }
+}
+
+/// The file's id hashing, checked against its transmitters: with `id_hash`, every id must be
+/// hashed; without, none may be.
+fn id_hashing(radio: &RadioFile) -> Result<Option<IdHashing>, SiteError> {
+    let hashing = match &radio.id_hash {
+        None => None,
+        Some(h) if h.scheme != ID_HASH_SCHEME || h.version != ID_HASH_VERSION => {
+            return Err(SiteError::UnsupportedIdHash { scheme: h.scheme.clone(), version: h.version })
+        }
+        Some(h) => {
+            let check = h.salt_check.to_ascii_lowercase();
+            if check.len() != HASH_HEX_DIGITS || !check.bytes().all(|c| c.is_ascii_hexdigit()) {
+                return Err(invalid(
+                    "radio.id_hash.salt_check",
+                    format!("must be {HASH_HEX_DIGITS} hex digits"),
+                ));
+            }
+            Some(IdHashing { salt_check: check })
+        }
+    };
+    if let Some(k) = radio.transmitters.iter().position(|id| id.is_hashed() != hashing.is_some()) {
+        let message = if hashing.is_some() {
+            "a raw id in a site whose ids are hashed (radio.id_hash)"
+        } else {
+            "a hashed id needs radio.id_hash (the scheme and the salt check)"
+        };
+        return Err(invalid(format!("radio.transmitters[{k}]"), message));
+    }
+    Ok(hashing)
 }
 
 #[cfg(test)]
@@ -438,6 +598,90 @@ mod tests {
                 GOOD.replace("{\"from\": 7, \"to\": 9}", "{\"from\": 7, \"to\": 9, \"length_m\": -1}"),
                 "edges[0].length_m",
             ),
+        ];
+        for (text, path) in cases {
+            match err(&text) {
+                SiteError::Invalid { path: p, message } => {
+                    assert!(p.starts_with(path), "expected {path}, got {p}: {message}")
+                }
+                other => panic!("expected Invalid at {path}, got {other:?}"),
+            }
+        }
+    }
+
+    const SALT: &str = "000102030405060708090a0b0c0d0e0f101112131415161718191a1b1c1d1e1f";
+
+    #[test]
+    fn hashed_site_holds_no_raw_id_and_round_trips() {
+        let salt = Salt::from_hex(SALT).unwrap();
+        let raw = Site::from_json(GOOD.as_bytes()).unwrap();
+        assert!(raw.id_hashing().is_none());
+        assert!(!raw.to_json().contains("id_hash"), "raw files are written as before");
+        let hashed = raw.hashed(&salt).unwrap();
+        let text = hashed.to_json();
+        assert!(!text.contains("00:11:22") && !text.contains("bssid"), "{text}");
+        assert!(
+            text.contains(r#""id_hash":{"scheme":"hmac-sha256-128","version":1,"salt_check":"#),
+            "{text}"
+        );
+        let again = Site::from_json(text.as_bytes()).unwrap();
+        assert_eq!(again.to_json(), text);
+        assert_eq!(again.radio().transmitters(), &[salt.hash(&raw.radio().transmitters()[0])]);
+        assert_eq!(again.id_hashing().unwrap().salt_check(), salt.check_value());
+        let fingerprints =
+            |s: &Site| s.radio().fingerprints().map(|(a, b, g)| (a, b, g.mean_dbm)).collect::<Vec<_>>();
+        assert_eq!(fingerprints(&again), fingerprints(&raw));
+        assert!(matches!(hashed.hashed(&salt), Err(SiteError::Invalid { .. })), "hashed twice");
+        let pseudo = hashed.with_pseudo_states(1.0);
+        assert!(pseudo.states().len() > hashed.states().len());
+        assert_eq!(pseudo.id_hashing(), hashed.id_hashing(), "pseudo states keep the hashing");
+    }
+
+    #[test]
+    fn the_salt_must_be_the_sites() {
+        let salt = Salt::from_hex(SALT).unwrap();
+        let other = Salt::new([9u8; 16]).unwrap();
+        let raw = Site::from_json(GOOD.as_bytes()).unwrap();
+        let hashed = raw.hashed(&salt).unwrap();
+        assert!(matches!(hashed.scan_hasher(Some(&salt)), Ok(Some(_))));
+        assert_eq!(hashed.scan_hasher(None).unwrap_err(), SiteError::SaltRequired);
+        assert_eq!(hashed.scan_hasher(Some(&other)).unwrap_err(), SiteError::WrongSalt);
+        assert!(matches!(raw.scan_hasher(Some(&salt)), Ok(None)), "a salt for raw ids is ignored");
+        assert!(matches!(raw.scan_hasher(None), Ok(None)));
+        for e in [SiteError::SaltRequired, SiteError::WrongSalt] {
+            assert!(!e.to_string().contains(SALT), "{e}");
+        }
+    }
+
+    #[test]
+    fn hashed_files_are_checked() {
+        let salt = Salt::from_hex(SALT).unwrap();
+        let text = Site::from_json(GOOD.as_bytes()).unwrap().hashed(&salt).unwrap().to_json();
+        let check = salt.check_value();
+        let version = text.replace("\"version\":1", "\"version\":2");
+        assert!(matches!(err(&version), SiteError::UnsupportedIdHash { version: 2, .. }));
+        let scheme = text.replace("hmac-sha256-128", "hmac-sha3");
+        assert!(matches!(err(&scheme), SiteError::UnsupportedIdHash { .. }));
+        let hashed_id = salt.hash(&TransmitterId::wifi("00:11:22:33:44:55").unwrap());
+        let TransmitterId::HashedWifi { hash } = &hashed_id else { panic!("{hashed_id:?}") };
+        let cases = [
+            (text.replace(&check, "abc"), "radio.id_hash.salt_check"),
+            (
+                text.replace(
+                    &format!("{{\"hashed_wifi\":{{\"hash\":\"{hash}\"}}}}"),
+                    r#"{"wifi":{"bssid":"00:11:22:33:44:55"}}"#,
+                ),
+                "radio.transmitters[0]",
+            ),
+            (
+                GOOD.replace(
+                    r#"{"wifi": {"bssid": "00:11:22:33:44:55"}}"#,
+                    &format!(r#"{{"hashed_wifi": {{"hash": "{hash}"}}}}"#),
+                ),
+                "radio.transmitters[0]",
+            ),
+            (text.replace(hash, "xyz"), "radio.transmitters[0]"),
+            (text.replace("\"salt_check\"", "\"salt\""), "radio.id_hash"),
         ];
         for (text, path) in cases {
             match err(&text) {

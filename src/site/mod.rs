@@ -7,7 +7,7 @@ mod pseudo;
 mod reach;
 
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
-pub use file::{SiteError, FORMAT_VERSION};
+pub use file::{IdHashing, SiteError, FORMAT_VERSION};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
 pub use reach::ReachTable;
 
@@ -142,6 +142,8 @@ pub struct Site {
     north: North,
     spacing_m: f64,
     calibration: Calibration,
+    /// Set when the transmitter ids are salted hashes.
+    id_hashing: Option<IdHashing>,
 }
 
 impl Site {
@@ -185,6 +187,7 @@ impl Site {
             north,
             spacing_m,
             calibration: Calibration::default(),
+            id_hashing: None,
         }
     }
 
@@ -226,6 +229,11 @@ impl Site {
     /// What the survey calibrated.
     pub fn calibration(&self) -> &Calibration {
         &self.calibration
+    }
+
+    /// How the transmitter ids are hashed; `None` when they are raw MAC addresses and UUIDs.
+    pub fn id_hashing(&self) -> Option<&IdHashing> {
+        self.id_hashing.as_ref()
     }
 
     /// The site with `calibration`; `Err((path, message))` if a value is out of range.

@@ -86,6 +86,7 @@ impl Site {
         let mut site =
             Site::from_parts(self.name.clone(), self.floors.clone(), states, edges, map, self.north);
         site.calibration = self.calibration;
+        site.id_hashing = self.id_hashing.clone();
         site
     }
 }

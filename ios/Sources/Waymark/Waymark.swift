@@ -578,6 +578,24 @@ fileprivate struct FfiConverterString: FfiConverter {
     }
 }
 
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterData: FfiConverterRustBuffer {
+    typealias SwiftType = Data
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Data {
+        let len: Int32 = try readInt(&buf)
+        return Data(try readBytes(&buf, count: Int(len)))
+    }
+
+    public static func write(_ value: Data, into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        writeBytes(&buf, value)
+    }
+}
+
 
 
 
@@ -798,8 +816,11 @@ public func FfiConverterTypeLogSink_lower(_ value: LogSink) -> UInt64 {
 
 
 /**
- * Receives positions and status on the thread that pushed the input, after the engine's
- * lock is released. Throwing from a method is reported, never fatal.
+ * Receives positions and status after the engine's lock is released, in the order they
+ * happened, on a thread that called the engine (usually the one that pushed the input; while
+ * one thread is delivering, input pushed by others is delivered by it). Never called from two
+ * threads at once. A listener may call the engine, subscribe and cancel from its methods.
+ * Throwing from a method is reported, never fatal.
  */
 public protocol PositionListener: AnyObject, Sendable {
     
@@ -821,8 +842,11 @@ public protocol PositionListener: AnyObject, Sendable {
     
 }
 /**
- * Receives positions and status on the thread that pushed the input, after the engine's
- * lock is released. Throwing from a method is reported, never fatal.
+ * Receives positions and status after the engine's lock is released, in the order they
+ * happened, on a thread that called the engine (usually the one that pushed the input; while
+ * one thread is delivering, input pushed by others is delivered by it). Never called from two
+ * threads at once. A listener may call the engine, subscribe and cancel from its methods.
+ * Throwing from a method is reported, never fatal.
  */
 open class PositionListenerImpl: PositionListener, @unchecked Sendable {
     fileprivate let handle: UInt64
@@ -1144,7 +1168,7 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     
     /**
      * Calls `listener` with every position and status change until the returned subscription
-     * is cancelled or dropped. Listeners run on the pushing thread, with no lock held.
+     * is cancelled or dropped. Listeners run with no lock held, never two calls at once.
      */
     func subscribe(listener: PositionListener)  -> Subscription
     
@@ -1333,7 +1357,7 @@ open func pushScan(scan: RadioScan)throws  -> PositionEstimate  {
     
     /**
      * Calls `listener` with every position and status change until the returned subscription
-     * is cancelled or dropped. Listeners run on the pushing thread, with no lock held.
+     * is cancelled or dropped. Listeners run with no lock held, never two calls at once.
      */
 open func subscribe(listener: PositionListener) -> Subscription  {
     return try!  FfiConverterTypeSubscription_lift(try! rustCall() {
@@ -1674,6 +1698,14 @@ public struct EngineOptions: Equatable, Hashable {
      * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
      */
     public var siteRotationDeg: Double?
+    /**
+     * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
+     * `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
+     * Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+     * hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
+     * site file's download and out of logs.
+     */
+    public var siteSalt: Data?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -1692,12 +1724,20 @@ public struct EngineOptions: Equatable, Hashable {
          */declinationDeg: Double? = nil, 
         /**
          * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
-         */siteRotationDeg: Double? = nil) {
+         */siteRotationDeg: Double? = nil, 
+        /**
+         * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
+         * `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
+         * Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+         * hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
+         * site file's download and out of logs.
+         */siteSalt: Data? = nil) {
         self.transition = transition
         self.stepLengthM = stepLengthM
         self.fixedLagEpochs = fixedLagEpochs
         self.declinationDeg = declinationDeg
         self.siteRotationDeg = siteRotationDeg
+        self.siteSalt = siteSalt
     }
 
     
@@ -1720,7 +1760,8 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
                 stepLengthM: FfiConverterDouble.read(from: &buf), 
                 fixedLagEpochs: FfiConverterUInt32.read(from: &buf), 
                 declinationDeg: FfiConverterOptionDouble.read(from: &buf), 
-                siteRotationDeg: FfiConverterOptionDouble.read(from: &buf)
+                siteRotationDeg: FfiConverterOptionDouble.read(from: &buf), 
+                siteSalt: FfiConverterOptionData.read(from: &buf)
         )
     }
 
@@ -1730,6 +1771,7 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.fixedLagEpochs, into: &buf)
         FfiConverterOptionDouble.write(value.declinationDeg, into: &buf)
         FfiConverterOptionDouble.write(value.siteRotationDeg, into: &buf)
+        FfiConverterOptionData.write(value.siteSalt, into: &buf)
     }
 }
 
@@ -2587,6 +2629,15 @@ enum PositioningError: Swift.Error, Equatable, Hashable, Foundation.LocalizedErr
          */reason: String
     )
     /**
+     * The site's transmitter ids are salted hashes and `EngineOptions.siteSalt` is missing or
+     * is not the salt they were hashed with: get the venue's salt for this site file.
+     */
+    case SaltMismatch(
+        /**
+         * Missing or wrong (the salt itself is never in the message).
+         */reason: String
+    )
+    /**
      * A bug in Waymark or in a listener: the call had no effect.
      */
     case Internal(
@@ -2632,7 +2683,10 @@ public struct FfiConverterTypePositioningError: FfiConverterRustBuffer {
         case 3: return .InputRejected(
             reason: try FfiConverterString.read(from: &buf)
             )
-        case 4: return .Internal(
+        case 4: return .SaltMismatch(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 5: return .Internal(
             reason: try FfiConverterString.read(from: &buf)
             )
 
@@ -2662,8 +2716,13 @@ public struct FfiConverterTypePositioningError: FfiConverterRustBuffer {
             FfiConverterString.write(reason, into: &buf)
             
         
-        case let .Internal(reason):
+        case let .SaltMismatch(reason):
             writeInt(&buf, Int32(4))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case let .Internal(reason):
+            writeInt(&buf, Int32(5))
             FfiConverterString.write(reason, into: &buf)
             
         }
@@ -2941,6 +3000,30 @@ fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionData: FfiConverterRustBuffer {
+    typealias SwiftType = Data?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterData.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterData.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypeLogSink: FfiConverterRustBuffer {
     typealias SwiftType = LogSink?
 
@@ -3197,7 +3280,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_push_scan() != 50876) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_subscribe() != 58171) {
+    if (uniffi_waymark_checksum_method_positioningengine_subscribe() != 5158) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_track() != 56838) {

@@ -1,6 +1,7 @@
 //! `waymark`: the command-line tool for the engineer who surveys a building and measures
 //! accuracy. `waymark demo` runs the engine on a built-in simulated office.
 
+mod bench;
 mod real;
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -36,6 +37,11 @@ enum Command {
     /// Survey on the survey walks of the given floors, replay the test walks through every
     /// configuration, and print the errors (split: file i is a test walk when i % 5 == 4).
     Eval(real::EvalArgs),
+    /// Speed and memory at building scale (1 000 to 50 000 states), as one JSON object.
+    Bench(bench::BenchArgs),
+    /// Site files: hash their transmitter ids with a salt (`site hash`), check a salt
+    /// (`site check`).
+    Site(real::SiteArgs),
 }
 
 #[derive(clap::Args)]
@@ -72,8 +78,33 @@ struct SimulateArgs {
     json: bool,
     /// Instead: evaluate the motion tracker alone on simulated raw IMU (steps detected at 20,
     /// 50, 100 and 200 Hz, steps while still and shaken, heading RMSE past steel); prints JSON.
+    /// The same as `--experiment motion`.
     #[arg(long)]
     motion: bool,
+    /// Which experiment.
+    #[arg(long, value_enum, default_value_t = SimExperiment::Papers)]
+    experiment: SimExperiment,
+    /// long-run: simulated hours (issue 7: 24).
+    #[arg(long, default_value_t = 24.0)]
+    hours: f64,
+    /// long-run: a report every this many simulated seconds.
+    #[arg(long, default_value_t = 3600.0)]
+    report_every_s: f64,
+    /// recovery: runs per scenario, seeded `--seed`, `--seed` + 1, ...
+    #[arg(long, default_value_t = 20)]
+    seeds: u64,
+}
+
+#[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
+enum SimExperiment {
+    /// Hoang et al. Table 1 and HIPE Table 5 on the same walks.
+    Papers,
+    /// The motion tracker alone on simulated raw IMU.
+    Motion,
+    /// A simulated day at 100 Hz through the FFI engine: memory and finiteness per hour.
+    LongRun,
+    /// Kidnapped and radio-outage recovery: epochs of good data back to the normal error.
+    Recovery,
 }
 
 #[derive(Clone, Copy, ValueEnum)]
@@ -121,6 +152,8 @@ fn main() -> ExitCode {
         Command::Survey(args) => real::survey(&args),
         Command::Replay(args) => real::replay(&args),
         Command::Eval(args) => real::eval(&args),
+        Command::Bench(args) => bench::bench(&args),
+        Command::Site(args) => real::site(&args),
     }
 }
 
@@ -245,7 +278,12 @@ fn demo(args: &DemoArgs) -> ExitCode {
 }
 
 fn simulate(args: &SimulateArgs) -> ExitCode {
-    if args.motion {
+    match args.experiment {
+        SimExperiment::LongRun => return long_run(args),
+        SimExperiment::Recovery => return recovery(args),
+        SimExperiment::Papers | SimExperiment::Motion => {}
+    }
+    if args.motion || args.experiment == SimExperiment::Motion {
         let report = sim::motion_eval::evaluate(args.seed, args.runs);
         match serde_json::to_string_pretty(&report) {
             Ok(text) => println!("{text}"),
@@ -312,6 +350,229 @@ fn simulate(args: &SimulateArgs) -> ExitCode {
     for (lag, e) in &report.fixed_lag_mean_error_m {
         println!("  lag {lag}: {e:.2} m");
     }
+    ExitCode::SUCCESS
+}
+
+fn long_run(args: &SimulateArgs) -> ExitCode {
+    use sim::longrun::{self, LongRunConfig};
+    let config = LongRunConfig {
+        hours: args.hours,
+        seed: args.seed,
+        report_every_s: args.report_every_s,
+        ..LongRunConfig::default()
+    };
+    let mb = |kb: Option<u64>| kb.map_or("-".to_owned(), |kb| format!("{:.1}", kb as f64 / 1024.0));
+    if !args.json {
+        println!(
+            "Long run: {} simulated hours on the office (seed {}), accelerometer, gyroscope and magnetometer at 100 Hz \
+             in batches of {}, a WiFi scan every {} s, through the FFI engine and the core engine in lockstep\n",
+            args.hours,
+            args.seed,
+            longrun::BATCH_SAMPLES,
+            longrun::SCAN_INTERVAL_NS as f64 * 1e-9
+        );
+        println!(
+            "  {:>6} {:>7} {:>8} {:>8} {:>9} {:>6} {:>6} {:>9} {:>7} {:>7} {:>6} {:>6} {:>8} {:>7} {:>8}",
+            "hour",
+            "wall s",
+            "RSS MiB",
+            "HWM MiB",
+            "track B",
+            "window",
+            "epochs",
+            "non-fin.",
+            "mean m",
+            "p90 m",
+            "walk",
+            "table",
+            "steps",
+            "dropped",
+            "restarts"
+        );
+        println!("  (mean error while walking / standing / on a table in brackets)");
+    }
+    let json = args.json;
+    let result = longrun::run(&config, |i| {
+        if !json {
+            println!(
+                "  {:>6.2} {:>7.1} {:>8} {:>8} {:>9} {:>6} {:>6} {:>9} {:>7.2} {:>7.2} {:>5.0}% {:>5.0}% {:>8} {:>7} {:>8}",
+                i.hours,
+                i.wall_s,
+                mb(i.rss_kb),
+                mb(i.hwm_kb),
+                i.track_memory_bytes,
+                i.track_window_epochs,
+                i.epochs,
+                i.non_finite_positions,
+                i.mean_error_m,
+                i.p90_error_m,
+                100.0 * i.walking_share,
+                100.0 * i.table_share,
+                i.input.steps,
+                i.input.samples_dropped,
+                i.input.filter_restarts,
+            );
+            let [w, s, t] = i.mean_error_by_activity_m;
+            println!("  {:>6} ({w:.2} / {s:.2} / {t:.2} m)", "");
+        }
+    });
+    let report = match result {
+        Ok(report) => report,
+        Err(e) => {
+            eprintln!("waymark simulate --experiment long-run: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if json {
+        match serde_json::to_string(&report) {
+            Ok(text) => println!("{text}"),
+            Err(e) => {
+                eprintln!("waymark simulate --experiment long-run: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+    } else {
+        let last = report.intervals.last();
+        println!(
+            "\nRSS at 1 h: {} MiB; at {} h: {} MiB; ratio {}",
+            mb(report.rss_1h_kb),
+            args.hours,
+            mb(report.rss_end_kb),
+            report.rss_end_over_1h.map_or("-".to_owned(), |r| format!("{r:.3}"))
+        );
+        println!(
+            "Viterbi window: {} epochs of {} states, {} B accounted (bound {} B); fixed lag {} epochs read from it",
+            report.track_window_capacity,
+            report.states,
+            last.map_or(0, |i| i.track_memory_bytes),
+            report.track_memory_bound_bytes,
+            report.fixed_lag_epochs
+        );
+        println!(
+            "Generator: largest segment held {:.1} MiB. Positions: {} epochs, {} non-finite; mean error {:.2} m. FFI/core mismatches: {}",
+            report.generator_peak_bytes as f64 / 1048576.0,
+            report.epochs,
+            report.non_finite_positions,
+            report.mean_error_m,
+            report.intervals.iter().map(|i| i.ffi_core_mismatches).sum::<u64>()
+        );
+        if let Some(i) = last {
+            println!("Input: {:?}", i.input);
+        }
+        println!("Wall time {:.1} s", report.wall_s);
+    }
+    ExitCode::SUCCESS
+}
+
+fn recovery(args: &SimulateArgs) -> ExitCode {
+    use sim::recovery::{self, RecoveryConfig, ScenarioReport};
+    let config = RecoveryConfig { seeds: args.seeds, first_seed: args.seed, ..RecoveryConfig::default() };
+    let json = args.json;
+    let result = recovery::run(&config, |scenario, run| {
+        if !json {
+            eprintln!(
+                "  {scenario:<12} seed {:>3}: {:>5.1} m disturbance, error before {:>5.2} m, first good epochs {}",
+                run.seed,
+                run.disturbance_m,
+                run.error_before_m,
+                run.errors_m.iter().take(12).map(|e| format!("{e:.1}")).collect::<Vec<_>>().join(" ")
+            );
+        }
+    });
+    let report = match result {
+        Ok(report) => report,
+        Err(e) => {
+            eprintln!("waymark simulate --experiment recovery: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if json {
+        match serde_json::to_string(&report) {
+            Ok(text) => println!("{text}"),
+            Err(e) => {
+                eprintln!("waymark simulate --experiment recovery: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+        return ExitCode::SUCCESS;
+    }
+    println!(
+        "Recovery on the simulated office, {} runs per scenario (seeds {}..{}), an epoch every {} s, the default engine.\n\
+         Normal error: the undisturbed twin runs' error in their steady state (every epoch after the first {}),\n\
+         pooled median and p90.\n\
+         Recovered after r epochs: r is the first epoch of good data from which the error stays within\n\
+         max(1.5 x normal median, normal p90) for {} consecutive epochs. Target: r <= {}.\n",
+        args.seeds,
+        args.seed,
+        args.seed + args.seeds.saturating_sub(1),
+        report.epoch_s,
+        recovery::WARMUP_EPOCHS,
+        report.hold_epochs,
+        report.target_epochs
+    );
+    let show = |s: &ScenarioReport| {
+        let r = &s.recovery;
+        let t = &s.twin_recovery;
+        println!("{}:", s.scenario);
+        println!(
+            "  normal error: median {:.2} m, p90 {:.2} m -> tolerance {:.2} m; error just before good data (median) {:.2} m",
+            s.normal_median_m, s.normal_p90_m, s.tolerance_m, s.median_error_before_m
+        );
+        println!(
+            "  epochs to recover: median {}, p90 {}, max {}, within {}: {:.0}% ({} not recovered in the scored epochs)",
+            r.median,
+            r.p90,
+            r.max,
+            report.target_epochs,
+            100.0 * r.within_target,
+            r.not_recovered
+        );
+        println!(
+            "  the same rule on the undisturbed twins: median {}, p90 {}, max {}, within {}: {:.0}%",
+            t.median,
+            t.p90,
+            t.max,
+            report.target_epochs,
+            100.0 * t.within_target
+        );
+        if let Some(f) = &s.forget {
+            println!(
+                "  epochs until it reports what an undisturbed engine with the same input reports (within {} m): \
+                 median {}, p90 {}, max {}, within {}: {:.0}%",
+                recovery::SAME_PLACE_M,
+                f.median,
+                f.p90,
+                f.max,
+                report.target_epochs,
+                100.0 * f.within_target
+            );
+        }
+        if let Some(c) = &s.cold_recovery {
+            println!(
+                "  the same rule on a fresh engine started at the first good epoch: median {}, p90 {}, max {}, within {}: {:.0}%",
+                c.median,
+                c.p90,
+                c.max,
+                report.target_epochs,
+                100.0 * c.within_target
+            );
+        }
+        println!(
+            "  error at recovery (median) {:.2} m; mean error from epoch {} on: {:.2} m disturbed, {:.2} m twins",
+            s.median_error_at_recovery_m,
+            report.target_epochs + 1,
+            s.settled_mean_error_m[0],
+            s.settled_mean_error_m[1]
+        );
+        let epochs: Vec<String> = s
+            .runs
+            .iter()
+            .map(|run| run.epochs_to_recover.map_or("-".to_owned(), |e| e.to_string()))
+            .collect();
+        println!("  per run: {}\n", epochs.join(" "));
+    };
+    show(&report.kidnapped);
+    show(&report.radio_outage);
     ExitCode::SUCCESS
 }
 

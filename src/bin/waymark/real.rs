@@ -1,4 +1,4 @@
-//! The verbs for recorded data: `survey`, `replay`, `eval`.
+//! The verbs for recorded data: `survey`, `replay`, `eval`, and `site` for site files.
 
 use indicatif::{ProgressBar, ProgressStyle};
 use std::path::PathBuf;
@@ -8,7 +8,40 @@ use std::time::Instant;
 use waymark::eval::real::{self as evaluation, EvalOptions, FloorData, CONFIGURATIONS};
 use waymark::eval::replay::{self as replaying, ReplayOptions};
 use waymark::io::Trace;
-use waymark::{Engine, EngineConfig, Site};
+use waymark::{Engine, EngineConfig, Salt, Site};
+
+/// The environment variable that may hold the salt (hex) when no `--salt-file` is given.
+pub const SALT_ENV: &str = "WAYMARK_SALT";
+
+/// Where a site's salt comes from: a file, else the environment, never a command-line value
+/// (it would land in the shell's history and in `ps`).
+#[derive(clap::Args)]
+pub struct SaltArgs {
+    /// File holding the site's salt as hex digits (at least 32; `openssl rand -hex 32 > F`).
+    /// Without it, the environment variable WAYMARK_SALT (hex) if set. Site files made with a
+    /// salt hold salted hashes of the transmitter ids instead of MAC addresses and UUIDs.
+    #[arg(long, value_name = "FILE")]
+    salt_file: Option<PathBuf>,
+}
+
+impl SaltArgs {
+    /// The salt, with where it came from; `None` when neither a file nor the variable gives one.
+    pub fn salt(&self) -> Result<Option<(Salt, String)>, String> {
+        let (text, source) = match &self.salt_file {
+            Some(path) => (
+                std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?,
+                path.display().to_string(),
+            ),
+            None => match std::env::var(SALT_ENV) {
+                Ok(text) if !text.trim().is_empty() => (text, format!("${SALT_ENV}")),
+                _ => return Ok(None),
+            },
+        };
+        Salt::from_hex(&text)
+            .map(|salt| Some((salt, source.clone())))
+            .map_err(|e| format!("salt from {source}: {e}"))
+    }
+}
 
 #[derive(clap::Args)]
 pub struct SurveyArgs {
@@ -22,6 +55,8 @@ pub struct SurveyArgs {
     /// The site's name.
     #[arg(long, default_value = "site")]
     name: String,
+    #[command(flatten)]
+    salt: SaltArgs,
 }
 
 #[derive(clap::Args)]
@@ -37,6 +72,37 @@ pub struct ReplayArgs {
     /// γ of Hoang eq. 14 (the radio likelihood's weight); default: the site's calibrated one.
     #[arg(long)]
     gamma: Option<f64>,
+    /// The salt of a site whose transmitter ids are hashed.
+    #[command(flatten)]
+    salt: SaltArgs,
+}
+
+#[derive(clap::Args)]
+pub struct SiteArgs {
+    #[command(subcommand)]
+    command: SiteCommand,
+}
+
+#[derive(clap::Subcommand)]
+enum SiteCommand {
+    /// Write a copy of a site file whose transmitter ids are salted hashes (HMAC-SHA256,
+    /// 128 bits) instead of MAC addresses and UUIDs, for shipping inside an app.
+    Hash {
+        /// The site file with raw ids.
+        input: PathBuf,
+        /// Where to write the hashed site file.
+        output: PathBuf,
+        #[command(flatten)]
+        salt: SaltArgs,
+    },
+    /// Say whether a site file's ids are hashed and, given a salt, whether it is the right one
+    /// (exit status 1 if not).
+    Check {
+        /// The site file.
+        site: PathBuf,
+        #[command(flatten)]
+        salt: SaltArgs,
+    },
 }
 
 #[derive(clap::Args)]
@@ -128,6 +194,17 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         Err(e) => return fail("survey", e),
     };
     bar.finish_and_clear();
+    let site = match args.salt.salt() {
+        Err(e) => return fail("survey", e),
+        Ok(None) => site,
+        Ok(Some((salt, source))) => match site.hashed(&salt) {
+            Ok(hashed) => {
+                println!("transmitter ids hashed with the salt from {source}");
+                hashed
+            }
+            Err(e) => return fail("survey", e),
+        },
+    };
     if let Err(e) = std::fs::write(&args.out, site.to_json()) {
         return fail("survey", format!("cannot write {}: {e}", args.out.display()));
     }
@@ -158,8 +235,13 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
         Ok(t) => t,
         Err(e) => return fail("replay", e),
     };
+    let site_salt = match args.salt.salt() {
+        Ok(salt) => salt.map(|(salt, _)| salt),
+        Err(e) => return fail("replay", e),
+    };
     // The engine as `eval` runs it: stale readings dropped at the survey's age limit.
-    let config = EngineConfig { rssi_weight: args.gamma, ..EvalOptions::default().engine_config() };
+    let config =
+        EngineConfig { rssi_weight: args.gamma, site_salt, ..EvalOptions::default().engine_config() };
     let mut engine = match Engine::new(Arc::clone(&site), config) {
         Ok(e) => e,
         Err(e) => return fail("replay", e),
@@ -219,6 +301,49 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
         None => print!("{text}"),
     }
     ExitCode::SUCCESS
+}
+
+pub fn site(args: &SiteArgs) -> ExitCode {
+    match &args.command {
+        SiteCommand::Hash { input, output, salt } => {
+            let salt = match salt.salt() {
+                Ok(Some((salt, _))) => salt,
+                Ok(None) => return fail("site hash", format!("no salt: give --salt-file or set {SALT_ENV}")),
+                Err(e) => return fail("site hash", e),
+            };
+            let hashed = match Site::load(input).and_then(|site| site.hashed(&salt)) {
+                Ok(site) => site,
+                Err(e) => return fail("site hash", e),
+            };
+            if let Err(e) = std::fs::write(output, hashed.to_json()) {
+                return fail("site hash", format!("cannot write {}: {e}", output.display()));
+            }
+            println!(
+                "{} transmitter ids hashed ({} version {}); written to {}",
+                hashed.radio().transmitters().len(),
+                waymark::radio::ID_HASH_SCHEME,
+                waymark::radio::ID_HASH_VERSION,
+                output.display()
+            );
+            ExitCode::SUCCESS
+        }
+        SiteCommand::Check { site, salt } => {
+            let (site, salt) = match (Site::load(site), salt.salt()) {
+                (Ok(site), Ok(salt)) => (site, salt.map(|(salt, _)| salt)),
+                (Err(e), _) => return fail("site check", e),
+                (_, Err(e)) => return fail("site check", e),
+            };
+            let count = site.radio().transmitters().len();
+            match (site.id_hashing(), site.scan_hasher(salt.as_ref())) {
+                (None, _) => println!("{count} raw transmitter ids (MAC addresses, UUIDs): not hashed"),
+                (Some(_), Ok(_)) => println!("{count} hashed transmitter ids; the salt matches"),
+                (Some(_), Err(e)) => {
+                    return fail("site check", format!("{count} hashed transmitter ids; {e}"))
+                }
+            }
+            ExitCode::SUCCESS
+        }
+    }
 }
 
 fn progress_bar(hidden: bool, len: u64, message: &'static str) -> ProgressBar {

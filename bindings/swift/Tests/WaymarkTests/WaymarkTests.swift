@@ -1,6 +1,7 @@
 // The Swift bindings on Linux, against the host-built libwaymark.so: the scenarios of
-// tests/ffi.rs from Swift, on the walk `waymark sim-export` writes (test.sh exports it and
-// passes its folder in WAYMARK_SIM_DIR), plus the plain-Swift sensor conversions.
+// tests/ffi.rs from Swift, on the walk `waymark sim-export` writes (test.sh exports it, with a
+// copy of the site hashed by `waymark site hash` and its salt, and passes the folder in
+// WAYMARK_SIM_DIR), plus the plain-Swift sensor conversions.
 
 import Foundation
 import XCTest
@@ -71,6 +72,14 @@ struct Walk: Decodable {
         }
     }
     let epochs: [Epoch]
+}
+
+/// A salt file's hex digits as bytes, as an app would hold its venue's salt.
+func saltFromHex(_ text: String) -> Data {
+    let digits = Array(text.trimmingCharacters(in: .whitespacesAndNewlines).utf8)
+    return Data(stride(from: 0, to: digits.count - 1, by: 2).compactMap {
+        UInt8(String(decoding: digits[$0..<$0 + 2], as: UTF8.self), radix: 16)
+    })
 }
 
 /// Rows `[timestamp_ns, x, y, z]` as samples.
@@ -183,6 +192,41 @@ final class WaymarkTests: XCTestCase {
         let s = { (t: UInt64, x: Double) in MotionSample(timestampNs: first.timestampNs + t, x: x, y: 0, z: 9.81) }
         XCTAssertEqual(try engine.pushAccelerometer(batch: [s(15, 0), s(14, 0), s(16, .nan), s(17, 0.1)]), 2)
         XCTAssertNotNil(engine.position())
+    }
+
+    // A site whose transmitter ids are salted hashes: with its salt the engine positions exactly
+    // as on the raw site; without it, or with another, it refuses to start with a typed error.
+    func testAHashedSiteNeedsItsSalt() throws {
+        let hashedURL = Self.simDir.appendingPathComponent("site-hashed.json")
+        let hashedJson = try String(contentsOf: hashedURL, encoding: .utf8)
+        XCTAssertFalse(hashedJson.contains("\"bssid\""), "no BSSID in the hashed file")
+        let salt = saltFromHex(try String(contentsOf: Self.simDir.appendingPathComponent("salt.hex"), encoding: .utf8))
+        XCTAssertEqual(salt.count, 32)
+        let raw = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let hashed = try PositioningEngine.fromPath(path: hashedURL.path, options: EngineOptions(siteSalt: salt))
+        for epoch in try walk().epochs {
+            for engine in [raw, hashed] {
+                _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
+                _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
+                _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
+            }
+            XCTAssertEqual(try? raw.pushScan(scan: epoch.scan), try? hashed.pushScan(scan: epoch.scan))
+        }
+        XCTAssertNotNil(hashed.position())
+
+        var wrong = salt
+        wrong[0] ^= 1
+        for options in [EngineOptions(), EngineOptions(siteSalt: wrong)] {
+            XCTAssertThrowsError(try PositioningEngine(siteJson: hashedJson, options: options)) {
+                guard case PositioningError.SaltMismatch(let reason) = $0 else {
+                    return XCTFail("expected SaltMismatch, got \($0)")
+                }
+                XCTAssertTrue(reason.contains("salt"))
+            }
+        }
+        XCTAssertThrowsError(try PositioningEngine(siteJson: hashedJson, options: EngineOptions(siteSalt: Data(count: 8)))) {
+            guard case PositioningError.InvalidConfig = $0 else { return XCTFail("expected InvalidConfig, got \($0)") }
+        }
     }
 
     // A BLE beacon known by its advertiser address only (Eddystone, or an iBeacon left at

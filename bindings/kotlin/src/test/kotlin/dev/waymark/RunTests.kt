@@ -7,7 +7,7 @@ import org.junit.runner.notification.Failure
 import org.junit.runner.notification.RunListener
 
 /**
- * Runs [WaymarkTest] with JUnit 4, prints one line per test and, last, exactly
+ * Runs the JUnit 4 test classes, prints one line per test and, last, exactly
  * `N passed, N failed` (what CI reads). Exits 1 if anything failed.
  */
 object RunTests {
@@ -31,10 +31,14 @@ object RunTests {
                 if (description !in failed) println("PASS ${description.methodName}")
             }
         })
-        val result = core.run(WaymarkTest::class.java, ConversionsTest::class.java, GeoConversionsTest::class.java)
+        val classes = arrayOf(
+            WaymarkTest::class.java, ConversionsTest::class.java, GeoConversionsTest::class.java,
+            ConcurrencyTest::class.java, RobustnessTest::class.java,
+        )
+        val result = core.run(*classes)
         // A failure in @BeforeClass fails the class without running any test: count each test.
         val failed = if (result.runCount == 0 && result.failureCount > 0) {
-            maxOf(result.failureCount, listOf(WaymarkTest::class.java, ConversionsTest::class.java, GeoConversionsTest::class.java).sumOf { c -> c.methods.count { it.isAnnotationPresent(org.junit.Test::class.java) } })
+            maxOf(result.failureCount, classes.sumOf { c -> c.methods.count { it.isAnnotationPresent(org.junit.Test::class.java) } })
         } else {
             result.failureCount
         }

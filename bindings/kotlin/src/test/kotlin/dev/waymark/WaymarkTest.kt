@@ -18,8 +18,10 @@ import org.junit.Test
 /**
  * The Kotlin surface of Waymark on the JVM, against the bindings uniffi generates: the simulated
  * walk of `waymark sim-export` pushed through a Kotlin listener, typed errors, a throwing
- * listener, eight threads at once, and cancellation. Paths come from the system properties
- * `waymark.site` / `waymark.walk` (or the environment variables `WAYMARK_SITE` / `WAYMARK_WALK`).
+ * listener, eight threads at once, and cancellation; the same site with hashed transmitter ids
+ * (`waymark site hash`) with and without its salt. Paths come from the system properties
+ * `waymark.site` / `waymark.walk` / `waymark.hashedSite` / `waymark.salt` (or the environment
+ * variables `WAYMARK_SITE` / `WAYMARK_WALK` / `WAYMARK_HASHED_SITE` / `WAYMARK_SALT_FILE`).
  */
 class WaymarkTest {
     /** Counts what it hears; remembers the last position. */
@@ -118,6 +120,10 @@ class WaymarkTest {
 
         fun newEngine(): PositioningEngine = PositioningEngine(siteJson, EngineOptions())
 
+        /** A salt file's hex digits as bytes, as an app would hold its venue's salt. */
+        fun saltFromHex(text: String): ByteArray =
+            text.trim().chunked(2).map { it.toInt(16).toByte() }.toByteArray()
+
         fun sample(t: Long, x: Double) = MotionSample(t.toULong(), x, 0.0, 9.81)
     }
 
@@ -144,6 +150,38 @@ class WaymarkTest {
             assertNotNull(engine.fixedLagPosition())
             subscription.cancel()
             subscription.close()
+        }
+    }
+
+    @Test
+    fun aHashedSitePositionsAsTheRawOneWithItsSaltAndFailsWithout() {
+        val hashedPath = setting("waymark.hashedSite", "WAYMARK_HASHED_SITE")
+        val hashedJson = File(hashedPath).readText()
+        assertFalse("no BSSID in the hashed file", hashedJson.contains("\"bssid\""))
+        val salt = saltFromHex(File(setting("waymark.salt", "WAYMARK_SALT_FILE")).readText())
+        assertEquals(32, salt.size)
+        val raw = newEngine()
+        val hashed = PositioningEngine.fromPath(hashedPath, EngineOptions(siteSalt = salt))
+        for (epoch in walk) {
+            assertEquals(pushEpoch(raw, epoch), pushEpoch(hashed, epoch))
+        }
+        assertNotNull(hashed.position())
+        raw.close()
+        hashed.close()
+
+        val wrong = salt.copyOf().also { it[0] = (it[0].toInt() xor 1).toByte() }
+        for ((what, options) in listOf("no salt" to EngineOptions(), "a wrong salt" to EngineOptions(siteSalt = wrong))) {
+            try {
+                PositioningEngine(hashedJson, options).close()
+                fail("a hashed site with $what was accepted")
+            } catch (e: PositioningException.SaltMismatch) {
+                assertTrue(e.reason.contains("salt"))
+            }
+        }
+        try {
+            PositioningEngine(hashedJson, EngineOptions(siteSalt = ByteArray(8))).close()
+            fail("an 8-byte salt was accepted")
+        } catch (e: PositioningException.InvalidConfig) {
         }
     }
 

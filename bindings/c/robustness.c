@@ -1,0 +1,268 @@
+/* Garbage through every function of Waymark's C ABI (issue 7): NULL pointers, invalid UTF-8,
+ * NaN, infinities, huge values, out-of-order and extreme timestamps, truncated and malformed
+ * site JSON, a callback that calls back into the engine. Every call must return a result code
+ * (never crash, never leak: test.sh runs this under valgrind), and the engine must position
+ * normally afterwards. Calls after waymark_engine_free cannot be detected in C (the handle is
+ * a dangling pointer) and are not tried. Usage: robustness site.json */
+#include <math.h>
+#include <stdint.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include "waymark.h"
+
+static int failures = 0, checks = 0;
+#define CHECK(cond, ...)                                         \
+    do {                                                         \
+        checks++;                                                \
+        if (!(cond)) {                                           \
+            failures++;                                          \
+            fprintf(stderr, "FAIL %s:%d: ", __FILE__, __LINE__); \
+            fprintf(stderr, __VA_ARGS__);                        \
+            fprintf(stderr, "\n");                               \
+        }                                                        \
+    } while (0)
+
+static char *read_file(const char *path, size_t *len) {
+    FILE *f = fopen(path, "rb");
+    if (!f) return NULL;
+    fseek(f, 0, SEEK_END);
+    long n = ftell(f);
+    fseek(f, 0, SEEK_SET);
+    char *buf = malloc((size_t)n + 1);
+    if (buf && fread(buf, 1, (size_t)n, f) != (size_t)n) {
+        free(buf);
+        buf = NULL;
+    }
+    fclose(f);
+    if (buf) buf[n] = 0;
+    *len = (size_t)n;
+    return buf;
+}
+
+/* One of the result codes the header defines. */
+static int known(waymark_result r) {
+    return r == WAYMARK_RESULT_OK || r == WAYMARK_RESULT_NULL_PARAMETER || r == WAYMARK_RESULT_INVALID_SITE ||
+           r == WAYMARK_RESULT_INVALID_CONFIG || r == WAYMARK_RESULT_INPUT_REJECTED ||
+           r == WAYMARK_RESULT_NO_POSITION || r == WAYMARK_RESULT_INVALID_UTF8 || r == WAYMARK_RESULT_PANIC;
+}
+
+static int finite_position(const waymark_position *p) {
+    return isfinite(p->x) && isfinite(p->y) && isfinite(p->floor_probability) && isfinite(p->accuracy_m) &&
+           isfinite(p->accuracy_95_m) && p->accuracy_m > 0 && p->accuracy_95_m >= p->accuracy_m &&
+           (isnan(p->heading_deg) || isfinite(p->heading_deg)) && p->motion_state <= 2 && p->scenario <= 3;
+}
+
+static const char *const BAD_UTF8[] = {"\xff", "02:00:00:00:00:0\xc3", "\xed\xa0\x80", "\xc0\xaf"};
+static const char *const BAD_TEXT[] = {"", " ", "not a mac", "zz:zz:zz:zz:zz:zz", "02:00:00:00:00",
+                                       "02:00:00:00:00:00:00", "\xf0\x9f\x92\xa5"};
+#define COUNT(a) (sizeof(a) / sizeof *(a))
+
+static void sites(const char *site_path, const char *json, size_t len) {
+    waymark_engine *engine = NULL;
+    /* NULLs. */
+    CHECK(waymark_engine_new(NULL, 10, &engine) == WAYMARK_RESULT_NULL_PARAMETER, "null json");
+    CHECK(waymark_engine_new((const uint8_t *)json, len, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "null out");
+    CHECK(waymark_engine_new_from_path(NULL, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "null path, out");
+    CHECK(waymark_engine_new_from_path(site_path, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "null out");
+    /* Empty, truncated at many places, not UTF-8, embedded NUL, deeply nested. */
+    CHECK(waymark_engine_new((const uint8_t *)json, 0, &engine) == WAYMARK_RESULT_INVALID_SITE, "empty json");
+    for (size_t k = 1; k < 24; k++) {
+        size_t cut = len * k / 24;
+        CHECK(waymark_engine_new((const uint8_t *)json, cut, &engine) == WAYMARK_RESULT_INVALID_SITE,
+              "json cut at %zu of %zu", cut, len);
+    }
+    const uint8_t not_utf8[] = {'{', '"', 0xff, 0xfe, '"', ':', '1', '}'};
+    CHECK(waymark_engine_new(not_utf8, sizeof not_utf8, &engine) == WAYMARK_RESULT_INVALID_SITE, "bytes");
+    char *copy = malloc(len);
+    if (copy) {
+        memcpy(copy, json, len);
+        copy[len / 2] = 0;
+        CHECK(waymark_engine_new((const uint8_t *)copy, len, &engine) == WAYMARK_RESULT_INVALID_SITE, "NUL");
+        free(copy);
+    }
+    size_t deep = 1000000;
+    char *nested = malloc(deep);
+    if (nested) {
+        memset(nested, '[', deep);
+        CHECK(waymark_engine_new((const uint8_t *)nested, deep, &engine) == WAYMARK_RESULT_INVALID_SITE, "[[[");
+        free(nested);
+    }
+    /* Paths: not UTF-8, empty, a directory, a device, too long. */
+    for (size_t i = 0; i < COUNT(BAD_UTF8); i++) {
+        CHECK(waymark_engine_new_from_path(BAD_UTF8[i], &engine) == WAYMARK_RESULT_INVALID_UTF8, "path %zu", i);
+    }
+    const char *paths[] = {"", "/", "/dev/null", "/proc/self"};
+    for (size_t i = 0; i < COUNT(paths); i++) {
+        CHECK(waymark_engine_new_from_path(paths[i], &engine) == WAYMARK_RESULT_INVALID_SITE, "path %s", paths[i]);
+    }
+    char *long_path = malloc(100001);
+    if (long_path) {
+        memset(long_path, 'x', 100000);
+        long_path[100000] = 0;
+        CHECK(waymark_engine_new_from_path(long_path, &engine) == WAYMARK_RESULT_INVALID_SITE, "long path");
+        free(long_path);
+    }
+    CHECK(engine == NULL, "no engine came out of a failure");
+    /* The last error: any buffer size, including none. */
+    char one[1] = {'x'}, small[4];
+    size_t n = waymark_last_error(NULL, 0);
+    CHECK(n > 0, "a message");
+    CHECK(waymark_last_error(one, 0) == n && one[0] == 'x', "len 0 writes nothing");
+    CHECK(waymark_last_error(one, 1) == n && one[0] == 0, "len 1 writes the NUL");
+    CHECK(waymark_last_error(small, sizeof small) == n && strlen(small) == 3, "truncated");
+    waymark_engine_free(NULL);
+}
+
+/* Every engine function with a NULL engine. */
+static void null_engine(void) {
+    waymark_sample s = {1, 0, 0, 9.8};
+    waymark_position p;
+    size_t accepted;
+    CHECK(waymark_engine_push_accelerometer(NULL, &s, 1, &accepted) == WAYMARK_RESULT_NULL_PARAMETER, "acc");
+    CHECK(waymark_engine_push_gyroscope(NULL, &s, 1, &accepted) == WAYMARK_RESULT_NULL_PARAMETER, "gyro");
+    CHECK(waymark_engine_push_magnetometer(NULL, &s, 1, &accepted) == WAYMARK_RESULT_NULL_PARAMETER, "mag");
+    waymark_wifi_reading w = {"02:00:00:00:00:00", -60.0, 0};
+    CHECK(waymark_engine_push_scan(NULL, 1, &w, 1, NULL, 0, &p) == WAYMARK_RESULT_NULL_PARAMETER, "scan");
+    CHECK(waymark_engine_advance(NULL, 1, &p) == WAYMARK_RESULT_NULL_PARAMETER, "advance");
+    CHECK(waymark_engine_position(NULL, &p) == WAYMARK_RESULT_NULL_PARAMETER, "position");
+    CHECK(waymark_engine_position(NULL, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "position, NULL out");
+    CHECK(waymark_engine_set_callback(NULL, NULL, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "callback");
+}
+
+/* A callback that calls back into the engine: no lock is held while it runs. */
+static int reentrant_calls = 0;
+static void reentrant(void *userdata, const waymark_position *p) {
+    waymark_engine *engine = userdata;
+    waymark_position again;
+    reentrant_calls++;
+    CHECK(p != NULL && finite_position(p), "callback position");
+    CHECK(waymark_engine_position(engine, &again) == WAYMARK_RESULT_OK, "position from the callback");
+    waymark_sample s = {p->timestamp_ns + 1, 0, 0, 9.81};
+    CHECK(waymark_engine_push_accelerometer(engine, &s, 1, NULL) == WAYMARK_RESULT_OK, "push from the callback");
+}
+
+static void garbage(waymark_engine *engine) {
+    waymark_position p;
+    size_t accepted = 99;
+    typedef waymark_result (*push_fn)(waymark_engine *, const waymark_sample *, size_t, size_t *);
+    push_fn pushes[] = {waymark_engine_push_accelerometer, waymark_engine_push_gyroscope,
+                        waymark_engine_push_magnetometer};
+    const double weird[] = {NAN, INFINITY, -INFINITY, 1e300, -1e300, 1e7, -0.0, 5e-324};
+    for (size_t k = 0; k < COUNT(pushes); k++) {
+        CHECK(pushes[k](engine, NULL, 0, &accepted) == WAYMARK_RESULT_OK && accepted == 0, "empty batch");
+        CHECK(pushes[k](engine, NULL, 5, &accepted) == WAYMARK_RESULT_NULL_PARAMETER, "NULL batch");
+        waymark_sample bad[3 * COUNT(weird)];
+        for (size_t i = 0; i < COUNT(weird); i++) {
+            bad[3 * i] = (waymark_sample){100 + i, weird[i], 0, 9.8};
+            bad[3 * i + 1] = (waymark_sample){100 + i, 0, weird[i], 9.8};
+            bad[3 * i + 2] = (waymark_sample){100 + i, 0, 0, weird[i]};
+        }
+        CHECK(pushes[k](engine, bad, COUNT(bad), &accepted) == WAYMARK_RESULT_OK && accepted <= 2,
+              "weird values: %zu taken", accepted);
+        waymark_sample times[] = {{50, 0, 0, 9.8}, {40, 0, 0, 9.8}, {50, 0, 0, 9.8}, {0, 0, 0, 9.8},
+                                  {UINT64_MAX - 1, 0, 0, 9.8}, {60, 0, 0, 9.8}};
+        CHECK(pushes[k](engine, times, COUNT(times), NULL) == WAYMARK_RESULT_OK, "backwards samples");
+    }
+
+    const char *known = "02:00:00:00:00:00";
+    uint64_t t = 1000;
+    /* Readings: NULL arrays with counts, NULL and non-UTF-8 strings, bad ids, weird RSSI and ages. */
+    CHECK(waymark_engine_push_scan(engine, ++t, NULL, 0, NULL, 0, &p) == WAYMARK_RESULT_INPUT_REJECTED, "empty");
+    CHECK(waymark_engine_push_scan(engine, ++t, NULL, 3, NULL, 0, &p) == WAYMARK_RESULT_NULL_PARAMETER, "wifi");
+    CHECK(waymark_engine_push_scan(engine, ++t, NULL, 0, NULL, 3, &p) == WAYMARK_RESULT_NULL_PARAMETER, "ble");
+    waymark_wifi_reading null_bssid = {NULL, -60.0, 0};
+    CHECK(waymark_engine_push_scan(engine, ++t, &null_bssid, 1, NULL, 0, &p) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL bssid");
+    for (size_t i = 0; i < COUNT(BAD_UTF8); i++) {
+        waymark_wifi_reading w = {BAD_UTF8[i], -60.0, 0};
+        CHECK(waymark_engine_push_scan(engine, ++t, &w, 1, NULL, 0, &p) == WAYMARK_RESULT_INVALID_UTF8, "bssid %zu", i);
+        waymark_beacon_reading u = {BAD_UTF8[i], 1, 2, -60.0, 0, NULL};
+        CHECK(waymark_engine_push_scan(engine, ++t, NULL, 0, &u, 1, &p) == WAYMARK_RESULT_INVALID_UTF8, "uuid %zu", i);
+        waymark_beacon_reading a = {NULL, 0, 0, -60.0, 0, BAD_UTF8[i]};
+        CHECK(waymark_engine_push_scan(engine, ++t, NULL, 0, &a, 1, &p) == WAYMARK_RESULT_INVALID_UTF8, "mac %zu", i);
+    }
+    for (size_t i = 0; i < COUNT(BAD_TEXT); i++) {
+        waymark_wifi_reading w = {BAD_TEXT[i], -60.0, 0};
+        CHECK(waymark_engine_push_scan(engine, ++t, &w, 1, NULL, 0, &p) == WAYMARK_RESULT_INPUT_REJECTED, "bssid");
+        waymark_beacon_reading u = {BAD_TEXT[i], 1, 2, -60.0, 0, NULL};
+        CHECK(waymark_engine_push_scan(engine, ++t, NULL, 0, &u, 1, &p) == WAYMARK_RESULT_INPUT_REJECTED, "uuid");
+        waymark_beacon_reading a = {NULL, 0, 0, -60.0, 0, BAD_TEXT[i]};
+        CHECK(waymark_engine_push_scan(engine, ++t, NULL, 0, &a, 1, &p) == WAYMARK_RESULT_INPUT_REJECTED, "mac");
+    }
+    waymark_beacon_reading nothing = {NULL, 0, 0, -60.0, 0, NULL};
+    CHECK(waymark_engine_push_scan(engine, ++t, NULL, 0, &nothing, 1, &p) == WAYMARK_RESULT_INPUT_REJECTED, "none");
+    const double rssi[] = {NAN, INFINITY, -INFINITY, 1e300, -1e300, 1001.0};
+    for (size_t i = 0; i < COUNT(rssi); i++) {
+        waymark_wifi_reading w[2] = {{known, -60.0, 0}, {known, rssi[i], 0}};
+        CHECK(waymark_engine_push_scan(engine, ++t, w, 2, NULL, 0, &p) == WAYMARK_RESULT_INPUT_REJECTED, "rssi %zu", i);
+    }
+    /* Accepted: a huge age (with no age limit), duplicates, -0 dBm; each position finite. */
+    waymark_wifi_reading odd[] = {{known, -60.0, UINT64_MAX}, {known, -61.0, 0}, {known, -0.0, 5}};
+    for (size_t n = 1; n <= COUNT(odd); n++) {
+        waymark_result r = waymark_engine_push_scan(engine, ++t, odd, n, NULL, 0, &p);
+        CHECK(r == WAYMARK_RESULT_OK && finite_position(&p), "odd scan %zu: %d", n, (int)r);
+    }
+    size_t many = 20000;
+    waymark_wifi_reading *lots = malloc(many * sizeof *lots);
+    if (lots) {
+        for (size_t i = 0; i < many; i++) lots[i] = (waymark_wifi_reading){known, -40.0 - (double)(i % 50), i};
+        CHECK(waymark_engine_push_scan(engine, ++t, lots, many, NULL, 0, NULL) == WAYMARK_RESULT_OK, "20000 readings");
+        free(lots);
+    }
+    /* Time: the same, earlier, zero; NULL out is allowed. */
+    waymark_wifi_reading one = {known, -60.0, 0};
+    CHECK(waymark_engine_push_scan(engine, t, &one, 1, NULL, 0, NULL) == WAYMARK_RESULT_INPUT_REJECTED, "same time");
+    CHECK(waymark_engine_push_scan(engine, 0, &one, 1, NULL, 0, NULL) == WAYMARK_RESULT_INPUT_REJECTED, "time 0");
+    CHECK(waymark_engine_advance(engine, t, NULL) == WAYMARK_RESULT_INPUT_REJECTED, "advance to the same time");
+    CHECK(waymark_engine_advance(engine, ++t, NULL) == WAYMARK_RESULT_OK, "advance, NULL out");
+    CHECK(waymark_engine_position(engine, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "position, NULL out");
+
+    /* A callback that re-enters; then cleared; setting it twice replaces it. */
+    CHECK(waymark_engine_set_callback(engine, reentrant, engine) == WAYMARK_RESULT_OK, "set");
+    CHECK(waymark_engine_set_callback(engine, reentrant, engine) == WAYMARK_RESULT_OK, "set again");
+    t += 1000000000ull;
+    CHECK(waymark_engine_push_scan(engine, t, &one, 1, NULL, 0, &p) == WAYMARK_RESULT_OK, "scan with callback");
+    t += 1000000000ull;
+    CHECK(waymark_engine_advance(engine, t, &p) == WAYMARK_RESULT_OK, "advance with callback");
+    CHECK(reentrant_calls == 2, "%d callbacks", reentrant_calls);
+    CHECK(waymark_engine_set_callback(engine, NULL, engine) == WAYMARK_RESULT_OK, "clear");
+    t += 1000000000ull;
+    CHECK(waymark_engine_advance(engine, t, &p) == WAYMARK_RESULT_OK && reentrant_calls == 2, "cleared");
+}
+
+int main(int argc, char **argv) {
+    if (argc != 2) {
+        fprintf(stderr, "usage: %s site.json\n", argv[0]);
+        return 2;
+    }
+    size_t len = 0;
+    char *json = read_file(argv[1], &len);
+    CHECK(json != NULL, "read %s", argv[1]);
+    if (!json) return 1;
+    sites(argv[1], json, len);
+    null_engine();
+
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new((const uint8_t *)json, len, &engine) == WAYMARK_RESULT_OK, "site");
+    free(json);
+    if (!engine) return 1;
+    garbage(engine);
+
+    /* After all that, the engine positions as usual and every result code was a known one. */
+    waymark_position before, p;
+    CHECK(waymark_engine_position(engine, &before) == WAYMARK_RESULT_OK && finite_position(&before), "position");
+    waymark_wifi_reading scan[] = {{"02:00:00:00:00:00", -55.0, 0}, {"02:00:00:00:00:01", -70.0, 0},
+                                   {"02:00:00:00:00:02", -80.0, 0}};
+    for (int k = 1; k <= 5; k++) {
+        waymark_result r = waymark_engine_push_scan(engine, before.timestamp_ns + (uint64_t)k * 1500000000ull, scan,
+                                                    COUNT(scan), NULL, 0, &p);
+        CHECK(known(r) && r == WAYMARK_RESULT_OK && finite_position(&p), "scan %d after the garbage: %d", k, (int)r);
+    }
+    CHECK(waymark_engine_advance(engine, UINT64_MAX, &p) == WAYMARK_RESULT_OK && finite_position(&p), "end of time");
+    CHECK(waymark_engine_advance(engine, UINT64_MAX, &p) == WAYMARK_RESULT_INPUT_REJECTED, "past the end of time");
+    waymark_engine_free(engine);
+    printf("%d passed, %d failed\n", checks - failures, failures);
+    return failures ? 1 : 0;
+}
