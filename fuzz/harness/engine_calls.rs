@@ -432,13 +432,22 @@ fn valid_motion(m: &MotionUpdate) -> bool {
         && m.displacement_m.map_or(true, |d| d.iter().all(|v| v.is_finite()))
 }
 
-/// Why a scan must be rejected, by the documented rules; `None` if it must be taken.
-fn rejection(scan: &Scan, last_epoch: Option<u64>, fixture: &Fixture) -> Option<&'static str> {
+/// Why a scan must be rejected, by the documented rules, in the order the engine checks them;
+/// `None` if it must be taken. `motion_valid` is false for an invalid motion given with it.
+fn rejection(
+    scan: &Scan,
+    last_epoch: Option<u64>,
+    fixture: &Fixture,
+    motion_valid: bool,
+) -> Option<&'static str> {
     if last_epoch.is_some_and(|last| scan.timestamp_ns <= last) {
         Some("out of order")
+    } else if !motion_valid {
+        Some("invalid motion")
     } else if scan.readings.is_empty() {
         Some("empty")
-    } else if scan.readings.iter().any(|r| !r.rssi_dbm.is_finite()) {
+    } else if scan.readings.iter().any(|r| !(r.rssi_dbm.is_finite() && r.rssi_dbm >= -1000.0)) {
+        // NaN, ±inf, or below -1000 dBm, which no receiver reports.
         Some("non-finite")
     } else if scan.readings.iter().any(|r| r.rssi_dbm > waymark::engine::MAX_RSSI_DBM) {
         Some("rssi too high")
@@ -675,10 +684,11 @@ impl Session<'_> {
         let core = if input.mangled {
             None
         } else {
-            let why = rejection(&input.core, self.core_last, self.fixture);
+            let why = rejection(&input.core, self.core_last, self.fixture, true);
             self.core_epoch(input.core.timestamp_ns, why, true, |e| e.push_scan(&input.core))
         };
-        let ffi_rejected = input.mangled || rejection(&input.core, self.ffi_last, self.fixture).is_some();
+        let ffi_rejected =
+            input.mangled || rejection(&input.core, self.ffi_last, self.fixture, true).is_some();
         let ffi_scan = input.ffi.clone();
         self.ffi_epoch(input.core.timestamp_ns, ffi_rejected, core.as_ref(), |e| e.push_scan(ffi_scan));
     }
@@ -811,18 +821,19 @@ pub fn run(data: &[u8]) {
                 s.lockstep = false;
                 let with_scan = c.u8() % 2 == 0;
                 let m = motion(&mut c, &mut clock);
-                // Checked after everything else about the call.
-                let invalid = (!valid_motion(&m)).then_some("invalid motion");
+                // Checked right after the time.
+                let valid = valid_motion(&m);
                 if with_scan {
                     let input = scan(&mut c, fixture, &mut clock);
-                    let why = rejection(&input.core, s.core_last, fixture).or(invalid);
+                    let why = rejection(&input.core, s.core_last, fixture, valid);
                     s.core_epoch(input.core.timestamp_ns, why, true, |e| {
                         e.push_scan_with_motion(&input.core, &m)
                     });
                 } else {
                     let t = clock.time(&mut c);
                     let why = s.core_last.is_some_and(|last| t <= last).then_some("out of order");
-                    s.core_epoch(t, why.or(invalid), false, |e| e.advance_with_motion(t, &m));
+                    let why = why.or((!valid).then_some("invalid motion"));
+                    s.core_epoch(t, why, false, |e| e.advance_with_motion(t, &m));
                 }
             }
         }
