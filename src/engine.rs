@@ -429,9 +429,6 @@ impl Engine {
         if resolved.observations.is_empty() {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
-        if let Some(m) = motion {
-            check_motion(m)?;
-        }
         self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
         // Accepted from here on: the state changes.
         let motion = self.motion_until(scan.timestamp_ns, motion);
