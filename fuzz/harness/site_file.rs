@@ -1,6 +1,7 @@
-//! `site_file`: any bytes through `Site::from_json`. A site that loads must write JSON that
-//! reloads to the same JSON, and must make an engine (core and FFI) that takes scans and an
-//! advance without panicking and with sane positions.
+//! `site_file`: any bytes through `Site::from_bytes`, so both encodings: JSON, and the binary
+//! one when the input starts with its signature. A site that loads must write JSON and binary
+//! that reload to the same site, and must make an engine (core and FFI) that takes scans and
+//! an advance without panicking and with sane positions.
 
 use super::checks;
 use std::sync::Arc;
@@ -9,16 +10,19 @@ use waymark::{Engine, EngineConfig, Error, InputError, Reading, Scan, Site};
 
 /// One fuzz input.
 pub fn run(data: &[u8]) {
-    let parsed = Site::from_json(data);
-    // The FFI constructor takes text; it must agree with the core on what loads.
+    let parsed = Site::from_bytes(data);
+    // The FFI constructors must agree with the core on what loads: the text one on JSON (text
+    // never starts with the binary signature, which is not UTF-8), the bytes one on anything.
+    let agree = |created: Result<_, ffi::PositioningError>| match created {
+        Ok(_) => assert!(parsed.is_ok(), "the FFI loaded a site the core refuses"),
+        Err(ffi::PositioningError::InvalidSite { .. }) => assert!(parsed.is_err()),
+        Err(ffi::PositioningError::InvalidConfig { .. }) => assert!(parsed.is_ok()),
+        Err(e) => panic!("unexpected FFI error: {e}"),
+    };
     if let Ok(text) = std::str::from_utf8(data) {
-        match ffi::PositioningEngine::new(text.to_owned(), ffi::EngineOptions::default()) {
-            Ok(_) => assert!(parsed.is_ok(), "the FFI loaded a site the core refuses"),
-            Err(ffi::PositioningError::InvalidSite { .. }) => assert!(parsed.is_err()),
-            Err(ffi::PositioningError::InvalidConfig { .. }) => assert!(parsed.is_ok()),
-            Err(e) => panic!("unexpected FFI error: {e}"),
-        }
+        agree(ffi::PositioningEngine::new(text.to_owned(), ffi::EngineOptions::default()));
     }
+    agree(ffi::PositioningEngine::from_site_bytes(data.to_vec(), ffi::EngineOptions::default()));
     let site = match parsed {
         Ok(site) => site,
         Err(e) => {
@@ -30,6 +34,10 @@ pub fn run(data: &[u8]) {
     let again = Site::from_json(json.as_bytes()).unwrap_or_else(|e| panic!("to_json does not reload: {e}"));
     assert_eq!(again.to_json(), json, "a reloaded site writes different JSON");
     assert_eq!(again.states(), site.states());
+    let binary = site.to_binary();
+    let unpacked = Site::from_bytes(&binary).unwrap_or_else(|e| panic!("to_binary does not reload: {e}"));
+    assert_eq!(unpacked.to_json(), json, "the binary encoding loads as another site");
+    assert_eq!(unpacked.to_binary(), binary, "a reloaded site writes different binary");
     let site = Arc::new(site);
     match Engine::new(Arc::clone(&site), EngineConfig::default()) {
         Ok(engine) => exercise(engine),

@@ -220,24 +220,24 @@ fn salt_arg<'a>(salt: *const u8, salt_len: usize) -> Result<Option<&'a [u8]>, wa
     }
 }
 
-fn new_from_json(
-    site_json: *const u8,
+fn new_from_bytes(
+    site_file: *const u8,
     len: usize,
     salt: *const u8,
     salt_len: usize,
     out: *mut *mut waymark_engine,
 ) -> waymark_result {
     boundary(|| {
-        if site_json.is_null() || out.is_null() {
-            return fail(waymark_result::NullParameter, "site_json and out must not be NULL");
+        if site_file.is_null() || out.is_null() {
+            return fail(waymark_result::NullParameter, "site_file and out must not be NULL");
         }
         let salt = match salt_arg(salt, salt_len) {
             Ok(salt) => salt,
             Err(code) => return code,
         };
-        // SAFETY: the caller guarantees `site_json` points to `len` readable bytes.
-        let bytes = unsafe { std::slice::from_raw_parts(site_json, len) };
-        create(Site::from_json(bytes), salt, out)
+        // SAFETY: the caller guarantees `site_file` points to `len` readable bytes.
+        let bytes = unsafe { std::slice::from_raw_parts(site_file, len) };
+        create(Site::from_bytes(bytes), salt, out)
     })
 }
 
@@ -263,19 +263,21 @@ fn new_from_path(
     })
 }
 
-/// Creates an engine from site-file JSON (`len` bytes at `site_json`, not NUL-terminated
-/// necessarily). On success `*out` holds the engine; free it with `waymark_engine_free`.
+/// Creates an engine from a site file's contents, `len` bytes at `site_file`: the binary
+/// encoding (`waymark site pack`, what an app should ship: it loads several times faster and
+/// in a third of the memory) or JSON text (not necessarily NUL-terminated). On success `*out`
+/// holds the engine; free it with `waymark_engine_free`.
 /// A site whose transmitter ids are hashed needs `waymark_engine_new_with_salt`.
 #[no_mangle]
 pub extern "C" fn waymark_engine_new(
-    site_json: *const u8,
+    site_file: *const u8,
     len: usize,
     out: *mut *mut waymark_engine,
 ) -> waymark_result {
-    new_from_json(site_json, len, std::ptr::null(), 0, out)
+    new_from_bytes(site_file, len, std::ptr::null(), 0, out)
 }
 
-/// Creates an engine from the site file at the NUL-terminated `path`.
+/// Creates an engine from the site file (binary or JSON) at the NUL-terminated `path`.
 /// A site whose transmitter ids are hashed needs `waymark_engine_new_from_path_with_salt`.
 #[no_mangle]
 pub extern "C" fn waymark_engine_new_from_path(
@@ -293,13 +295,13 @@ pub extern "C" fn waymark_engine_new_from_path(
 /// site with raw ids is not needed and is ignored.
 #[no_mangle]
 pub extern "C" fn waymark_engine_new_with_salt(
-    site_json: *const u8,
+    site_file: *const u8,
     len: usize,
     salt: *const u8,
     salt_len: usize,
     out: *mut *mut waymark_engine,
 ) -> waymark_result {
-    new_from_json(site_json, len, salt, salt_len, out)
+    new_from_bytes(site_file, len, salt, salt_len, out)
 }
 
 /// As `waymark_engine_new_from_path`, with the site's salt as in `waymark_engine_new_with_salt`.

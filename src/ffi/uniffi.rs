@@ -613,7 +613,15 @@ impl PositioningEngine {
         Self::create(site, options)
     }
 
-    /// An engine on the site file at `path`.
+    /// An engine on a site file's contents: the binary encoding (`waymark site pack`, what an
+    /// app should ship: it loads several times faster and in a third of the memory) or JSON.
+    #[uniffi::constructor]
+    pub fn from_site_bytes(site: Vec<u8>, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
+        let site = Site::from_bytes(&site).map_err(crate::Error::from)?;
+        Self::create(site, options)
+    }
+
+    /// An engine on the site file (binary or JSON) at `path`.
     #[uniffi::constructor]
     pub fn from_path(path: String, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
         let site = Site::load(&path).map_err(crate::Error::from)?;

@@ -123,6 +123,54 @@ fn mills_ratio(x: f64) -> f64 {
     1.0 / tail
 }
 
+/// Where [`ln_std_normal_cdf_tabled`] interpolates: z in [-40, 8). Censored-model scores take
+/// z = (c - μ)/σ, which on real sites lies within about [-20, 2]; outside the table the exact
+/// function is called.
+const TABLE_Z: (f64, f64) = (-40.0, 8.0);
+
+/// Table knots per unit of z: 256. Linear interpolation errs by at most h²/8 · max|f″| with
+/// |f″| ≤ 1 for ln Φ; the test `tabled_ln_cdf_matches_exact` measures 1.9e-6 at most, under a
+/// millionth of what one 1 dBm step of a reading changes. (Cubic Hermite on 32 knots erred by
+/// 5e-10, but its dependent arithmetic made a 10 000-state epoch 30% slower.)
+const TABLE_KNOTS_PER_Z: f64 = 256.0;
+
+/// ln Φ(z) by linear interpolation in a table: several times faster than
+/// [`ln_std_normal_cdf`], for scoring scans against compact radio maps that do not cache ln Φ
+/// per entry. Built once per process ([`LnCdfTable::get`]).
+pub struct LnCdfTable {
+    /// ln Φ at each knot.
+    knots: Vec<f64>,
+}
+
+impl LnCdfTable {
+    /// The table (built on first use, 96 KB).
+    pub fn get() -> &'static LnCdfTable {
+        static TABLE: std::sync::OnceLock<LnCdfTable> = std::sync::OnceLock::new();
+        TABLE.get_or_init(|| {
+            let count = ((TABLE_Z.1 - TABLE_Z.0) * TABLE_KNOTS_PER_Z) as usize + 1;
+            let knots =
+                (0..count).map(|k| ln_std_normal_cdf(TABLE_Z.0 + k as f64 / TABLE_KNOTS_PER_Z)).collect();
+            LnCdfTable { knots }
+        })
+    }
+
+    /// ln Φ(z): interpolated within [`TABLE_Z`], exact outside.
+    #[inline]
+    pub fn ln_cdf(&self, z: f64) -> f64 {
+        let u = (z - TABLE_Z.0) * TABLE_KNOTS_PER_Z;
+        let k = u as usize; // saturating: NaN and negatives give 0
+        match (self.knots.get(k), self.knots.get(k + 1)) {
+            (Some(&y0), Some(&y1)) if u >= 0.0 => y0 + (u - k as f64) * (y1 - y0),
+            _ => ln_std_normal_cdf(z),
+        }
+    }
+}
+
+/// ln Φ(z) through [`LnCdfTable`].
+pub fn ln_std_normal_cdf_tabled(z: f64) -> f64 {
+    LnCdfTable::get().ln_cdf(z)
+}
+
 impl Gaussian {
     /// A model, if both parameters are finite and σ > 0.
     pub fn new(mean_dbm: f64, std_db: f64) -> Option<Self> {
@@ -275,6 +323,19 @@ mod tests {
     use proptest::prelude::*;
     use rand::SeedableRng;
     use rand_distr::{Distribution, Normal};
+
+    #[test]
+    fn tabled_ln_cdf_matches_exact() {
+        let mut worst: f64 = 0.0;
+        let mut z = -45.0;
+        while z < 12.0 {
+            worst = worst.max((ln_std_normal_cdf_tabled(z) - ln_std_normal_cdf(z)).abs());
+            z += 0.001_37;
+        }
+        assert!(worst < 2e-6, "largest error {worst:e}");
+        assert_eq!(ln_std_normal_cdf_tabled(-60.0), ln_std_normal_cdf(-60.0));
+        assert!(ln_std_normal_cdf_tabled(f64::NAN).is_nan());
+    }
 
     #[test]
     fn ln_cdf_matches_erfc_and_tail() {

@@ -1,16 +1,64 @@
 //! The radio map: every state's fingerprint, stored by transmitter so that a scan costs
 //! O(states + fingerprint entries of the transmitters heard), not O(states × transmitters).
+//!
+//! Entries are 8 bytes: the state, the mean in 0.01 dB and an index into the map's table of
+//! distinct standard deviations (also in 0.01 dB). A real five-floor mall has 2.4 million
+//! entries; at 32 bytes (f64 mean and σ, a cached ln p(absent)) they alone took 55 MB of a
+//! 10 000-state site's engine, against issue 7's 30 MB. ln p(absent) is computed when a
+//! transmitter is heard, by [`LnCdfTable`].
 
-use super::{Gaussian, RssiModel, Scan, TransmitterId};
+use super::{ln_std_normal_pdf, Gaussian, LnCdfTable, RssiModel, Scan, TransmitterId};
 use std::collections::HashMap;
 
-/// One transmitter's model at one state.
+/// Resolution of the stored RSSI levels and spreads: 0.01 dB, a hundredth of the 1 dBm step
+/// phones report RSSI in, so storing it changes no likelihood a reading can tell apart.
+pub const LEVEL_STEP_DB: f64 = 0.01;
+
+/// Largest |mean| of a fingerprint model, dBm: the 0.01 dB steps are stored in an `i16`
+/// (±327.67 dBm). Phones report about -130 to +20 dBm.
+pub const MAX_ABS_LEVEL_DBM: f64 = 320.0;
+
+/// Smallest standard deviation of a fingerprint model, dB: one [`LEVEL_STEP_DB`]. Found with
+/// the `site_file` fuzz harness: with σ of 1e-300 dB every reading off the mean had a
+/// likelihood of exactly 0 at every state, and no state explained any scan. Phones report
+/// whole dBm and the survey's fits stop at 1 dB.
+pub const MIN_STD_DB: f64 = LEVEL_STEP_DB;
+
+/// Largest standard deviation of a fingerprint model, dB: the steps are stored in a `u16`
+/// (655.35 dB). The survey caps its fits far below.
+pub const MAX_STD_DB: f64 = 650.0;
+
+/// One transmitter's model at one state: 8 bytes.
 #[derive(Clone, Copy, Debug)]
 struct Entry {
     state: u32,
-    model: Gaussian,
-    /// ln p(absent | state), cached.
-    ln_absent: f64,
+    /// Mean, in [`LEVEL_STEP_DB`].
+    mean: i16,
+    /// Index into [`RadioMap::spreads`].
+    spread: u16,
+}
+
+/// A standard deviation that entries share, with what scoring needs of it.
+#[derive(Clone, Copy, Debug)]
+struct Spread {
+    /// σ in [`LEVEL_STEP_DB`] steps.
+    steps: u16,
+    /// 1/σ, 1/dB.
+    inverse: f64,
+    /// ln σ.
+    ln: f64,
+}
+
+/// A model's (mean, σ) in [`LEVEL_STEP_DB`] steps, if within the stored range.
+fn quantise(g: &Gaussian) -> Option<(i16, u16)> {
+    let mean = (g.mean_dbm / LEVEL_STEP_DB).round();
+    let std = (g.std_db / LEVEL_STEP_DB).round().max(1.0);
+    (g.mean_dbm.abs() <= MAX_ABS_LEVEL_DBM && g.std_db <= MAX_STD_DB).then_some((mean as i16, std as u16))
+}
+
+/// A stored level or spread in dB.
+fn level(steps: impl Into<f64>) -> f64 {
+    steps.into() / 100.0
 }
 
 /// Fingerprints of every state, ready to score scans (Hoang eqs. 9-10).
@@ -18,6 +66,8 @@ struct Entry {
 /// Every transmitter of the map enters every state's likelihood: heard ones through their
 /// reading, the others as "below the clip level" (eq. 10). A state with no model of a
 /// transmitter uses the map's `unheard` model for it (Hoang §3: μ ≪ c, average σ).
+/// Fingerprint models are stored to [`LEVEL_STEP_DB`]; [`fingerprints`](Self::fingerprints)
+/// returns the stored values.
 #[derive(Clone, Debug)]
 pub struct RadioMap {
     model: RssiModel,
@@ -29,6 +79,8 @@ pub struct RadioMap {
     /// Entries of transmitter `t` are `entries[starts[t]..starts[t + 1]]`.
     starts: Vec<usize>,
     entries: Vec<Entry>,
+    /// The distinct standard deviations of the entries (a few hundred on a real site).
+    spreads: Vec<Spread>,
     /// Per radio kind (WiFi, BLE), per state: ln p(every transmitter of that kind absent |
     /// state).
     all_absent: [Vec<f64>; 2],
@@ -59,10 +111,12 @@ pub struct ResolvedScan {
 }
 
 impl RadioMap {
-    /// Builds a map over `state_count` states from `(state, transmitter, model)` triples.
+    /// Builds a map over `state_count` states from `(state, transmitter, model)` triples,
+    /// storing each model to [`LEVEL_STEP_DB`].
     ///
-    /// Fails, with a message, on a duplicate transmitter id, an index out of range or a
-    /// transmitter modelled twice at one state.
+    /// Fails, with a message, on a duplicate transmitter id, an index out of range, a model
+    /// outside the stored range ([`MAX_ABS_LEVEL_DBM`], [`MAX_STD_DB`]) or a transmitter
+    /// modelled twice at one state.
     pub fn new(
         model: RssiModel,
         clip_dbm: f64,
@@ -77,7 +131,32 @@ impl RadioMap {
                 return Err(format!("transmitter {id} is listed twice"));
             }
         }
-        let triples: Vec<(u32, u32, Gaussian)> = fingerprints.into_iter().collect();
+        // Quantised first: 16 bytes a triple while the map is built, where the f64 triples
+        // took 24.
+        let mut quantised = Vec::new();
+        for (state, tx, g) in fingerprints {
+            if state as usize >= state_count || tx as usize >= ids.len() {
+                return Err(format!("fingerprint entry (state {state}, transmitter {tx}) is out of range"));
+            }
+            let (mean, std) = quantise(&g).ok_or_else(|| {
+                format!(
+                    "the model of transmitter {tx} at state {state} (mean {} dBm, σ {} dB) is outside \
+                     the stored range (mean within ±{MAX_ABS_LEVEL_DBM} dBm, σ at most {MAX_STD_DB} dB)",
+                    g.mean_dbm, g.std_db
+                )
+            })?;
+            quantised.push((state, tx, mean, std));
+        }
+        // The table of distinct spreads, indexed by their steps.
+        let mut spread_of = vec![u16::MAX; usize::from(u16::MAX) + 1];
+        let mut spreads = Vec::new();
+        for &(_, _, _, std) in &quantised {
+            if spread_of[usize::from(std)] == u16::MAX {
+                spread_of[usize::from(std)] = spreads.len() as u16;
+                let sigma = level(std);
+                spreads.push(Spread { steps: std, inverse: 1.0 / sigma, ln: sigma.ln() });
+            }
+        }
         let unheard_ln_absent = model.ln_absent(&unheard, clip_dbm);
         let kinds: Vec<u8> = ids.iter().map(kind).collect();
         let mut all_absent = [0u8, 1].map(|k| {
@@ -87,22 +166,25 @@ impl RadioMap {
         // Bucket by transmitter (a counting sort: O(entries), where sorting took a quarter of
         // the load time of a 10 000-state site), keeping the given order within a bucket.
         let mut starts = vec![0usize; ids.len() + 1];
-        for &(state, tx, _) in &triples {
-            if state as usize >= state_count || tx as usize >= ids.len() {
-                return Err(format!("fingerprint entry (state {state}, transmitter {tx}) is out of range"));
-            }
+        for &(_, tx, _, _) in &quantised {
             starts[tx as usize + 1] += 1;
         }
         for t in 0..ids.len() {
             starts[t + 1] += starts[t];
         }
         let mut fill = starts.clone();
-        let placeholder = Entry { state: 0, model: unheard, ln_absent: 0.0 };
-        let mut entries = vec![placeholder; triples.len()];
-        for (state, tx, g) in triples {
-            let ln_absent = model.ln_absent(&g, clip_dbm);
+        let table = LnCdfTable::get();
+        let mut entries = vec![Entry { state: 0, mean: 0, spread: 0 }; quantised.len()];
+        for (state, tx, mean, std) in quantised {
+            // ln p(absent) by the table, as scoring takes it: the exact ln Φ per entry was
+            // half the load time of a 10 000-state site.
+            let (mean_dbm, std_db) = (level(mean), level(std));
+            let ln_absent = match model {
+                RssiModel::CensoredGaussian => table.ln_cdf((clip_dbm - mean_dbm) / std_db),
+                RssiModel::NaiveGaussian => model.ln_absent(&Gaussian { mean_dbm, std_db }, clip_dbm),
+            };
             all_absent[kinds[tx as usize] as usize][state as usize] += ln_absent - unheard_ln_absent;
-            entries[fill[tx as usize]] = Entry { state, model: g, ln_absent };
+            entries[fill[tx as usize]] = Entry { state, mean, spread: spread_of[usize::from(std)] };
             fill[tx as usize] += 1;
         }
         // Site files list entries state by state, so buckets come out sorted; any other
@@ -125,6 +207,7 @@ impl RadioMap {
             index,
             starts,
             entries,
+            spreads,
             all_absent,
             kinds,
         })
@@ -158,8 +241,23 @@ impl RadioMap {
     /// Every `(state, transmitter, model)` of the map, by transmitter.
     pub fn fingerprints(&self) -> impl Iterator<Item = (u32, u32, Gaussian)> + '_ {
         (0..self.ids.len()).flat_map(move |t| {
-            self.entries[self.starts[t]..self.starts[t + 1]].iter().map(move |e| (e.state, t as u32, e.model))
+            self.entries[self.starts[t]..self.starts[t + 1]]
+                .iter()
+                .map(move |e| (e.state, t as u32, self.gaussian(e)))
         })
+    }
+
+    /// The stored model of an entry.
+    fn gaussian(&self, e: &Entry) -> Gaussian {
+        Gaussian { mean_dbm: level(e.mean), std_db: level(self.spreads[usize::from(e.spread)].steps) }
+    }
+
+    /// Heap bytes of the fingerprint entries and their tables (what grows with the site).
+    pub fn memory_bytes(&self) -> usize {
+        self.entries.capacity() * std::mem::size_of::<Entry>()
+            + self.spreads.capacity() * std::mem::size_of::<Spread>()
+            + self.starts.capacity() * std::mem::size_of::<usize>()
+            + self.all_absent.iter().map(|v| v.capacity() * 8).sum::<usize>()
     }
 
     /// Matches a scan's readings to the map's transmitters, dropping (and counting) unknown,
@@ -214,10 +312,31 @@ impl RadioMap {
                 self.model.ln_heard(&self.unheard, rssi, self.clip_dbm) - self.unheard_ln_absent;
             shared += unheard_delta;
             // ...and, for states that model this transmitter, the difference to their own.
-            let (from, to) = (self.starts[t as usize], self.starts[t as usize + 1]);
-            for e in &self.entries[from..to] {
-                let delta = self.model.ln_heard(&e.model, rssi, self.clip_dbm) - e.ln_absent;
-                out[e.state as usize] += delta - unheard_delta;
+            // A reading at or below the clip level is ln p(absent) for every model: no change.
+            if rssi <= self.clip_dbm {
+                continue;
+            }
+            let entries = &self.entries[self.starts[t as usize]..self.starts[t as usize + 1]];
+            match self.model {
+                RssiModel::CensoredGaussian => {
+                    let table = LnCdfTable::get();
+                    for e in entries {
+                        let spread = &self.spreads[usize::from(e.spread)];
+                        let mean = f64::from(e.mean) * LEVEL_STEP_DB;
+                        let heard = ln_std_normal_pdf((rssi - mean) * spread.inverse) - spread.ln;
+                        let absent = table.ln_cdf((self.clip_dbm - mean) * spread.inverse);
+                        out[e.state as usize] += heard - absent - unheard_delta;
+                    }
+                }
+                RssiModel::NaiveGaussian => {
+                    for e in entries {
+                        let spread = &self.spreads[usize::from(e.spread)];
+                        let mean = f64::from(e.mean) * LEVEL_STEP_DB;
+                        let (z, z_clip) =
+                            ((rssi - mean) * spread.inverse, (self.clip_dbm - mean) * spread.inverse);
+                        out[e.state as usize] += 0.5 * (z_clip * z_clip - z * z) - unheard_delta;
+                    }
+                }
             }
         }
         for v in out.iter_mut() {
@@ -280,8 +399,9 @@ mod tests {
             {
                 let mut out = vec![0.0; 2];
                 map.ln_likelihood(&heard, &mut out);
+                // Each heard transmitter's ln p(absent) comes from the table (≤ 2e-6 off).
                 for s in 0..2 {
-                    assert_relative_eq!(out[s as usize], brute_force(&map, &heard, s), epsilon = 1e-9);
+                    assert_relative_eq!(out[s as usize], brute_force(&map, &heard, s), epsilon = 1e-5);
                 }
             }
         }
@@ -323,7 +443,8 @@ mod tests {
         let ln_pdf_at_mean = -(4.0 * (2.0 * std::f64::consts::PI).sqrt()).ln();
         // Transmitter 1 below -100 with μ -80, σ 5: Φ(-4); transmitter 2 with μ -95, σ 6: Φ(-5/6).
         let expected = ln_pdf_at_mean + 3.167_124_183_311_992e-5f64.ln() + 0.202_328_380_963_643_03f64.ln();
-        assert_relative_eq!(out[0], expected, epsilon = 1e-9);
+        // Transmitter 0's ln p(absent) is tabled (≤ 2e-6 off).
+        assert_relative_eq!(out[0], expected, epsilon = 1e-5);
     }
 
     #[test]

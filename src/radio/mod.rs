@@ -6,13 +6,13 @@ mod hash;
 mod map;
 
 pub use gaussian::{
-    fit_censored, fit_naive, ln_std_normal_cdf, ln_std_normal_pdf, lower_tail_hazard, unheard_model,
-    CensoredFit, FitOptions, Gaussian, RssiModel,
+    fit_censored, fit_naive, ln_std_normal_cdf, ln_std_normal_cdf_tabled, ln_std_normal_pdf,
+    lower_tail_hazard, unheard_model, CensoredFit, FitOptions, Gaussian, LnCdfTable, RssiModel,
 };
 pub use hash::{
     Salt, ScanHasher, HASH_HEX_DIGITS, ID_CACHE_CAPACITY, ID_HASH_SCHEME, ID_HASH_VERSION, MIN_SALT_BYTES,
 };
-pub use map::{RadioMap, ResolvedScan};
+pub use map::{RadioMap, ResolvedScan, LEVEL_STEP_DB, MAX_ABS_LEVEL_DBM, MAX_STD_DB, MIN_STD_DB};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;

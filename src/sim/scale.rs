@@ -269,12 +269,21 @@ impl DenseForward {
         }
         let clip_dbm = map.clip_dbm();
         let model = map.model();
-        let cell = |g: &crate::radio::Gaussian| {
-            [g.mean_dbm, 1.0 / g.std_db, g.ln_pdf(g.mean_dbm), model.ln_absent(g, clip_dbm)]
+        // The same emission as the radio map's: ln p(absent) of fingerprint entries from the
+        // table the map scores with, of the unheard model exactly.
+        let cell = |g: &crate::radio::Gaussian, ln_absent: f64| {
+            [g.mean_dbm, 1.0 / g.std_db, g.ln_pdf(g.mean_dbm), ln_absent]
         };
-        let mut emission = vec![cell(&map.unheard()); n * transmitters];
+        let unheard = map.unheard();
+        let mut emission = vec![cell(&unheard, model.ln_absent(&unheard, clip_dbm)); n * transmitters];
         for (state, tx, g) in map.fingerprints() {
-            emission[state as usize * transmitters + tx as usize] = cell(&g);
+            let ln_absent = match model {
+                crate::radio::RssiModel::CensoredGaussian => {
+                    crate::radio::LnCdfTable::get().ln_cdf((clip_dbm - g.mean_dbm) / g.std_db)
+                }
+                crate::radio::RssiModel::NaiveGaussian => model.ln_absent(&g, clip_dbm),
+            };
+            emission[state as usize * transmitters + tx as usize] = cell(&g, ln_absent);
         }
         Self {
             n,

@@ -2,7 +2,9 @@
 //! RSSI model at every state (Hoang §3) and derives the map's "unheard" model.
 
 use super::{Edge, Floor, North, Site, SiteError, State, StateKind};
-use crate::radio::{unheard_model, FitOptions, Gaussian, RadioMap, RssiModel, Scan, TransmitterId};
+use crate::radio::{
+    unheard_model, FitOptions, Gaussian, RadioMap, RssiModel, Scan, TransmitterId, MAX_STD_DB,
+};
 use nalgebra::Point2;
 use std::collections::{BTreeMap, BTreeSet};
 
@@ -70,6 +72,9 @@ impl SiteBuilder {
             .collect();
         let index: BTreeMap<&TransmitterId, u32> =
             ids.iter().enumerate().map(|(i, id)| (id, i as u32)).collect();
+        // The radio map stores σ up to `radio::MAX_STD_DB`; a fit wider than that (a
+        // transmitter heard once, unconstrained EM) is capped there.
+        let fit = FitOptions { max_std_db: options.fit.max_std_db.min(MAX_STD_DB), ..options.fit };
         let fit_state = |s: usize, scans: &[TrainingScan]| -> Vec<(u32, u32, Gaussian)> {
             let mut samples: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
             for (k, scan) in scans.iter().enumerate() {
@@ -82,9 +87,7 @@ impl SiteBuilder {
             }
             samples
                 .into_iter()
-                .filter_map(|(tx, column)| {
-                    options.model.fit(&column, &options.fit).map(|g| (s as u32, tx, g))
-                })
+                .filter_map(|(tx, column)| options.model.fit(&column, &fit).map(|g| (s as u32, tx, g)))
                 .collect()
         };
         // States fit independently: one chunk per core (a building's survey is thousands of

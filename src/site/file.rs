@@ -9,7 +9,7 @@
 use super::{Calibration, Edge, Floor, North, Site, State, StateKind};
 use crate::radio::{
     Gaussian, RadioMap, RssiModel, Salt, ScanHasher, TransmitterId, HASH_HEX_DIGITS, ID_HASH_SCHEME,
-    ID_HASH_VERSION,
+    ID_HASH_VERSION, MAX_ABS_LEVEL_DBM, MAX_STD_DB, MIN_STD_DB,
 };
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
@@ -64,6 +64,23 @@ pub enum SiteError {
         /// What is wrong.
         message: String,
     },
+    /// A binary site file that was cut short or changed after it was written (its checksum
+    /// differs), or whose parts do not fit together.
+    #[error("binary site file is damaged: {message}")]
+    Damaged {
+        /// What is wrong, and where.
+        message: String,
+    },
+    /// A binary site file in a newer (or unknown) layout.
+    #[error(
+        "binary site file has layout version {found}; this build of Waymark reads layout version {supported}"
+    )]
+    UnsupportedLayout {
+        /// The layout version in the file.
+        found: u32,
+        /// The layout version this build reads.
+        supported: u32,
+    },
     /// The transmitter ids are hashed with a scheme this build does not know (a newer one).
     #[error(
         "site file hashes its transmitter ids with {scheme} version {version}; this build knows {} version {}",
@@ -94,14 +111,14 @@ fn invalid(path: impl Into<String>, message: impl Into<String>) -> SiteError {
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct SiteFile {
+pub(super) struct SiteFile {
     format_version: u32,
     name: String,
     #[serde(default)]
     north: North,
     floors: Vec<FloorFile>,
     radio: RadioFile,
-    states: Vec<StateFile>,
+    pub(super) states: Vec<StateFile>,
     #[serde(default)]
     edges: Vec<EdgeFile>,
     #[serde(default, skip_serializing_if = "Calibration::is_empty")]
@@ -163,7 +180,7 @@ struct GaussianFile {
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct StateFile {
+pub(super) struct StateFile {
     id: u32,
     floor: usize,
     x: f64,
@@ -172,13 +189,14 @@ struct StateFile {
     kind: StateKind,
     #[serde(default)]
     training_scans: u32,
-    #[serde(default)]
-    fingerprint: Vec<FingerprintFile>,
+    /// Empty in the header of a binary site file, whose fingerprints follow in columns.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub(super) fingerprint: Vec<FingerprintFile>,
 }
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-struct FingerprintFile {
+pub(super) struct FingerprintFile {
     /// Index into `radio.transmitters`.
     tx: usize,
     mean_dbm: f64,
@@ -210,27 +228,23 @@ fn json_error(e: &serde_json::Error) -> SiteError {
 /// building's frame, and keeps every distance and its square finite.
 const MAX_COORDINATE_M: f64 = 1e6;
 
-/// Largest |value| of an RSSI level in the file (means, the clip level), dBm.
-const MAX_ABS_DBM: f64 = 1000.0;
-
-/// Smallest standard deviation of an RSSI model, dB. Found with the `site_file` fuzz harness:
-/// with σ of 1e-300 dB every reading off the mean had a likelihood of exactly 0 at every
-/// state, and no state explained any scan. Phones report whole dBm and the survey's fits stop
-/// at 1 dB; with σ ≥ 0.01 dB and the levels within ±1000 dBm, every accepted reading (at most
-/// +100 dBm) has a finite log-likelihood.
-const MIN_STD_DB: f64 = 0.01;
-
 /// A validated Gaussian; `path` (formatted only on error) says where it was in the file.
 fn gaussian(path: impl FnOnce() -> String, g: &GaussianFile) -> Result<Gaussian, SiteError> {
     let (mean, std) = (g.mean_dbm, g.std_db);
-    Gaussian::new(mean, std).filter(|_| mean.abs() <= MAX_ABS_DBM && std >= MIN_STD_DB).ok_or_else(|| {
-        invalid(
-            path(),
-            format!(
-                "mean_dbm must be within ±{MAX_ABS_DBM} and std_db finite and ≥ {MIN_STD_DB} (got {mean}, {std})"
-            ),
-        )
-    })
+    // The radio map stores levels to 0.01 dB in 16 bits (`radio::LEVEL_STEP_DB`): with σ ≥
+    // 0.01 dB and levels within ±320 dBm, every accepted reading (at most +100 dBm) has a
+    // finite log-likelihood.
+    Gaussian::new(mean, std)
+        .filter(|_| mean.abs() <= MAX_ABS_LEVEL_DBM && (MIN_STD_DB..=MAX_STD_DB).contains(&std))
+        .ok_or_else(|| {
+            invalid(
+                path(),
+                format!(
+                    "mean_dbm must be within ±{MAX_ABS_LEVEL_DBM} and std_db within \
+                     [{MIN_STD_DB}, {MAX_STD_DB}] (got {mean}, {std})"
+                ),
+            )
+        })
 }
 
 /// Why a file that does not parse is not a site file of this version, if it is not: a
@@ -251,31 +265,51 @@ fn check_version(bytes: &[u8]) -> Result<(), SiteError> {
     }
 }
 
+/// Parses (but does not validate) a JSON site file of this format version.
+pub(super) fn parse_json(bytes: &[u8]) -> Result<SiteFile, SiteError> {
+    let mut de = serde_json::Deserializer::from_slice(bytes);
+    let parsed: Result<SiteFile, _> = serde_path_to_error::deserialize(&mut de);
+    // The version is checked first only when the file does not parse as this version:
+    // reading the document twice doubled the load time of a 10 000-state site.
+    match parsed {
+        Ok(file) if file.format_version == FORMAT_VERSION => Ok(file),
+        Ok(file) => Err(SiteError::UnsupportedVersion {
+            found: u64::from(file.format_version),
+            supported: FORMAT_VERSION,
+        }),
+        Err(e) => {
+            check_version(bytes)?;
+            let inner = e.inner();
+            Err(match inner.classify() {
+                serde_json::error::Category::Data => invalid(e.path().to_string(), inner.to_string()),
+                _ => json_error(inner),
+            })
+        }
+    }
+}
+
+/// Where a site file keeps its fingerprints.
+pub(super) enum Fingerprints<'a> {
+    /// In each state's `fingerprint` array (JSON).
+    Nested,
+    /// In columns after the header, state by state (binary); every state's array is empty.
+    Columns(&'a super::binary::Columns<'a>),
+}
+
 impl Site {
     /// Loads a site file from JSON bytes.
     pub fn from_json(bytes: &[u8]) -> Result<Site, SiteError> {
-        let mut de = serde_json::Deserializer::from_slice(bytes);
-        let parsed: Result<SiteFile, _> = serde_path_to_error::deserialize(&mut de);
-        // The version is checked first only when the file does not parse as this version:
-        // reading the document twice doubled the load time of a 10 000-state site.
-        let file = match parsed {
-            Ok(file) if file.format_version == FORMAT_VERSION => file,
-            Ok(file) => {
-                return Err(SiteError::UnsupportedVersion {
-                    found: u64::from(file.format_version),
-                    supported: FORMAT_VERSION,
-                })
-            }
-            Err(e) => {
-                check_version(bytes)?;
-                let inner = e.inner();
-                return Err(match inner.classify() {
-                    serde_json::error::Category::Data => invalid(e.path().to_string(), inner.to_string()),
-                    _ => json_error(inner),
-                });
-            }
-        };
-        Site::from_file(file)
+        Site::from_file(parse_json(bytes)?, Fingerprints::Nested)
+    }
+
+    /// Loads a site file in either encoding: binary ([`Site::to_binary`]) when the bytes start
+    /// with its signature, JSON otherwise.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Site, SiteError> {
+        if super::binary::is_binary(bytes) {
+            super::binary::decode(bytes)
+        } else {
+            Site::from_json(bytes)
+        }
     }
 
     /// Loads a site file from disk.
@@ -283,14 +317,20 @@ impl Site {
         let path = path.as_ref();
         let bytes = std::fs::read(path)
             .map_err(|e| SiteError::Io { path: path.display().to_string(), message: e.to_string() })?;
-        Site::from_json(&bytes)
+        Site::from_bytes(&bytes)
     }
 
     /// The site as site-file JSON (current format version).
     pub fn to_json(&self) -> String {
+        serde_json::to_string(&self.to_file(true)).expect("a site serialises: every float in it is finite")
+    }
+
+    /// The site as the serde model of its file; `nested` puts each state's fingerprint in it
+    /// (JSON), otherwise every state's array is left empty (the binary header).
+    pub(super) fn to_file(&self, nested: bool) -> SiteFile {
         let mut fingerprints: Vec<Vec<FingerprintFile>> =
             (0..self.states.len()).map(|_| Vec::new()).collect();
-        for (state, tx, g) in self.radio.fingerprints() {
+        for (state, tx, g) in self.radio.fingerprints().filter(|_| nested) {
             fingerprints[state as usize].push(FingerprintFile {
                 tx: tx as usize,
                 mean_dbm: g.mean_dbm,
@@ -298,7 +338,7 @@ impl Site {
             });
         }
         let unheard = self.radio.unheard();
-        let file = SiteFile {
+        SiteFile {
             format_version: FORMAT_VERSION,
             name: self.name.clone(),
             north: self.north,
@@ -343,11 +383,10 @@ impl Site {
                 })
                 .collect(),
             calibration: self.calibration,
-        };
-        serde_json::to_string(&file).expect("a site serialises: every float in it is finite")
+        }
     }
 
-    fn from_file(file: SiteFile) -> Result<Site, SiteError> {
+    pub(super) fn from_file(file: SiteFile, fingerprints: Fingerprints) -> Result<Site, SiteError> {
         if file.floors.is_empty() {
             return Err(invalid("floors", "a site needs at least one floor"));
         }
@@ -363,16 +402,21 @@ impl Site {
             return Err(invalid("states", "more states than a u32 can index"));
         }
         let radio = &file.radio;
-        if !radio.clip_dbm.is_finite() || radio.clip_dbm.abs() > MAX_ABS_DBM {
-            return Err(invalid("radio.clip_dbm", format!("must be within ±{MAX_ABS_DBM}")));
+        if !radio.clip_dbm.is_finite() || radio.clip_dbm.abs() > MAX_ABS_LEVEL_DBM {
+            return Err(invalid("radio.clip_dbm", format!("must be within ±{MAX_ABS_LEVEL_DBM}")));
         }
         let unheard = gaussian(|| "radio.unheard".into(), &radio.unheard)?;
         let id_hashing = id_hashing(radio)?;
         let tx_count = radio.transmitters.len();
         let mut ids = HashMap::with_capacity(file.states.len());
         let mut states = Vec::with_capacity(file.states.len());
-        let mut triples = Vec::with_capacity(file.states.iter().map(|s| s.fingerprint.len()).sum());
+        let entry_count = match fingerprints {
+            Fingerprints::Nested => file.states.iter().map(|s| s.fingerprint.len()).sum(),
+            Fingerprints::Columns(c) => c.len(),
+        };
+        let mut triples = Vec::with_capacity(entry_count);
         let mut seen_in = vec![0usize; tx_count];
+        let mut next_column_entry = 0;
         for (i, s) in file.states.iter().enumerate() {
             let at = |field: &str| format!("states[{i}].{field}");
             if let Some(first) = ids.insert(s.id, i) {
@@ -388,27 +432,42 @@ impl Site {
             if !(inside(s.x) && inside(s.y)) {
                 return Err(invalid(at("x"), format!("coordinates must be within ±{MAX_COORDINATE_M} m")));
             }
-            for (k, f) in s.fingerprint.iter().enumerate() {
+            let count = match fingerprints {
+                Fingerprints::Nested => s.fingerprint.len(),
+                Fingerprints::Columns(_) if !s.fingerprint.is_empty() => {
+                    return Err(invalid(at("fingerprint"), "must be empty in a binary site file's header"))
+                }
+                Fingerprints::Columns(c) => c.count(i),
+            };
+            for k in 0..count {
+                let (tx, mean_dbm, std_db) = match fingerprints {
+                    Fingerprints::Nested => {
+                        let f = &s.fingerprint[k];
+                        (f.tx, f.mean_dbm, f.std_db)
+                    }
+                    Fingerprints::Columns(c) => c.entry(next_column_entry + k),
+                };
                 // Paths are formatted only for an error: once per entry, they were a third of
                 // the load time of a 10 000-state site.
                 let path = || format!("states[{i}].fingerprint[{k}]");
-                if f.tx >= tx_count {
+                if tx >= tx_count {
                     return Err(invalid(
                         format!("{}.tx", path()),
-                        format!("transmitter {} does not exist (radio.transmitters has {tx_count})", f.tx),
+                        format!("transmitter {tx} does not exist (radio.transmitters has {tx_count})"),
                     ));
                 }
                 // seen_in[t] holds 1 + the last state that modelled transmitter t.
-                if seen_in[f.tx] == i + 1 {
+                if seen_in[tx] == i + 1 {
                     return Err(invalid(
                         format!("{}.tx", path()),
-                        format!("transmitter {} is modelled twice", f.tx),
+                        format!("transmitter {tx} is modelled twice"),
                     ));
                 }
-                seen_in[f.tx] = i + 1;
-                let g = gaussian(path, &GaussianFile { mean_dbm: f.mean_dbm, std_db: f.std_db })?;
-                triples.push((i as u32, f.tx as u32, g));
+                seen_in[tx] = i + 1;
+                let g = gaussian(path, &GaussianFile { mean_dbm, std_db })?;
+                triples.push((i as u32, tx as u32, g));
             }
+            next_column_entry += count;
             states.push(State {
                 id: s.id,
                 floor: s.floor,

@@ -1,11 +1,13 @@
 //! The surveyed site: floors, states (the HMM's possible positions), the walkable graph between
-//! them, and the radio map. Loaded from a versioned JSON site file.
+//! them, and the radio map. Loaded from a versioned site file: JSON, or its binary encoding.
 
+mod binary;
 mod builder;
 mod file;
 mod pseudo;
 mod reach;
 
+pub use binary::{LAYOUT_VERSION as BINARY_LAYOUT_VERSION, SIGNATURE as BINARY_SIGNATURE};
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
 pub use file::{IdHashing, SiteError, FORMAT_VERSION};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};

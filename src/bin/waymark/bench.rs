@@ -41,8 +41,11 @@ pub struct BenchArgs {
     /// Measure only the raw IMU ingestion rate (for profiling it).
     #[arg(long)]
     ingest_only: bool,
+    /// Measure only the load time and engine memory of the 10 000-state site, binary and JSON.
+    #[arg(long)]
+    load_only: bool,
     /// Write the site file of the first `--states` size here and stop (to profile loading it
-    /// with `--rss-probe`).
+    /// with `--rss-probe`): binary if the name ends in `.wmsite`, JSON otherwise.
     #[arg(long)]
     write_site: Option<PathBuf>,
     /// Internal: load this site file, run an engine on it and print its resident memory.
@@ -91,8 +94,13 @@ fn run(args: &BenchArgs) -> Result<Value, String> {
     if let Some(path) = &args.write_site {
         let n = args.states.first().copied().unwrap_or(REFERENCE_STATES);
         let scaled = ScaleSite::generate(&ScaleConfig { states: n, ..ScaleConfig::default() });
-        std::fs::write(path, &scaled.json).map_err(|e| format!("{}: {e}", path.display()))?;
-        return Ok(json!({"site": path, "states": n, "bytes": scaled.json.len()}));
+        let contents = if path.extension().is_some_and(|e| e == "wmsite") {
+            Site::from_json(scaled.json.as_bytes()).map_err(|e| e.to_string())?.to_binary()
+        } else {
+            scaled.json.into_bytes()
+        };
+        std::fs::write(path, &contents).map_err(|e| format!("{}: {e}", path.display()))?;
+        return Ok(json!({"site": path, "states": n, "bytes": contents.len()}));
     }
     if args.ingest_only {
         return Ok(json!({"ingest_samples_per_s": ingest_samples_per_s()?}));
@@ -106,7 +114,7 @@ fn run(args: &BenchArgs) -> Result<Value, String> {
     let mut engine_new = BTreeMap::new();
     let mut fingerprints = BTreeMap::new();
     let mut ratio = None;
-    let mut sizes = args.states.clone();
+    let mut sizes = if args.load_only { vec![] } else { args.states.clone() };
     if !sizes.contains(&REFERENCE_STATES) {
         sizes.push(REFERENCE_STATES);
     }
@@ -116,14 +124,25 @@ fn run(args: &BenchArgs) -> Result<Value, String> {
         let key = n.to_string();
         let scaled = ScaleSite::generate(&ScaleConfig { states: n, ..ScaleConfig::default() });
         fingerprints.insert(key.clone(), json!(scaled.fingerprints));
+        let site = Arc::new(Site::from_json(scaled.json.as_bytes()).map_err(|e| e.to_string())?);
         if n == REFERENCE_STATES {
-            let (load_ms, rss) = load_and_probe(&scaled)?;
+            // The binary encoding is what an app ships (`waymark site pack`); JSON is
+            // reported beside it.
+            let binary = site.to_binary();
+            let (load_ms, rss) = load_and_probe(&binary, "site.wmsite")?;
             report.insert("site_load_ms".into(), json!(load_ms));
-            report.insert("site_file_bytes".into(), json!(scaled.json.len()));
+            report.insert("site_file_bytes".into(), json!(binary.len()));
             report.insert("engine_rss_mb".into(), rss["engine_rss_mb"].clone());
             report.insert("process_rss_before_site_mb".into(), rss["before_site_mb"].clone());
+            let (load_ms, rss) = load_and_probe(scaled.json.as_bytes(), "site.json")?;
+            report.insert("site_load_json_ms".into(), json!(load_ms));
+            report.insert("site_json_bytes".into(), json!(scaled.json.len()));
+            report.insert("engine_rss_json_mb".into(), rss["engine_rss_mb"].clone());
+            report.insert("radio_map_bytes".into(), json!(site.radio().memory_bytes()));
+            if args.load_only {
+                return Ok(json!(report));
+            }
         }
-        let site = Arc::new(Site::from_json(scaled.json.as_bytes()).map_err(|e| e.to_string())?);
         let start = Clock::now();
         let mut engine =
             Engine::new(Arc::clone(&site), EngineConfig::default()).map_err(|e| e.to_string())?;
@@ -198,13 +217,14 @@ fn dense_epoch_ms(site: &Site, _scaled: &ScaleSite, walk: &[waymark::sim::scale:
     percentile(&mut times, 0.5)
 }
 
-/// Writes the site file, times `Site::load` (median of 5, file in the page cache), and runs
-/// a child process that reports the resident memory of an engine on it.
-fn load_and_probe(scaled: &ScaleSite) -> Result<(f64, Value), String> {
+/// Writes the site file (`contents`, JSON or binary) as `name`, times `Site::load` (median of
+/// 5, file in the page cache), and runs a child process that reports the resident memory of
+/// an engine on it.
+fn load_and_probe(contents: &[u8], name: &str) -> Result<(f64, Value), String> {
     let dir = std::env::temp_dir().join(format!("waymark-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
-    let path = dir.join("site.json");
-    std::fs::write(&path, &scaled.json).map_err(|e| e.to_string())?;
+    let path = dir.join(name);
+    std::fs::write(&path, contents).map_err(|e| e.to_string())?;
     let mut times = Vec::new();
     for _ in 0..5 {
         let start = Clock::now();
