@@ -161,6 +161,28 @@ static void error_paths(const char *site_path) {
     CHECK(strcmp(waymark_version(), WAYMARK_VERSION) == 0, "version %s", waymark_version());
 }
 
+/* The binary encoding of the same site (`waymark site pack`): loads from bytes and from a path,
+ * and a damaged copy is refused with a message that says so. */
+static void binary_site(const char *packed_path) {
+    size_t len = 0;
+    char *bytes = read_file(packed_path, &len);
+    CHECK(bytes != NULL && len > 16, "read packed site");
+    if (!bytes) return;
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new((const uint8_t *)bytes, len, &engine) == WAYMARK_RESULT_OK, "packed site from bytes");
+    waymark_engine_free(engine);
+    bytes[len / 2] ^= 0x40;
+    engine = NULL;
+    CHECK(waymark_engine_new((const uint8_t *)bytes, len, &engine) == WAYMARK_RESULT_INVALID_SITE && engine == NULL,
+          "damaged packed site");
+    char message[256];
+    waymark_last_error(message, sizeof message);
+    CHECK(strstr(message, "damaged") != NULL, "message: %s", message);
+    CHECK(waymark_engine_new((const uint8_t *)bytes, len - 1000, &engine) == WAYMARK_RESULT_INVALID_SITE,
+          "cut packed site");
+    free(bytes);
+}
+
 /* The site with its first access point turned into a BLE beacon known by its advertiser
  * address only (as Eddystone beacons are): a malloc'd copy of `json`, or NULL. */
 static char *with_address_beacon(const char *json) {
@@ -261,8 +283,8 @@ static void salted(const char *hashed_path, const uint8_t *salt, size_t salt_len
 }
 
 int main(int argc, char **argv) {
-    if (argc != 5) {
-        fprintf(stderr, "usage: %s site.json walk.txt site-hashed.json salt.hex\n", argv[0]);
+    if (argc != 6) {
+        fprintf(stderr, "usage: %s site.json walk.txt site-hashed.json salt.hex site.wmsite\n", argv[0]);
         return 2;
     }
     uint8_t salt[64];
@@ -271,6 +293,8 @@ int main(int argc, char **argv) {
     error_paths(argv[1]);
     address_beacons(argv[1]);
     walk(argv[1], argv[2], NULL, 0);
+    walk(argv[5], argv[2], NULL, 0);
+    binary_site(argv[5]);
     walk(argv[3], argv[2], salt, salt_len);
     salted(argv[3], salt, salt_len);
     printf("%d passed, %d failed\n", checks - failures, failures);

@@ -38,6 +38,8 @@ cargo run --features cli --locked --quiet -- sim-export --walk-length-m 40 --out
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$work/salt.hex"
 cargo run --features cli --locked --quiet -- site hash --salt-file "$work/salt.hex" \
     "$work/site.json" "$work/site-hashed.json" >/dev/null
+# The same site in the binary encoding an app ships.
+cargo run --features cli --locked --quiet -- site pack "$work/site.json" "$work/site.wmsite" >/dev/null
 # A test build: a scan at UINT64_MAX - 7 panics inside the engine (feature fault-injection).
 cargo build --lib --locked --quiet --features fault-injection
 python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
@@ -51,7 +53,8 @@ for kind in shared static; do
     echo "-- $kind library under valgrind"
     LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
         --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
-        "$work/test_$kind" "$work/site.json" "$work/walk.txt" "$work/site-hashed.json" "$work/salt.hex"
+        "$work/test_$kind" "$work/site.json" "$work/walk.txt" "$work/site-hashed.json" "$work/salt.hex" \
+        "$work/site.wmsite"
     echo "-- bad input, $kind library under valgrind"
     LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
         --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \

@@ -78,6 +78,8 @@ cargo build --features cli --bin waymark
 # The same site with its transmitter ids hashed, under a fixed test salt.
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$SIM/salt.hex"
 "$TARGET/debug/waymark" site hash --salt-file "$SIM/salt.hex" "$SIM/site.json" "$SIM/site-hashed.json" >&2
+# The same site in the binary encoding an app ships.
+"$TARGET/debug/waymark" site pack "$SIM/site.json" "$SIM/site.wmsite" >&2
 # The shipped library, without the bindgen (or cli) feature: the one the JVM loads.
 step "cargo build --lib"
 # A test build: a scan at ULong.MAX - 7 panics inside the engine (feature fault-injection).
@@ -109,6 +111,7 @@ set +e
 java -Djna.library.path="$TARGET/debug" \
     -Dwaymark.site="$SIM/site.json" -Dwaymark.walk="$SIM/walk.json" \
     -Dwaymark.hashedSite="$SIM/site-hashed.json" -Dwaymark.salt="$SIM/salt.hex" \
+    -Dwaymark.packedSite="$SIM/site.wmsite" \
     -cp "$OUT/classes:$run_cp" dev.waymark.RunTests 2>&1 | tee "$OUT/junit.log"
 status=${PIPESTATUS[0]}
 set -e

@@ -46,6 +46,9 @@ cargo run --quiet --features cli --bin waymark -- sim-export --out "$TARGET/sim-
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$TARGET/sim-export/salt.hex"
 cargo run --quiet --features cli --bin waymark -- site hash --salt-file "$TARGET/sim-export/salt.hex" \
     "$TARGET/sim-export/site.json" "$TARGET/sim-export/site-hashed.json" >/dev/null
+# The same site in the binary encoding an app ships.
+cargo run --quiet --features cli --bin waymark -- site pack "$TARGET/sim-export/site.json" \
+    "$TARGET/sim-export/site.wmsite" >/dev/null
 # A test build: a scan at UInt64.max - 7 panics inside the engine (feature fault-injection).
 cargo build --quiet --lib --features fault-injection
 LIB="$TARGET/debug/libwaymark.so"

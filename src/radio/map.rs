@@ -26,7 +26,7 @@ pub const MIN_STD_DB: f64 = LEVEL_STEP_DB;
 
 /// Largest standard deviation of a fingerprint model, dB: the steps are stored in a `u16`
 /// (655.35 dB). The survey caps its fits far below.
-pub const MAX_STD_DB: f64 = 650.0;
+pub const MAX_STORED_STD_DB: f64 = 650.0;
 
 /// One transmitter's model at one state: 8 bytes.
 #[derive(Clone, Copy, Debug)]
@@ -53,7 +53,8 @@ struct Spread {
 fn quantise(g: &Gaussian) -> Option<(i16, u16)> {
     let mean = (g.mean_dbm / LEVEL_STEP_DB).round();
     let std = (g.std_db / LEVEL_STEP_DB).round().max(1.0);
-    (g.mean_dbm.abs() <= MAX_ABS_LEVEL_DBM && g.std_db <= MAX_STD_DB).then_some((mean as i16, std as u16))
+    (g.mean_dbm.abs() <= MAX_ABS_LEVEL_DBM && g.std_db <= MAX_STORED_STD_DB)
+        .then_some((mean as i16, std as u16))
 }
 
 /// A stored level or spread in dB.
@@ -115,7 +116,7 @@ impl RadioMap {
     /// storing each model to [`LEVEL_STEP_DB`].
     ///
     /// Fails, with a message, on a duplicate transmitter id, an index out of range, a model
-    /// outside the stored range ([`MAX_ABS_LEVEL_DBM`], [`MAX_STD_DB`]) or a transmitter
+    /// outside the stored range ([`MAX_ABS_LEVEL_DBM`], [`MAX_STORED_STD_DB`]) or a transmitter
     /// modelled twice at one state.
     pub fn new(
         model: RssiModel,
@@ -141,7 +142,7 @@ impl RadioMap {
             let (mean, std) = quantise(&g).ok_or_else(|| {
                 format!(
                     "the model of transmitter {tx} at state {state} (mean {} dBm, σ {} dB) is outside \
-                     the stored range (mean within ±{MAX_ABS_LEVEL_DBM} dBm, σ at most {MAX_STD_DB} dB)",
+                     the stored range (mean within ±{MAX_ABS_LEVEL_DBM} dBm, σ at most {MAX_STORED_STD_DB} dB)",
                     g.mean_dbm, g.std_db
                 )
             })?;

@@ -3,7 +3,7 @@
 
 use super::{Edge, Floor, North, Site, SiteError, State, StateKind};
 use crate::radio::{
-    unheard_model, FitOptions, Gaussian, RadioMap, RssiModel, Scan, TransmitterId, MAX_STD_DB,
+    unheard_model, FitOptions, Gaussian, RadioMap, RssiModel, Scan, TransmitterId, MAX_STORED_STD_DB,
 };
 use nalgebra::Point2;
 use std::collections::{BTreeMap, BTreeSet};
@@ -72,9 +72,9 @@ impl SiteBuilder {
             .collect();
         let index: BTreeMap<&TransmitterId, u32> =
             ids.iter().enumerate().map(|(i, id)| (id, i as u32)).collect();
-        // The radio map stores σ up to `radio::MAX_STD_DB`; a fit wider than that (a
+        // The radio map stores σ up to `radio::MAX_STORED_STD_DB`; a fit wider than that (a
         // transmitter heard once, unconstrained EM) is capped there.
-        let fit = FitOptions { max_std_db: options.fit.max_std_db.min(MAX_STD_DB), ..options.fit };
+        let fit = FitOptions { max_std_db: options.fit.max_std_db.min(MAX_STORED_STD_DB), ..options.fit };
         let fit_state = |s: usize, scans: &[TrainingScan]| -> Vec<(u32, u32, Gaussian)> {
             let mut samples: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
             for (k, scan) in scans.iter().enumerate() {

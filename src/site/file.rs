@@ -9,7 +9,7 @@
 use super::{Calibration, Edge, Floor, North, Site, State, StateKind};
 use crate::radio::{
     Gaussian, RadioMap, RssiModel, Salt, ScanHasher, TransmitterId, HASH_HEX_DIGITS, ID_HASH_SCHEME,
-    ID_HASH_VERSION, MAX_ABS_LEVEL_DBM, MAX_STD_DB, MIN_STD_DB,
+    ID_HASH_VERSION, MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB,
 };
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
@@ -235,13 +235,13 @@ fn gaussian(path: impl FnOnce() -> String, g: &GaussianFile) -> Result<Gaussian,
     // 0.01 dB and levels within ±320 dBm, every accepted reading (at most +100 dBm) has a
     // finite log-likelihood.
     Gaussian::new(mean, std)
-        .filter(|_| mean.abs() <= MAX_ABS_LEVEL_DBM && (MIN_STD_DB..=MAX_STD_DB).contains(&std))
+        .filter(|_| mean.abs() <= MAX_ABS_LEVEL_DBM && (MIN_STD_DB..=MAX_STORED_STD_DB).contains(&std))
         .ok_or_else(|| {
             invalid(
                 path(),
                 format!(
                     "mean_dbm must be within ±{MAX_ABS_LEVEL_DBM} and std_db within \
-                     [{MIN_STD_DB}, {MAX_STD_DB}] (got {mean}, {std})"
+                     [{MIN_STD_DB}, {MAX_STORED_STD_DB}] (got {mean}, {std})"
                 ),
             )
         })

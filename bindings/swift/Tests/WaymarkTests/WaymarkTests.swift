@@ -229,6 +229,34 @@ final class WaymarkTests: XCTestCase {
         }
     }
 
+    // The binary site encoding (`waymark site pack`), what an app ships in its bundle: from
+    // bytes it positions exactly as the JSON; a damaged copy is an invalid site.
+    func testAPackedSitePositionsAsItsJson() throws {
+        let packedURL = Self.simDir.appendingPathComponent("site.wmsite")
+        var packed = try Data(contentsOf: packedURL)
+        let json = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let binary = try PositioningEngine.fromSiteBytes(site: packed, options: EngineOptions())
+        var positions = 0
+        for epoch in try walk().epochs {
+            for engine in [json, binary] {
+                _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
+                _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
+                _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
+            }
+            let expected = try? json.pushScan(scan: epoch.scan)
+            XCTAssertEqual(expected, try? binary.pushScan(scan: epoch.scan))
+            positions += expected == nil ? 0 : 1
+        }
+        XCTAssertGreaterThan(positions, 10)
+        packed[packed.count / 2] ^= 0x40
+        XCTAssertThrowsError(try PositioningEngine.fromSiteBytes(site: packed, options: EngineOptions())) {
+            guard case PositioningError.InvalidSite(let reason) = $0 else {
+                return XCTFail("expected InvalidSite, got \($0)")
+            }
+            XCTAssertTrue(reason.contains("damaged"), reason)
+        }
+    }
+
     // A BLE beacon known by its advertiser address only (Eddystone, or an iBeacon left at
     // major = minor = 0). The site is the simulated one with its first access point turned
     // into such a beacon.

@@ -356,6 +356,11 @@ void uniffi_waymark_fn_free_positioningengine(uint64_t handle, RustCallStatus *_
 uint64_t uniffi_waymark_fn_constructor_positioningengine_from_path(RustBuffer path, RustBuffer options, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_POSITIONINGENGINE_FROM_SITE_BYTES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_POSITIONINGENGINE_FROM_SITE_BYTES
+uint64_t uniffi_waymark_fn_constructor_positioningengine_from_site_bytes(RustBuffer site, RustBuffer options, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_POSITIONINGENGINE_NEW
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_POSITIONINGENGINE_NEW
 uint64_t uniffi_waymark_fn_constructor_positioningengine_new(RustBuffer site_json, RustBuffer options, RustCallStatus *_Nonnull out_status
@@ -779,6 +784,12 @@ uint16_t uniffi_waymark_checksum_method_subscription_cancel(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_POSITIONINGENGINE_FROM_PATH
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_POSITIONINGENGINE_FROM_PATH
 uint16_t uniffi_waymark_checksum_constructor_positioningengine_from_path(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_POSITIONINGENGINE_FROM_SITE_BYTES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_POSITIONINGENGINE_FROM_SITE_BYTES
+uint16_t uniffi_waymark_checksum_constructor_positioningengine_from_site_bytes(void
     
 );
 #endif
