@@ -287,6 +287,17 @@ impl<'a> Feeder<'a> {
         self.peak_segment_bytes
     }
 
+    /// Replaces the segment under way, before any of its samples were delivered, with
+    /// `segment`; the generator goes on as before. The recovery experiment gives its
+    /// reference engine a different history this way: the phone lying where the kidnapped
+    /// person is put down, instead of the first walk.
+    pub fn replace_segment(&mut self, segment: Segment) {
+        debug_assert_eq!(self.cursor, [0; 3], "samples of the segment under way were delivered");
+        self.current = segment;
+        self.cursor = [0; 3];
+        self.peak_segment_bytes = self.peak_segment_bytes.max(self.current.memory_bytes());
+    }
+
     fn advance_segment(&mut self) {
         self.current = self.generator.next_segment();
         self.cursor = [0; 3];
