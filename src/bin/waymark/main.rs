@@ -39,7 +39,8 @@ enum Command {
     Eval(real::EvalArgs),
     /// Speed and memory at building scale (1 000 to 50 000 states), as one JSON object.
     Bench(bench::BenchArgs),
-    /// Site files: hash their transmitter ids with a salt (`site hash`), check a salt
+    /// Site files: pack into the binary encoding apps ship (`site pack`) and back to JSON
+    /// (`site unpack`), hash their transmitter ids with a salt (`site hash`), check a salt
     /// (`site check`).
     Site(real::SiteArgs),
 }
