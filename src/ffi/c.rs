@@ -29,8 +29,15 @@ pub enum waymark_result {
     InvalidSite = 2,
     /// The configuration is invalid.
     InvalidConfig = 3,
-    /// The input was rejected (out of order, empty, NaN, unknown transmitters only, bad id);
-    /// the engine is unchanged.
+    /// The input was rejected and the engine is unchanged; `waymark_last_error` says why. A
+    /// scan or an advance is rejected when its timestamp is not after the last epoch's (a step
+    /// back in time, or a duplicate). A scan is also rejected when
+    /// - it has no readings;
+    /// - a reading's RSSI is NaN, infinite or below -1000 dBm;
+    /// - a reading's RSSI is above +100 dBm, more than any receiver reports;
+    /// - no reading is of a transmitter the site knows;
+    /// - a transmitter id is malformed: a BSSID, beacon UUID or beacon address that does not
+    ///   parse, or a beacon with neither a UUID nor an address.
     InputRejected = 4,
     /// No position yet.
     NoPosition = 5,
@@ -457,8 +464,10 @@ fn epoch(
 }
 
 /// A scan: WiFi readings and BLE beacon readings (either array may be NULL with count 0). One
-/// positioning epoch; `*out` (may be NULL) receives the new position. A rejected scan returns
-/// `InputRejected` and changes nothing.
+/// positioning epoch; `*out` (may be NULL) receives the new position. A rejected scan (out of
+/// order, empty, an RSSI that is NaN, infinite, below -1000 or above +100 dBm, no known
+/// transmitter, a malformed id: see `WAYMARK_RESULT_INPUT_REJECTED`) returns `InputRejected`
+/// and changes nothing.
 #[no_mangle]
 pub extern "C" fn waymark_engine_push_scan(
     engine: *mut waymark_engine,
@@ -511,7 +520,8 @@ pub extern "C" fn waymark_engine_push_scan(
     })
 }
 
-/// An epoch without radio at `timestamp_ns`, from the motion since the last epoch.
+/// An epoch without radio at `timestamp_ns`, from the motion since the last epoch. A
+/// `timestamp_ns` not after the last epoch's returns `InputRejected` and changes nothing.
 #[no_mangle]
 pub extern "C" fn waymark_engine_advance(
     engine: *mut waymark_engine,
