@@ -145,6 +145,9 @@ pub struct InputStats {
     pub readings_stale: u64,
     /// Epochs without a scan ([`Engine::advance`]).
     pub motion_epochs: u64,
+    /// Epochs without a scan rejected: a timestamp not after the last epoch, or invalid motion
+    /// given with it ([`Engine::advance_with_motion`]).
+    pub advances_rejected: u64,
     /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
     /// when no state could explain a scan.
     pub filter_restarts: u64,
@@ -380,6 +383,19 @@ impl Engine {
     }
 
     fn advance_from(
+        &mut self,
+        timestamp_ns: u64,
+        motion: Option<&MotionUpdate>,
+    ) -> Result<Position, InputError> {
+        let result = self.motion_epoch(timestamp_ns, motion);
+        if let Err(e) = &result {
+            self.stats.advances_rejected += 1;
+            log::debug!("advance rejected: {e}");
+        }
+        result
+    }
+
+    fn motion_epoch(
         &mut self,
         timestamp_ns: u64,
         motion: Option<&MotionUpdate>,

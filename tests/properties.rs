@@ -12,9 +12,9 @@
 //! - reads change nothing, and listeners hear exactly one position per accepted epoch.
 //!
 //! "State" is everything in [`waymark::engine::EngineSnapshot`] except `InputStats`: the
-//! rejection counters are bookkeeping of rejections, so a rejected scan must change exactly
-//! its own counter by one and nothing else (checked separately), while every later answer of
-//! the engine is decided by the rest, which must be identical.
+//! rejection counters are bookkeeping of rejections, so a rejected scan or advance must change
+//! exactly its own counter by one and nothing else (checked separately), while every later
+//! answer of the engine is decided by the rest, which must be identical.
 
 mod common;
 
@@ -455,8 +455,12 @@ fn without_stats(mut s: EngineSnapshot) -> EngineSnapshot {
     s
 }
 
-/// Raises the one counter a rejected scan raises.
-fn count(stats: &mut InputStats, e: &InputError) {
+/// Raises the one counter a rejected scan, or a rejected advance, raises.
+fn count(stats: &mut InputStats, is_scan: bool, e: &InputError) {
+    if !is_scan {
+        stats.advances_rejected += 1;
+        return;
+    }
     *match e {
         InputError::OutOfOrder { .. } => &mut stats.scans_out_of_order,
         InputError::EmptyScan => &mut stats.scans_empty,
@@ -467,14 +471,15 @@ fn count(stats: &mut InputStats, e: &InputError) {
     } += 1;
 }
 
-/// The scan rejection counters, summed, and the stats without them.
+/// The rejection counters (of scans and of advances), summed, and the stats without them.
 fn rejections(s: &InputStats) -> (u64, InputStats) {
     let sum = s.scans_out_of_order
         + s.scans_empty
         + s.scans_non_finite
         + s.scans_rssi_too_high
         + s.scans_no_known_transmitter
-        + s.scans_invalid_motion;
+        + s.scans_invalid_motion
+        + s.advances_rejected;
     let rest = InputStats {
         scans_out_of_order: 0,
         scans_empty: 0,
@@ -482,6 +487,7 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
         scans_rssi_too_high: 0,
         scans_no_known_transmitter: 0,
         scans_invalid_motion: 0,
+        advances_rejected: 0,
         ..s.clone()
     };
     (sum, rest)
@@ -638,12 +644,10 @@ fn run_core(
                     t,
                     e
                 );
-                // Bookkeeping: a rejected scan raises its own counter by one; a rejected
-                // advance counts nothing.
+                // Bookkeeping: a rejected scan raises its own counter by one, a rejected
+                // advance `advances_rejected`.
                 let mut expected = before.stats.clone();
-                if is_scan {
-                    count(&mut expected, &e);
-                }
+                count(&mut expected, is_scan, &e);
                 prop_assert_eq!(&after.stats, &expected);
             }
             None => {}
@@ -869,11 +873,17 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                     t,
                     e
                 );
-                // A scan the FFI could not even parse (a malformed id) or a panic counts
-                // nothing; one the engine rejected raises one scan counter.
+                // A rejected advance raises `advances_rejected` by one; a rejected scan one scan
+                // counter, or none if the FFI could not even parse it (a malformed id); a panic
+                // counts nothing.
                 let (raised_after, rest_after) = rejections(&after.0.stats);
                 let (raised_before, rest_before) = rejections(&before.0.stats);
-                prop_assert!(raised_after - raised_before <= u64::from(is_scan), "counters raised");
+                let raised = raised_after - raised_before;
+                match &e {
+                    PositioningError::Internal { .. } => prop_assert_eq!(raised, 0, "a panic was counted"),
+                    _ if is_scan => prop_assert!(raised <= 1, "{} counters raised", raised),
+                    _ => prop_assert_eq!(raised, 1, "a rejected advance is counted once"),
+                }
                 prop_assert_eq!(rest_after, rest_before);
                 prop_assert_eq!(recorder.heard.lock().unwrap().1, errors, "listeners hear every error");
             }
@@ -980,6 +990,7 @@ fn invalid_motion_from_outside_is_rejected() {
         assert!(matches!(result, Err(InputError::InvalidMotion { .. })), "{motion:?}: {result:?}");
         assert!(matches!(engine.advance_with_motion(SECOND, motion), Err(InputError::InvalidMotion { .. })));
         assert_eq!(engine.stats().scans_invalid_motion, k as u64 + 1);
+        assert_eq!(engine.stats().advances_rejected, k as u64 + 1);
         assert_eq!(without_stats(engine.snapshot()), without_stats(before));
     }
     let p = engine.push_scan_with_motion(&scan(SECOND), &good).unwrap();

@@ -619,12 +619,11 @@ impl Session<'_> {
     }
 
     /// A core epoch (a scan or an advance, with or without motion): taken iff `rejection` is
-    /// `None`, and a rejected one changes nothing but the counters.
+    /// `None`, and a rejected one changes nothing but the counters, which it raises.
     fn core_epoch(
         &mut self,
         timestamp_ns: u64,
         rejection: Option<&'static str>,
-        counted: bool,
         call: impl FnOnce(&mut Engine) -> Result<Position, InputError>,
     ) -> Option<Position> {
         let before = (self.core.posterior().to_vec(), self.core.position().cloned(), self.core.track());
@@ -644,9 +643,7 @@ impl Session<'_> {
                 assert_eq!(bits(&before.0), bits(after.0), "a rejected epoch changed the posterior");
                 assert_eq!(before.1.as_ref(), after.1, "a rejected epoch changed the position");
                 assert_eq!(before.2, after.2, "a rejected epoch changed the track");
-                if counted {
-                    assert_ne!(&stats, self.core.stats(), "a rejected scan was not counted");
-                }
+                assert_ne!(&stats, self.core.stats(), "a rejected epoch was not counted");
                 None
             }
             (Ok(_), Some(why)) => panic!("an epoch that should be rejected ({why}) was taken"),
@@ -685,7 +682,7 @@ impl Session<'_> {
             None
         } else {
             let why = rejection(&input.core, self.core_last, self.fixture, true);
-            self.core_epoch(input.core.timestamp_ns, why, true, |e| e.push_scan(&input.core))
+            self.core_epoch(input.core.timestamp_ns, why, |e| e.push_scan(&input.core))
         };
         let ffi_rejected =
             input.mangled || rejection(&input.core, self.ffi_last, self.fixture, true).is_some();
@@ -696,7 +693,7 @@ impl Session<'_> {
     fn advance(&mut self, timestamp_ns: u64) {
         let rejected = |last: Option<u64>| last.is_some_and(|last| timestamp_ns <= last);
         let why = rejected(self.core_last).then_some("out of order");
-        let core = self.core_epoch(timestamp_ns, why, false, |e| e.advance(timestamp_ns));
+        let core = self.core_epoch(timestamp_ns, why, |e| e.advance(timestamp_ns));
         let ffi_rejected = rejected(self.ffi_last);
         self.ffi_epoch(timestamp_ns, ffi_rejected, core.as_ref(), |e| e.advance(timestamp_ns));
     }
@@ -826,14 +823,12 @@ pub fn run(data: &[u8]) {
                 if with_scan {
                     let input = scan(&mut c, fixture, &mut clock);
                     let why = rejection(&input.core, s.core_last, fixture, valid);
-                    s.core_epoch(input.core.timestamp_ns, why, true, |e| {
-                        e.push_scan_with_motion(&input.core, &m)
-                    });
+                    s.core_epoch(input.core.timestamp_ns, why, |e| e.push_scan_with_motion(&input.core, &m));
                 } else {
                     let t = clock.time(&mut c);
                     let why = s.core_last.is_some_and(|last| t <= last).then_some("out of order");
                     let why = why.or((!valid).then_some("invalid motion"));
-                    s.core_epoch(t, why, false, |e| e.advance_with_motion(t, &m));
+                    s.core_epoch(t, why, |e| e.advance_with_motion(t, &m));
                 }
             }
         }
