@@ -116,7 +116,7 @@ enum When {
     Same,
     /// `now - d`.
     Before(u64),
-    /// An absolute time (0, `u64::MAX`, the fault-injection time, anything).
+    /// An absolute time (0, `u64::MAX`, the fault-injection times, anything).
     At(u64),
 }
 
@@ -180,6 +180,7 @@ fn when() -> impl Strategy<Value = When> {
             Just(u64::MAX),
             Just(u64::MAX - 1),
             Just(waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS),
+            Just(waymark::engine::FAULT_INJECTION_MID_EPOCH_NS),
             any::<u64>(),
         ]
         .prop_map(When::At),
@@ -493,6 +494,17 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
     (sum, rest)
 }
 
+/// An epoch call that panicked.
+#[derive(Debug)]
+struct Panicked;
+
+/// Runs an epoch call, catching a panic (the injected one is expected; any other fails).
+fn guarded(
+    call: impl FnOnce() -> Result<Position, InputError>,
+) -> Result<Result<Position, InputError>, Panicked> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(call)).map_err(|_| Panicked)
+}
+
 /// What a listener heard, checked as it hears it.
 #[derive(Default)]
 struct Heard {
@@ -591,7 +603,7 @@ fn run_core(
                     timestamp_ns: clock.at(*when),
                     readings: readings.iter().map(|r| core_reading(f, r)).collect(),
                 };
-                Some((scan.timestamp_ns, true, engine.push_scan(&scan)))
+                Some((scan.timestamp_ns, true, guarded(|| engine.push_scan(&scan))))
             }
             Call::RealisticScan { when, index, junk } => {
                 let mut readings = realistic(f, *index);
@@ -600,20 +612,21 @@ fn run_core(
                     timestamp_ns: clock.at(*when),
                     readings: readings.iter().map(|r| core_reading(f, r)).collect(),
                 };
-                Some((scan.timestamp_ns, true, engine.push_scan(&scan)))
+                Some((scan.timestamp_ns, true, guarded(|| engine.push_scan(&scan))))
             }
             Call::Advance { when } => {
                 let t = clock.at(*when);
-                Some((t, false, engine.advance(t)))
+                Some((t, false, guarded(|| engine.advance(t))))
             }
             Call::WithMotion { when, scan: Some(index), motion } => {
                 let t = clock.at(*when);
                 let readings = realistic(f, *index).iter().map(|r| core_reading(f, r)).collect();
-                Some((t, true, engine.push_scan_with_motion(&Scan { timestamp_ns: t, readings }, motion)))
+                let scan = Scan { timestamp_ns: t, readings };
+                Some((t, true, guarded(|| engine.push_scan_with_motion(&scan, motion))))
             }
             Call::WithMotion { when, scan: None, motion } => {
                 let t = clock.at(*when);
-                Some((t, false, engine.advance_with_motion(t, motion)))
+                Some((t, false, guarded(|| engine.advance_with_motion(t, motion))))
             }
             Call::Read => {
                 let _ = (engine.position(), engine.track(), engine.fixed_lag_position());
@@ -625,7 +638,22 @@ fn run_core(
         };
         let after = engine.snapshot();
         match outcome {
-            Some((t, _, Ok(p))) => {
+            Some((t, _, Err(Panicked))) => {
+                // The injected panic half-way through an epoch: undone, counters included. The
+                // listener heard the position before the panic; that cannot be taken back.
+                prop_assert!(
+                    cfg!(feature = "fault-injection") && t == waymark::engine::FAULT_INJECTION_MID_EPOCH_NS,
+                    "call {} ({:?} at {}) panicked",
+                    n,
+                    call,
+                    t
+                );
+                prop_assert_eq!(&after, &before, "call {} panicked half-way and changed the engine", n);
+                let mut heard = heard.lock().unwrap();
+                prop_assert_eq!(heard.positions.len(), epochs + 1);
+                heard.positions.pop();
+            }
+            Some((t, _, Ok(Ok(p)))) => {
                 epochs += 1;
                 prop_assert_eq!(p.timestamp_ns, t);
                 prop_assert_eq!(after.last_epoch_ns, Some(t));
@@ -634,7 +662,7 @@ fn run_core(
                 prop_assert_eq!(heard.positions.len(), epochs, "one position per epoch to the listener");
                 prop_assert_eq!(heard.positions.last(), Some(&p));
             }
-            Some((t, is_scan, Err(e))) => {
+            Some((t, is_scan, Ok(Err(e)))) => {
                 prop_assert_eq!(
                     without_stats(after.clone()),
                     without_stats(before.clone()),
@@ -855,9 +883,11 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
             }
             Some((t, is_scan, Err(e))) => {
                 errors += 1;
+                // The injected panics: before a scan reaches the engine, or half-way through an
+                // epoch (which the engine undoes).
                 let injected = cfg!(feature = "fault-injection")
-                    && is_scan
-                    && t == waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS;
+                    && ((is_scan && t == waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS)
+                        || t == waymark::engine::FAULT_INJECTION_MID_EPOCH_NS);
                 match &e {
                     PositioningError::InputRejected { .. } => {}
                     PositioningError::Internal { .. } if injected => {}
@@ -875,12 +905,14 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                 );
                 // A rejected advance raises `advances_rejected` by one; a rejected scan one scan
                 // counter, or none if the FFI could not even parse it (a malformed id); a panic
-                // counts nothing.
+                // leaves everything as it was, counters included.
                 let (raised_after, rest_after) = rejections(&after.0.stats);
                 let (raised_before, rest_before) = rejections(&before.0.stats);
                 let raised = raised_after - raised_before;
                 match &e {
-                    PositioningError::Internal { .. } => prop_assert_eq!(raised, 0, "a panic was counted"),
+                    PositioningError::Internal { .. } => {
+                        prop_assert_eq!(&after.0, &before.0, "a panic changed the engine");
+                    }
                     _ if is_scan => prop_assert!(raised <= 1, "{} counters raised", raised),
                     _ => prop_assert_eq!(raised, 1, "a rejected advance is counted once"),
                 }

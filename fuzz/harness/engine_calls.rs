@@ -177,11 +177,12 @@ impl Clock {
 }
 
 /// With the `fault-injection` feature (`cargo test --all-features`) a scan at
-/// `FAULT_INJECTION_TIMESTAMP_NS` panics inside the FFI engine on purpose: the harness never
-/// makes one.
+/// `FAULT_INJECTION_TIMESTAMP_NS` panics inside the FFI engine on purpose, and an epoch at
+/// `FAULT_INJECTION_MID_EPOCH_NS` inside either engine: the harness never makes one.
 fn not_fault_injection(t: u64) -> u64 {
-    if t == ffi::FAULT_INJECTION_TIMESTAMP_NS {
-        t - 1
+    let mid = waymark::engine::FAULT_INJECTION_MID_EPOCH_NS;
+    if t == ffi::FAULT_INJECTION_TIMESTAMP_NS || t == mid {
+        mid - 1
     } else {
         t
     }

@@ -1,13 +1,13 @@
 //! The Kotlin and Swift API, through uniffi proc-macros. Every exported type lives here; a
 //! change in this file is a possible breaking change for apps (CHANGELOG, "Breaking changes").
 
+use super::delivery::{lock, Delivery};
 use crate::config::{EngineConfig, TransitionModel};
 use crate::engine::{self, Engine, PositionListener as CoreListener};
 use crate::radio::{Reading, Scan, TransmitterId};
 use crate::sensors::{self, SensorSample};
 use crate::site::Site;
-use std::collections::VecDeque;
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
+use std::sync::{Arc, Mutex, Weak};
 
 /// Errors an app can act on.
 #[derive(Debug, thiserror::Error, uniffi::Error)]
@@ -370,30 +370,16 @@ enum Event {
     Error(String),
 }
 
-/// What was published and not yet delivered, oldest first, and whether a thread is
-/// delivering it.
-#[derive(Default)]
-struct Queue {
-    events: VecDeque<Event>,
-    delivering: bool,
-}
-
-/// Locks `mutex`, even if a panic elsewhere poisoned it: nothing behind these locks is left
-/// half-changed by a panic (the engine's own calls run under `catch_unwind`).
-fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
-/// Collects the core engine's publications into the queue (under the engine's lock, so in
-/// the order of the epochs).
+/// Collects the core engine's publications (under the engine's lock, so in the order of the
+/// epochs), held back until the call that made them returns.
 struct Collector {
-    queue: Arc<Mutex<Queue>>,
+    events: Arc<Delivery<Event>>,
     floor_names: Vec<String>,
 }
 
 impl Collector {
     fn push(&self, event: Event) {
-        lock(&self.queue).events.push_back(event);
+        self.events.stage(event);
     }
 }
 
@@ -452,7 +438,7 @@ struct Inner {
 #[derive(uniffi::Object)]
 pub struct PositioningEngine {
     inner: Mutex<Inner>,
-    queue: Arc<Mutex<Queue>>,
+    events: Arc<Delivery<Event>>,
     listeners: Mutex<Vec<(u64, Arc<dyn PositionListener>)>>,
     next_listener: Mutex<u64>,
 }
@@ -506,30 +492,39 @@ impl PositioningEngine {
         let floor_names: Vec<String> = site.floors().iter().map(|f| f.name.clone()).collect();
         let config = options.to_config(&site)?;
         let mut engine = Engine::new(Arc::new(site), config)?;
-        let queue = Arc::new(Mutex::new(Queue::default()));
-        engine.subscribe(Box::new(Collector { queue: Arc::clone(&queue), floor_names: floor_names.clone() }));
+        let events = Arc::new(Delivery::new());
+        engine
+            .subscribe(Box::new(Collector { events: Arc::clone(&events), floor_names: floor_names.clone() }));
         Ok(Arc::new(Self {
             inner: Mutex::new(Inner { engine, floor_names, latest: None }),
-            queue,
+            events,
             listeners: Mutex::new(Vec::new()),
             next_listener: Mutex::new(0),
         }))
     }
 
     /// Runs `f` on the engine under its lock, then delivers what it published to the
-    /// listeners with no lock held. A panic inside becomes `Internal` and leaves the engine
-    /// usable.
+    /// listeners with no lock held. A panic inside becomes `Internal`: the engine undoes an
+    /// epoch that panics, and what the call published is dropped, so the call had no effect.
     fn with_engine<T>(
         &self,
         f: impl FnOnce(&mut Inner) -> Result<T, PositioningError>,
     ) -> Result<T, PositioningError> {
         let result = {
             let mut inner = lock(&self.inner);
-            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&mut inner)))
-                .unwrap_or_else(|_| Err(internal("engine")));
+            let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&mut inner))) {
+                Ok(result) => {
+                    self.events.commit();
+                    result
+                }
+                Err(_) => {
+                    self.events.discard();
+                    Err(internal("engine"))
+                }
+            };
             // Queued under the engine's lock, so listeners hear it in the order of the calls.
             if let Err(e) = &result {
-                lock(&self.queue).events.push_back(Event::Error(e.to_string()));
+                self.events.push(Event::Error(e.to_string()));
             }
             result
         };
@@ -541,48 +536,16 @@ impl PositioningEngine {
     /// the listeners' `on_error` as the engine's own rejections are.
     fn reject(&self, reason: String) -> PositioningError {
         let error = PositioningError::InputRejected { reason };
-        lock(&self.queue).events.push_back(Event::Error(error.to_string()));
+        self.events.push(Event::Error(error.to_string()));
         self.deliver();
         error
     }
 
-    /// Delivers the queue to the listeners, oldest event first, with no lock held during a
-    /// call. One thread delivers at a time: a thread that finds another delivering leaves its
-    /// events to that one, which delivers until the queue is empty. So two threads' epochs
-    /// cannot reach a listener in the wrong order (nor a listener from two threads at once),
-    /// and a listener that calls the engine from its callback does not recurse: what its call
-    /// publishes is delivered after the current event. A listener subscribed during an event
-    /// hears the events after it; one cancelled during an event hears nothing more.
+    /// Delivers what was published to the listeners, oldest event first, one thread at a time
+    /// and with no lock held during a call ([`Delivery`]). A listener subscribed during an
+    /// event hears the events after it; one cancelled during an event hears nothing more.
     fn deliver(&self) {
-        {
-            let mut queue = lock(&self.queue);
-            if queue.delivering || queue.events.is_empty() {
-                return;
-            }
-            queue.delivering = true;
-        }
-        // Should anything below unwind, the next call takes over the delivery.
-        struct Delivering<'a>(&'a Mutex<Queue>, bool);
-        impl Drop for Delivering<'_> {
-            fn drop(&mut self) {
-                if self.1 {
-                    lock(self.0).delivering = false;
-                }
-            }
-        }
-        let mut delivering = Delivering(&self.queue, true);
-        loop {
-            let event = {
-                let mut queue = lock(&self.queue);
-                match queue.events.pop_front() {
-                    Some(event) => event,
-                    None => {
-                        queue.delivering = false;
-                        delivering.1 = false;
-                        return;
-                    }
-                }
-            };
+        self.events.deliver(|event| {
             let listeners = lock(&self.listeners).clone();
             for (id, listener) in &listeners {
                 // Cancelled by a callback earlier in this event.
@@ -600,7 +563,7 @@ impl PositioningEngine {
                     Err(_) => log::warn!("a position listener panicked"),
                 }
             }
-        }
+        });
     }
 }
 
@@ -659,13 +622,12 @@ impl PositioningEngine {
             });
         }
         let core = Scan { timestamp_ns: scan.timestamp_ns, readings };
-        let queue = Arc::clone(&self.queue);
+        let events = Arc::clone(&self.events);
         self.epoch(|engine| {
             fault_injection(core.timestamp_ns);
             let result = engine.push_scan(&core);
             if let Err(crate::InputError::NoKnownTransmitter { .. }) = result {
-                let coverage = StatusUpdate::NoSiteCoverage { timestamp_ns: core.timestamp_ns };
-                lock(&queue).events.push_back(Event::Status(coverage));
+                events.stage(Event::Status(StatusUpdate::NoSiteCoverage { timestamp_ns: core.timestamp_ns }));
             }
             result
         })
