@@ -61,7 +61,8 @@ enum waymark_result
    */
   WAYMARK_RESULT_SALT_MISMATCH = 7,
   /**
-   * Waymark panicked; the call had no effect and the engine stays usable.
+   * Waymark panicked (a bug); the engine stays usable. A scan or an advance that panicked
+   * half-way is undone: the engine is as it was before the call, and no callback hears of it.
    */
   WAYMARK_RESULT_PANIC = 99,
 };
@@ -210,7 +211,13 @@ typedef struct {
 } waymark_position;
 
 /**
- * Called with every new position, on the thread that pushed the input, with no lock held.
+ * Called with every new position, in the order of the epochs, never from two threads at once,
+ * with no lock held, on a thread that called the engine: usually the one whose call made the
+ * position. While one thread is running the callback, positions made by other threads' calls
+ * are passed to it by that thread, after the current one, so such a call may return before
+ * its position reaches the callback; every position has reached it by the time all calls
+ * have returned. A callback may call the engine (what it makes is delivered after the current
+ * call returns, by the same thread).
  */
 typedef void (*waymark_position_callback)(void *userdata, const waymark_position *position);
 
@@ -312,9 +319,13 @@ waymark_result waymark_engine_advance(waymark_engine *engine,
 waymark_result waymark_engine_position(const waymark_engine *engine, waymark_position *out);
 
 /**
- * Sets (or, with a NULL callback, clears) the function called with every new position.
- * `userdata` is passed back untouched; it must stay valid until the callback is replaced or
- * the engine freed.
+ * Sets (or, with a NULL callback, clears) the function called with every new position (see
+ * `waymark_position_callback` for when and on which thread). `userdata` is passed back
+ * untouched; it must stay valid until the callback is replaced or the engine freed. When this
+ * returns, the previous callback is not running on another thread and will not be called
+ * again, so its userdata may be freed: if it is running, this waits for it to return (so do
+ * not call this while holding a lock that callback takes). Called from inside the callback,
+ * it does not wait; the current call finishes and the next position goes to the new one.
  */
 waymark_result waymark_engine_set_callback(waymark_engine *engine,
                                            waymark_position_callback callback,

@@ -1,4 +1,5 @@
-//! How the FFI hands what the engine published to the app's listeners ([`super::uniffi`]).
+//! How both FFIs hand what the engine published to the app: Kotlin and Swift listeners
+//! ([`super::uniffi`]) and the C position callback ([`super::c`]).
 //!
 //! Events are queued under the engine's lock, so in the order of the epochs, and delivered
 //! after it is released, by one thread at a time: a thread that finds another delivering leaves
@@ -60,6 +61,11 @@ impl<E> Delivery<E> {
     /// Queues `event` after everything queued so far.
     pub(crate) fn push(&self, event: E) {
         lock(&self.state).events.push_back(event);
+    }
+
+    /// Whether the calling thread is delivering: it is inside a callback.
+    pub(crate) fn on_delivering_thread(&self) -> bool {
+        lock(&self.state).deliverer == Some(thread::current().id())
     }
 
     /// Delivers the queue, oldest event first, calling `deliver_one` with no lock held, unless
@@ -141,10 +147,12 @@ mod tests {
                         }
                         delivery.deliver(|e| {
                             assert_eq!(inside.fetch_add(1, Ordering::SeqCst), 0, "two deliveries at once");
+                            assert!(delivery.on_delivering_thread());
                             lock(&heard).push(e);
                             thread::yield_now();
                             inside.fetch_sub(1, Ordering::SeqCst);
                         });
+                        assert!(!delivery.on_delivering_thread());
                     }
                 })
             })
