@@ -149,7 +149,7 @@ fn ffi_scan(s: &Scan, timestamp_ns: u64) -> RadioScan {
         .iter()
         .map(|r| match &r.transmitter {
             TransmitterId::Wifi { bssid } => {
-                WifiReading { bssid: bssid.clone(), rssi_dbm: r.rssi_dbm, age_ms: 0 }
+                WifiReading { bssid: bssid.clone().into(), rssi_dbm: r.rssi_dbm, age_ms: 0 }
             }
             _ => unreachable!("the simulator makes WiFi only"),
         })

@@ -742,18 +742,18 @@ fn ffi_scan(f: &Fixture, timestamp_ns: u64, readings: &[ReadingSpec]) -> RadioSc
     let mut scan = RadioScan { timestamp_ns, wifi: Vec::new(), beacons: Vec::new() };
     for r in readings {
         let age_ms = r.age_ns / 1_000_000;
-        let wifi = |bssid| WifiReading { bssid, rssi_dbm: r.rssi_dbm, age_ms };
+        let wifi = |bssid: String| WifiReading { bssid: bssid.into(), rssi_dbm: r.rssi_dbm, age_ms };
         match &r.who {
             Who::Known(k, notation) => scan.wifi.push(wifi(bssid(f, *k, *notation))),
             Who::Unknown(k) => scan.wifi.push(wifi(format!("0a:00:00:00:00:{k:02x}"))),
             Who::Garbage(text) => scan.wifi.push(wifi(text.clone())),
             Who::Beacon { uuid, major, minor, address } => scan.beacons.push(BeaconReading {
-                uuid: uuid.clone(),
+                uuid: uuid.as_str().into(),
                 major: *major,
                 minor: *minor,
                 rssi_dbm: r.rssi_dbm,
                 age_ms,
-                address: address.clone(),
+                address: address.as_deref().map(Into::into),
             }),
         }
     }

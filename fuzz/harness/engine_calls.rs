@@ -370,12 +370,12 @@ fn scan(c: &mut Cursor, fixture: &Fixture, clock: &mut Clock) -> ScanInput {
         let broken = mangled && k == 0;
         match &r.transmitter {
             TransmitterId::Wifi { bssid } => wifi.push(ffi::WifiReading {
-                bssid: if broken { "not a bssid".into() } else { bssid.clone() },
+                bssid: if broken { "not a bssid".into() } else { bssid.clone().into() },
                 rssi_dbm,
                 age_ms,
             }),
             TransmitterId::Ble { uuid, major, minor } => beacons.push(ffi::BeaconReading {
-                uuid: if broken { String::new() } else { uuid.clone() },
+                uuid: if broken { "".into() } else { uuid.clone().into() },
                 major: *major,
                 minor: *minor,
                 rssi_dbm,
@@ -383,12 +383,12 @@ fn scan(c: &mut Cursor, fixture: &Fixture, clock: &mut Clock) -> ScanInput {
                 address: None,
             }),
             TransmitterId::BleAddress { mac } => beacons.push(ffi::BeaconReading {
-                uuid: String::new(),
+                uuid: "".into(),
                 major: 0,
                 minor: 0,
                 rssi_dbm,
                 age_ms,
-                address: Some(if broken { "nope".into() } else { mac.clone() }),
+                address: Some(if broken { "nope".into() } else { mac.clone().into() }),
             }),
             // Readings are drawn from the harness's sites, which hold raw ids.
             TransmitterId::HashedWifi { .. } | TransmitterId::HashedBle { .. } => {}
@@ -716,7 +716,7 @@ impl Session<'_> {
             .iter()
             .filter_map(|r| match &r.transmitter {
                 TransmitterId::Wifi { bssid } => {
-                    Some(ffi::WifiReading { bssid: bssid.clone(), rssi_dbm: r.rssi_dbm, age_ms: 0 })
+                    Some(ffi::WifiReading { bssid: bssid.clone().into(), rssi_dbm: r.rssi_dbm, age_ms: 0 })
                 }
                 _ => None,
             })

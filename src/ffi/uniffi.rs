@@ -24,8 +24,11 @@ pub enum PositioningError {
         /// Which field and why.
         reason: String,
     },
-    /// An input was rejected (out of order, empty, NaN, no known transmitter); the engine is
-    /// unchanged and goes on.
+    /// An input was rejected; the engine is unchanged and goes on. A scan or an advance whose
+    /// time is not after the last epoch's; a scan with no readings, with an RSSI that is NaN,
+    /// infinite, below -1000 dBm or above +100 dBm, with no transmitter the site knows, or with
+    /// a malformed transmitter id: a BSSID, UUID or address that does not parse (in Kotlin, one
+    /// holding a lone UTF-16 surrogate too), a beacon with neither a UUID nor an address.
     #[error("input rejected: {reason}")]
     InputRejected {
         /// Why.
@@ -38,7 +41,8 @@ pub enum PositioningError {
         /// Missing or wrong (the salt itself is never in the message).
         reason: String,
     },
-    /// A bug in Waymark or in a listener: the call had no effect.
+    /// A bug in Waymark or in a listener: the call had no effect (a scan or an advance that
+    /// panicked half-way is undone, and no listener hears its position).
     #[error("internal error: {reason}")]
     Internal {
         /// What happened.
@@ -179,11 +183,45 @@ pub struct MotionSample {
     pub z: f64,
 }
 
+/// A transmitter's id as an app gives it: a BSSID, a beacon's proximity UUID or its advertiser
+/// address. Kotlin and Swift see a `String`.
+///
+/// A Kotlin `String` can hold a lone UTF-16 surrogate (`"\uD800"`), which is not text: uniffi's
+/// generated code refuses to encode it and throws `CharacterCodingException` before the call
+/// reaches Waymark (and, for a method, leaks the engine's handle). This type's Kotlin
+/// conversion (`uniffi.toml`) encodes such an id with each lone surrogate replaced by `?`
+/// instead, so it reaches Waymark, parses as no id, and the scan throws
+/// `PositioningException.InputRejected` like any malformed id. A valid id is never changed.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct TransmitterIdString(pub String);
+
+uniffi::custom_newtype!(TransmitterIdString, String);
+
+impl std::ops::Deref for TransmitterIdString {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.0
+    }
+}
+
+impl From<&str> for TransmitterIdString {
+    fn from(id: &str) -> Self {
+        Self(id.to_owned())
+    }
+}
+
+impl From<String> for TransmitterIdString {
+    fn from(id: String) -> Self {
+        Self(id)
+    }
+}
+
 /// A WiFi access point heard in a scan.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
 pub struct WifiReading {
-    /// BSSID, any common notation.
-    pub bssid: String,
+    /// BSSID, any common notation. One that does not parse (in Kotlin, one holding a lone
+    /// UTF-16 surrogate too) makes `push_scan` throw `InputRejected`.
+    pub bssid: TransmitterIdString,
     /// Signal strength, dBm.
     pub rssi_dbm: f64,
     /// How long before the scan this reading was measured, ms (0 if fresh).
@@ -197,12 +235,13 @@ pub struct WifiReading {
 /// Which one it is: with an `address`, a beacon whose `uuid` is empty or whose major and
 /// minor are both 0 is identified by the address; otherwise by UUID, major and minor (the
 /// address must still be valid). A reading with neither a UUID nor an address, or with one
-/// that does not parse, makes `push_scan` throw `InputRejected`.
+/// that does not parse (in Kotlin, one holding a lone UTF-16 surrogate too), makes
+/// `push_scan` throw `InputRejected`.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
 pub struct BeaconReading {
     /// Proximity UUID, with or without hyphens; empty for a beacon known by its address only.
     #[uniffi(default = "")]
-    pub uuid: String,
+    pub uuid: TransmitterIdString,
     /// Major number.
     #[uniffi(default = 0)]
     pub major: u16,
@@ -217,7 +256,7 @@ pub struct BeaconReading {
     /// The advertiser's MAC address (Android `ScanResult.getDevice().getAddress()`), any common
     /// notation; `null` / `nil` or empty when unknown (iOS never reports it).
     #[uniffi(default = None)]
-    pub address: Option<String>,
+    pub address: Option<TransmitterIdString>,
 }
 
 /// Everything heard at one moment.
@@ -435,6 +474,12 @@ struct Inner {
 /// The positioning engine. Thread-safe: sensor threads and the scan receiver may call it at
 /// once. Create it from a site file; feed it sensor batches and scans with timestamps on one
 /// monotonic clock; read positions by polling or by subscribing a listener.
+///
+/// Kotlin: a `String` argument holding a lone UTF-16 surrogate (`"\uD800"`, not text) cannot
+/// be encoded by uniffi's generated code. In a transmitter id it is replaced by `?` on the way
+/// in, so the scan throws `PositioningException.InputRejected`; in a constructor's `siteJson`
+/// or `path` it throws `java.nio.charset.CharacterCodingException` (a
+/// `MalformedInputException`) before the call reaches Waymark: no engine is made.
 #[derive(uniffi::Object)]
 pub struct PositioningEngine {
     inner: Mutex<Inner>,

@@ -257,7 +257,7 @@ fn radio_scan(scan: &Scan) -> ffi::RadioScan {
         .iter()
         .filter_map(|r| match &r.transmitter {
             TransmitterId::Wifi { bssid } => Some(ffi::WifiReading {
-                bssid: bssid.clone(),
+                bssid: bssid.clone().into(),
                 rssi_dbm: r.rssi_dbm,
                 age_ms: r.age_ns / 1_000_000,
             }),
