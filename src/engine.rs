@@ -25,6 +25,12 @@ use std::sync::Arc;
 /// "not heard".
 pub const MAX_RSSI_DBM: f64 = 100.0;
 
+/// With the `fault-injection` feature (test builds only), an epoch (a scan or an advance) at
+/// this time panics after it has stepped the filter and the track, moved the clock, raised the
+/// counters and told the listeners, just before it stores the position: as half-done as an
+/// epoch gets. The engine must come out of it exactly as it was before the call.
+pub const FAULT_INJECTION_MID_EPOCH_NS: u64 = u64::MAX - 8;
+
 /// Where the phone is, after one epoch.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Position {
@@ -145,6 +151,9 @@ pub struct InputStats {
     pub readings_stale: u64,
     /// Epochs without a scan ([`Engine::advance`]).
     pub motion_epochs: u64,
+    /// Epochs without a scan rejected: a timestamp not after the last epoch, or invalid motion
+    /// given with it ([`Engine::advance_with_motion`]).
+    pub advances_rejected: u64,
     /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
     /// when no state could explain a scan.
     pub filter_restarts: u64,
@@ -195,6 +204,20 @@ pub struct Engine {
     accuracy_scale: [f64; 2],
     /// Hashes scans' ids with the site's salt when the site's ids are hashed.
     id_hasher: Option<ScanHasher>,
+    /// What the running epoch may change, as it was before (see [`Engine::atomically`]).
+    undo: Undo,
+}
+
+/// What an epoch changes besides the filter and the Viterbi window, which keep their own
+/// checkpoints: saved before it, so that a panic inside can be undone.
+#[derive(Default)]
+struct Undo {
+    last_epoch_ns: Option<u64>,
+    latest: Option<Position>,
+    published_track: Vec<TrackPoint>,
+    stats: InputStats,
+    /// Only for an epoch that takes its motion from the tracker.
+    tracker: Option<MotionTracker>,
 }
 
 impl Engine {
@@ -225,6 +248,7 @@ impl Engine {
             accuracy_scale,
             id_hasher,
             config,
+            undo: Undo::default(),
         })
     }
 
@@ -384,12 +408,68 @@ impl Engine {
         timestamp_ns: u64,
         motion: Option<&MotionUpdate>,
     ) -> Result<Position, InputError> {
+        let result = self.motion_epoch(timestamp_ns, motion);
+        if let Err(e) = &result {
+            self.stats.advances_rejected += 1;
+            log::debug!("advance rejected: {e}");
+        }
+        result
+    }
+
+    fn motion_epoch(
+        &mut self,
+        timestamp_ns: u64,
+        motion: Option<&MotionUpdate>,
+    ) -> Result<Position, InputError> {
         self.check_time(timestamp_ns)?;
         motion.map_or(Ok(()), check_motion)?;
-        let motion = self.motion_until(timestamp_ns, motion);
-        self.ln_emission.fill(0.0);
-        self.stats.motion_epochs += 1;
-        Ok(self.run_epoch(timestamp_ns, None, &motion))
+        Ok(self.atomically(motion.is_none(), |engine| {
+            let motion = engine.motion_until(timestamp_ns, motion);
+            engine.ln_emission.fill(0.0);
+            engine.stats.motion_epochs += 1;
+            engine.run_epoch(timestamp_ns, None, &motion)
+        }))
+    }
+
+    /// Runs the part of an accepted epoch that changes the engine so that it happens whole or
+    /// not at all: a panic inside (a bug) undoes it, leaving the engine exactly as it was before
+    /// the call, then goes on unwinding to the caller (the FFI turns it into an error). With
+    /// `uses_tracker` the epoch takes its motion from the tracker, which is saved too. What
+    /// listeners heard before the panic cannot be taken back: the FFI holds what its own
+    /// listener hears until the call has returned, and drops it on a panic.
+    ///
+    /// The cost, at every epoch: a pointer swap in the filter and in the Viterbi window (the
+    /// scores they replace are kept aside, not copied), a copy of the last position, the
+    /// published track and the counters, and a clone of the tracker when it is used.
+    fn atomically<T>(&mut self, uses_tracker: bool, epoch: impl FnOnce(&mut Self) -> T) -> T {
+        self.undo.last_epoch_ns = self.last_epoch_ns;
+        self.undo.latest.clone_from(&self.latest);
+        self.undo.published_track.clone_from(&self.published_track);
+        self.undo.stats.clone_from(&self.stats);
+        self.undo.tracker = uses_tracker.then(|| self.tracker.clone());
+        self.filter.checkpoint();
+        self.viterbi.checkpoint();
+        match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| epoch(self))) {
+            Ok(result) => {
+                self.filter.commit();
+                self.viterbi.commit();
+                self.undo.tracker = None;
+                result
+            }
+            Err(panic) => {
+                self.filter.rollback();
+                self.viterbi.rollback();
+                self.last_epoch_ns = self.undo.last_epoch_ns;
+                std::mem::swap(&mut self.latest, &mut self.undo.latest);
+                std::mem::swap(&mut self.published_track, &mut self.undo.published_track);
+                std::mem::swap(&mut self.stats, &mut self.undo.stats);
+                if let Some(tracker) = self.undo.tracker.take() {
+                    self.tracker = tracker;
+                }
+                log::error!("an epoch panicked; the engine is as it was before it");
+                std::panic::resume_unwind(panic)
+            }
+        }
     }
 
     /// The motion given, or what the tracker measured up to `timestamp_ns`.
@@ -430,22 +510,26 @@ impl Engine {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
         self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
+        let dropped = [resolved.unknown, resolved.duplicates, resolved.stale].map(|n| n as u64);
         // Accepted from here on: the state changes.
-        let motion = self.motion_until(scan.timestamp_ns, motion);
-        // Hoang eq. 14: p(o | s)^γ, with the γ of an epoch with or without a movement
-        // likelihood to balance against.
-        let with_movement =
-            self.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some();
-        if let Some(gamma) = if with_movement { self.rssi_weight[0] } else { self.rssi_weight[1] } {
-            for e in self.ln_emission.iter_mut() {
-                *e *= gamma;
+        Ok(self.atomically(motion.is_none(), |engine| {
+            let motion = engine.motion_until(scan.timestamp_ns, motion);
+            // Hoang eq. 14: p(o | s)^γ, with the γ of an epoch with or without a movement
+            // likelihood to balance against.
+            let with_movement =
+                engine.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some();
+            let gamma = if with_movement { engine.rssi_weight[0] } else { engine.rssi_weight[1] };
+            if let Some(gamma) = gamma {
+                for e in engine.ln_emission.iter_mut() {
+                    *e *= gamma;
+                }
             }
-        }
-        self.stats.scans_accepted += 1;
-        self.stats.readings_unknown += resolved.unknown as u64;
-        self.stats.readings_duplicate += resolved.duplicates as u64;
-        self.stats.readings_stale += resolved.stale as u64;
-        Ok(self.run_epoch(scan.timestamp_ns, Some(()), &motion))
+            engine.stats.scans_accepted += 1;
+            engine.stats.readings_unknown += dropped[0];
+            engine.stats.readings_duplicate += dropped[1];
+            engine.stats.readings_stale += dropped[2];
+            engine.run_epoch(scan.timestamp_ns, Some(()), &motion)
+        }))
     }
 
     /// Prediction, update, estimate, publication. `ln_emission` holds the observation (zeros
@@ -478,6 +562,9 @@ impl Engine {
             radio_log_evidence: scan.map(|_| evidence),
         };
         self.publish(&position);
+        if cfg!(feature = "fault-injection") && timestamp_ns == FAULT_INJECTION_MID_EPOCH_NS {
+            panic!("fault injected in the middle of the epoch at {timestamp_ns}");
+        }
         self.latest = Some(position.clone());
         position
     }

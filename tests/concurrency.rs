@@ -54,7 +54,7 @@ static FIXTURE: LazyLock<Fixture> = LazyLock::new(|| {
                 .iter()
                 .map(|r| match &r.transmitter {
                     TransmitterId::Wifi { bssid } => {
-                        WifiReading { bssid: bssid.clone(), rssi_dbm: r.rssi_dbm, age_ms: 0 }
+                        WifiReading { bssid: bssid.clone().into(), rssi_dbm: r.rssi_dbm, age_ms: 0 }
                     }
                     other => unreachable!("the simulator makes WiFi only: {other:?}"),
                 })

@@ -50,6 +50,10 @@ fn rejected_input_leaves_the_engine_unchanged_and_is_counted() {
     assert!(matches!(inf, Err(InputError::NonFiniteRssi { index: 0, .. })));
     let unknown = engine.push_scan(&scan(11 * SECOND, &[(77, -60.0), (78, -70.0)]));
     assert_eq!(unknown, Err(InputError::NoKnownTransmitter { unknown: 2, stale: 0 }));
+    // An advance back in time, or to the last epoch's time, is counted apart from scans.
+    let advance = engine.advance(9 * SECOND);
+    assert_eq!(advance, Err(InputError::OutOfOrder { timestamp_ns: 9 * SECOND, last_ns: 10 * SECOND }));
+    assert!(matches!(engine.advance(10 * SECOND), Err(InputError::OutOfOrder { .. })));
 
     assert_eq!(engine.posterior(), &posterior[..]);
     assert_eq!(engine.position(), Some(&first));
@@ -60,9 +64,11 @@ fn rejected_input_leaves_the_engine_unchanged_and_is_counted() {
             stats.scans_out_of_order,
             stats.scans_empty,
             stats.scans_non_finite,
-            stats.scans_no_known_transmitter
+            stats.scans_no_known_transmitter,
+            stats.advances_rejected,
+            stats.motion_epochs,
         ),
-        (1, 2, 1, 2, 1)
+        (1, 2, 1, 2, 1, 2, 0)
     );
 
     // Unknown and duplicate readings inside a good scan are dropped and counted, not fatal.

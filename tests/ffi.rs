@@ -61,7 +61,7 @@ fn scan(s: &waymark::Scan) -> RadioScan {
         .iter()
         .map(|r| match &r.transmitter {
             TransmitterId::Wifi { bssid } => {
-                WifiReading { bssid: bssid.to_uppercase(), rssi_dbm: r.rssi_dbm, age_ms: 0 }
+                WifiReading { bssid: bssid.to_uppercase().into(), rssi_dbm: r.rssi_dbm, age_ms: 0 }
             }
             _ => unreachable!("the simulator makes WiFi only"),
         })

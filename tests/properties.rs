@@ -12,9 +12,9 @@
 //! - reads change nothing, and listeners hear exactly one position per accepted epoch.
 //!
 //! "State" is everything in [`waymark::engine::EngineSnapshot`] except `InputStats`: the
-//! rejection counters are bookkeeping of rejections, so a rejected scan must change exactly
-//! its own counter by one and nothing else (checked separately), while every later answer of
-//! the engine is decided by the rest, which must be identical.
+//! rejection counters are bookkeeping of rejections, so a rejected scan or advance must change
+//! exactly its own counter by one and nothing else (checked separately), while every later
+//! answer of the engine is decided by the rest, which must be identical.
 
 mod common;
 
@@ -116,7 +116,7 @@ enum When {
     Same,
     /// `now - d`.
     Before(u64),
-    /// An absolute time (0, `u64::MAX`, the fault-injection time, anything).
+    /// An absolute time (0, `u64::MAX`, the fault-injection times, anything).
     At(u64),
 }
 
@@ -180,6 +180,7 @@ fn when() -> impl Strategy<Value = When> {
             Just(u64::MAX),
             Just(u64::MAX - 1),
             Just(waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS),
+            Just(waymark::engine::FAULT_INJECTION_MID_EPOCH_NS),
             any::<u64>(),
         ]
         .prop_map(When::At),
@@ -455,8 +456,12 @@ fn without_stats(mut s: EngineSnapshot) -> EngineSnapshot {
     s
 }
 
-/// Raises the one counter a rejected scan raises.
-fn count(stats: &mut InputStats, e: &InputError) {
+/// Raises the one counter a rejected scan, or a rejected advance, raises.
+fn count(stats: &mut InputStats, is_scan: bool, e: &InputError) {
+    if !is_scan {
+        stats.advances_rejected += 1;
+        return;
+    }
     *match e {
         InputError::OutOfOrder { .. } => &mut stats.scans_out_of_order,
         InputError::EmptyScan => &mut stats.scans_empty,
@@ -467,14 +472,15 @@ fn count(stats: &mut InputStats, e: &InputError) {
     } += 1;
 }
 
-/// The scan rejection counters, summed, and the stats without them.
+/// The rejection counters (of scans and of advances), summed, and the stats without them.
 fn rejections(s: &InputStats) -> (u64, InputStats) {
     let sum = s.scans_out_of_order
         + s.scans_empty
         + s.scans_non_finite
         + s.scans_rssi_too_high
         + s.scans_no_known_transmitter
-        + s.scans_invalid_motion;
+        + s.scans_invalid_motion
+        + s.advances_rejected;
     let rest = InputStats {
         scans_out_of_order: 0,
         scans_empty: 0,
@@ -482,9 +488,21 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
         scans_rssi_too_high: 0,
         scans_no_known_transmitter: 0,
         scans_invalid_motion: 0,
+        advances_rejected: 0,
         ..s.clone()
     };
     (sum, rest)
+}
+
+/// An epoch call that panicked.
+#[derive(Debug)]
+struct Panicked;
+
+/// Runs an epoch call, catching a panic (the injected one is expected; any other fails).
+fn guarded(
+    call: impl FnOnce() -> Result<Position, InputError>,
+) -> Result<Result<Position, InputError>, Panicked> {
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(call)).map_err(|_| Panicked)
 }
 
 /// What a listener heard, checked as it hears it.
@@ -585,7 +603,7 @@ fn run_core(
                     timestamp_ns: clock.at(*when),
                     readings: readings.iter().map(|r| core_reading(f, r)).collect(),
                 };
-                Some((scan.timestamp_ns, true, engine.push_scan(&scan)))
+                Some((scan.timestamp_ns, true, guarded(|| engine.push_scan(&scan))))
             }
             Call::RealisticScan { when, index, junk } => {
                 let mut readings = realistic(f, *index);
@@ -594,20 +612,21 @@ fn run_core(
                     timestamp_ns: clock.at(*when),
                     readings: readings.iter().map(|r| core_reading(f, r)).collect(),
                 };
-                Some((scan.timestamp_ns, true, engine.push_scan(&scan)))
+                Some((scan.timestamp_ns, true, guarded(|| engine.push_scan(&scan))))
             }
             Call::Advance { when } => {
                 let t = clock.at(*when);
-                Some((t, false, engine.advance(t)))
+                Some((t, false, guarded(|| engine.advance(t))))
             }
             Call::WithMotion { when, scan: Some(index), motion } => {
                 let t = clock.at(*when);
                 let readings = realistic(f, *index).iter().map(|r| core_reading(f, r)).collect();
-                Some((t, true, engine.push_scan_with_motion(&Scan { timestamp_ns: t, readings }, motion)))
+                let scan = Scan { timestamp_ns: t, readings };
+                Some((t, true, guarded(|| engine.push_scan_with_motion(&scan, motion))))
             }
             Call::WithMotion { when, scan: None, motion } => {
                 let t = clock.at(*when);
-                Some((t, false, engine.advance_with_motion(t, motion)))
+                Some((t, false, guarded(|| engine.advance_with_motion(t, motion))))
             }
             Call::Read => {
                 let _ = (engine.position(), engine.track(), engine.fixed_lag_position());
@@ -619,7 +638,22 @@ fn run_core(
         };
         let after = engine.snapshot();
         match outcome {
-            Some((t, _, Ok(p))) => {
+            Some((t, _, Err(Panicked))) => {
+                // The injected panic half-way through an epoch: undone, counters included. The
+                // listener heard the position before the panic; that cannot be taken back.
+                prop_assert!(
+                    cfg!(feature = "fault-injection") && t == waymark::engine::FAULT_INJECTION_MID_EPOCH_NS,
+                    "call {} ({:?} at {}) panicked",
+                    n,
+                    call,
+                    t
+                );
+                prop_assert_eq!(&after, &before, "call {} panicked half-way and changed the engine", n);
+                let mut heard = heard.lock().unwrap();
+                prop_assert_eq!(heard.positions.len(), epochs + 1);
+                heard.positions.pop();
+            }
+            Some((t, _, Ok(Ok(p)))) => {
                 epochs += 1;
                 prop_assert_eq!(p.timestamp_ns, t);
                 prop_assert_eq!(after.last_epoch_ns, Some(t));
@@ -628,7 +662,7 @@ fn run_core(
                 prop_assert_eq!(heard.positions.len(), epochs, "one position per epoch to the listener");
                 prop_assert_eq!(heard.positions.last(), Some(&p));
             }
-            Some((t, is_scan, Err(e))) => {
+            Some((t, is_scan, Ok(Err(e)))) => {
                 prop_assert_eq!(
                     without_stats(after.clone()),
                     without_stats(before.clone()),
@@ -638,12 +672,10 @@ fn run_core(
                     t,
                     e
                 );
-                // Bookkeeping: a rejected scan raises its own counter by one; a rejected
-                // advance counts nothing.
+                // Bookkeeping: a rejected scan raises its own counter by one, a rejected
+                // advance `advances_rejected`.
                 let mut expected = before.stats.clone();
-                if is_scan {
-                    count(&mut expected, &e);
-                }
+                count(&mut expected, is_scan, &e);
                 prop_assert_eq!(&after.stats, &expected);
             }
             None => {}
@@ -710,18 +742,18 @@ fn ffi_scan(f: &Fixture, timestamp_ns: u64, readings: &[ReadingSpec]) -> RadioSc
     let mut scan = RadioScan { timestamp_ns, wifi: Vec::new(), beacons: Vec::new() };
     for r in readings {
         let age_ms = r.age_ns / 1_000_000;
-        let wifi = |bssid| WifiReading { bssid, rssi_dbm: r.rssi_dbm, age_ms };
+        let wifi = |bssid: String| WifiReading { bssid: bssid.into(), rssi_dbm: r.rssi_dbm, age_ms };
         match &r.who {
             Who::Known(k, notation) => scan.wifi.push(wifi(bssid(f, *k, *notation))),
             Who::Unknown(k) => scan.wifi.push(wifi(format!("0a:00:00:00:00:{k:02x}"))),
             Who::Garbage(text) => scan.wifi.push(wifi(text.clone())),
             Who::Beacon { uuid, major, minor, address } => scan.beacons.push(BeaconReading {
-                uuid: uuid.clone(),
+                uuid: uuid.as_str().into(),
                 major: *major,
                 minor: *minor,
                 rssi_dbm: r.rssi_dbm,
                 age_ms,
-                address: address.clone(),
+                address: address.as_deref().map(Into::into),
             }),
         }
     }
@@ -851,9 +883,11 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
             }
             Some((t, is_scan, Err(e))) => {
                 errors += 1;
+                // The injected panics: before a scan reaches the engine, or half-way through an
+                // epoch (which the engine undoes).
                 let injected = cfg!(feature = "fault-injection")
-                    && is_scan
-                    && t == waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS;
+                    && ((is_scan && t == waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS)
+                        || t == waymark::engine::FAULT_INJECTION_MID_EPOCH_NS);
                 match &e {
                     PositioningError::InputRejected { .. } => {}
                     PositioningError::Internal { .. } if injected => {}
@@ -869,11 +903,19 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                     t,
                     e
                 );
-                // A scan the FFI could not even parse (a malformed id) or a panic counts
-                // nothing; one the engine rejected raises one scan counter.
+                // A rejected advance raises `advances_rejected` by one; a rejected scan one scan
+                // counter, or none if the FFI could not even parse it (a malformed id); a panic
+                // leaves everything as it was, counters included.
                 let (raised_after, rest_after) = rejections(&after.0.stats);
                 let (raised_before, rest_before) = rejections(&before.0.stats);
-                prop_assert!(raised_after - raised_before <= u64::from(is_scan), "counters raised");
+                let raised = raised_after - raised_before;
+                match &e {
+                    PositioningError::Internal { .. } => {
+                        prop_assert_eq!(&after.0, &before.0, "a panic changed the engine");
+                    }
+                    _ if is_scan => prop_assert!(raised <= 1, "{} counters raised", raised),
+                    _ => prop_assert_eq!(raised, 1, "a rejected advance is counted once"),
+                }
                 prop_assert_eq!(rest_after, rest_before);
                 prop_assert_eq!(recorder.heard.lock().unwrap().1, errors, "listeners hear every error");
             }
@@ -980,6 +1022,7 @@ fn invalid_motion_from_outside_is_rejected() {
         assert!(matches!(result, Err(InputError::InvalidMotion { .. })), "{motion:?}: {result:?}");
         assert!(matches!(engine.advance_with_motion(SECOND, motion), Err(InputError::InvalidMotion { .. })));
         assert_eq!(engine.stats().scans_invalid_motion, k as u64 + 1);
+        assert_eq!(engine.stats().advances_rejected, k as u64 + 1);
         assert_eq!(without_stats(engine.snapshot()), without_stats(before));
     }
     let p = engine.push_scan_with_motion(&scan(SECOND), &good).unwrap();

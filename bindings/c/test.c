@@ -123,6 +123,22 @@ static void walk(const char *site_path, const char *walk_path, const uint8_t *sa
           "injected panic");
     CHECK(waymark_engine_push_scan(engine, moved.timestamp_ns + 2, &known, 1, NULL, 0, NULL) == WAYMARK_RESULT_OK,
           "usable after a panic");
+    /* A panic half-way through an epoch (injected at UINT64_MAX - 8, after the engine has
+     * stepped its filter and moved its clock) is undone: the same position, and no callback. */
+    waymark_position kept, now;
+    int heard = callbacks;
+    CHECK(waymark_engine_position(engine, &kept) == WAYMARK_RESULT_OK, "position");
+    CHECK(waymark_engine_push_scan(engine, UINT64_MAX - 8, &known, 1, NULL, 0, NULL) == WAYMARK_RESULT_PANIC,
+          "panic half-way through a scan");
+    CHECK(waymark_engine_advance(engine, UINT64_MAX - 8, NULL) == WAYMARK_RESULT_PANIC,
+          "panic half-way through an advance");
+    CHECK(waymark_engine_position(engine, &now) == WAYMARK_RESULT_OK && now.timestamp_ns == kept.timestamp_ns &&
+              now.x == kept.x && now.y == kept.y && now.accuracy_m == kept.accuracy_m,
+          "the undone epochs left the position");
+    CHECK(callbacks == heard, "a callback for an undone epoch");
+    CHECK(waymark_engine_push_scan(engine, kept.timestamp_ns + 1500000000ull, &known, 1, NULL, 0, NULL) ==
+              WAYMARK_RESULT_OK && callbacks == heard + 1,
+          "usable after a panic half-way");
     CHECK(waymark_engine_set_callback(engine, NULL, NULL) == WAYMARK_RESULT_OK, "clear callback");
     waymark_engine_free(engine);
 }

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The C ABI test: checks the committed header is what cbindgen makes from src/ffi/c.rs, builds
-# the library, compiles bindings/c/test.c against the header and the library (shared and
-# static), and runs both under valgrind: zero errors, zero leaks. Then checks that the shared
-# library imports no networking function (scripts/check-no-network.sh).
+# the library, compiles bindings/c/test.c, robustness.c and threads.c against the header and the
+# library (shared and static), and runs them under valgrind: zero errors, zero leaks. Then
+# checks that the shared library imports no networking function (scripts/check-no-network.sh).
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/../.." && pwd)
 cd "$repo"
@@ -43,8 +43,8 @@ cargo run --features cli --locked --quiet -- site pack "$work/site.json" "$work/
 # A test build: a scan at UINT64_MAX - 7 panics inside the engine (feature fault-injection).
 cargo build --lib --locked --quiet --features fault-injection
 python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
-flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -I bindings/c)
-for test in test robustness; do
+flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -pthread -I bindings/c)
+for test in test robustness threads; do
     gcc "${flags[@]}" "bindings/c/$test.c" -L "$target/debug" -lwaymark -lm -o "$work/${test}_shared"
     gcc "${flags[@]}" "bindings/c/$test.c" "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/${test}_static"
 done
@@ -59,6 +59,10 @@ for kind in shared static; do
     LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
         --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
         "$work/robustness_$kind" "$work/site.json"
+    echo "-- threads pushing at once, $kind library under valgrind"
+    LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
+        --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
+        "$work/threads_$kind" "$work/site.json"
 done
 
 echo "-- no networking"

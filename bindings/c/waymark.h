@@ -36,8 +36,15 @@ enum waymark_result
    */
   WAYMARK_RESULT_INVALID_CONFIG = 3,
   /**
-   * The input was rejected (out of order, empty, NaN, unknown transmitters only, bad id);
-   * the engine is unchanged.
+   * The input was rejected and the engine is unchanged; `waymark_last_error` says why. A
+   * scan or an advance is rejected when its timestamp is not after the last epoch's (a step
+   * back in time, or a duplicate). A scan is also rejected when
+   * - it has no readings;
+   * - a reading's RSSI is NaN, infinite or below -1000 dBm;
+   * - a reading's RSSI is above +100 dBm, more than any receiver reports;
+   * - no reading is of a transmitter the site knows;
+   * - a transmitter id is malformed: a BSSID, beacon UUID or beacon address that does not
+   *   parse, or a beacon with neither a UUID nor an address.
    */
   WAYMARK_RESULT_INPUT_REJECTED = 4,
   /**
@@ -54,7 +61,8 @@ enum waymark_result
    */
   WAYMARK_RESULT_SALT_MISMATCH = 7,
   /**
-   * Waymark panicked; the call had no effect and the engine stays usable.
+   * Waymark panicked (a bug); the engine stays usable. A scan or an advance that panicked
+   * half-way is undone: the engine is as it was before the call, and no callback hears of it.
    */
   WAYMARK_RESULT_PANIC = 99,
 };
@@ -203,7 +211,13 @@ typedef struct {
 } waymark_position;
 
 /**
- * Called with every new position, on the thread that pushed the input, with no lock held.
+ * Called with every new position, in the order of the epochs, never from two threads at once,
+ * with no lock held, on a thread that called the engine: usually the one whose call made the
+ * position. While one thread is running the callback, positions made by other threads' calls
+ * are passed to it by that thread, after the current one, so such a call may return before
+ * its position reaches the callback; every position has reached it by the time all calls
+ * have returned. A callback may call the engine (what it makes is delivered after the current
+ * call returns, by the same thread).
  */
 typedef void (*waymark_position_callback)(void *userdata, const waymark_position *position);
 
@@ -280,8 +294,10 @@ waymark_result waymark_engine_push_magnetometer(waymark_engine *engine,
 
 /**
  * A scan: WiFi readings and BLE beacon readings (either array may be NULL with count 0). One
- * positioning epoch; `*out` (may be NULL) receives the new position. A rejected scan returns
- * `InputRejected` and changes nothing.
+ * positioning epoch; `*out` (may be NULL) receives the new position. A rejected scan (out of
+ * order, empty, an RSSI that is NaN, infinite, below -1000 or above +100 dBm, no known
+ * transmitter, a malformed id: see `WAYMARK_RESULT_INPUT_REJECTED`) returns `InputRejected`
+ * and changes nothing.
  */
 waymark_result waymark_engine_push_scan(waymark_engine *engine,
                                         uint64_t timestamp_ns,
@@ -292,7 +308,8 @@ waymark_result waymark_engine_push_scan(waymark_engine *engine,
                                         waymark_position *out);
 
 /**
- * An epoch without radio at `timestamp_ns`, from the motion since the last epoch.
+ * An epoch without radio at `timestamp_ns`, from the motion since the last epoch. A
+ * `timestamp_ns` not after the last epoch's returns `InputRejected` and changes nothing.
  */
 waymark_result waymark_engine_advance(waymark_engine *engine,
                                       uint64_t timestamp_ns,
@@ -304,9 +321,13 @@ waymark_result waymark_engine_advance(waymark_engine *engine,
 waymark_result waymark_engine_position(const waymark_engine *engine, waymark_position *out);
 
 /**
- * Sets (or, with a NULL callback, clears) the function called with every new position.
- * `userdata` is passed back untouched; it must stay valid until the callback is replaced or
- * the engine freed.
+ * Sets (or, with a NULL callback, clears) the function called with every new position (see
+ * `waymark_position_callback` for when and on which thread). `userdata` is passed back
+ * untouched; it must stay valid until the callback is replaced or the engine freed. When this
+ * returns, the previous callback is not running on another thread and will not be called
+ * again, so its userdata may be freed: if it is running, this waits for it to return (so do
+ * not call this while holding a lock that callback takes). Called from inside the callback,
+ * it does not wait; the current call finishes and the next position goes to the new one.
  */
 waymark_result waymark_engine_set_callback(waymark_engine *engine,
                                            waymark_position_callback callback,

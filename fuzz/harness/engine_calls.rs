@@ -177,11 +177,12 @@ impl Clock {
 }
 
 /// With the `fault-injection` feature (`cargo test --all-features`) a scan at
-/// `FAULT_INJECTION_TIMESTAMP_NS` panics inside the FFI engine on purpose: the harness never
-/// makes one.
+/// `FAULT_INJECTION_TIMESTAMP_NS` panics inside the FFI engine on purpose, and an epoch at
+/// `FAULT_INJECTION_MID_EPOCH_NS` inside either engine: the harness never makes one.
 fn not_fault_injection(t: u64) -> u64 {
-    if t == ffi::FAULT_INJECTION_TIMESTAMP_NS {
-        t - 1
+    let mid = waymark::engine::FAULT_INJECTION_MID_EPOCH_NS;
+    if t == ffi::FAULT_INJECTION_TIMESTAMP_NS || t == mid {
+        mid - 1
     } else {
         t
     }
@@ -369,12 +370,12 @@ fn scan(c: &mut Cursor, fixture: &Fixture, clock: &mut Clock) -> ScanInput {
         let broken = mangled && k == 0;
         match &r.transmitter {
             TransmitterId::Wifi { bssid } => wifi.push(ffi::WifiReading {
-                bssid: if broken { "not a bssid".into() } else { bssid.clone() },
+                bssid: if broken { "not a bssid".into() } else { bssid.clone().into() },
                 rssi_dbm,
                 age_ms,
             }),
             TransmitterId::Ble { uuid, major, minor } => beacons.push(ffi::BeaconReading {
-                uuid: if broken { String::new() } else { uuid.clone() },
+                uuid: if broken { "".into() } else { uuid.clone().into() },
                 major: *major,
                 minor: *minor,
                 rssi_dbm,
@@ -382,12 +383,12 @@ fn scan(c: &mut Cursor, fixture: &Fixture, clock: &mut Clock) -> ScanInput {
                 address: None,
             }),
             TransmitterId::BleAddress { mac } => beacons.push(ffi::BeaconReading {
-                uuid: String::new(),
+                uuid: "".into(),
                 major: 0,
                 minor: 0,
                 rssi_dbm,
                 age_ms,
-                address: Some(if broken { "nope".into() } else { mac.clone() }),
+                address: Some(if broken { "nope".into() } else { mac.clone().into() }),
             }),
             // Readings are drawn from the harness's sites, which hold raw ids.
             TransmitterId::HashedWifi { .. } | TransmitterId::HashedBle { .. } => {}
@@ -619,12 +620,11 @@ impl Session<'_> {
     }
 
     /// A core epoch (a scan or an advance, with or without motion): taken iff `rejection` is
-    /// `None`, and a rejected one changes nothing but the counters.
+    /// `None`, and a rejected one changes nothing but the counters, which it raises.
     fn core_epoch(
         &mut self,
         timestamp_ns: u64,
         rejection: Option<&'static str>,
-        counted: bool,
         call: impl FnOnce(&mut Engine) -> Result<Position, InputError>,
     ) -> Option<Position> {
         let before = (self.core.posterior().to_vec(), self.core.position().cloned(), self.core.track());
@@ -644,9 +644,7 @@ impl Session<'_> {
                 assert_eq!(bits(&before.0), bits(after.0), "a rejected epoch changed the posterior");
                 assert_eq!(before.1.as_ref(), after.1, "a rejected epoch changed the position");
                 assert_eq!(before.2, after.2, "a rejected epoch changed the track");
-                if counted {
-                    assert_ne!(&stats, self.core.stats(), "a rejected scan was not counted");
-                }
+                assert_ne!(&stats, self.core.stats(), "a rejected epoch was not counted");
                 None
             }
             (Ok(_), Some(why)) => panic!("an epoch that should be rejected ({why}) was taken"),
@@ -685,7 +683,7 @@ impl Session<'_> {
             None
         } else {
             let why = rejection(&input.core, self.core_last, self.fixture, true);
-            self.core_epoch(input.core.timestamp_ns, why, true, |e| e.push_scan(&input.core))
+            self.core_epoch(input.core.timestamp_ns, why, |e| e.push_scan(&input.core))
         };
         let ffi_rejected =
             input.mangled || rejection(&input.core, self.ffi_last, self.fixture, true).is_some();
@@ -696,7 +694,7 @@ impl Session<'_> {
     fn advance(&mut self, timestamp_ns: u64) {
         let rejected = |last: Option<u64>| last.is_some_and(|last| timestamp_ns <= last);
         let why = rejected(self.core_last).then_some("out of order");
-        let core = self.core_epoch(timestamp_ns, why, false, |e| e.advance(timestamp_ns));
+        let core = self.core_epoch(timestamp_ns, why, |e| e.advance(timestamp_ns));
         let ffi_rejected = rejected(self.ffi_last);
         self.ffi_epoch(timestamp_ns, ffi_rejected, core.as_ref(), |e| e.advance(timestamp_ns));
     }
@@ -718,7 +716,7 @@ impl Session<'_> {
             .iter()
             .filter_map(|r| match &r.transmitter {
                 TransmitterId::Wifi { bssid } => {
-                    Some(ffi::WifiReading { bssid: bssid.clone(), rssi_dbm: r.rssi_dbm, age_ms: 0 })
+                    Some(ffi::WifiReading { bssid: bssid.clone().into(), rssi_dbm: r.rssi_dbm, age_ms: 0 })
                 }
                 _ => None,
             })
@@ -826,14 +824,12 @@ pub fn run(data: &[u8]) {
                 if with_scan {
                     let input = scan(&mut c, fixture, &mut clock);
                     let why = rejection(&input.core, s.core_last, fixture, valid);
-                    s.core_epoch(input.core.timestamp_ns, why, true, |e| {
-                        e.push_scan_with_motion(&input.core, &m)
-                    });
+                    s.core_epoch(input.core.timestamp_ns, why, |e| e.push_scan_with_motion(&input.core, &m));
                 } else {
                     let t = clock.time(&mut c);
                     let why = s.core_last.is_some_and(|last| t <= last).then_some("out of order");
                     let why = why.or((!valid).then_some("invalid motion"));
-                    s.core_epoch(t, why, false, |e| e.advance_with_motion(t, &m));
+                    s.core_epoch(t, why, |e| e.advance_with_motion(t, &m));
                 }
             }
         }

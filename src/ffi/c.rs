@@ -8,6 +8,7 @@
 // the header, and each dereference carries a SAFETY comment (as rustls-ffi does).
 #![allow(clippy::not_unsafe_ptr_arg_deref)]
 
+use super::delivery::{lock, Delivery};
 use crate::engine::{Engine, Position};
 use crate::radio::{Reading, Scan, TransmitterId};
 use crate::sensors::{MdiScenario, MotionState, SensorSample};
@@ -29,8 +30,15 @@ pub enum waymark_result {
     InvalidSite = 2,
     /// The configuration is invalid.
     InvalidConfig = 3,
-    /// The input was rejected (out of order, empty, NaN, unknown transmitters only, bad id);
-    /// the engine is unchanged.
+    /// The input was rejected and the engine is unchanged; `waymark_last_error` says why. A
+    /// scan or an advance is rejected when its timestamp is not after the last epoch's (a step
+    /// back in time, or a duplicate). A scan is also rejected when
+    /// - it has no readings;
+    /// - a reading's RSSI is NaN, infinite or below -1000 dBm;
+    /// - a reading's RSSI is above +100 dBm, more than any receiver reports;
+    /// - no reading is of a transmitter the site knows;
+    /// - a transmitter id is malformed: a BSSID, beacon UUID or beacon address that does not
+    ///   parse, or a beacon with neither a UUID nor an address.
     InputRejected = 4,
     /// No position yet.
     NoPosition = 5,
@@ -39,19 +47,27 @@ pub enum waymark_result {
     /// The site's transmitter ids are salted hashes and no salt, or not the salt they were
     /// hashed with, was given (`waymark_engine_new_with_salt`).
     SaltMismatch = 7,
-    /// Waymark panicked; the call had no effect and the engine stays usable.
+    /// Waymark panicked (a bug); the engine stays usable. A scan or an advance that panicked
+    /// half-way is undone: the engine is as it was before the call, and no callback hears of it.
     Panic = 99,
 }
 
 /// An engine. Opaque; create with `waymark_engine_new`, free with `waymark_engine_free`.
 /// Thread-safe: any thread may call any function on it.
 pub struct waymark_engine {
-    inner: Mutex<Inner>,
+    engine: Mutex<Engine>,
+    /// The callback and its userdata, as `waymark_engine_set_callback` left them.
+    callback: Mutex<Option<Callback>>,
+    /// Held while the callback runs, so that setting another one can wait for it to return.
+    calling: Mutex<()>,
+    /// Positions not yet passed to the callback.
+    positions: Delivery<waymark_position>,
 }
 
-struct Inner {
-    engine: Engine,
-    callback: Option<(waymark_position_callback, usize)>,
+#[derive(Clone, Copy)]
+struct Callback {
+    function: unsafe extern "C" fn(userdata: *mut c_void, position: *const waymark_position),
+    userdata: usize,
 }
 
 /// One accelerometer (m/s², gravity included), gyroscope (rad/s) or magnetometer (µT) sample
@@ -134,7 +150,13 @@ pub struct waymark_position {
     pub steps: u32,
 }
 
-/// Called with every new position, on the thread that pushed the input, with no lock held.
+/// Called with every new position, in the order of the epochs, never from two threads at once,
+/// with no lock held, on a thread that called the engine: usually the one whose call made the
+/// position. While one thread is running the callback, positions made by other threads' calls
+/// are passed to it by that thread, after the current one, so such a call may return before
+/// its position reaches the callback; every position has reached it by the time all calls
+/// have returned. A callback may call the engine (what it makes is delivered after the current
+/// call returns, by the same thread).
 pub type waymark_position_callback =
     Option<unsafe extern "C" fn(userdata: *mut c_void, position: *const waymark_position)>;
 
@@ -203,7 +225,12 @@ fn create(
         Err(e @ crate::Error::Site(_)) => return fail(waymark_result::InvalidSite, e.to_string()),
         Err(e) => return fail(waymark_result::InvalidConfig, e.to_string()),
     };
-    let handle = Box::new(waymark_engine { inner: Mutex::new(Inner { engine, callback: None }) });
+    let handle = Box::new(waymark_engine {
+        engine: Mutex::new(engine),
+        callback: Mutex::new(None),
+        calling: Mutex::new(()),
+        positions: Delivery::new(),
+    });
     // SAFETY: `out` was checked non-NULL by the caller of `create` and points to writable
     // storage for one pointer, as the header documents.
     unsafe { *out = Box::into_raw(handle) };
@@ -328,10 +355,10 @@ pub extern "C" fn waymark_engine_free(engine: *mut waymark_engine) {
     });
 }
 
-/// Borrows the engine behind `engine`, or fails with `NullParameter`.
-fn with_engine(
+/// Borrows the handle `engine`, or fails with `NullParameter`.
+fn with_handle(
     engine: *const waymark_engine,
-    body: impl FnOnce(&mut Inner) -> waymark_result,
+    body: impl FnOnce(&waymark_engine) -> waymark_result,
 ) -> waymark_result {
     boundary(|| {
         // SAFETY: a non-NULL `engine` is a live handle from `waymark_engine_new*` (the header's
@@ -339,9 +366,17 @@ fn with_engine(
         let Some(handle) = (unsafe { engine.as_ref() }) else {
             return fail(waymark_result::NullParameter, "engine must not be NULL");
         };
-        let mut inner = handle.inner.lock().unwrap_or_else(|p| p.into_inner());
-        body(&mut inner)
+        body(handle)
     })
+}
+
+/// Runs `body` on the engine behind `engine` under its lock, or fails with `NullParameter`.
+/// The lock is taken even if a panic poisoned it: an epoch that panics is undone by the engine.
+fn with_engine(
+    engine: *const waymark_engine,
+    body: impl FnOnce(&mut Engine) -> waymark_result,
+) -> waymark_result {
+    with_handle(engine, |handle| body(&mut lock(&handle.engine)))
 }
 
 fn samples<'a>(batch: *const waymark_sample, count: usize) -> Option<&'a [waymark_sample]> {
@@ -367,7 +402,7 @@ fn push_samples(
             .iter()
             .map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z })
             .collect();
-        let report = push(&mut inner.engine, &converted);
+        let report = push(inner, &converted);
         if !accepted.is_null() {
             // SAFETY: a non-NULL `accepted` points to writable storage for one size_t.
             unsafe { *accepted = report.accepted };
@@ -430,37 +465,57 @@ fn optional_string_arg(text: *const c_char, what: &str) -> Result<Option<String>
     }
 }
 
-/// Runs an epoch under the lock, then calls the callback with no lock held and writes `out`.
+/// Runs an epoch under the lock, queueing its position under it (so in the order of the
+/// epochs), writes `out`, then passes the queue to the callback with no lock held.
 fn epoch(
     engine: *mut waymark_engine,
     out: *mut waymark_position,
     body: impl FnOnce(&mut Engine) -> Result<Position, waymark_result>,
 ) -> waymark_result {
-    let mut result = None;
-    let code = with_engine(engine, |inner| match body(&mut inner.engine) {
-        Ok(p) => {
-            result = Some((convert(&p), inner.callback));
-            waymark_result::Ok
+    with_handle(engine, |handle| {
+        let position = {
+            let mut engine = lock(&handle.engine);
+            body(&mut engine).map(|p| {
+                let position = convert(&p);
+                handle.positions.push(position);
+                position
+            })
+        };
+        match position {
+            Ok(position) => {
+                if !out.is_null() {
+                    // SAFETY: a non-NULL `out` points to writable storage for one
+                    // waymark_position.
+                    unsafe { *out = position };
+                }
+                deliver(handle);
+                waymark_result::Ok
+            }
+            Err(code) => code,
         }
-        Err(code) => code,
+    })
+}
+
+/// Passes the queued positions to the callback, one thread at a time, in order ([`Delivery`]),
+/// reading the callback afresh for each.
+fn deliver(handle: &waymark_engine) {
+    handle.positions.deliver(|position| {
+        let _calling = lock(&handle.calling);
+        let callback = *lock(&handle.callback);
+        if let Some(Callback { function, userdata }) = callback {
+            // SAFETY: the function and its userdata were registered together by the caller of
+            // `waymark_engine_set_callback`, who guarantees they stay valid until replaced; a
+            // replacement waits for this call to return (`calling`).
+            unsafe { function(userdata as *mut c_void, &position) };
+        }
     });
-    if let Some((position, callback)) = result {
-        if !out.is_null() {
-            // SAFETY: a non-NULL `out` points to writable storage for one waymark_position.
-            unsafe { *out = position };
-        }
-        if let Some((Some(callback), userdata)) = callback {
-            // SAFETY: the callback and its userdata were registered together by the caller of
-            // `waymark_engine_set_callback`, who guarantees they stay valid until replaced.
-            unsafe { callback(userdata as *mut c_void, &position) };
-        }
-    }
-    code
 }
 
 /// A scan: WiFi readings and BLE beacon readings (either array may be NULL with count 0). One
-/// positioning epoch; `*out` (may be NULL) receives the new position. A rejected scan returns
-/// `InputRejected` and changes nothing.
+/// positioning epoch; `*out` (may be NULL) receives the new position. A rejected scan (out of
+/// order, empty, an RSSI that is NaN, infinite, below -1000 or above +100 dBm, no known
+/// transmitter, a malformed id: see `WAYMARK_RESULT_INPUT_REJECTED`) returns `InputRejected`
+/// and changes nothing.
 #[no_mangle]
 pub extern "C" fn waymark_engine_push_scan(
     engine: *mut waymark_engine,
@@ -513,7 +568,8 @@ pub extern "C" fn waymark_engine_push_scan(
     })
 }
 
-/// An epoch without radio at `timestamp_ns`, from the motion since the last epoch.
+/// An epoch without radio at `timestamp_ns`, from the motion since the last epoch. A
+/// `timestamp_ns` not after the last epoch's returns `InputRejected` and changes nothing.
 #[no_mangle]
 pub extern "C" fn waymark_engine_advance(
     engine: *mut waymark_engine,
@@ -534,7 +590,7 @@ pub extern "C" fn waymark_engine_position(
     if out.is_null() {
         return fail(waymark_result::NullParameter, "out must not be NULL");
     }
-    with_engine(engine, |inner| match inner.engine.position() {
+    with_engine(engine, |inner| match inner.position() {
         Some(p) => {
             // SAFETY: `out` was checked non-NULL and points to one waymark_position.
             unsafe { *out = convert(p) };
@@ -544,17 +600,24 @@ pub extern "C" fn waymark_engine_position(
     })
 }
 
-/// Sets (or, with a NULL callback, clears) the function called with every new position.
-/// `userdata` is passed back untouched; it must stay valid until the callback is replaced or
-/// the engine freed.
+/// Sets (or, with a NULL callback, clears) the function called with every new position (see
+/// `waymark_position_callback` for when and on which thread). `userdata` is passed back
+/// untouched; it must stay valid until the callback is replaced or the engine freed. When this
+/// returns, the previous callback is not running on another thread and will not be called
+/// again, so its userdata may be freed: if it is running, this waits for it to return (so do
+/// not call this while holding a lock that callback takes). Called from inside the callback,
+/// it does not wait; the current call finishes and the next position goes to the new one.
 #[no_mangle]
 pub extern "C" fn waymark_engine_set_callback(
     engine: *mut waymark_engine,
     callback: waymark_position_callback,
     userdata: *mut c_void,
 ) -> waymark_result {
-    with_engine(engine, |inner| {
-        inner.callback = callback.map(|c| (Some(c), userdata as usize));
+    with_handle(engine, |handle| {
+        *lock(&handle.callback) = callback.map(|function| Callback { function, userdata: userdata as usize });
+        if !handle.positions.on_delivering_thread() {
+            drop(lock(&handle.calling));
+        }
         waymark_result::Ok
     })
 }

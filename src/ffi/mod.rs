@@ -3,6 +3,7 @@
 //! through the header `bindings/c/waymark.h`.
 
 pub mod c;
+mod delivery;
 pub mod logging;
 pub mod uniffi;
 

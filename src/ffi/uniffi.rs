@@ -1,13 +1,13 @@
 //! The Kotlin and Swift API, through uniffi proc-macros. Every exported type lives here; a
 //! change in this file is a possible breaking change for apps (CHANGELOG, "Breaking changes").
 
+use super::delivery::{lock, Delivery};
 use crate::config::{EngineConfig, TransitionModel};
 use crate::engine::{self, Engine, PositionListener as CoreListener};
 use crate::radio::{Reading, Scan, TransmitterId};
 use crate::sensors::{self, SensorSample};
 use crate::site::Site;
-use std::collections::VecDeque;
-use std::sync::{Arc, Mutex, MutexGuard, PoisonError, Weak};
+use std::sync::{Arc, Mutex, Weak};
 
 /// Errors an app can act on.
 #[derive(Debug, thiserror::Error, uniffi::Error)]
@@ -24,8 +24,11 @@ pub enum PositioningError {
         /// Which field and why.
         reason: String,
     },
-    /// An input was rejected (out of order, empty, NaN, no known transmitter); the engine is
-    /// unchanged and goes on.
+    /// An input was rejected; the engine is unchanged and goes on. A scan or an advance whose
+    /// time is not after the last epoch's; a scan with no readings, with an RSSI that is NaN,
+    /// infinite, below -1000 dBm or above +100 dBm, with no transmitter the site knows, or with
+    /// a malformed transmitter id: a BSSID, UUID or address that does not parse (in Kotlin, one
+    /// holding a lone UTF-16 surrogate too), a beacon with neither a UUID nor an address.
     #[error("input rejected: {reason}")]
     InputRejected {
         /// Why.
@@ -38,7 +41,8 @@ pub enum PositioningError {
         /// Missing or wrong (the salt itself is never in the message).
         reason: String,
     },
-    /// A bug in Waymark or in a listener: the call had no effect.
+    /// A bug in Waymark or in a listener: the call had no effect (a scan or an advance that
+    /// panicked half-way is undone, and no listener hears its position).
     #[error("internal error: {reason}")]
     Internal {
         /// What happened.
@@ -179,11 +183,45 @@ pub struct MotionSample {
     pub z: f64,
 }
 
+/// A transmitter's id as an app gives it: a BSSID, a beacon's proximity UUID or its advertiser
+/// address. Kotlin and Swift see a `String`.
+///
+/// A Kotlin `String` can hold a lone UTF-16 surrogate (`"\uD800"`), which is not text: uniffi's
+/// generated code refuses to encode it and throws `CharacterCodingException` before the call
+/// reaches Waymark (and, for a method, leaks the engine's handle). This type's Kotlin
+/// conversion (`uniffi.toml`) encodes such an id with each lone surrogate replaced by `?`
+/// instead, so it reaches Waymark, parses as no id, and the scan throws
+/// `PositioningException.InputRejected` like any malformed id. A valid id is never changed.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct TransmitterIdString(pub String);
+
+uniffi::custom_newtype!(TransmitterIdString, String);
+
+impl std::ops::Deref for TransmitterIdString {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.0
+    }
+}
+
+impl From<&str> for TransmitterIdString {
+    fn from(id: &str) -> Self {
+        Self(id.to_owned())
+    }
+}
+
+impl From<String> for TransmitterIdString {
+    fn from(id: String) -> Self {
+        Self(id)
+    }
+}
+
 /// A WiFi access point heard in a scan.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
 pub struct WifiReading {
-    /// BSSID, any common notation.
-    pub bssid: String,
+    /// BSSID, any common notation. One that does not parse (in Kotlin, one holding a lone
+    /// UTF-16 surrogate too) makes `push_scan` throw `InputRejected`.
+    pub bssid: TransmitterIdString,
     /// Signal strength, dBm.
     pub rssi_dbm: f64,
     /// How long before the scan this reading was measured, ms (0 if fresh).
@@ -197,12 +235,13 @@ pub struct WifiReading {
 /// Which one it is: with an `address`, a beacon whose `uuid` is empty or whose major and
 /// minor are both 0 is identified by the address; otherwise by UUID, major and minor (the
 /// address must still be valid). A reading with neither a UUID nor an address, or with one
-/// that does not parse, makes `push_scan` throw `InputRejected`.
+/// that does not parse (in Kotlin, one holding a lone UTF-16 surrogate too), makes
+/// `push_scan` throw `InputRejected`.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
 pub struct BeaconReading {
     /// Proximity UUID, with or without hyphens; empty for a beacon known by its address only.
     #[uniffi(default = "")]
-    pub uuid: String,
+    pub uuid: TransmitterIdString,
     /// Major number.
     #[uniffi(default = 0)]
     pub major: u16,
@@ -217,7 +256,7 @@ pub struct BeaconReading {
     /// The advertiser's MAC address (Android `ScanResult.getDevice().getAddress()`), any common
     /// notation; `null` / `nil` or empty when unknown (iOS never reports it).
     #[uniffi(default = None)]
-    pub address: Option<String>,
+    pub address: Option<TransmitterIdString>,
 }
 
 /// Everything heard at one moment.
@@ -370,30 +409,16 @@ enum Event {
     Error(String),
 }
 
-/// What was published and not yet delivered, oldest first, and whether a thread is
-/// delivering it.
-#[derive(Default)]
-struct Queue {
-    events: VecDeque<Event>,
-    delivering: bool,
-}
-
-/// Locks `mutex`, even if a panic elsewhere poisoned it: nothing behind these locks is left
-/// half-changed by a panic (the engine's own calls run under `catch_unwind`).
-fn lock<T>(mutex: &Mutex<T>) -> MutexGuard<'_, T> {
-    mutex.lock().unwrap_or_else(PoisonError::into_inner)
-}
-
-/// Collects the core engine's publications into the queue (under the engine's lock, so in
-/// the order of the epochs).
+/// Collects the core engine's publications (under the engine's lock, so in the order of the
+/// epochs), held back until the call that made them returns.
 struct Collector {
-    queue: Arc<Mutex<Queue>>,
+    events: Arc<Delivery<Event>>,
     floor_names: Vec<String>,
 }
 
 impl Collector {
     fn push(&self, event: Event) {
-        lock(&self.queue).events.push_back(event);
+        self.events.stage(event);
     }
 }
 
@@ -449,10 +474,16 @@ struct Inner {
 /// The positioning engine. Thread-safe: sensor threads and the scan receiver may call it at
 /// once. Create it from a site file; feed it sensor batches and scans with timestamps on one
 /// monotonic clock; read positions by polling or by subscribing a listener.
+///
+/// Kotlin: a `String` argument holding a lone UTF-16 surrogate (`"\uD800"`, not text) cannot
+/// be encoded by uniffi's generated code. In a transmitter id it is replaced by `?` on the way
+/// in, so the scan throws `PositioningException.InputRejected`; in a constructor's `siteJson`
+/// or `path` it throws `java.nio.charset.CharacterCodingException` (a
+/// `MalformedInputException`) before the call reaches Waymark: no engine is made.
 #[derive(uniffi::Object)]
 pub struct PositioningEngine {
     inner: Mutex<Inner>,
-    queue: Arc<Mutex<Queue>>,
+    events: Arc<Delivery<Event>>,
     listeners: Mutex<Vec<(u64, Arc<dyn PositionListener>)>>,
     next_listener: Mutex<u64>,
 }
@@ -506,30 +537,39 @@ impl PositioningEngine {
         let floor_names: Vec<String> = site.floors().iter().map(|f| f.name.clone()).collect();
         let config = options.to_config(&site)?;
         let mut engine = Engine::new(Arc::new(site), config)?;
-        let queue = Arc::new(Mutex::new(Queue::default()));
-        engine.subscribe(Box::new(Collector { queue: Arc::clone(&queue), floor_names: floor_names.clone() }));
+        let events = Arc::new(Delivery::new());
+        engine
+            .subscribe(Box::new(Collector { events: Arc::clone(&events), floor_names: floor_names.clone() }));
         Ok(Arc::new(Self {
             inner: Mutex::new(Inner { engine, floor_names, latest: None }),
-            queue,
+            events,
             listeners: Mutex::new(Vec::new()),
             next_listener: Mutex::new(0),
         }))
     }
 
     /// Runs `f` on the engine under its lock, then delivers what it published to the
-    /// listeners with no lock held. A panic inside becomes `Internal` and leaves the engine
-    /// usable.
+    /// listeners with no lock held. A panic inside becomes `Internal`: the engine undoes an
+    /// epoch that panics, and what the call published is dropped, so the call had no effect.
     fn with_engine<T>(
         &self,
         f: impl FnOnce(&mut Inner) -> Result<T, PositioningError>,
     ) -> Result<T, PositioningError> {
         let result = {
             let mut inner = lock(&self.inner);
-            let result = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&mut inner)))
-                .unwrap_or_else(|_| Err(internal("engine")));
+            let result = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| f(&mut inner))) {
+                Ok(result) => {
+                    self.events.commit();
+                    result
+                }
+                Err(_) => {
+                    self.events.discard();
+                    Err(internal("engine"))
+                }
+            };
             // Queued under the engine's lock, so listeners hear it in the order of the calls.
             if let Err(e) = &result {
-                lock(&self.queue).events.push_back(Event::Error(e.to_string()));
+                self.events.push(Event::Error(e.to_string()));
             }
             result
         };
@@ -541,48 +581,16 @@ impl PositioningEngine {
     /// the listeners' `on_error` as the engine's own rejections are.
     fn reject(&self, reason: String) -> PositioningError {
         let error = PositioningError::InputRejected { reason };
-        lock(&self.queue).events.push_back(Event::Error(error.to_string()));
+        self.events.push(Event::Error(error.to_string()));
         self.deliver();
         error
     }
 
-    /// Delivers the queue to the listeners, oldest event first, with no lock held during a
-    /// call. One thread delivers at a time: a thread that finds another delivering leaves its
-    /// events to that one, which delivers until the queue is empty. So two threads' epochs
-    /// cannot reach a listener in the wrong order (nor a listener from two threads at once),
-    /// and a listener that calls the engine from its callback does not recurse: what its call
-    /// publishes is delivered after the current event. A listener subscribed during an event
-    /// hears the events after it; one cancelled during an event hears nothing more.
+    /// Delivers what was published to the listeners, oldest event first, one thread at a time
+    /// and with no lock held during a call ([`Delivery`]). A listener subscribed during an
+    /// event hears the events after it; one cancelled during an event hears nothing more.
     fn deliver(&self) {
-        {
-            let mut queue = lock(&self.queue);
-            if queue.delivering || queue.events.is_empty() {
-                return;
-            }
-            queue.delivering = true;
-        }
-        // Should anything below unwind, the next call takes over the delivery.
-        struct Delivering<'a>(&'a Mutex<Queue>, bool);
-        impl Drop for Delivering<'_> {
-            fn drop(&mut self) {
-                if self.1 {
-                    lock(self.0).delivering = false;
-                }
-            }
-        }
-        let mut delivering = Delivering(&self.queue, true);
-        loop {
-            let event = {
-                let mut queue = lock(&self.queue);
-                match queue.events.pop_front() {
-                    Some(event) => event,
-                    None => {
-                        queue.delivering = false;
-                        delivering.1 = false;
-                        return;
-                    }
-                }
-            };
+        self.events.deliver(|event| {
             let listeners = lock(&self.listeners).clone();
             for (id, listener) in &listeners {
                 // Cancelled by a callback earlier in this event.
@@ -600,7 +608,7 @@ impl PositioningEngine {
                     Err(_) => log::warn!("a position listener panicked"),
                 }
             }
-        }
+        });
     }
 }
 
@@ -667,13 +675,12 @@ impl PositioningEngine {
             });
         }
         let core = Scan { timestamp_ns: scan.timestamp_ns, readings };
-        let queue = Arc::clone(&self.queue);
+        let events = Arc::clone(&self.events);
         self.epoch(|engine| {
             fault_injection(core.timestamp_ns);
             let result = engine.push_scan(&core);
             if let Err(crate::InputError::NoKnownTransmitter { .. }) = result {
-                let coverage = StatusUpdate::NoSiteCoverage { timestamp_ns: core.timestamp_ns };
-                lock(&queue).events.push_back(Event::Status(coverage));
+                events.stage(Event::Status(StatusUpdate::NoSiteCoverage { timestamp_ns: core.timestamp_ns }));
             }
             result
         })

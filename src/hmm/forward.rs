@@ -21,27 +21,91 @@ pub enum FilterError {
 }
 
 /// The posterior P(s_t | observations so far) over N states.
-#[derive(Clone, Debug)]
+///
+/// A new posterior is computed in a scratch buffer and swapped in, so the one it replaces is
+/// still there: after [`checkpoint`](Self::checkpoint), [`rollback`](Self::rollback) brings
+/// it back at the cost of a pointer swap, not a copy of N values.
+#[derive(Clone)]
 pub struct ForwardFilter {
     posterior: Vec<f64>,
     predicted: Vec<f64>,
     weights: Vec<f64>,
     row: Vec<(u32, f64)>,
+    /// The posterior of the checkpoint, once something replaced it (`Saved::Kept`).
+    saved: Vec<f64>,
+    checkpoint: Saved,
+}
+
+/// Where the checkpoint's posterior is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Saved {
+    /// No checkpoint.
+    None,
+    /// A checkpoint, and the posterior has not changed since.
+    Current,
+    /// A checkpoint, and its posterior is in `saved`.
+    Kept,
+}
+
+/// The state only: the scratch buffers hold nothing a later step reads.
+impl std::fmt::Debug for ForwardFilter {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ForwardFilter").field("posterior", &self.posterior).finish_non_exhaustive()
+    }
 }
 
 impl ForwardFilter {
     /// A filter over `n` states with the uniform prior.
     pub fn new(n: usize) -> Self {
-        let mut filter =
-            Self { posterior: vec![0.0; n], predicted: vec![0.0; n], weights: vec![0.0; n], row: Vec::new() };
+        let mut filter = Self {
+            posterior: vec![0.0; n],
+            predicted: vec![0.0; n],
+            weights: vec![0.0; n],
+            row: Vec::new(),
+            saved: vec![0.0; n],
+            checkpoint: Saved::None,
+        };
         filter.reset();
         filter
     }
 
     /// Back to the uniform prior.
     pub fn reset(&mut self) {
+        if self.checkpoint == Saved::Current {
+            std::mem::swap(&mut self.posterior, &mut self.saved);
+            self.checkpoint = Saved::Kept;
+        }
         let n = self.posterior.len();
         self.posterior.fill(1.0 / n as f64);
+    }
+
+    /// Remembers the posterior, so that [`rollback`](Self::rollback) can return to it until
+    /// [`commit`](Self::commit).
+    pub fn checkpoint(&mut self) {
+        self.checkpoint = Saved::Current;
+    }
+
+    /// Forgets the checkpoint.
+    pub fn commit(&mut self) {
+        self.checkpoint = Saved::None;
+    }
+
+    /// Back to the posterior of the checkpoint, whatever happened since; nothing without one.
+    pub fn rollback(&mut self) {
+        if self.checkpoint == Saved::Kept {
+            std::mem::swap(&mut self.posterior, &mut self.saved);
+        }
+        self.checkpoint = Saved::None;
+    }
+
+    /// Makes `new` (one of the scratch buffers, holding the new posterior) the posterior. The
+    /// old posterior goes to `saved` if it is the checkpoint's, else to `new` as scratch.
+    fn replace(posterior: &mut Vec<f64>, new: &mut Vec<f64>, saved: &mut Vec<f64>, checkpoint: &mut Saved) {
+        std::mem::swap(posterior, new);
+        if *checkpoint == Saved::Current {
+            std::mem::swap(new, saved);
+            *checkpoint = Saved::Kept;
+        }
     }
 
     /// The current posterior; sums to 1.
@@ -53,9 +117,10 @@ impl ForwardFilter {
     pub fn predict(&mut self, transition: &dyn Transition) {
         predict(transition, &self.posterior, &mut self.predicted, &mut self.row);
         let total: f64 = self.predicted.iter().sum();
-        for (post, &p) in self.posterior.iter_mut().zip(&self.predicted) {
-            *post = p / total;
+        for p in self.predicted.iter_mut() {
+            *p /= total;
         }
+        Self::replace(&mut self.posterior, &mut self.predicted, &mut self.saved, &mut self.checkpoint);
     }
 
     /// One epoch: predict with `transition` (none at the first epoch, or when no time has
@@ -85,9 +150,10 @@ impl ForwardFilter {
                 total += *w;
             }
             if total > 1e-250 {
-                for (post, &w) in self.posterior.iter_mut().zip(&self.weights) {
-                    *post = w / total;
+                for w in self.weights.iter_mut() {
+                    *w /= total;
                 }
+                Self::replace(&mut self.posterior, &mut self.weights, &mut self.saved, &mut self.checkpoint);
                 return Ok(max_e + total.ln());
             }
         }
@@ -106,9 +172,10 @@ impl ForwardFilter {
             total += *w;
         }
         // total ≥ 1: the maximum contributes exp(0).
-        for (post, &w) in self.posterior.iter_mut().zip(&self.weights) {
-            *post = w / total;
+        for w in self.weights.iter_mut() {
+            *w /= total;
         }
+        Self::replace(&mut self.posterior, &mut self.weights, &mut self.saved, &mut self.checkpoint);
         Ok(max + total.ln())
     }
 }
@@ -180,6 +247,41 @@ mod tests {
         assert_eq!(filter.step(None, &[f64::NEG_INFINITY, f64::NAN]), Err(FilterError::Degenerate));
         assert_eq!(filter.posterior(), &before[..]);
         assert!(matches!(filter.step(None, &[0.0]), Err(FilterError::Length { .. })));
+    }
+
+    #[test]
+    fn rollback_returns_to_the_checkpoint_and_commit_keeps_the_step() {
+        let dense = Dense(vec![vec![0.9, 0.1], vec![0.2, 0.8]]);
+        let mut filter = ForwardFilter::new(2);
+        filter.step(None, &[-1.0, -2.0]).unwrap();
+        let before = filter.posterior().to_vec();
+        // Every way the posterior changes, the log-space path of `step` included.
+        filter.checkpoint();
+        filter.step(Some(&dense), &[-3.0, -0.5]).unwrap();
+        filter.predict(&dense);
+        filter.reset();
+        filter.step(Some(&dense), &[-800.0, -2000.0]).unwrap();
+        assert_ne!(filter.posterior(), &before[..]);
+        filter.rollback();
+        assert_eq!(filter.posterior(), &before[..]);
+        filter.checkpoint();
+        filter.reset();
+        filter.rollback();
+        assert_eq!(filter.posterior(), &before[..]);
+        filter.rollback(); // no checkpoint: nothing
+        assert_eq!(filter.posterior(), &before[..]);
+        // Committed, the step stays, and the filter goes on as one that never saved anything.
+        let mut twin = filter.clone();
+        filter.checkpoint();
+        filter.step(Some(&dense), &[-3.0, -0.5]).unwrap();
+        filter.commit();
+        filter.rollback();
+        twin.step(Some(&dense), &[-3.0, -0.5]).unwrap();
+        for e in [[-0.1, -4.0], [-2.0, -1.0]] {
+            filter.step(Some(&dense), &e).unwrap();
+            twin.step(Some(&dense), &e).unwrap();
+        }
+        assert_eq!(format!("{filter:?}"), format!("{twin:?}"));
     }
 
     proptest! {

@@ -6,7 +6,11 @@ use super::transition::{viterbi_step, Transition};
 use std::collections::VecDeque;
 
 /// The most likely state sequence over the last epochs.
-#[derive(Clone, Debug)]
+///
+/// After [`checkpoint`](Self::checkpoint), [`rollback`](Self::rollback) returns the window to
+/// it cheaply: the scores it replaces are swapped aside, not copied, and the epochs it drops
+/// are set aside until [`commit`](Self::commit) rather than recycled.
+#[derive(Clone)]
 pub struct ViterbiWindow {
     capacity: usize,
     /// max over paths of ln p(path, observations), shifted so that its maximum is 0.
@@ -17,6 +21,31 @@ pub struct ViterbiWindow {
     epochs: VecDeque<(u64, Vec<u32>)>,
     spare: Vec<Vec<u32>>,
     row: Vec<(u32, f64)>,
+    undo: Undo,
+}
+
+/// What [`ViterbiWindow::rollback`] needs.
+#[derive(Clone)]
+struct Undo {
+    active: bool,
+    /// How many of the checkpoint's epochs are still in the window (its oldest were dropped).
+    kept: usize,
+    /// The checkpoint's epochs dropped since, oldest first.
+    dropped: Vec<(u64, Vec<u32>)>,
+    /// The checkpoint's scores, once a step replaced them (`delta_saved`).
+    delta: Vec<f64>,
+    delta_saved: bool,
+}
+
+/// The state only: the scratch buffers hold nothing a later step reads.
+impl std::fmt::Debug for ViterbiWindow {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ViterbiWindow")
+            .field("capacity", &self.capacity)
+            .field("delta", &self.delta)
+            .field("epochs", &self.epochs)
+            .finish_non_exhaustive()
+    }
 }
 
 impl ViterbiWindow {
@@ -29,14 +58,78 @@ impl ViterbiWindow {
             epochs: VecDeque::with_capacity(capacity.max(1)),
             spare: Vec::new(),
             row: Vec::new(),
+            undo: Undo {
+                active: false,
+                kept: 0,
+                dropped: Vec::new(),
+                delta: vec![0.0; n],
+                delta_saved: false,
+            },
         }
     }
 
     /// Forgets every epoch.
     pub fn reset(&mut self) {
-        while let Some((_, back)) = self.epochs.pop_front() {
+        while !self.epochs.is_empty() {
+            self.drop_oldest();
+        }
+    }
+
+    fn drop_oldest(&mut self) {
+        let Some(oldest) = self.epochs.pop_front() else { return };
+        if self.undo.active && self.undo.kept > 0 {
+            self.undo.kept -= 1;
+            self.undo.dropped.push(oldest);
+        } else {
+            self.spare.push(oldest.1);
+        }
+    }
+
+    /// Makes `next` (holding the new scores) the scores; the old ones are kept for `rollback`
+    /// if they are the checkpoint's.
+    fn replace_delta(&mut self) {
+        std::mem::swap(&mut self.delta, &mut self.next);
+        if self.undo.active && !self.undo.delta_saved {
+            std::mem::swap(&mut self.next, &mut self.undo.delta);
+            self.undo.delta_saved = true;
+        }
+    }
+
+    /// Remembers the window, so that [`rollback`](Self::rollback) can return to it until
+    /// [`commit`](Self::commit).
+    pub fn checkpoint(&mut self) {
+        self.commit();
+        self.undo.active = true;
+        self.undo.kept = self.epochs.len();
+    }
+
+    /// Forgets the checkpoint.
+    pub fn commit(&mut self) {
+        for (_, back) in self.undo.dropped.drain(..) {
             self.spare.push(back);
         }
+        self.undo.active = false;
+        self.undo.delta_saved = false;
+    }
+
+    /// Back to the window of the checkpoint, whatever happened since; nothing without one.
+    pub fn rollback(&mut self) {
+        if !self.undo.active {
+            return;
+        }
+        while self.epochs.len() > self.undo.kept {
+            if let Some((_, back)) = self.epochs.pop_back() {
+                self.spare.push(back);
+            }
+        }
+        while let Some(epoch) = self.undo.dropped.pop() {
+            self.epochs.push_front(epoch);
+        }
+        if self.undo.delta_saved {
+            std::mem::swap(&mut self.delta, &mut self.undo.delta);
+        }
+        self.undo.active = false;
+        self.undo.delta_saved = false;
     }
 
     /// Epochs held.
@@ -52,7 +145,7 @@ impl ViterbiWindow {
     /// Bytes held by back-pointers and scores, for memory accounting.
     pub fn memory_bytes(&self) -> usize {
         let n = self.delta.len();
-        (self.epochs.len() + self.spare.len()) * n * 4 + 2 * n * 8
+        (self.epochs.len() + self.spare.len() + self.undo.dropped.len()) * n * 4 + 3 * n * 8
     }
 
     /// Adds an epoch: `transition` from the previous one (ignored for the first epoch of the
@@ -74,16 +167,16 @@ impl ViterbiWindow {
             // Nothing explains the observation: restart the window from it alone.
             self.spare.push(back);
             self.reset();
-            self.delta.fill(0.0);
+            self.next.fill(0.0);
+            self.replace_delta();
             return;
         }
-        for (d, &v) in self.delta.iter_mut().zip(&self.next) {
-            *d = if v.is_nan() { f64::NEG_INFINITY } else { v - max };
+        for v in self.next.iter_mut() {
+            *v = if v.is_nan() { f64::NEG_INFINITY } else { *v - max };
         }
+        self.replace_delta();
         if self.epochs.len() == self.capacity {
-            if let Some((_, old)) = self.epochs.pop_front() {
-                self.spare.push(old);
-            }
+            self.drop_oldest();
         }
         self.epochs.push_back((timestamp_ns, back));
     }
@@ -155,5 +248,42 @@ mod tests {
         }
         assert_eq!(short.len(), 2);
         assert_eq!(short.path().iter().map(|p| p.0).collect::<Vec<_>>(), vec![3, 4]);
+    }
+
+    #[test]
+    fn rollback_returns_to_the_checkpoint_and_commit_keeps_the_step() {
+        let dense = Dense(vec![vec![0.6, 0.3, 0.1], vec![0.2, 0.5, 0.3], vec![0.1, 0.1, 0.8]]);
+        let emissions = [[-0.1, -2.0, -3.0], [-1.5, -0.4, -2.0], [-2.0, -1.9, -0.3], [-0.2, -2.5, -0.9]];
+        let mut window = ViterbiWindow::new(3, 2);
+        window.step(0, &dense, &emissions[0]);
+        window.step(1, &dense, &emissions[1]);
+        let before = format!("{window:?}");
+        // A step into the full window drops its oldest epoch.
+        window.checkpoint();
+        window.step(2, &dense, &emissions[2]);
+        assert_ne!(format!("{window:?}"), before);
+        window.rollback();
+        assert_eq!(format!("{window:?}"), before);
+        // Nothing explains the observation: the window restarts; undone too.
+        window.checkpoint();
+        window.step(2, &dense, &[f64::NEG_INFINITY; 3]);
+        assert!(window.is_empty());
+        window.rollback();
+        assert_eq!(format!("{window:?}"), before);
+        assert_eq!(window.path().iter().map(|p| p.0).collect::<Vec<_>>(), vec![0, 1]);
+        // Committed, the step stays, and the window goes on as one that never saved anything.
+        let mut twin = window.clone();
+        window.checkpoint();
+        window.step(2, &dense, &emissions[2]);
+        window.commit();
+        window.rollback();
+        for (t, e) in emissions.iter().enumerate().skip(2) {
+            if t > 2 {
+                window.step(t as u64, &dense, e);
+            }
+            twin.step(t as u64, &dense, e);
+        }
+        assert_eq!(format!("{window:?}"), format!("{twin:?}"));
+        assert_eq!(window.memory_bytes(), twin.memory_bytes());
     }
 }

@@ -157,8 +157,8 @@ pub struct LongRunReport {
     pub states: usize,
     /// The Viterbi window's capacity, epochs (`EngineConfig::track_window_epochs`).
     pub track_window_capacity: usize,
-    /// Its bound in bytes: (capacity + 1 spare) × states × 4 (back-pointers) + 2 × states × 8
-    /// (scores).
+    /// Its bound in bytes: (capacity + 1 spare) × states × 4 (back-pointers) + 3 × states × 8
+    /// (scores: current, next, and the previous ones kept while an epoch runs).
     pub track_memory_bound_bytes: usize,
     /// Fixed lag, epochs (read from the window; no memory of its own).
     pub fixed_lag_epochs: usize,
@@ -257,7 +257,7 @@ fn radio_scan(scan: &Scan) -> ffi::RadioScan {
         .iter()
         .filter_map(|r| match &r.transmitter {
             TransmitterId::Wifi { bssid } => Some(ffi::WifiReading {
-                bssid: bssid.clone(),
+                bssid: bssid.clone().into(),
                 rssi_dbm: r.rssi_dbm,
                 age_ms: r.age_ns / 1_000_000,
             }),
@@ -404,7 +404,7 @@ pub fn run(
         hours: config.hours,
         states,
         track_window_capacity,
-        track_memory_bound_bytes: (track_window_capacity + 1) * states * 4 + 2 * states * 8,
+        track_memory_bound_bytes: (track_window_capacity + 1) * states * 4 + 3 * states * 8,
         fixed_lag_epochs: engine_config.fixed_lag_epochs,
         rss_1h_kb,
         rss_end_kb,

@@ -1124,6 +1124,12 @@ public func FfiConverterTypePositionListener_lower(_ value: PositionListener) ->
  * The positioning engine. Thread-safe: sensor threads and the scan receiver may call it at
  * once. Create it from a site file; feed it sensor batches and scans with timestamps on one
  * monotonic clock; read positions by polling or by subscribing a listener.
+ *
+ * Kotlin: a `String` argument holding a lone UTF-16 surrogate (`"\uD800"`, not text) cannot
+ * be encoded by uniffi's generated code. In a transmitter id it is replaced by `?` on the way
+ * in, so the scan throws `PositioningException.InputRejected`; in a constructor's `siteJson`
+ * or `path` it throws `java.nio.charset.CharacterCodingException` (a
+ * `MalformedInputException`) before the call reaches Waymark: no engine is made.
  */
 public protocol PositioningEngineProtocol: AnyObject, Sendable {
     
@@ -1182,6 +1188,12 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
  * The positioning engine. Thread-safe: sensor threads and the scan receiver may call it at
  * once. Create it from a site file; feed it sensor batches and scans with timestamps on one
  * monotonic clock; read positions by polling or by subscribing a listener.
+ *
+ * Kotlin: a `String` argument holding a lone UTF-16 surrogate (`"\uD800"`, not text) cannot
+ * be encoded by uniffi's generated code. In a transmitter id it is replaced by `?` on the way
+ * in, so the scan throws `PositioningException.InputRejected`; in a constructor's `siteJson`
+ * or `path` it throws `java.nio.charset.CharacterCodingException` (a
+ * `MalformedInputException`) before the call reaches Waymark: no engine is made.
  */
 open class PositioningEngine: PositioningEngineProtocol, @unchecked Sendable {
     fileprivate let handle: UInt64
@@ -1578,13 +1590,14 @@ public func FfiConverterTypeSubscription_lower(_ value: Subscription) -> UInt64 
  * Which one it is: with an `address`, a beacon whose `uuid` is empty or whose major and
  * minor are both 0 is identified by the address; otherwise by UUID, major and minor (the
  * address must still be valid). A reading with neither a UUID nor an address, or with one
- * that does not parse, makes `push_scan` throw `InputRejected`.
+ * that does not parse (in Kotlin, one holding a lone UTF-16 surrogate too), makes
+ * `push_scan` throw `InputRejected`.
  */
 public struct BeaconReading: Equatable, Hashable {
     /**
      * Proximity UUID, with or without hyphens; empty for a beacon known by its address only.
      */
-    public var uuid: String
+    public var uuid: TransmitterIdString
     /**
      * Major number.
      */
@@ -1605,14 +1618,14 @@ public struct BeaconReading: Equatable, Hashable {
      * The advertiser's MAC address (Android `ScanResult.getDevice().getAddress()`), any common
      * notation; `null` / `nil` or empty when unknown (iOS never reports it).
      */
-    public var address: String?
+    public var address: TransmitterIdString?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
     public init(
         /**
          * Proximity UUID, with or without hyphens; empty for a beacon known by its address only.
-         */uuid: String = "", 
+         */uuid: TransmitterIdString = "", 
         /**
          * Major number.
          */major: UInt16 = UInt16(0), 
@@ -1628,7 +1641,7 @@ public struct BeaconReading: Equatable, Hashable {
         /**
          * The advertiser's MAC address (Android `ScanResult.getDevice().getAddress()`), any common
          * notation; `null` / `nil` or empty when unknown (iOS never reports it).
-         */address: String? = nil) {
+         */address: TransmitterIdString? = nil) {
         self.uuid = uuid
         self.major = major
         self.minor = minor
@@ -1653,22 +1666,22 @@ public struct FfiConverterTypeBeaconReading: FfiConverterRustBuffer {
     public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> BeaconReading {
         return
             try BeaconReading(
-                uuid: FfiConverterString.read(from: &buf), 
+                uuid: FfiConverterTypeTransmitterIdString.read(from: &buf), 
                 major: FfiConverterUInt16.read(from: &buf), 
                 minor: FfiConverterUInt16.read(from: &buf), 
                 rssiDbm: FfiConverterDouble.read(from: &buf), 
                 ageMs: FfiConverterUInt64.read(from: &buf), 
-                address: FfiConverterOptionString.read(from: &buf)
+                address: FfiConverterOptionTypeTransmitterIdString.read(from: &buf)
         )
     }
 
     public static func write(_ value: BeaconReading, into buf: inout [UInt8]) {
-        FfiConverterString.write(value.uuid, into: &buf)
+        FfiConverterTypeTransmitterIdString.write(value.uuid, into: &buf)
         FfiConverterUInt16.write(value.major, into: &buf)
         FfiConverterUInt16.write(value.minor, into: &buf)
         FfiConverterDouble.write(value.rssiDbm, into: &buf)
         FfiConverterUInt64.write(value.ageMs, into: &buf)
-        FfiConverterOptionString.write(value.address, into: &buf)
+        FfiConverterOptionTypeTransmitterIdString.write(value.address, into: &buf)
     }
 }
 
@@ -2250,9 +2263,10 @@ public func FfiConverterTypeTrackPoint_lower(_ value: TrackPoint) -> RustBuffer 
  */
 public struct WifiReading: Equatable, Hashable {
     /**
-     * BSSID, any common notation.
+     * BSSID, any common notation. One that does not parse (in Kotlin, one holding a lone
+     * UTF-16 surrogate too) makes `push_scan` throw `InputRejected`.
      */
-    public var bssid: String
+    public var bssid: TransmitterIdString
     /**
      * Signal strength, dBm.
      */
@@ -2266,8 +2280,9 @@ public struct WifiReading: Equatable, Hashable {
     // declare one manually.
     public init(
         /**
-         * BSSID, any common notation.
-         */bssid: String, 
+         * BSSID, any common notation. One that does not parse (in Kotlin, one holding a lone
+         * UTF-16 surrogate too) makes `push_scan` throw `InputRejected`.
+         */bssid: TransmitterIdString, 
         /**
          * Signal strength, dBm.
          */rssiDbm: Double, 
@@ -2295,14 +2310,14 @@ public struct FfiConverterTypeWifiReading: FfiConverterRustBuffer {
     public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> WifiReading {
         return
             try WifiReading(
-                bssid: FfiConverterString.read(from: &buf), 
+                bssid: FfiConverterTypeTransmitterIdString.read(from: &buf), 
                 rssiDbm: FfiConverterDouble.read(from: &buf), 
                 ageMs: FfiConverterUInt64.read(from: &buf)
         )
     }
 
     public static func write(_ value: WifiReading, into buf: inout [UInt8]) {
-        FfiConverterString.write(value.bssid, into: &buf)
+        FfiConverterTypeTransmitterIdString.write(value.bssid, into: &buf)
         FfiConverterDouble.write(value.rssiDbm, into: &buf)
         FfiConverterUInt64.write(value.ageMs, into: &buf)
     }
@@ -2634,8 +2649,11 @@ enum PositioningError: Swift.Error, Equatable, Hashable, Foundation.LocalizedErr
          */reason: String
     )
     /**
-     * An input was rejected (out of order, empty, NaN, no known transmitter); the engine is
-     * unchanged and goes on.
+     * An input was rejected; the engine is unchanged and goes on. A scan or an advance whose
+     * time is not after the last epoch's; a scan with no readings, with an RSSI that is NaN,
+     * infinite, below -1000 dBm or above +100 dBm, with no transmitter the site knows, or with
+     * a malformed transmitter id: a BSSID, UUID or address that does not parse (in Kotlin, one
+     * holding a lone UTF-16 surrogate too), a beacon with neither a UUID nor an address.
      */
     case InputRejected(
         /**
@@ -2652,7 +2670,8 @@ enum PositioningError: Swift.Error, Equatable, Hashable, Foundation.LocalizedErr
          */reason: String
     )
     /**
-     * A bug in Waymark or in a listener: the call had no effect.
+     * A bug in Waymark or in a listener: the call had no effect (a scan or an advance that
+     * panicked half-way is undone, and no listener hears its position).
      */
     case Internal(
         /**
@@ -2990,30 +3009,6 @@ fileprivate struct FfiConverterOptionDouble: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
-    typealias SwiftType = String?
-
-    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
-        guard let value = value else {
-            writeInt(&buf, Int8(0))
-            return
-        }
-        writeInt(&buf, Int8(1))
-        FfiConverterString.write(value, into: &buf)
-    }
-
-    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
-        switch try readInt(&buf) as Int8 {
-        case 0: return nil
-        case 1: return try FfiConverterString.read(from: &buf)
-        default: throw UniffiInternalError.unexpectedOptionalTag
-        }
-    }
-}
-
-#if swift(>=5.8)
-@_documentation(visibility: private)
-#endif
 fileprivate struct FfiConverterOptionData: FfiConverterRustBuffer {
     typealias SwiftType = Data?
 
@@ -3134,6 +3129,30 @@ fileprivate struct FfiConverterOptionTypeTransitionKind: FfiConverterRustBuffer 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypeTransmitterIdString: FfiConverterRustBuffer {
+    typealias SwiftType = TransmitterIdString?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeTransmitterIdString.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeTransmitterIdString.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceTypeBeaconReading: FfiConverterRustBuffer {
     typealias SwiftType = [BeaconReading]
 
@@ -3230,6 +3249,46 @@ fileprivate struct FfiConverterSequenceTypeWifiReading: FfiConverterRustBuffer {
         return seq
     }
 }
+
+
+public typealias TransmitterIdString = String
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeTransmitterIdString: FfiConverter {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> TransmitterIdString {
+        return try FfiConverterString.read(from: &buf)
+    }
+
+    public static func write(_ value: TransmitterIdString, into buf: inout [UInt8]) {
+        return FfiConverterString.write(value, into: &buf)
+    }
+
+    public static func lift(_ value: RustBuffer) throws -> TransmitterIdString {
+        return try FfiConverterString.lift(value)
+    }
+
+    public static func lower(_ value: TransmitterIdString) -> RustBuffer {
+        return FfiConverterString.lower(value)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeTransmitterIdString_lift(_ value: RustBuffer) throws -> TransmitterIdString {
+    return try FfiConverterTypeTransmitterIdString.lift(value)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeTransmitterIdString_lower(_ value: TransmitterIdString) -> RustBuffer {
+    return FfiConverterTypeTransmitterIdString.lower(value)
+}
+
 /**
  * Sends Waymark's log records at `level` and above to `sink` (on Android, with no sink, to
  * logcat under the tag "waymark"). Safe to call again: the latest sink and level win.

@@ -66,9 +66,10 @@ class RobustnessTest {
     }
 
     /**
-     * A string with a lone surrogate is not valid UTF-16: uniffi's generated code throws
-     * CharacterCodingException before the call reaches Rust (the engine never sees it). True if
-     * `call` did that.
+     * A string with a lone surrogate is not valid UTF-16: uniffi's generated code for a `String`
+     * argument throws CharacterCodingException before the call reaches Rust (documented on
+     * `PositioningEngine` for the constructors; transmitter ids are converted instead, see
+     * [loneSurrogatesInIdsAreInputRejected]). True if `call` did that.
      */
     private fun notSent(call: () -> Unit): Boolean = try {
         call()
@@ -168,9 +169,8 @@ class RobustnessTest {
                 push(emptyList(), listOf(BeaconReading(uuid = s, major = 1u, minor = 2u, rssiDbm = -60.0)))
                 push(emptyList(), listOf(BeaconReading(rssiDbm = -60.0, address = s)))
             }
-            assertTrue(notSent { engine.pushScan(RadioScan(++t, listOf(WifiReading("\uD800", -60.0, 0uL)), emptyList())) })
-            val beacon = BeaconReading(rssiDbm = -60.0, address = "a\uDFFF")
-            assertTrue(notSent { engine.pushScan(RadioScan(++t, emptyList(), listOf(beacon))) })
+            push(listOf(WifiReading("\uD800", -60.0, 0uL)))
+            push(emptyList(), listOf(BeaconReading(rssiDbm = -60.0, address = "a\uDFFF")))
             push(listOf(WifiReading(known, -60.0, ULong.MAX_VALUE)))
             push(List(10_000) { WifiReading(known, -60.0 - it % 30, it.toULong()) }) // duplicates
             push(List(10_000) { WifiReading("0a:00:00:00:%02x:%02x".format(it / 256, it % 256), -70.0, 0uL) })
@@ -208,6 +208,56 @@ class RobustnessTest {
             subscription.close()
             subscription.close() // twice: nothing
         }
+    }
+
+    /**
+     * A transmitter id holding a lone UTF-16 surrogate is not text. uniffi's own String encoding
+     * threw CharacterCodingException for it, before the call reached Rust and after it had
+     * cloned the engine's handle, which then leaked: `close()` no longer freed the engine. Ids
+     * now go through the custom type TransmitterIdString (uniffi.toml), whose conversion puts
+     * `?` for a lone surrogate: the scan reaches the engine and is InputRejected like any
+     * malformed id, reported to onError, the engine unchanged and freed on close.
+     */
+    @Test
+    fun loneSurrogatesInIdsAreInputRejected() {
+        val engine = PositioningEngine(siteJson, EngineOptions())
+        val errors = WaymarkTest.Counter()
+        val subscription = engine.subscribe(errors)
+        assertTrue(replay(engine, walk.take(4)) > 0)
+        val before = engine.position()
+        val known = walk.first().wifi.first().bssid
+        var t = before!!.timestampNs
+        val bad: List<Pair<List<WifiReading>, List<BeaconReading>>> = listOf(
+            listOf(WifiReading("\uD800", -60.0, 0uL)) to emptyList(),
+            listOf(WifiReading(known.dropLast(1) + "\uDC00", -60.0, 0uL)) to emptyList(),
+            listOf(WifiReading(known, -60.0, 0uL), WifiReading("\uDBFF\uDBFF", -70.0, 0uL)) to emptyList(),
+            emptyList<WifiReading>() to listOf(BeaconReading(rssiDbm = -60.0, address = "a\uDFFF")),
+            emptyList<WifiReading>() to listOf(BeaconReading(uuid = "\uD83D", major = 1u, minor = 2u, rssiDbm = -60.0)),
+        )
+        for ((wifi, beacons) in bad) {
+            try {
+                engine.pushScan(RadioScan(++t, wifi, beacons))
+                fail("a scan with a lone surrogate in an id was accepted")
+            } catch (e: PositioningException.InputRejected) {
+                assertTrue(e.reason, e.reason.contains("?"))
+            }
+        }
+        assertEquals(bad.size, errors.errors.get())
+        assertEquals(before, engine.position())
+        // A valid surrogate pair passes as it is: no BSSID, but Waymark saw what was sent.
+        try {
+            engine.pushScan(RadioScan(++t, listOf(WifiReading("💥", -60.0, 0uL)), emptyList()))
+            fail("an emoji BSSID was accepted")
+        } catch (e: PositioningException.InputRejected) {
+            assertTrue(e.reason, e.reason.contains("💥"))
+        }
+        // Nothing leaked: closing the engine frees it, and with it the listener it held.
+        // (uniffi's handle map of Kotlin listeners is internal; this test is compiled with the
+        // bindings. Another test's engine freed meanwhile can only lower the count further.)
+        val listeners = FfiConverterTypePositionListener.handleMap.size
+        engine.close()
+        assertTrue(FfiConverterTypePositionListener.handleMap.size <= listeners - 1)
+        subscription.close()
     }
 
     @Test

@@ -199,8 +199,26 @@ class WaymarkTest {
             assertTrue(e.reason.isNotEmpty())
         }
         assertEquals(1, counter.errors.get())
-        engine.pushScan(RadioScan(10UL, wifi, emptyList()))
+        val position = engine.pushScan(RadioScan(10UL, wifi, emptyList()))
         assertEquals(1, counter.positions.get())
+        // A panic half-way through an epoch (this build, at ULong.MAX - 8, after the filter has
+        // stepped and the listeners' position was made) is undone: the same position, no
+        // position heard, the error heard; a scan and an advance alike.
+        for (call in listOf<() -> Unit>(
+            { engine.pushScan(RadioScan(ULong.MAX_VALUE - 8UL, wifi, emptyList())) },
+            { engine.advance(ULong.MAX_VALUE - 8UL) },
+        )) {
+            try {
+                call()
+                fail("the injected panic did not surface")
+            } catch (e: PositioningException.Internal) {
+            }
+        }
+        assertEquals(position, engine.position())
+        assertEquals(1, counter.positions.get())
+        assertEquals(3, counter.errors.get())
+        engine.pushScan(RadioScan(20UL, wifi, emptyList()))
+        assertEquals(2, counter.positions.get())
         subscription.cancel()
     }
 
