@@ -35,4 +35,17 @@ static char *read_file(const char *path, size_t *len) {
     return buf;
 }
 
+/* The site file named by the only argument, read whole (exits 2 on a wrong argument count,
+ * 1 if it cannot be read). */
+static inline char *site_argument(int argc, char **argv, size_t *len) {
+    if (argc != 2) {
+        fprintf(stderr, "usage: %s site.json\n", argv[0]);
+        exit(2);
+    }
+    char *json = read_file(argv[1], len);
+    CHECK(json != NULL, "read %s", argv[1]);
+    if (!json) exit(1);
+    return json;
+}
+
 #endif

@@ -170,14 +170,8 @@ static void replacing(waymark_engine *engine) {
 }
 
 int main(int argc, char **argv) {
-    if (argc != 2) {
-        fprintf(stderr, "usage: %s site.json\n", argv[0]);
-        return 2;
-    }
     size_t len = 0;
-    char *json = read_file(argv[1], &len);
-    CHECK(json != NULL, "read %s", argv[1]);
-    if (!json) return 1;
+    char *json = site_argument(argc, argv, &len);
     waymark_engine *engine = NULL;
     CHECK(waymark_engine_new((const uint8_t *)json, len, &engine) == WAYMARK_RESULT_OK, "site");
     free(json);
