@@ -19,6 +19,6 @@ pub use config::EngineConfig;
 pub use engine::{Engine, InputStats, Position, PositionListener, StatusEvent, SubscriptionId, TrackPoint};
 pub use error::{Error, InputError};
 pub use radio::{Reading, Salt, Scan, TransmitterId};
-pub use site::{Site, SiteError};
+pub use site::{Site, SiteError, Zone, ZoneKind};
 
 uniffi::setup_scaffolding!();
