@@ -294,3 +294,26 @@ fn the_history_is_bounded() {
     assert!(engine.history().is_empty());
     assert_eq!(EngineConfig::default().history_epochs, 500);
 }
+#[test]
+fn the_simulated_office_has_its_rooms_as_zones() {
+    let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
+    let site = &office.site;
+    let names: Vec<&str> = site.zones().iter().map(|z| z.name.as_str()).collect();
+    assert_eq!(names.len(), 12);
+    assert_eq!((names[0], names[1], names[11]), ("aisle", "room 1", "stair hall"));
+    for (i, s) in site.states().iter().enumerate() {
+        assert_eq!(site.zone_of(i), office.zone_at(s.position), "state {i} at {}", s.position);
+    }
+    let pseudo = site.with_pseudo_states(waymark::site::PSEUDO_SPACING_M);
+    assert!((0..pseudo.states().len()).all(|i| pseudo.zone_of(i).is_some()));
+    // Every epoch of a walk is in some zone.
+    assert!(office.walk(1, 100.0).epochs.iter().all(|e| e.zone.is_some()));
+}
+
+#[test]
+fn room_level_accuracy_on_simulated_walks() {
+    let experiment = waymark::sim::Experiment { walks: 5, ..waymark::sim::Experiment::default() };
+    let report = waymark::sim::run(&experiment).unwrap();
+    let hit = report.summary.zone_hit.unwrap();
+    assert!(hit > 0.8, "the right room in {:.1}% of epochs", 100.0 * hit);
+}
