@@ -134,6 +134,10 @@ pub struct Metrics {
     /// with zones.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub zone_hit: Option<f64>,
+    /// Share of points whose true position is in a zone (the rest are in none, and a most
+    /// likely zone of none is right there): the base rate `zone_hit` should be read against.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub in_zone: Option<f64>,
     /// Points scored.
     pub epochs: usize,
 }
@@ -151,6 +155,8 @@ pub struct Scored {
     pub floor_correct: bool,
     /// Whether the zone was right; `None` when not scored by zone.
     pub zone_correct: Option<bool>,
+    /// Whether the true position was in a zone; `None` when not scored by zone.
+    pub in_zone: Option<bool>,
 }
 
 impl Scored {
@@ -192,6 +198,7 @@ impl Metrics {
             accuracy_68_median_m: quantile(&radii, 0.5),
             floor_hit: share(&|p| p.floor_correct),
             zone_hit: super::zone_hit(points.iter().map(|p| p.zone_correct)),
+            in_zone: super::zone_hit(points.iter().map(|p| p.in_zone)),
             epochs: n,
         }
     }
@@ -272,12 +279,16 @@ pub fn score_zones(
     estimates: &[Estimate],
     zones: Option<&ZoneTruth>,
 ) -> (Vec<Scored>, Vec<Scored>) {
-    let scored = |e: &Estimate, (x, y): (f64, f64)| Scored {
-        error_m: (e.x - x).hypot(e.y - y),
-        accuracy_m: e.accuracy_m,
-        accuracy_95_m: e.accuracy_95_m,
-        floor_correct: e.floor == floor,
-        zone_correct: zones.map(|z| e.floor == floor && e.zone == z.zone_at(floor, x, y)),
+    let scored = |e: &Estimate, (x, y): (f64, f64)| {
+        let truth = zones.map(|z| z.zone_at(floor, x, y));
+        Scored {
+            error_m: (e.x - x).hypot(e.y - y),
+            accuracy_m: e.accuracy_m,
+            accuracy_95_m: e.accuracy_95_m,
+            floor_correct: e.floor == floor,
+            zone_correct: truth.map(|t| e.floor == floor && e.zone == t),
+            in_zone: truth.map(|t| t.is_some()),
+        }
     };
     let epochs =
         estimates.iter().filter_map(|e| trace.position_at(e.timestamp_ns).map(|p| scored(e, p))).collect();

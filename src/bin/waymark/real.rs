@@ -535,6 +535,13 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
                 m.epochs
             );
         }
+        if let Some(share) = report.configurations.values().find_map(|r| r.pooled.in_zone) {
+            println!(
+                "zone: the most likely zone is the zone of the state nearest the truth (or both none); \
+                 the truth was in a zone at {:.1}% of the scored points",
+                100.0 * share
+            );
+        }
     }
     ExitCode::SUCCESS
 }
