@@ -315,9 +315,12 @@ pub struct PositionEstimate {
     pub floor_probability: f64,
     /// The most likely zone's name (a room, a corridor): the zone holding the most posterior
     /// mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
-    /// than in any one.
+    /// than in any one. (The defaults here and below only keep code that builds estimates,
+    /// such as tests, compiling: the engine always sets both.)
+    #[uniffi(default = None)]
     pub zone: Option<String>,
     /// Probability of `zone` (of being in no zone when it is `null` / `nil`).
+    #[uniffi(default = 1.0)]
     pub zone_probability: f64,
     /// Radius of the 68% circle, m, as Android's `getAccuracy()` and iOS's
     /// `horizontalAccuracy`.
