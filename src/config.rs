@@ -166,6 +166,11 @@ pub struct EngineConfig {
     /// ([`SiteError::SaltRequired`](crate::SiteError::SaltRequired),
     /// [`SiteError::WrongSalt`](crate::SiteError::WrongSalt)).
     pub site_salt: Option<crate::radio::Salt>,
+    /// Epochs kept in the engine's history ([`Engine::history`](crate::Engine::history)) for a
+    /// later learning pass, with the user's feedback: 500, the length of the observation
+    /// sequences El Gemayel et al. learn from with feedback (§IV-C: "observation sequences of
+    /// length 500"). 0 keeps none.
+    pub history_epochs: usize,
 }
 
 impl Default for EngineConfig {
@@ -189,6 +194,7 @@ impl Default for EngineConfig {
             accuracy_mass: 0.68,
             site_calibration: true,
             site_salt: None,
+            history_epochs: 500,
         }
     }
 }

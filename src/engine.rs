@@ -7,6 +7,8 @@
 
 use crate::config::{EngineConfig, TransitionModel};
 use crate::error::{Error, InputError};
+use crate::fix::{self, PositionFix};
+use crate::history::{EpochInput, EpochRecord, History};
 use crate::hmm::{
     estimate, ForwardFilter, HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach,
     ViterbiWindow,
@@ -15,7 +17,7 @@ use crate::radio::{Scan, ScanHasher};
 use crate::sensors::{
     BatchReport, MdiScenario, MotionState, MotionStats, MotionTracker, MotionUpdate, SensorSample,
 };
-use crate::site::{ReachTable, Site};
+use crate::site::{most_likely_zone, ReachTable, Site};
 use std::sync::Arc;
 
 /// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
@@ -40,6 +42,12 @@ pub struct Position {
     pub floor: usize,
     /// Posterior probability of that floor.
     pub floor_probability: f64,
+    /// The most likely zone, an index into the site's zones: the zone holding the most
+    /// posterior mass, or `None` when the site has no zones or more mass lies outside every
+    /// zone than in any one of them.
+    pub zone: Option<usize>,
+    /// Posterior probability of `zone` (of being in no zone when it is `None`).
+    pub zone_probability: f64,
     /// East-ish coordinate in the site's metric frame, m.
     pub x: f64,
     /// North-ish coordinate in the site's metric frame, m.
@@ -157,6 +165,16 @@ pub struct InputStats {
     /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
     /// when no state could explain a scan.
     pub filter_restarts: u64,
+    /// Position fixes that made an epoch ([`Engine::push_fix`]).
+    pub fixes_accepted: u64,
+    /// Position fixes rejected: a timestamp not after the last epoch, a NaN or infinite
+    /// coordinate, an accuracy not > 0, an unknown floor, or too far from every state.
+    pub fixes_rejected: u64,
+    /// User feedback taken ([`Engine::confirm_zone`], [`Engine::confirm_position`]).
+    pub feedback_accepted: u64,
+    /// User feedback rejected: a timestamp before the last epoch, an unknown zone or floor, a
+    /// NaN or infinite coordinate, a radius not > 0, or no state within the radius.
+    pub feedback_rejected: u64,
 }
 
 /// Everything an engine holds that decides its later answers, for tests that check a call
@@ -179,6 +197,8 @@ pub struct EngineSnapshot {
     pub subscriptions: (Vec<SubscriptionId>, u64),
     /// `Debug` of the forward filter, the Viterbi window and the motion tracker.
     pub internals: String,
+    /// The epoch history with its feedback.
+    pub history: Vec<EpochRecord>,
 }
 
 /// A positioning session on one site.
@@ -206,6 +226,10 @@ pub struct Engine {
     id_hasher: Option<ScanHasher>,
     /// What the running epoch may change, as it was before (see [`Engine::atomically`]).
     undo: Undo,
+    /// Posterior mass per zone, recomputed at each epoch.
+    zone_mass: Vec<f64>,
+    /// Recent epochs and the user's feedback, for a later learning pass.
+    history: History,
 }
 
 /// What an epoch changes besides the filter and the Viterbi window, which keep their own
@@ -230,6 +254,7 @@ impl Engine {
         let reach = ReachTable::build(&site, config.reach_radius_m);
         let rssi_weight = config.rssi_weight_for(&site);
         let accuracy_scale = config.accuracy_scale_for(&site);
+        let site_zones = site.zones().len();
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,
             viterbi: ViterbiWindow::new(n, config.track_window_epochs),
@@ -247,6 +272,8 @@ impl Engine {
             rssi_weight,
             accuracy_scale,
             id_hasher,
+            zone_mass: vec![0.0; site_zones],
+            history: History::new(config.history_epochs),
             config,
             undo: Undo::default(),
         })
@@ -270,6 +297,21 @@ impl Engine {
     /// The posterior over the site's states.
     pub fn posterior(&self) -> &[f64] {
         self.filter.posterior()
+    }
+
+    /// Posterior probability of each of the site's zones (the sum of the state posterior over
+    /// its states), by zone index; empty for a site without zones. The rest of the mass,
+    /// 1 − the sum, is outside every zone.
+    pub fn zone_posterior(&self) -> Vec<f64> {
+        let mut out = vec![0.0; self.site.zones().len()];
+        self.site.zone_mass(self.filter.posterior(), &mut out);
+        out
+    }
+
+    /// The last epochs (at most `history_epochs`), oldest first, each with the states the user
+    /// confirmed at it, if any: input for a later learning pass.
+    pub fn history(&self) -> &std::collections::VecDeque<EpochRecord> {
+        self.history.records()
     }
 
     /// Counts of accepted and dropped input.
@@ -298,6 +340,7 @@ impl Engine {
             stats: self.stats.clone(),
             subscriptions: (self.listeners.iter().map(|(id, _)| *id).collect(), self.next_subscription),
             internals: format!("{:?}\n{:?}\n{:?}", self.filter, self.viterbi, self.tracker),
+            history: self.history.records().iter().cloned().collect(),
         }
     }
 
@@ -379,6 +422,11 @@ impl Engine {
                 InputError::RssiTooHigh { .. } => &mut self.stats.scans_rssi_too_high,
                 InputError::NoKnownTransmitter { .. } => &mut self.stats.scans_no_known_transmitter,
                 InputError::InvalidMotion { .. } => &mut self.stats.scans_invalid_motion,
+                // Not produced by a scan (fixes and feedback only).
+                InputError::UnknownZone { .. }
+                | InputError::UnknownFloor { .. }
+                | InputError::InvalidValue { .. }
+                | InputError::OutsideSite { .. } => &mut self.stats.scans_invalid_motion,
             };
             *counter += 1;
             log::debug!("scan rejected: {e}");
@@ -427,8 +475,126 @@ impl Engine {
             let motion = engine.motion_until(timestamp_ns, motion);
             engine.ln_emission.fill(0.0);
             engine.stats.motion_epochs += 1;
-            engine.run_epoch(timestamp_ns, None, &motion)
+            engine.run_epoch(timestamp_ns, EpochInput::Motion, None, &motion)
         }))
+    }
+
+    /// A position from another positioning system (GNSS near an entrance, WiFi RTT, UWB): one
+    /// epoch, with the motion the inertial sensors measured since the previous one, whose
+    /// observation is the fix, a Gaussian around each state's position (El Gemayel et al.
+    /// §II-C/D, eq. 7; σ from `accuracy_m`, see [`fix::sigma_m`]). A precise fix pulls the
+    /// estimate to it; a vague one barely moves it. Rejected, changing nothing but
+    /// `fixes_rejected`: a timestamp not after the last epoch, a NaN or infinite coordinate, an
+    /// accuracy not > 0, an unknown floor, or a fix farther from every state than its own
+    /// error allows ([`fix::FIX_GATE_MASS`]).
+    pub fn push_fix(&mut self, fix: &PositionFix) -> Result<Position, InputError> {
+        let result = self.fix_epoch(fix);
+        if let Err(e) = &result {
+            self.stats.fixes_rejected += 1;
+            log::debug!("position fix rejected: {e}");
+        }
+        result
+    }
+
+    fn fix_epoch(&mut self, fix: &PositionFix) -> Result<Position, InputError> {
+        self.check_time(fix.timestamp_ns)?;
+        fix::ln_likelihood(&self.site, fix, &mut self.ln_emission)?;
+        Ok(self.atomically(true, |engine| {
+            let motion = engine.motion_until(fix.timestamp_ns, None);
+            engine.stats.fixes_accepted += 1;
+            engine.run_epoch(fix.timestamp_ns, EpochInput::Fix(*fix), None, &motion)
+        }))
+    }
+
+    /// User feedback: "I am in this zone" at `timestamp_ns` (El Gemayel et al. §IV-C). The
+    /// posterior is zeroed outside the zone's states and renormalised. At the time of the
+    /// latest epoch it pins that epoch (the position the user was shown); later, it is an
+    /// epoch of its own, with the motion since the previous one. Recorded in the
+    /// [`history`](Self::history) for a learning pass. Rejected, changing nothing but
+    /// `feedback_rejected`: a time before the latest epoch, or no such zone.
+    pub fn confirm_zone(&mut self, timestamp_ns: u64, zone: usize) -> Result<Position, InputError> {
+        let states = match self.site.zones().get(zone) {
+            Some(z) => Ok(z.states.clone()),
+            None => Err(InputError::UnknownZone { zone: format!("#{zone}") }),
+        };
+        self.feedback(timestamp_ns, states)
+    }
+
+    /// [`confirm_zone`](Self::confirm_zone) by the zone's name.
+    pub fn confirm_zone_named(&mut self, timestamp_ns: u64, name: &str) -> Result<Position, InputError> {
+        let states = match self.site.zone_index(name) {
+            Some(z) => Ok(self.site.zones()[z].states.clone()),
+            None => Err(InputError::UnknownZone { zone: name.to_owned() }),
+        };
+        self.feedback(timestamp_ns, states)
+    }
+
+    /// User feedback: "I am within `radius_m` of (x, y) on `floor`" (a tap on the map), as
+    /// [`confirm_zone`](Self::confirm_zone) with the states within the radius. Also rejected:
+    /// an unknown floor, a NaN or infinite coordinate, a radius not > 0, or no state within it.
+    pub fn confirm_position(
+        &mut self,
+        timestamp_ns: u64,
+        x: f64,
+        y: f64,
+        floor: usize,
+        radius_m: f64,
+    ) -> Result<Position, InputError> {
+        let states = fix::states_within(&self.site, x, y, floor, radius_m);
+        self.feedback(timestamp_ns, states)
+    }
+
+    fn feedback(
+        &mut self,
+        timestamp_ns: u64,
+        states: Result<Vec<u32>, InputError>,
+    ) -> Result<Position, InputError> {
+        let result = self.feedback_epoch(timestamp_ns, states);
+        if let Err(e) = &result {
+            self.stats.feedback_rejected += 1;
+            log::debug!("feedback rejected: {e}");
+        }
+        result
+    }
+
+    fn feedback_epoch(
+        &mut self,
+        timestamp_ns: u64,
+        states: Result<Vec<u32>, InputError>,
+    ) -> Result<Position, InputError> {
+        let latest = self.latest.clone().filter(|p| p.timestamp_ns == timestamp_ns);
+        if latest.is_none() {
+            self.check_time(timestamp_ns)?;
+        }
+        let states = states?;
+        // §IV-C: the forward variable is zeroed outside the known states.
+        self.ln_emission.fill(f64::NEG_INFINITY);
+        for &s in &states {
+            self.ln_emission[s as usize] = 0.0;
+        }
+        Ok(match latest {
+            Some(latest) => self.atomically(false, |engine| {
+                engine.stats.feedback_accepted += 1;
+                engine.pin_latest(latest, &states)
+            }),
+            None => self.atomically(true, |engine| {
+                let motion = engine.motion_until(timestamp_ns, None);
+                engine.stats.feedback_accepted += 1;
+                engine.run_epoch(timestamp_ns, EpochInput::Feedback, Some(states), &motion)
+            }),
+        })
+    }
+
+    /// Feedback at the time of the latest epoch: its posterior and Viterbi scores are weighted
+    /// by `ln_emission` (no prediction), and its position revised. Feedback that contradicts
+    /// earlier feedback at the same epoch wins: the posterior restarts on its states.
+    fn pin_latest(&mut self, latest: Position, states: &[u32]) -> Position {
+        if self.filter.step(None, &self.ln_emission).is_err() {
+            self.restart();
+        }
+        self.viterbi.pin(&self.ln_emission);
+        let position = self.locate(latest);
+        self.conclude(position, |history, p| history.pin_latest(states, p.floor, p.x, p.y))
     }
 
     /// Runs the part of an accepted epoch that changes the engine so that it happens whole or
@@ -528,16 +694,46 @@ impl Engine {
             engine.stats.readings_unknown += dropped[0];
             engine.stats.readings_duplicate += dropped[1];
             engine.stats.readings_stale += dropped[2];
-            engine.run_epoch(scan.timestamp_ns, Some(()), &motion)
+            engine.run_epoch(scan.timestamp_ns, EpochInput::Scan, None, &motion)
         }))
     }
 
-    /// Prediction, update, estimate, publication. `ln_emission` holds the observation (zeros
-    /// when `scan` is `None`).
-    fn run_epoch(&mut self, timestamp_ns: u64, scan: Option<()>, motion: &MotionUpdate) -> Position {
+    /// Prediction, update, estimate, publication, history. `ln_emission` holds the observation
+    /// (zeros for motion alone); `allowed` is the user's feedback at this epoch.
+    fn run_epoch(
+        &mut self,
+        timestamp_ns: u64,
+        input: EpochInput,
+        allowed: Option<Vec<u32>>,
+        motion: &MotionUpdate,
+    ) -> Position {
         let dt_s = self.last_epoch_ns.map(|last| (timestamp_ns - last) as f64 * 1e-9);
         let evidence = self.forward(timestamp_ns, dt_s, motion);
         self.last_epoch_ns = Some(timestamp_ns);
+        let position = self.locate(Position {
+            timestamp_ns,
+            floor: 0,
+            floor_probability: 0.0,
+            zone: None,
+            zone_probability: 0.0,
+            x: 0.0,
+            y: 0.0,
+            accuracy_m: 0.0,
+            accuracy_95_m: 0.0,
+            heading_rad: motion.heading_rad,
+            heading_accuracy_rad: motion.heading_rad.map(|_| motion.heading_sigma_rad),
+            motion_state: motion.motion_state,
+            scenario: motion.scenario,
+            steps: motion.steps,
+            radio_log_evidence: (input == EpochInput::Scan).then_some(evidence),
+        });
+        self.conclude(position, |history, p| {
+            history.push(EpochRecord { timestamp_ns, input, floor: p.floor, x: p.x, y: p.y, allowed })
+        })
+    }
+
+    /// `position` with the estimate from the current posterior: floor, (x, y), radii, zone.
+    fn locate(&mut self, position: Position) -> Position {
         let e = estimate(
             &self.site,
             self.filter.posterior(),
@@ -545,27 +741,35 @@ impl Engine {
             self.config.accuracy_mass,
             &mut self.scratch,
         );
-        let position = Position {
-            timestamp_ns,
+        let (zone, zone_probability) = if self.site.zones().is_empty() {
+            (None, 1.0)
+        } else {
+            let outside = self.site.zone_mass(self.filter.posterior(), &mut self.zone_mass);
+            most_likely_zone(&self.zone_mass, outside)
+        };
+        Position {
             floor: e.floor,
             floor_probability: e.floor_probability,
+            zone,
+            zone_probability,
             x: e.position.x,
             y: e.position.y,
             accuracy_m: e.accuracy_m * self.accuracy_scale[0],
             accuracy_95_m: (e.accuracy_95_m * self.accuracy_scale[1])
                 .max(e.accuracy_m * self.accuracy_scale[0]),
-            heading_rad: motion.heading_rad,
-            heading_accuracy_rad: motion.heading_rad.map(|_| motion.heading_sigma_rad),
-            motion_state: motion.motion_state,
-            scenario: motion.scenario,
-            steps: motion.steps,
-            radio_log_evidence: scan.map(|_| evidence),
-        };
+            ..position
+        }
+    }
+
+    /// Publishes `position`, makes it the latest and records it in the history, last: nothing
+    /// after a possible panic, so the history needs no undo.
+    fn conclude(&mut self, position: Position, record: impl FnOnce(&mut History, &Position)) -> Position {
         self.publish(&position);
-        if cfg!(feature = "fault-injection") && timestamp_ns == FAULT_INJECTION_MID_EPOCH_NS {
-            panic!("fault injected in the middle of the epoch at {timestamp_ns}");
+        if cfg!(feature = "fault-injection") && position.timestamp_ns == FAULT_INJECTION_MID_EPOCH_NS {
+            panic!("fault injected in the middle of the epoch at {}", position.timestamp_ns);
         }
         self.latest = Some(position.clone());
+        record(&mut self.history, &position);
         position
     }
 

@@ -69,4 +69,36 @@ pub enum InputError {
         /// Readings older than the age limit.
         stale: usize,
     },
+    /// User feedback named a zone the site does not have.
+    #[error("the site has no zone {zone:?}")]
+    UnknownZone {
+        /// The zone as given: its name, or `#index`.
+        zone: String,
+    },
+    /// A floor index the site does not have (a position fix's or a confirmed position's).
+    #[error("floor {floor} does not exist (the site has {floors} floors)")]
+    UnknownFloor {
+        /// The floor given.
+        floor: usize,
+        /// How many floors the site has.
+        floors: usize,
+    },
+    /// A position fix or a confirmed position with a NaN or infinite coordinate, or an
+    /// accuracy or radius that is not finite and > 0.
+    #[error("invalid {field}: {value}")]
+    InvalidValue {
+        /// Which argument.
+        field: &'static str,
+        /// Its value.
+        value: f64,
+    },
+    /// A position fix too far from every state for the phone to be on the site (beyond the
+    /// fix's own error bound), or a confirmed position with no state within its radius.
+    #[error("the position is {distance_m:.1} m from the site's nearest state (at most {limit_m:.1} m)")]
+    OutsideSite {
+        /// Distance from the position to the nearest state (on the floor given, if any), m.
+        distance_m: f64,
+        /// The most it may be, m.
+        limit_m: f64,
+    },
 }

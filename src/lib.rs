@@ -7,6 +7,8 @@ pub mod engine;
 pub mod error;
 pub mod eval;
 pub mod ffi;
+pub mod fix;
+pub mod history;
 pub mod hmm;
 pub mod io;
 pub mod radio;
@@ -18,7 +20,8 @@ pub mod survey;
 pub use config::EngineConfig;
 pub use engine::{Engine, InputStats, Position, PositionListener, StatusEvent, SubscriptionId, TrackPoint};
 pub use error::{Error, InputError};
+pub use fix::PositionFix;
 pub use radio::{Reading, Salt, Scan, TransmitterId};
-pub use site::{Site, SiteError};
+pub use site::{Site, SiteError, Zone, ZoneKind};
 
 uniffi::setup_scaffolding!();

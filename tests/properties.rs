@@ -1,20 +1,24 @@
 //! Property tests of the engine's promises (issue 7), on arbitrary sequences of calls: IMU
 //! batches with any timestamps (backwards, duplicate, near `u64::MAX`) and any values (NaN,
 //! ±inf, huge), scans (empty, duplicated and unknown transmitters, malformed ids, NaN and
-//! extreme RSSI, huge ages), `advance`, and reads. After every call, on the core [`Engine`]
-//! and on the FFI [`PositioningEngine`]:
+//! extreme RSSI, huge ages), `advance`, position fixes (anywhere, any accuracy, any floor),
+//! user feedback (any zone, any circle, at the latest epoch's time or later or earlier), and
+//! reads. After every call, on the core [`Engine`] and on the FFI [`PositioningEngine`]:
 //!
 //! - the posterior is a distribution: finite, ≥ 0, sums to 1 ± 1e-9;
 //! - no NaN or infinity in any position, estimate or track point that leaves the engine;
 //! - the estimate is on the site: a valid floor, inside the bounding box of that floor's
 //!   states grown by the site's spacing; `accuracy_m` and `accuracy_95_m` finite and > 0;
+//! - the zone is one of the site's, or none, and its probability is what the zone posterior
+//!   (itself a sub-distribution) says;
 //! - a rejected call (one that returns `Err`) leaves the engine's state as it was;
 //! - reads change nothing, and listeners hear exactly one position per accepted epoch.
 //!
 //! "State" is everything in [`waymark::engine::EngineSnapshot`] except `InputStats`: the
-//! rejection counters are bookkeeping of rejections, so a rejected scan or advance must change
-//! exactly its own counter by one and nothing else (checked separately), while every later
-//! answer of the engine is decided by the rest, which must be identical.
+//! rejection counters are bookkeeping of rejections, so a rejected scan, advance, fix or
+//! feedback must change exactly its own counter by one and nothing else (checked separately),
+//! while every later answer of the engine is decided by the rest (the epoch history included),
+//! which must be identical.
 
 mod common;
 
@@ -23,14 +27,15 @@ use std::sync::{Arc, LazyLock, Mutex};
 use waymark::config::TransitionModel;
 use waymark::engine::{EngineSnapshot, StatusEvent};
 use waymark::ffi::uniffi::{
-    BeaconReading, EngineOptions, MotionSample, PositionEstimate, PositionListener as FfiListener,
-    PositioningEngine, PositioningError, RadioScan, StatusUpdate, TransitionKind, WifiReading,
+    BeaconReading, EngineOptions, MotionSample, PositionEstimate, PositionFix as FfiFix,
+    PositionListener as FfiListener, PositioningEngine, PositioningError, RadioScan, StatusUpdate,
+    TransitionKind, WifiReading,
 };
 use waymark::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
 use waymark::sim::{imu, Office, OfficeConfig};
 use waymark::{
-    Engine, EngineConfig, InputError, InputStats, Position, PositionListener, Reading, Scan, Site,
-    TrackPoint, TransmitterId,
+    Engine, EngineConfig, InputError, InputStats, Position, PositionFix, PositionListener, Reading, Scan,
+    Site, TrackPoint, TransmitterId, Zone, ZoneKind,
 };
 
 const SECOND: u64 = 1_000_000_000;
@@ -69,7 +74,8 @@ impl Fixture {
     }
 }
 
-/// The simulated office (one floor, 81 states) and the two-floor corridor of `tests/common`.
+/// The simulated office (one floor, 81 states, 12 zones) and the two-floor corridor of
+/// `tests/common` with three zones, one state in none.
 static FIXTURES: LazyLock<[Fixture; 2]> = LazyLock::new(|| {
     let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
     let walk = office.walk(11, 40.0);
@@ -79,7 +85,14 @@ static FIXTURES: LazyLock<[Fixture; 2]> = LazyLock::new(|| {
         .iter()
         .map(|e| e.scan.readings.iter().map(|r| (index(&r.transmitter), r.rssi_dbm)).collect())
         .collect();
-    let two = common::two_floor_site();
+    let zone = |name: &str, states: Vec<u32>| Zone { name: name.into(), kind: ZoneKind::Room, states };
+    let two = common::two_floor_site()
+        .with_zones(vec![
+            zone("west", vec![0, 1]),
+            zone("east", vec![3, 4]),
+            zone("upstairs", (5..10).collect()),
+        ])
+        .unwrap();
     let two_scans = (0..2)
         .flat_map(|f| (0..5).map(move |k| (f, 3.0 * k as f64)))
         .map(|(f, x)| (0..3).map(|t| (3 * f + t, -40.0 - 4.0 * (x - 6.0 * t as f64).abs())).collect())
@@ -156,8 +169,34 @@ enum Call {
     /// (`push_scan_with_motion`, `advance_with_motion`; the FFI has neither and uses the
     /// engine's own tracker).
     WithMotion { when: When, scan: Option<usize>, motion: MotionUpdate },
+    /// A position fix near state `near` (mod the states), `offset` m off, or at junk
+    /// coordinates.
+    Fix { when: When, at: Place, floor: Option<usize>, accuracy_m: f64 },
+    /// Feedback: "I am in this zone" (an index past the site's zones, or a junk name, is
+    /// unknown).
+    ConfirmZone { when: When, zone: ZoneRef },
+    /// Feedback: "I am within `radius_m` of here".
+    ConfirmPosition { when: When, at: Place, floor: usize, radius_m: f64 },
     /// Every read.
     Read,
+}
+
+/// Where a fix or a confirmed position is.
+#[derive(Clone, Copy, Debug)]
+enum Place {
+    /// State `k` (mod the states) moved by (dx, dy) m.
+    Near(usize, f64, f64),
+    /// Anywhere, NaN and infinities included.
+    At(f64, f64),
+}
+
+/// A zone named in feedback.
+#[derive(Clone, Debug)]
+enum ZoneRef {
+    /// By index; past the site's zones is unknown.
+    Index(usize),
+    /// By a name, probably unknown.
+    Name(String),
 }
 
 fn delta() -> impl Strategy<Value = u64> {
@@ -243,8 +282,25 @@ fn reading() -> impl Strategy<Value = ReadingSpec> {
     (who, rssi(), age()).prop_map(|(who, rssi_dbm, age_ns)| ReadingSpec { who, rssi_dbm, age_ns })
 }
 
+fn place() -> impl Strategy<Value = Place> {
+    prop_oneof![
+        6 => (any::<usize>(), -6.0..6.0f64, -6.0..6.0f64).prop_map(|(k, dx, dy)| Place::Near(k, dx, dy)),
+        1 => (value(), value()).prop_map(|(x, y)| Place::At(x, y)),
+    ]
+}
+
+fn distance() -> impl Strategy<Value = f64> {
+    prop_oneof![8 => 0.2..30.0f64, 1 => value(), 1 => Just(0.0), 1 => Just(1e5), 1 => Just(1e7)]
+}
+
 fn call() -> impl Strategy<Value = Call> {
     prop_oneof![
+        2 => (when(), place(), proptest::option::of(0..3usize), distance())
+            .prop_map(|(when, at, floor, accuracy_m)| Call::Fix { when, at, floor, accuracy_m }),
+        2 => (when(), prop_oneof![4 => (0..14usize).prop_map(ZoneRef::Index), 1 => text().prop_map(ZoneRef::Name)])
+            .prop_map(|(when, zone)| Call::ConfirmZone { when, zone }),
+        1 => (when(), place(), 0..3usize, distance())
+            .prop_map(|(when, at, floor, radius_m)| Call::ConfirmPosition { when, at, floor, radius_m }),
         3 => (0..3usize, proptest::collection::vec((when(), [value(), value(), value()]), 0..12))
             .prop_map(|(stream, samples)| Call::Imu { stream, samples }),
         3 => (0..3000u64).prop_map(|ms| Call::Walk { ms }),
@@ -394,6 +450,8 @@ fn check_optional(value: Option<f64>, what: &str) -> Result<(), TestCaseError> {
 
 fn check_position(f: &Fixture, p: &Position) -> Result<(), TestCaseError> {
     check_on_site(f, p.floor, p.x, p.y, "position")?;
+    prop_assert!(p.zone.map_or(true, |z| z < f.site.zones().len()), "zone {:?}", p.zone);
+    prop_assert!((0.0..=1.0 + 1e-9).contains(&p.zone_probability), "zone_probability {}", p.zone_probability);
     check_accuracy(p.accuracy_m, p.accuracy_95_m)?;
     prop_assert!(
         (0.0..=1.0 + 1e-9).contains(&p.floor_probability),
@@ -420,6 +478,8 @@ fn check_estimate(f: &Fixture, p: &PositionEstimate) -> Result<(), TestCaseError
     );
     check_optional(p.heading_deg, "heading_deg")?;
     check_optional(p.heading_accuracy_deg, "heading_accuracy_deg")?;
+    prop_assert!(p.zone.as_ref().map_or(true, |name| f.site.zone_index(name).is_some()), "zone {:?}", p.zone);
+    prop_assert!((0.0..=1.0 + 1e-9).contains(&p.zone_probability), "zone_probability {}", p.zone_probability);
     Ok(())
 }
 
@@ -439,9 +499,22 @@ fn check_track(f: &Fixture, track: &[TrackPoint], last_epoch_ns: Option<u64>) ->
 fn check_engine(f: &Fixture, engine: &Engine) -> Result<(), TestCaseError> {
     check_posterior(engine.posterior())?;
     let last = engine.snapshot().last_epoch_ns;
+    let zones = engine.zone_posterior();
+    prop_assert_eq!(zones.len(), f.site.zones().len());
+    prop_assert!(zones.iter().all(|z| (0.0..=1.0 + 1e-9).contains(z)), "{:?}", zones);
+    let outside = 1.0 - zones.iter().sum::<f64>();
+    prop_assert!(outside >= -1e-9, "zones hold {} of the posterior", 1.0 - outside);
     if let Some(p) = engine.position() {
         check_position(f, p)?;
         prop_assert_eq!(Some(p.timestamp_ns), last);
+        // The posterior has not changed since the epoch: its zone is the position's.
+        let expected = p.zone.map_or(if zones.is_empty() { 1.0 } else { outside }, |z| zones[z]);
+        prop_assert!(
+            (p.zone_probability - expected).abs() <= 1e-9,
+            "{} against {}",
+            p.zone_probability,
+            expected
+        );
     }
     check_track(f, &engine.track(), last)?;
     if let Some(p) = engine.fixed_lag_position() {
@@ -456,11 +529,22 @@ fn without_stats(mut s: EngineSnapshot) -> EngineSnapshot {
     s
 }
 
-/// Raises the one counter a rejected scan, or a rejected advance, raises.
-fn count(stats: &mut InputStats, is_scan: bool, e: &InputError) {
-    if !is_scan {
-        stats.advances_rejected += 1;
-        return;
+/// What an epoch call was.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Kind {
+    Scan,
+    Advance,
+    Fix,
+    Feedback,
+}
+
+/// Raises the one counter a rejected call raises.
+fn count(stats: &mut InputStats, kind: Kind, e: &InputError) {
+    match kind {
+        Kind::Scan => {}
+        Kind::Advance => return stats.advances_rejected += 1,
+        Kind::Fix => return stats.fixes_rejected += 1,
+        Kind::Feedback => return stats.feedback_rejected += 1,
     }
     *match e {
         InputError::OutOfOrder { .. } => &mut stats.scans_out_of_order,
@@ -469,6 +553,7 @@ fn count(stats: &mut InputStats, is_scan: bool, e: &InputError) {
         InputError::RssiTooHigh { .. } => &mut stats.scans_rssi_too_high,
         InputError::NoKnownTransmitter { .. } => &mut stats.scans_no_known_transmitter,
         InputError::InvalidMotion { .. } => &mut stats.scans_invalid_motion,
+        e => panic!("a scan cannot be rejected with {e}"),
     } += 1;
 }
 
@@ -480,7 +565,9 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
         + s.scans_rssi_too_high
         + s.scans_no_known_transmitter
         + s.scans_invalid_motion
-        + s.advances_rejected;
+        + s.advances_rejected
+        + s.fixes_rejected
+        + s.feedback_rejected;
     let rest = InputStats {
         scans_out_of_order: 0,
         scans_empty: 0,
@@ -489,6 +576,8 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
         scans_no_known_transmitter: 0,
         scans_invalid_motion: 0,
         advances_rejected: 0,
+        fixes_rejected: 0,
+        feedback_rejected: 0,
         ..s.clone()
     };
     (sum, rest)
@@ -555,6 +644,24 @@ fn realistic(f: &Fixture, index: usize) -> Vec<ReadingSpec> {
         .collect()
 }
 
+/// A place's coordinates on the fixture's site.
+fn coordinates(f: &Fixture, at: Place) -> (f64, f64) {
+    match at {
+        Place::Near(k, dx, dy) => {
+            let s = &f.site.states()[k % f.site.states().len()];
+            (s.position.x + dx, s.position.y + dy)
+        }
+        Place::At(x, y) => (x, y),
+    }
+}
+
+fn zone_name(f: &Fixture, zone: &ZoneRef) -> String {
+    match zone {
+        ZoneRef::Index(k) => f.site.zones().get(*k).map_or_else(|| format!("zone {k}"), |z| z.name.clone()),
+        ZoneRef::Name(name) => name.clone(),
+    }
+}
+
 fn run_core(
     fixture: usize,
     transition: TransitionModel,
@@ -603,7 +710,7 @@ fn run_core(
                     timestamp_ns: clock.at(*when),
                     readings: readings.iter().map(|r| core_reading(f, r)).collect(),
                 };
-                Some((scan.timestamp_ns, true, guarded(|| engine.push_scan(&scan))))
+                Some((scan.timestamp_ns, Kind::Scan, guarded(|| engine.push_scan(&scan))))
             }
             Call::RealisticScan { when, index, junk } => {
                 let mut readings = realistic(f, *index);
@@ -612,26 +719,51 @@ fn run_core(
                     timestamp_ns: clock.at(*when),
                     readings: readings.iter().map(|r| core_reading(f, r)).collect(),
                 };
-                Some((scan.timestamp_ns, true, guarded(|| engine.push_scan(&scan))))
+                Some((scan.timestamp_ns, Kind::Scan, guarded(|| engine.push_scan(&scan))))
             }
             Call::Advance { when } => {
                 let t = clock.at(*when);
-                Some((t, false, guarded(|| engine.advance(t))))
+                Some((t, Kind::Advance, guarded(|| engine.advance(t))))
             }
             Call::WithMotion { when, scan: Some(index), motion } => {
                 let t = clock.at(*when);
                 let readings = realistic(f, *index).iter().map(|r| core_reading(f, r)).collect();
                 let scan = Scan { timestamp_ns: t, readings };
-                Some((t, true, guarded(|| engine.push_scan_with_motion(&scan, motion))))
+                Some((t, Kind::Scan, guarded(|| engine.push_scan_with_motion(&scan, motion))))
             }
             Call::WithMotion { when, scan: None, motion } => {
                 let t = clock.at(*when);
-                Some((t, false, guarded(|| engine.advance_with_motion(t, motion))))
+                Some((t, Kind::Advance, guarded(|| engine.advance_with_motion(t, motion))))
+            }
+            Call::Fix { when, at, floor, accuracy_m } => {
+                let (x, y) = coordinates(f, *at);
+                let fix = PositionFix {
+                    timestamp_ns: clock.at(*when),
+                    x,
+                    y,
+                    floor: *floor,
+                    accuracy_m: *accuracy_m,
+                };
+                Some((fix.timestamp_ns, Kind::Fix, guarded(|| engine.push_fix(&fix))))
+            }
+            Call::ConfirmZone { when, zone } => {
+                let t = clock.at(*when);
+                let result = match zone {
+                    ZoneRef::Index(k) => guarded(|| engine.confirm_zone(t, *k)),
+                    ZoneRef::Name(name) => guarded(|| engine.confirm_zone_named(t, name)),
+                };
+                Some((t, Kind::Feedback, result))
+            }
+            Call::ConfirmPosition { when, at, floor, radius_m } => {
+                let t = clock.at(*when);
+                let (x, y) = coordinates(f, *at);
+                Some((t, Kind::Feedback, guarded(|| engine.confirm_position(t, x, y, *floor, *radius_m))))
             }
             Call::Read => {
                 let _ = (engine.position(), engine.track(), engine.fixed_lag_position());
                 let _ =
                     (engine.stats(), engine.motion_stats(), engine.track_memory_bytes(), engine.posterior());
+                let _ = (engine.zone_posterior(), engine.history());
                 prop_assert_eq!(engine.snapshot(), before.clone(), "a read changed the engine");
                 None
             }
@@ -662,7 +794,7 @@ fn run_core(
                 prop_assert_eq!(heard.positions.len(), epochs, "one position per epoch to the listener");
                 prop_assert_eq!(heard.positions.last(), Some(&p));
             }
-            Some((t, is_scan, Ok(Err(e)))) => {
+            Some((t, kind, Ok(Err(e)))) => {
                 prop_assert_eq!(
                     without_stats(after.clone()),
                     without_stats(before.clone()),
@@ -673,9 +805,10 @@ fn run_core(
                     e
                 );
                 // Bookkeeping: a rejected scan raises its own counter by one, a rejected
-                // advance `advances_rejected`.
+                // advance `advances_rejected`, a fix `fixes_rejected`, feedback
+                // `feedback_rejected`.
                 let mut expected = before.stats.clone();
-                count(&mut expected, is_scan, &e);
+                count(&mut expected, kind, &e);
                 prop_assert_eq!(&after.stats, &expected);
             }
             None => {}
@@ -848,24 +981,45 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
             }
             Call::Scan { when, readings } => {
                 let t = clock.at(*when);
-                Some((t, true, engine.push_scan(ffi_scan(f, t, readings))))
+                Some((t, Kind::Scan, engine.push_scan(ffi_scan(f, t, readings))))
             }
             Call::RealisticScan { when, index, junk } => {
                 let t = clock.at(*when);
                 let mut readings = realistic(f, *index);
                 readings.extend(junk.iter().cloned());
-                Some((t, true, engine.push_scan(ffi_scan(f, t, &readings))))
+                Some((t, Kind::Scan, engine.push_scan(ffi_scan(f, t, &readings))))
             }
             Call::Advance { when } | Call::WithMotion { when, scan: None, .. } => {
                 let t = clock.at(*when);
-                Some((t, false, engine.advance(t)))
+                Some((t, Kind::Advance, engine.advance(t)))
             }
             Call::WithMotion { when, scan: Some(index), .. } => {
                 let t = clock.at(*when);
-                Some((t, true, engine.push_scan(ffi_scan(f, t, &realistic(f, *index)))))
+                Some((t, Kind::Scan, engine.push_scan(ffi_scan(f, t, &realistic(f, *index)))))
+            }
+            Call::Fix { when, at, floor, accuracy_m } => {
+                let (x, y) = coordinates(f, *at);
+                let t = clock.at(*when);
+                let floor = floor.map(|f| f as u32);
+                Some((
+                    t,
+                    Kind::Fix,
+                    engine.push_fix(FfiFix { timestamp_ns: t, x, y, floor, accuracy_m: *accuracy_m }),
+                ))
+            }
+            Call::ConfirmZone { when, zone } => {
+                let t = clock.at(*when);
+                Some((t, Kind::Feedback, engine.confirm_zone(t, zone_name(f, zone))))
+            }
+            Call::ConfirmPosition { when, at, floor, radius_m } => {
+                let t = clock.at(*when);
+                let (x, y) = coordinates(f, *at);
+                Some((t, Kind::Feedback, engine.confirm_position(t, x, y, *floor as u32, *radius_m)))
             }
             Call::Read => {
                 let _ = (engine.position(), engine.track(), engine.fixed_lag_position());
+                let zones = engine.zone_posterior();
+                prop_assert_eq!(zones.len(), f.site.zones().len());
                 prop_assert_eq!(engine.snapshot(), before.clone(), "a read changed the engine");
                 None
             }
@@ -881,12 +1035,12 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                 prop_assert_eq!(heard.0.len(), epochs, "one position per epoch to the listener");
                 prop_assert_eq!(heard.0.last(), Some(&p));
             }
-            Some((t, is_scan, Err(e))) => {
+            Some((t, kind, Err(e))) => {
                 errors += 1;
                 // The injected panics: before a scan reaches the engine, or half-way through an
                 // epoch (which the engine undoes).
                 let injected = cfg!(feature = "fault-injection")
-                    && ((is_scan && t == waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS)
+                    && ((kind == Kind::Scan && t == waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS)
                         || t == waymark::engine::FAULT_INJECTION_MID_EPOCH_NS);
                 match &e {
                     PositioningError::InputRejected { .. } => {}
@@ -903,9 +1057,9 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                     t,
                     e
                 );
-                // A rejected advance raises `advances_rejected` by one; a rejected scan one scan
-                // counter, or none if the FFI could not even parse it (a malformed id); a panic
-                // leaves everything as it was, counters included.
+                // A rejected advance, fix or feedback raises its counter by one; a rejected scan
+                // one scan counter, or none if the FFI could not even parse it (a malformed
+                // id); a panic leaves everything as it was, counters included.
                 let (raised_after, rest_after) = rejections(&after.0.stats);
                 let (raised_before, rest_before) = rejections(&before.0.stats);
                 let raised = raised_after - raised_before;
@@ -913,8 +1067,8 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                     PositioningError::Internal { .. } => {
                         prop_assert_eq!(&after.0, &before.0, "a panic changed the engine");
                     }
-                    _ if is_scan => prop_assert!(raised <= 1, "{} counters raised", raised),
-                    _ => prop_assert_eq!(raised, 1, "a rejected advance is counted once"),
+                    _ if kind == Kind::Scan => prop_assert!(raised <= 1, "{} counters raised", raised),
+                    _ => prop_assert_eq!(raised, 1, "a rejected {:?} is counted once", kind),
                 }
                 prop_assert_eq!(rest_after, rest_before);
                 prop_assert_eq!(recorder.heard.lock().unwrap().1, errors, "listeners hear every error");

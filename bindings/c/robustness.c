@@ -101,6 +101,15 @@ static void null_engine(void) {
     CHECK(waymark_engine_position(NULL, &p) == WAYMARK_RESULT_NULL_PARAMETER, "position");
     CHECK(waymark_engine_position(NULL, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "position, NULL out");
     CHECK(waymark_engine_set_callback(NULL, NULL, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "callback");
+    CHECK(waymark_engine_push_fix(NULL, 1, 0, 0, -1, 3, &p) == WAYMARK_RESULT_NULL_PARAMETER, "fix");
+    CHECK(waymark_engine_confirm_zone(NULL, 1, "aisle", &p) == WAYMARK_RESULT_NULL_PARAMETER, "confirm zone");
+    CHECK(waymark_engine_confirm_position(NULL, 1, 0, 0, 0, 1, &p) == WAYMARK_RESULT_NULL_PARAMETER, "confirm position");
+    size_t zones;
+    double posterior[2];
+    char name[8];
+    CHECK(waymark_engine_zone_count(NULL, &zones) == WAYMARK_RESULT_NULL_PARAMETER, "zone count");
+    CHECK(waymark_engine_zone_name(NULL, 0, name, sizeof name, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "zone name");
+    CHECK(waymark_engine_zone_posterior(NULL, posterior, 2) == WAYMARK_RESULT_NULL_PARAMETER, "zone posterior");
 }
 
 /* A callback that calls back into the engine: no lock is held while it runs. */

@@ -298,6 +298,78 @@ static void salted(const char *hashed_path, const uint8_t *salt, size_t salt_len
     waymark_engine_free(engine);
 }
 
+/* Zones, user feedback and position fixes on the simulated office (ten rooms, the aisle and
+ * the stair hall as zones). */
+static void zones_and_feedback(const char *site_path) {
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "site");
+    size_t zones = 0, name_len = 0;
+    CHECK(waymark_engine_zone_count(engine, &zones) == WAYMARK_RESULT_OK && zones == 12, "%zu zones", zones);
+    char name[64];
+    CHECK(waymark_engine_zone_name(engine, 0, name, sizeof name, &name_len) == WAYMARK_RESULT_OK &&
+              strcmp(name, "aisle") == 0 && name_len == 5,
+          "zone 0 is %s", name);
+    char small[4];
+    CHECK(waymark_engine_zone_name(engine, 11, small, sizeof small, &name_len) == WAYMARK_RESULT_OK &&
+              strcmp(small, "sta") == 0 && name_len == strlen("stair hall"),
+          "truncated name %s (%zu)", small, name_len);
+    CHECK(waymark_engine_zone_name(engine, 12, name, sizeof name, NULL) == WAYMARK_RESULT_INPUT_REJECTED,
+          "zone index out of range");
+    CHECK(waymark_engine_zone_name(engine, 0, NULL, 8, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL buffer");
+    CHECK(waymark_engine_zone_count(engine, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL count");
+
+    waymark_wifi_reading known[2] = {{"02:00:00:00:00:00", -60.0, 0}, {"02:00:00:00:00:01", -70.0, 0}};
+    waymark_position p;
+    CHECK(waymark_engine_push_scan(engine, 10, known, 2, NULL, 0, &p) == WAYMARK_RESULT_OK, "scan");
+    CHECK(p.zone >= -1 && p.zone < 12 && p.zone_probability >= 0 && p.zone_probability <= 1 + 1e-9,
+          "zone %d (%g)", p.zone, p.zone_probability);
+    double posterior[12], sum = 0;
+    CHECK(waymark_engine_zone_posterior(engine, posterior, 12) == WAYMARK_RESULT_OK, "zone posterior");
+    for (int z = 0; z < 12; z++) sum += posterior[z];
+    CHECK(sum > 0 && sum <= 1 + 1e-9, "zone posterior sums to %g", sum);
+    CHECK(waymark_engine_zone_posterior(engine, NULL, 3) == WAYMARK_RESULT_NULL_PARAMETER, "NULL posterior");
+
+    /* "I am in room 3", about the position just shown: that epoch is pinned to the room. */
+    CHECK(waymark_engine_confirm_zone(engine, 10, "room 3", &p) == WAYMARK_RESULT_OK && p.zone == 3 &&
+              fabs(p.zone_probability - 1) < 1e-9 && p.timestamp_ns == 10,
+          "confirmed room: zone %d (%g)", p.zone, p.zone_probability);
+    CHECK(waymark_engine_confirm_zone(engine, 20, "cellar", &p) == WAYMARK_RESULT_INPUT_REJECTED, "unknown zone");
+    char message[256];
+    waymark_last_error(message, sizeof message);
+    CHECK(strstr(message, "cellar") != NULL, "message: %s", message);
+    CHECK(waymark_engine_confirm_zone(engine, 5, "room 3", &p) == WAYMARK_RESULT_INPUT_REJECTED, "back in time");
+    CHECK(waymark_engine_confirm_zone(engine, 20, NULL, &p) == WAYMARK_RESULT_NULL_PARAMETER, "NULL zone");
+    /* "I am within 2 m of here": the aisle's first state is at (1.7, 11.5). */
+    CHECK(waymark_engine_confirm_position(engine, 30000000000ull, 1.7, 11.5, 0, 2.0, &p) == WAYMARK_RESULT_OK &&
+              p.zone == 0 && fabs(p.x - 1.7) < 1e-9,
+          "confirmed position (%g, %g), zone %d", p.x, p.y, p.zone);
+    CHECK(waymark_engine_confirm_position(engine, 40000000000ull, 1.7, 11.5, 3, 2.0, &p) ==
+              WAYMARK_RESULT_INPUT_REJECTED, "unknown floor");
+    CHECK(waymark_engine_confirm_position(engine, 40000000000ull, 500, 500, 0, 2.0, &p) ==
+              WAYMARK_RESULT_INPUT_REJECTED, "no state within the radius");
+    /* A precise fix 40 s later (time to walk there) at the stair hall's middle state (35.5,
+     * 11.5) takes the estimate there; bad fixes are rejected and change nothing. */
+    CHECK(waymark_engine_push_fix(engine, 70000000000ull, 35.5, 11.5, -1, 0.5, &p) == WAYMARK_RESULT_OK &&
+              hypot(p.x - 35.5, p.y - 11.5) < 1.0 && p.zone == 11,
+          "fix: (%g, %g), zone %d", p.x, p.y, p.zone);
+    waymark_position kept, now;
+    CHECK(waymark_engine_position(engine, &kept) == WAYMARK_RESULT_OK, "position");
+    CHECK(waymark_engine_push_fix(engine, 80000000000ull, NAN, 11.5, -1, 3, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+          "NaN fix");
+    CHECK(waymark_engine_push_fix(engine, 80000000000ull, 35.5, 11.5, -1, 0, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+          "zero accuracy");
+    CHECK(waymark_engine_push_fix(engine, 80000000000ull, 35.5, 11.5, 4, 3, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+          "unknown floor");
+    CHECK(waymark_engine_push_fix(engine, 80000000000ull, 3000, 11.5, -1, 3, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+          "far outside the site");
+    CHECK(waymark_engine_push_fix(engine, 40000000000ull, 35.5, 11.5, 0, 3, &p) == WAYMARK_RESULT_INPUT_REJECTED,
+          "not after the last epoch");
+    CHECK(waymark_engine_position(engine, &now) == WAYMARK_RESULT_OK && now.timestamp_ns == kept.timestamp_ns &&
+              now.x == kept.x && now.zone == kept.zone,
+          "rejected fixes changed nothing");
+    waymark_engine_free(engine);
+}
+
 int main(int argc, char **argv) {
     if (argc != 6) {
         fprintf(stderr, "usage: %s site.json walk.txt site-hashed.json salt.hex site.wmsite\n", argv[0]);
@@ -308,6 +380,7 @@ int main(int argc, char **argv) {
     CHECK(salt_len >= 16, "salt file %s", argv[4]);
     error_paths(argv[1]);
     address_beacons(argv[1]);
+    zones_and_feedback(argv[1]);
     walk(argv[1], argv[2], NULL, 0);
     walk(argv[5], argv[2], NULL, 0);
     binary_site(argv[5]);

@@ -37,8 +37,13 @@ enum waymark_result
   WAYMARK_RESULT_INVALID_CONFIG = 3,
   /**
    * The input was rejected and the engine is unchanged; `waymark_last_error` says why. A
-   * scan or an advance is rejected when its timestamp is not after the last epoch's (a step
-   * back in time, or a duplicate). A scan is also rejected when
+   * scan, an advance or a position fix is rejected when its timestamp is not after the last
+   * epoch's (a step back in time, or a duplicate), feedback when it is before it. A
+   * position fix or a confirmed position is also rejected for a NaN or infinite coordinate,
+   * an accuracy or radius not > 0, a floor the site does not have, or a position too far
+   * from the site (for a fix, beyond its own error; for a confirmed position, no state
+   * within the radius); feedback for a zone the site does not have; a zone index out of
+   * range for `waymark_engine_zone_name`. A scan is also rejected when
    * - it has no readings;
    * - a reading's RSSI is NaN, infinite or below -1000 dBm;
    * - a reading's RSSI is above +100 dBm, more than any receiver reports;
@@ -181,6 +186,16 @@ typedef struct {
    */
   double floor_probability;
   /**
+   * The most likely zone (a room, a corridor), an index into the site file's zones
+   * (`waymark_engine_zone_name`); -1 when the site has no zones or more posterior mass lies
+   * outside every zone than in any one.
+   */
+  int32_t zone;
+  /**
+   * Probability of `zone` (of being in no zone when it is -1).
+   */
+  double zone_probability;
+  /**
    * Radius of the 68% circle, m.
    */
   double accuracy_m;
@@ -314,6 +329,73 @@ waymark_result waymark_engine_push_scan(waymark_engine *engine,
 waymark_result waymark_engine_advance(waymark_engine *engine,
                                       uint64_t timestamp_ns,
                                       waymark_position *out);
+
+/**
+ * A position from another positioning system (GNSS near an entrance, WiFi RTT, UWB) in the
+ * site's frame, m: one positioning epoch, with the motion since the last one, whose
+ * observation is the fix. `floor` is its floor index, or negative when unknown (GNSS);
+ * `accuracy_m` the radius of its 68% circle (Android's `Location.getAccuracy()`), > 0. A
+ * precise fix pulls the estimate to it; a vague one barely moves it. `*out` (may be NULL)
+ * receives the new position. A rejected fix (see `WAYMARK_RESULT_INPUT_REJECTED`) returns
+ * `InputRejected` and changes nothing.
+ */
+waymark_result waymark_engine_push_fix(waymark_engine *engine,
+                                       uint64_t timestamp_ns,
+                                       double x,
+                                       double y,
+                                       int32_t floor,
+                                       double accuracy_m,
+                                       waymark_position *out);
+
+/**
+ * User feedback: the user says they are in the zone named `zone` (NUL-terminated UTF-8) at
+ * `timestamp_ns`. The position is pinned to the zone's states: at the time of the latest
+ * position it corrects that position, later it is a new epoch. `*out` (may be NULL) receives
+ * the position. A time before the latest position or an unknown zone returns
+ * `InputRejected` and changes nothing.
+ */
+waymark_result waymark_engine_confirm_zone(waymark_engine *engine,
+                                           uint64_t timestamp_ns,
+                                           const char *zone,
+                                           waymark_position *out);
+
+/**
+ * User feedback: the user says they are within `radius_m` of (x, y) on `floor` (a tap on the
+ * map), as `waymark_engine_confirm_zone` with the states within the radius. Also rejected:
+ * an unknown floor, a NaN or infinite coordinate, a radius not > 0, no state within it.
+ */
+waymark_result waymark_engine_confirm_position(waymark_engine *engine,
+                                               uint64_t timestamp_ns,
+                                               double x,
+                                               double y,
+                                               uint32_t floor,
+                                               double radius_m,
+                                               waymark_position *out);
+
+/**
+ * The number of zones of the engine's site into `*count` (0 for a site without zones).
+ */
+waymark_result waymark_engine_zone_count(const waymark_engine *engine, size_t *count);
+
+/**
+ * Copies the name of zone `zone` into `buf` (NUL-terminated, truncated to `len` bytes; `buf`
+ * may be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL). A
+ * zone index out of range returns `InputRejected`.
+ */
+waymark_result waymark_engine_zone_name(const waymark_engine *engine,
+                                        size_t zone,
+                                        char *buf,
+                                        size_t len,
+                                        size_t *name_len);
+
+/**
+ * Writes the probability of being in each zone now, by zone index, into `out[0..count]`: the
+ * first `count` zones when the site has more, the rest of `out` untouched when it has fewer.
+ * `out` may be NULL when `count` is 0.
+ */
+waymark_result waymark_engine_zone_posterior(const waymark_engine *engine,
+                                             double *out,
+                                             size_t count);
 
 /**
  * The latest position into `*out`, or `NoPosition`.

@@ -467,6 +467,11 @@ fn error_kind(e: &InputError) -> &'static str {
         InputError::RssiTooHigh { .. } => "rssi too high",
         InputError::NoKnownTransmitter { .. } => "no known transmitter",
         InputError::InvalidMotion { .. } => "invalid motion",
+        // Position fixes and user feedback, which this harness does not make.
+        InputError::UnknownZone { .. } => "unknown zone",
+        InputError::UnknownFloor { .. } => "unknown floor",
+        InputError::InvalidValue { .. } => "invalid value",
+        InputError::OutsideSite { .. } => "outside the site",
     }
 }
 

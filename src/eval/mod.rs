@@ -1,6 +1,7 @@
 //! Error metrics of a track against the truth: mean, median, 90th percentile, RMSE, maximum
-//! (HIPE Table 5 reports RMSE, mean and maximum), CDF points (Hoang eq. 15), and how often the
-//! reported accuracy radius held the truth.
+//! (HIPE Table 5 reports RMSE, mean and maximum), CDF points (Hoang eq. 15), how often the
+//! reported accuracy radius held the truth, and room-level accuracy (El Gemayel et al. §II-B:
+//! the share of epochs whose most likely zone is the true one).
 
 pub mod pdr;
 
@@ -20,6 +21,9 @@ pub struct EpochError {
     pub accuracy_m: f64,
     /// Whether the floor was right.
     pub floor_correct: bool,
+    /// Whether the most likely zone was the true zone (both "no zone" counts as right);
+    /// `None` when the site has no zones.
+    pub zone_correct: Option<bool>,
 }
 
 /// Summary over many epochs.
@@ -43,6 +47,10 @@ pub struct ErrorSummary {
     pub median_accuracy_m: f64,
     /// Share of epochs on the right floor.
     pub floor_hit: f64,
+    /// Room-level accuracy: the share of epochs whose most likely zone was the true zone
+    /// (El Gemayel et al. §II-B), over the epochs scored by zone; `None` when none was.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone_hit: Option<f64>,
 }
 
 /// The `q`-quantile (0..=1) of sorted values, nearest rank.
@@ -73,6 +81,7 @@ impl ErrorSummary {
             accuracy_68_hit: share(epochs.iter().filter(|e| e.error_m <= e.accuracy_m).count()),
             median_accuracy_m: quantile(&accuracies, 0.5),
             floor_hit: share(epochs.iter().filter(|e| e.floor_correct).count()),
+            zone_hit: zone_hit(epochs.iter().map(|e| e.zone_correct)),
         }
     }
 
@@ -82,13 +91,24 @@ impl ErrorSummary {
     }
 }
 
+/// The share of `true` among the `Some`s; `None` without any.
+pub fn zone_hit(correct: impl Iterator<Item = Option<bool>>) -> Option<f64> {
+    let (mut scored, mut hits) = (0usize, 0usize);
+    for c in correct.flatten() {
+        scored += 1;
+        hits += usize::from(c);
+    }
+    (scored > 0).then(|| hits as f64 / scored as f64)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
 
     #[test]
     fn figures_by_hand() {
-        let e = |error_m, accuracy_m| EpochError { error_m, accuracy_m, floor_correct: true };
+        let e =
+            |error_m, accuracy_m| EpochError { error_m, accuracy_m, floor_correct: true, zone_correct: None };
         let epochs: Vec<EpochError> = (1..=10).map(|k| e(k as f64, 5.0)).collect();
         let s = ErrorSummary::new(&epochs);
         assert_eq!(s.epochs, 10);
@@ -100,5 +120,11 @@ mod tests {
         assert!((s.rmse_m - (385.0f64 / 10.0).sqrt()).abs() < 1e-12);
         assert_eq!(ErrorSummary::cdf(&epochs, 3.0), 0.3);
         assert!(ErrorSummary::new(&[]).mean_error_m.is_nan());
+        assert_eq!(s.zone_hit, None);
+        let zoned: Vec<EpochError> = [Some(true), Some(false), None, Some(true), Some(true)]
+            .into_iter()
+            .map(|zone_correct| EpochError { zone_correct, ..e(1.0, 1.0) })
+            .collect();
+        assert_eq!(ErrorSummary::new(&zoned).zone_hit, Some(0.75));
     }
 }

@@ -129,6 +129,15 @@ pub struct Metrics {
     pub accuracy_68_median_m: f64,
     /// Share of points on the right floor.
     pub floor_hit: f64,
+    /// Room-level accuracy (El Gemayel et al. §II-B): the share of points whose most likely
+    /// zone was the true zone, the zone of the state nearest the true position; only for sites
+    /// with zones.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone_hit: Option<f64>,
+    /// Share of points whose true position is in a zone (the rest are in none, and a most
+    /// likely zone of none is right there): the base rate `zone_hit` should be read against.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub in_zone: Option<f64>,
     /// Points scored.
     pub epochs: usize,
 }
@@ -144,6 +153,10 @@ pub struct Scored {
     pub accuracy_95_m: f64,
     /// Whether the floor was right.
     pub floor_correct: bool,
+    /// Whether the zone was right; `None` when not scored by zone.
+    pub zone_correct: Option<bool>,
+    /// Whether the true position was in a zone; `None` when not scored by zone.
+    pub in_zone: Option<bool>,
 }
 
 impl Scored {
@@ -184,6 +197,8 @@ impl Metrics {
             accuracy_95_hit: share(&|p| p.error_m <= p.accuracy_95_m),
             accuracy_68_median_m: quantile(&radii, 0.5),
             floor_hit: share(&|p| p.floor_correct),
+            zone_hit: super::zone_hit(points.iter().map(|p| p.zone_correct)),
+            in_zone: super::zone_hit(points.iter().map(|p| p.in_zone)),
             epochs: n,
         }
     }
@@ -216,16 +231,64 @@ pub struct Estimate {
     pub accuracy_m: f64,
     /// 95% radius, m.
     pub accuracy_95_m: f64,
+    /// The most likely zone, by index into the site's zones.
+    pub zone: Option<usize>,
+}
+
+/// The true zone of a position: the zone of the site's state nearest to it on its floor (a
+/// zone is a set of states, each standing for the cell around it).
+pub struct ZoneTruth {
+    /// Per floor: (position, zone) of its states.
+    floors: Vec<Vec<(Point2<f64>, Option<usize>)>>,
+}
+
+impl ZoneTruth {
+    /// For `site`; `None` when it has no zones.
+    pub fn new(site: &Site) -> Option<ZoneTruth> {
+        if site.zones().is_empty() {
+            return None;
+        }
+        let mut floors = vec![Vec::new(); site.floors().len()];
+        for (i, s) in site.states().iter().enumerate() {
+            floors[s.floor].push((s.position, site.zone_of(i)));
+        }
+        Some(ZoneTruth { floors })
+    }
+
+    /// The zone of the state nearest (x, y) on `floor`.
+    pub fn zone_at(&self, floor: usize, x: f64, y: f64) -> Option<usize> {
+        let at = Point2::new(x, y);
+        self.floors
+            .get(floor)?
+            .iter()
+            .min_by(|a, b| nalgebra::distance(&a.0, &at).total_cmp(&nalgebra::distance(&b.0, &at)))
+            .and_then(|s| s.1)
+    }
 }
 
 /// Scores a walk's estimates: at each estimate's own time (within the waypoints' span), and
 /// at each waypoint with the latest estimate at or before it. Returns (epochs, waypoints).
 pub fn score(trace: &Trace, floor: usize, estimates: &[Estimate]) -> (Vec<Scored>, Vec<Scored>) {
-    let scored = |e: &Estimate, (x, y): (f64, f64)| Scored {
-        error_m: (e.x - x).hypot(e.y - y),
-        accuracy_m: e.accuracy_m,
-        accuracy_95_m: e.accuracy_95_m,
-        floor_correct: e.floor == floor,
+    score_zones(trace, floor, estimates, None)
+}
+
+/// [`score`], and by zone against `zones` when given.
+pub fn score_zones(
+    trace: &Trace,
+    floor: usize,
+    estimates: &[Estimate],
+    zones: Option<&ZoneTruth>,
+) -> (Vec<Scored>, Vec<Scored>) {
+    let scored = |e: &Estimate, (x, y): (f64, f64)| {
+        let truth = zones.map(|z| z.zone_at(floor, x, y));
+        Scored {
+            error_m: (e.x - x).hypot(e.y - y),
+            accuracy_m: e.accuracy_m,
+            accuracy_95_m: e.accuracy_95_m,
+            floor_correct: e.floor == floor,
+            zone_correct: truth.map(|t| e.floor == floor && e.zone == t),
+            in_zone: truth.map(|t| t.is_some()),
+        }
     };
     let epochs =
         estimates.iter().filter_map(|e| trace.position_at(e.timestamp_ns).map(|p| scored(e, p))).collect();
@@ -439,6 +502,7 @@ pub fn evaluate_on(
     });
     let jobs: Vec<(usize, &Trace)> =
         floors.iter().enumerate().flat_map(|(f, floor)| floor.test.iter().map(move |t| (f, t))).collect();
+    let zone_truth = ZoneTruth::new(site);
     let run_walk = |&(floor, trace): &(usize, &Trace)| -> WalkResult {
         let mut result = WalkResult { floor, name: trace.name.clone(), ..WalkResult::default() };
         // The single-scan baselines are WiFi fingerprinting, as their names say.
@@ -462,6 +526,7 @@ pub fn evaluate_on(
                         y: p.y,
                         accuracy_m: spread,
                         accuracy_95_m: 2.0 * spread,
+                        zone: zone_truth.as_ref().and_then(|z| z.zone_at(f, p.x, p.y)),
                     })
                 })
                 .collect();
@@ -488,6 +553,7 @@ pub fn evaluate_on(
                         y: state.position.y,
                         accuracy_m: cell,
                         accuracy_95_m: 2.0 * cell,
+                        zone: site.zone_of(best),
                     })
                 })
                 .collect();
@@ -527,6 +593,7 @@ pub fn evaluate_on(
                             y: p.y,
                             accuracy_m: a68,
                             accuracy_95_m: a95,
+                            zone: site.zone_of(p.state as usize),
                         }
                     })
                     .collect()
@@ -561,7 +628,7 @@ pub fn evaluate_on(
         let mut per_floor: BTreeMap<String, Vec<Scored>> = BTreeMap::new();
         for (result, &(f, trace)) in results.iter().zip(&jobs) {
             let Some(estimates) = result.estimates.get(*key) else { continue };
-            let (epochs, waypoints) = score(trace, f, estimates);
+            let (epochs, waypoints) = score_zones(trace, f, estimates, zone_truth.as_ref());
             per_floor.entry(floors[f].name.clone()).or_default().extend_from_slice(&epochs);
             pooled.extend(epochs);
             at_waypoints.extend(waypoints);
@@ -778,6 +845,7 @@ fn live_estimates(positions: &[crate::Position]) -> Vec<Estimate> {
             y: p.y,
             accuracy_m: p.accuracy_m,
             accuracy_95_m: p.accuracy_95_m,
+            zone: p.zone,
         })
         .collect()
 }

@@ -31,8 +31,13 @@ pub enum waymark_result {
     /// The configuration is invalid.
     InvalidConfig = 3,
     /// The input was rejected and the engine is unchanged; `waymark_last_error` says why. A
-    /// scan or an advance is rejected when its timestamp is not after the last epoch's (a step
-    /// back in time, or a duplicate). A scan is also rejected when
+    /// scan, an advance or a position fix is rejected when its timestamp is not after the last
+    /// epoch's (a step back in time, or a duplicate), feedback when it is before it. A
+    /// position fix or a confirmed position is also rejected for a NaN or infinite coordinate,
+    /// an accuracy or radius not > 0, a floor the site does not have, or a position too far
+    /// from the site (for a fix, beyond its own error; for a confirmed position, no state
+    /// within the radius); feedback for a zone the site does not have; a zone index out of
+    /// range for `waymark_engine_zone_name`. A scan is also rejected when
     /// - it has no readings;
     /// - a reading's RSSI is NaN, infinite or below -1000 dBm;
     /// - a reading's RSSI is above +100 dBm, more than any receiver reports;
@@ -134,6 +139,12 @@ pub struct waymark_position {
     pub floor: u32,
     /// Probability of that floor.
     pub floor_probability: f64,
+    /// The most likely zone (a room, a corridor), an index into the site file's zones
+    /// (`waymark_engine_zone_name`); -1 when the site has no zones or more posterior mass lies
+    /// outside every zone than in any one.
+    pub zone: i32,
+    /// Probability of `zone` (of being in no zone when it is -1).
+    pub zone_probability: f64,
     /// Radius of the 68% circle, m.
     pub accuracy_m: f64,
     /// Radius of the 95% circle, m.
@@ -185,6 +196,9 @@ fn convert(p: &Position) -> waymark_position {
         y: p.y,
         floor: p.floor as u32,
         floor_probability: p.floor_probability,
+        // At most i32::MAX zones (`site::MAX_ZONES`).
+        zone: p.zone.map_or(-1, |z| i32::try_from(z).unwrap_or(-1)),
+        zone_probability: p.zone_probability,
         accuracy_m: p.accuracy_m,
         accuracy_95_m: p.accuracy_95_m,
         heading_deg: p.heading_rad.map_or(f64::NAN, f64::to_degrees),
@@ -581,6 +595,140 @@ pub extern "C" fn waymark_engine_advance(
     })
 }
 
+/// A position from another positioning system (GNSS near an entrance, WiFi RTT, UWB) in the
+/// site's frame, m: one positioning epoch, with the motion since the last one, whose
+/// observation is the fix. `floor` is its floor index, or negative when unknown (GNSS);
+/// `accuracy_m` the radius of its 68% circle (Android's `Location.getAccuracy()`), > 0. A
+/// precise fix pulls the estimate to it; a vague one barely moves it. `*out` (may be NULL)
+/// receives the new position. A rejected fix (see `WAYMARK_RESULT_INPUT_REJECTED`) returns
+/// `InputRejected` and changes nothing.
+#[no_mangle]
+pub extern "C" fn waymark_engine_push_fix(
+    engine: *mut waymark_engine,
+    timestamp_ns: u64,
+    x: f64,
+    y: f64,
+    floor: i32,
+    accuracy_m: f64,
+    out: *mut waymark_position,
+) -> waymark_result {
+    epoch(engine, out, |engine| {
+        let fix =
+            crate::fix::PositionFix { timestamp_ns, x, y, floor: usize::try_from(floor).ok(), accuracy_m };
+        engine.push_fix(&fix).map_err(|e| fail(waymark_result::InputRejected, e.to_string()))
+    })
+}
+
+/// User feedback: the user says they are in the zone named `zone` (NUL-terminated UTF-8) at
+/// `timestamp_ns`. The position is pinned to the zone's states: at the time of the latest
+/// position it corrects that position, later it is a new epoch. `*out` (may be NULL) receives
+/// the position. A time before the latest position or an unknown zone returns
+/// `InputRejected` and changes nothing.
+#[no_mangle]
+pub extern "C" fn waymark_engine_confirm_zone(
+    engine: *mut waymark_engine,
+    timestamp_ns: u64,
+    zone: *const c_char,
+    out: *mut waymark_position,
+) -> waymark_result {
+    epoch(engine, out, |engine| {
+        let zone = string_arg(zone, "zone")?;
+        engine
+            .confirm_zone_named(timestamp_ns, &zone)
+            .map_err(|e| fail(waymark_result::InputRejected, e.to_string()))
+    })
+}
+
+/// User feedback: the user says they are within `radius_m` of (x, y) on `floor` (a tap on the
+/// map), as `waymark_engine_confirm_zone` with the states within the radius. Also rejected:
+/// an unknown floor, a NaN or infinite coordinate, a radius not > 0, no state within it.
+#[no_mangle]
+pub extern "C" fn waymark_engine_confirm_position(
+    engine: *mut waymark_engine,
+    timestamp_ns: u64,
+    x: f64,
+    y: f64,
+    floor: u32,
+    radius_m: f64,
+    out: *mut waymark_position,
+) -> waymark_result {
+    epoch(engine, out, |engine| {
+        engine
+            .confirm_position(timestamp_ns, x, y, floor as usize, radius_m)
+            .map_err(|e| fail(waymark_result::InputRejected, e.to_string()))
+    })
+}
+
+/// The number of zones of the engine's site into `*count` (0 for a site without zones).
+#[no_mangle]
+pub extern "C" fn waymark_engine_zone_count(
+    engine: *const waymark_engine,
+    count: *mut usize,
+) -> waymark_result {
+    if count.is_null() {
+        return fail(waymark_result::NullParameter, "count must not be NULL");
+    }
+    with_engine(engine, |inner| {
+        // SAFETY: `count` was checked non-NULL and points to one writable size_t.
+        unsafe { *count = inner.site().zones().len() };
+        waymark_result::Ok
+    })
+}
+
+/// Copies the name of zone `zone` into `buf` (NUL-terminated, truncated to `len` bytes; `buf`
+/// may be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL). A
+/// zone index out of range returns `InputRejected`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_zone_name(
+    engine: *const waymark_engine,
+    zone: usize,
+    buf: *mut c_char,
+    len: usize,
+    name_len: *mut usize,
+) -> waymark_result {
+    if buf.is_null() && len > 0 {
+        return fail(waymark_result::NullParameter, "buf must not be NULL when len > 0");
+    }
+    with_engine(engine, |inner| {
+        let zones = inner.site().zones();
+        let Some(z) = zones.get(zone) else {
+            return fail(
+                waymark_result::InputRejected,
+                format!("zone {zone} does not exist ({} zones)", zones.len()),
+            );
+        };
+        copy_string(&z.name, buf, len);
+        if !name_len.is_null() {
+            // SAFETY: a non-NULL `name_len` points to one writable size_t.
+            unsafe { *name_len = z.name.len() };
+        }
+        waymark_result::Ok
+    })
+}
+
+/// Writes the probability of being in each zone now, by zone index, into `out[0..count]`: the
+/// first `count` zones when the site has more, the rest of `out` untouched when it has fewer.
+/// `out` may be NULL when `count` is 0.
+#[no_mangle]
+pub extern "C" fn waymark_engine_zone_posterior(
+    engine: *const waymark_engine,
+    out: *mut f64,
+    count: usize,
+) -> waymark_result {
+    if out.is_null() && count > 0 {
+        return fail(waymark_result::NullParameter, "out must not be NULL when count > 0");
+    }
+    with_engine(engine, |inner| {
+        let posterior = inner.zone_posterior();
+        let n = posterior.len().min(count);
+        if n > 0 {
+            // SAFETY: `out` was checked non-NULL and points to `count` ≥ n writable doubles.
+            unsafe { std::ptr::copy_nonoverlapping(posterior.as_ptr(), out, n) };
+        }
+        waymark_result::Ok
+    })
+}
+
 /// The latest position into `*out`, or `NoPosition`.
 #[no_mangle]
 pub extern "C" fn waymark_engine_position(
@@ -627,15 +775,22 @@ pub extern "C" fn waymark_engine_set_callback(
 #[no_mangle]
 pub extern "C" fn waymark_last_error(buf: *mut c_char, len: usize) -> usize {
     let message = LAST_ERROR.with(|e| e.borrow().clone());
+    copy_string(&message, buf, len);
+    message.len()
+}
+
+/// Copies `text` into `buf`, NUL-terminated and truncated to `len` bytes; nothing when `buf`
+/// is NULL or `len` 0.
+fn copy_string(text: &str, buf: *mut c_char, len: usize) {
     if !buf.is_null() && len > 0 {
-        let n = message.len().min(len - 1);
-        // SAFETY: `buf` points to `len` writable bytes (the header's contract); n < len.
+        let n = text.len().min(len - 1);
+        // SAFETY: `buf` points to `len` writable bytes (the caller's contract, as the header
+        // documents for each function taking a buffer); n < len.
         unsafe {
-            std::ptr::copy_nonoverlapping(message.as_ptr(), buf as *mut u8, n);
+            std::ptr::copy_nonoverlapping(text.as_ptr(), buf as *mut u8, n);
             *buf.add(n) = 0;
         }
     }
-    message.len()
 }
 
 /// The library's version, a static NUL-terminated string.

@@ -24,11 +24,15 @@ pub enum PositioningError {
         /// Which field and why.
         reason: String,
     },
-    /// An input was rejected; the engine is unchanged and goes on. A scan or an advance whose
-    /// time is not after the last epoch's; a scan with no readings, with an RSSI that is NaN,
-    /// infinite, below -1000 dBm or above +100 dBm, with no transmitter the site knows, or with
-    /// a malformed transmitter id: a BSSID, UUID or address that does not parse (in Kotlin, one
-    /// holding a lone UTF-16 surrogate too), a beacon with neither a UUID nor an address.
+    /// An input was rejected; the engine is unchanged and goes on. A scan, an advance or a
+    /// position fix whose time is not after the last epoch's, or feedback whose time is before
+    /// it; a scan with no readings, with an RSSI that is NaN, infinite, below -1000 dBm or
+    /// above +100 dBm, with no transmitter the site knows, or with a malformed transmitter id:
+    /// a BSSID, UUID or address that does not parse (in Kotlin, one holding a lone UTF-16
+    /// surrogate too), a beacon with neither a UUID nor an address; a position fix or a
+    /// confirmed position with a NaN or infinite coordinate, an accuracy or radius not > 0, a
+    /// floor the site does not have, or too far from the site; feedback naming a zone the
+    /// site does not have.
     #[error("input rejected: {reason}")]
     InputRejected {
         /// Why.
@@ -309,6 +313,15 @@ pub struct PositionEstimate {
     pub floor_name: String,
     /// Probability of that floor.
     pub floor_probability: f64,
+    /// The most likely zone's name (a room, a corridor): the zone holding the most posterior
+    /// mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
+    /// than in any one. (The defaults here and below only keep code that builds estimates,
+    /// such as tests, compiling: the engine always sets both.)
+    #[uniffi(default = None)]
+    pub zone: Option<String>,
+    /// Probability of `zone` (of being in no zone when it is `null` / `nil`).
+    #[uniffi(default = 1.0)]
+    pub zone_probability: f64,
     /// Radius of the 68% circle, m, as Android's `getAccuracy()` and iOS's
     /// `horizontalAccuracy`.
     pub accuracy_m: f64,
@@ -324,6 +337,65 @@ pub struct PositionEstimate {
     pub scenario: MotionScenario,
     /// Steps since the previous epoch.
     pub steps: u32,
+}
+
+/// A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB.
+#[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
+pub struct PositionFix {
+    /// When it was measured, ns, on the clock of every other input.
+    pub timestamp_ns: u64,
+    /// x in the site's metric frame, m.
+    pub x: f64,
+    /// y in the site's metric frame, m.
+    pub y: f64,
+    /// Floor index in the site file, when the other system knows it (UWB, an RTT access
+    /// point's floor); `null` / `nil` for GNSS.
+    #[uniffi(default = None)]
+    pub floor: Option<u32>,
+    /// Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
+    pub accuracy_m: f64,
+}
+
+/// What kind of place a zone is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
+pub enum ZoneKind {
+    /// A room (an office, a kitchen, a shop).
+    Room,
+    /// A corridor or aisle.
+    Corridor,
+    /// A hall, an atrium, a concourse.
+    Hall,
+    /// A staircase.
+    Stairs,
+    /// A lift (elevator) or its lobby.
+    Lift,
+    /// An entrance.
+    Entrance,
+    /// Anything else.
+    Other,
+}
+
+/// A zone of the site and how likely the phone is to be in it.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct ZoneProbability {
+    /// The zone's name, unique in the site.
+    pub name: String,
+    /// What kind of place it is.
+    pub kind: ZoneKind,
+    /// Posterior probability of being in it, now.
+    pub probability: f64,
+}
+
+fn zone_kind(k: crate::site::ZoneKind) -> ZoneKind {
+    match k {
+        crate::site::ZoneKind::Room => ZoneKind::Room,
+        crate::site::ZoneKind::Corridor => ZoneKind::Corridor,
+        crate::site::ZoneKind::Hall => ZoneKind::Hall,
+        crate::site::ZoneKind::Stairs => ZoneKind::Stairs,
+        crate::site::ZoneKind::Lift => ZoneKind::Lift,
+        crate::site::ZoneKind::Entrance => ZoneKind::Entrance,
+        crate::site::ZoneKind::Other => ZoneKind::Other,
+    }
 }
 
 /// One point of the smoothed track.
@@ -413,7 +485,13 @@ enum Event {
 /// epochs), held back until the call that made them returns.
 struct Collector {
     events: Arc<Delivery<Event>>,
-    floor_names: Vec<String>,
+    names: Arc<Names>,
+}
+
+/// The site's floor and zone names, by index.
+struct Names {
+    floors: Vec<String>,
+    zones: Vec<String>,
 }
 
 impl Collector {
@@ -422,14 +500,16 @@ impl Collector {
     }
 }
 
-fn estimate(p: &engine::Position, floor_names: &[String]) -> PositionEstimate {
+fn estimate(p: &engine::Position, names: &Names) -> PositionEstimate {
     PositionEstimate {
         timestamp_ns: p.timestamp_ns,
         x: p.x,
         y: p.y,
         floor: p.floor as u32,
-        floor_name: floor_names.get(p.floor).cloned().unwrap_or_default(),
+        floor_name: names.floors.get(p.floor).cloned().unwrap_or_default(),
         floor_probability: p.floor_probability,
+        zone: p.zone.and_then(|z| names.zones.get(z).cloned()),
+        zone_probability: p.zone_probability,
         accuracy_m: p.accuracy_m,
         accuracy_95_m: p.accuracy_95_m,
         heading_deg: p.heading_rad.map(f64::to_degrees),
@@ -442,7 +522,7 @@ fn estimate(p: &engine::Position, floor_names: &[String]) -> PositionEstimate {
 
 impl CoreListener for Collector {
     fn on_position(&mut self, p: &engine::Position) {
-        self.push(Event::Position(estimate(p, &self.floor_names)));
+        self.push(Event::Position(estimate(p, &self.names)));
     }
 
     fn on_status(&mut self, status: &engine::StatusEvent) {
@@ -466,7 +546,7 @@ impl CoreListener for Collector {
 
 struct Inner {
     engine: Engine,
-    floor_names: Vec<String>,
+    names: Arc<Names>,
     /// The last position, in FFI form.
     latest: Option<PositionEstimate>,
 }
@@ -534,14 +614,16 @@ fn internal(what: &str) -> PositioningError {
 
 impl PositioningEngine {
     fn create(site: Site, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
-        let floor_names: Vec<String> = site.floors().iter().map(|f| f.name.clone()).collect();
+        let names = Arc::new(Names {
+            floors: site.floors().iter().map(|f| f.name.clone()).collect(),
+            zones: site.zones().iter().map(|z| z.name.clone()).collect(),
+        });
         let config = options.to_config(&site)?;
         let mut engine = Engine::new(Arc::new(site), config)?;
         let events = Arc::new(Delivery::new());
-        engine
-            .subscribe(Box::new(Collector { events: Arc::clone(&events), floor_names: floor_names.clone() }));
+        engine.subscribe(Box::new(Collector { events: Arc::clone(&events), names: Arc::clone(&names) }));
         Ok(Arc::new(Self {
-            inner: Mutex::new(Inner { engine, floor_names, latest: None }),
+            inner: Mutex::new(Inner { engine, names, latest: None }),
             events,
             listeners: Mutex::new(Vec::new()),
             next_listener: Mutex::new(0),
@@ -692,6 +774,70 @@ impl PositioningEngine {
         self.epoch(|engine| engine.advance(timestamp_ns))
     }
 
+    /// A position from another positioning system (GNSS near an entrance, WiFi RTT, UWB): one
+    /// positioning epoch, with the motion since the last one, whose observation is the fix. A
+    /// precise fix pulls the estimate to it; a vague one barely moves it. Throws
+    /// `InputRejected`, changing nothing, for a time not after the last epoch, a NaN or
+    /// infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
+    /// site for its accuracy.
+    pub fn push_fix(&self, fix: PositionFix) -> Result<PositionEstimate, PositioningError> {
+        let core = crate::fix::PositionFix {
+            timestamp_ns: fix.timestamp_ns,
+            x: fix.x,
+            y: fix.y,
+            floor: fix.floor.map(|f| f as usize),
+            accuracy_m: fix.accuracy_m,
+        };
+        self.epoch(|engine| engine.push_fix(&core))
+    }
+
+    /// The user says they are in the zone called `zone` ("I am in the kitchen"): the position
+    /// is pinned to its states. At the time of the latest position it corrects that position;
+    /// later, it is a new epoch. Kept for learning the user's habits. Throws `InputRejected`,
+    /// changing nothing, for a time before the latest position or an unknown zone.
+    pub fn confirm_zone(
+        &self,
+        timestamp_ns: u64,
+        zone: String,
+    ) -> Result<PositionEstimate, PositioningError> {
+        self.epoch(|engine| engine.confirm_zone_named(timestamp_ns, &zone))
+    }
+
+    /// The user says they are within `radius_m` of (x, y) on `floor` (a tap on the map): as
+    /// `confirm_zone`, pinned to the states within the radius. Throws `InputRejected`, changing
+    /// nothing, for a time before the latest position, an unknown floor, a NaN or infinite
+    /// coordinate, a radius not > 0, or no surveyed place within the radius.
+    pub fn confirm_position(
+        &self,
+        timestamp_ns: u64,
+        x: f64,
+        y: f64,
+        floor: u32,
+        radius_m: f64,
+    ) -> Result<PositionEstimate, PositioningError> {
+        self.epoch(|engine| engine.confirm_position(timestamp_ns, x, y, floor as usize, radius_m))
+    }
+
+    /// Every zone of the site, in the site file's order, with the probability of being in it
+    /// now (before the first epoch, its share of the site's states: the prior is uniform).
+    /// Empty for a site without zones.
+    pub fn zone_posterior(&self) -> Vec<ZoneProbability> {
+        self.with_engine(|i| {
+            let site = Arc::clone(i.engine.site());
+            Ok(site
+                .zones()
+                .iter()
+                .zip(i.engine.zone_posterior())
+                .map(|(z, probability)| ZoneProbability {
+                    name: z.name.clone(),
+                    kind: zone_kind(z.kind),
+                    probability,
+                })
+                .collect())
+        })
+        .unwrap_or_default()
+    }
+
     /// The latest position, if any.
     pub fn position(&self) -> Option<PositionEstimate> {
         self.with_engine(|i| Ok(i.latest.clone())).ok().flatten()
@@ -736,7 +882,7 @@ impl PositioningEngine {
         self.with_engine(|inner| {
             let position = f(&mut inner.engine)
                 .map_err(|e| PositioningError::InputRejected { reason: e.to_string() })?;
-            let estimate = estimate(&position, &inner.floor_names);
+            let estimate = estimate(&position, &inner.names);
             inner.latest = Some(estimate.clone());
             Ok(estimate)
         })

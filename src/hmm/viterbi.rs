@@ -181,6 +181,33 @@ impl ViterbiWindow {
         self.epochs.push_back((timestamp_ns, back));
     }
 
+    /// Weights the newest epoch's scores by `ln_emission` without adding an epoch (feedback
+    /// about that epoch). When no state keeps a finite score (the feedback contradicts what the
+    /// window holds), the newest epoch's scores restart from `ln_emission` alone; the
+    /// back-pointers into earlier epochs stay valid, every state has one. Nothing without an
+    /// epoch.
+    pub fn pin(&mut self, ln_emission: &[f64]) {
+        if self.epochs.is_empty() {
+            return;
+        }
+        for ((n, &d), &e) in self.next.iter_mut().zip(&self.delta).zip(ln_emission) {
+            *n = d + e;
+        }
+        let best = |v: &[f64]| v.iter().copied().filter(|x| !x.is_nan()).fold(f64::NEG_INFINITY, f64::max);
+        let mut max = best(&self.next);
+        if !max.is_finite() {
+            self.next.copy_from_slice(ln_emission);
+            max = best(&self.next);
+            if !max.is_finite() {
+                return;
+            }
+        }
+        for v in self.next.iter_mut() {
+            *v = if v.is_nan() { f64::NEG_INFINITY } else { *v - max };
+        }
+        self.replace_delta();
+    }
+
     /// The most likely path through the window, oldest first, as (timestamp, state).
     pub fn path(&self) -> Vec<(u64, u32)> {
         let Some(mut state) =
@@ -248,6 +275,31 @@ mod tests {
         }
         assert_eq!(short.len(), 2);
         assert_eq!(short.path().iter().map(|p| p.0).collect::<Vec<_>>(), vec![3, 4]);
+    }
+
+    #[test]
+    fn pinning_the_newest_epoch_is_adding_to_its_emission() {
+        let a = vec![vec![0.6, 0.3, 0.1], vec![0.2, 0.5, 0.3], vec![0.1, 0.1, 0.8]];
+        let mut emissions = vec![vec![-0.1, -2.0, -3.0], vec![-1.5, -0.4, -2.0], vec![-2.0, -1.9, -0.3]];
+        let dense = Dense(a.clone());
+        let mut window = ViterbiWindow::new(3, 10);
+        for (t, e) in emissions.iter().enumerate() {
+            window.step(t as u64, &dense, e);
+        }
+        let pin = [f64::NEG_INFINITY, 0.0, f64::NEG_INFINITY];
+        window.pin(&pin);
+        emissions[2][0] = -1e6;
+        emissions[2][2] = -1e6;
+        let got: Vec<u32> = window.path().iter().map(|p| p.1).collect();
+        assert_eq!(got, brute_force(&a, &emissions));
+        assert_eq!(got[2], 1);
+        // A contradicting pin restarts the newest scores from it.
+        window.pin(&[0.0, f64::NEG_INFINITY, f64::NEG_INFINITY]);
+        assert_eq!(window.path().last().map(|p| p.1), Some(0));
+        assert_eq!(window.len(), 3);
+        let mut empty = ViterbiWindow::new(3, 2);
+        empty.pin(&pin);
+        assert!(empty.path().is_empty());
     }
 
     #[test]

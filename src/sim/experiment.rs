@@ -43,6 +43,8 @@ fn between(stream: &[SensorSample], from: Option<u64>, to: u64) -> &[SensorSampl
 pub struct TrackPoint {
     /// Where the phone was.
     pub truth: Point2<f64>,
+    /// The zone it was in.
+    pub truth_zone: Option<usize>,
     /// What the engine said.
     pub position: Position,
 }
@@ -84,7 +86,7 @@ pub fn track_walk(
         previous = Some(t);
         // A scan where no access point was heard is rejected (and counted): nothing to score.
         let Ok(position) = engine.push_scan(&epoch.scan) else { continue };
-        points.push(TrackPoint { truth: epoch.truth, position });
+        points.push(TrackPoint { truth: epoch.truth, truth_zone: epoch.zone, position });
         if lags > 0 {
             let path = engine.track();
             for (lag, out) in lag_errors.iter_mut().enumerate() {
@@ -101,7 +103,7 @@ pub fn track_walk(
     Ok(TrackedWalk { points, lag_errors })
 }
 
-/// Scores a track.
+/// Scores a track (by zone too: the simulated office has zones).
 pub fn errors(points: &[TrackPoint]) -> Vec<EpochError> {
     points
         .iter()
@@ -109,6 +111,7 @@ pub fn errors(points: &[TrackPoint]) -> Vec<EpochError> {
             error_m: nalgebra::distance(&p.truth, &Point2::new(p.position.x, p.position.y)),
             accuracy_m: p.position.accuracy_m,
             floor_correct: p.position.floor == 0,
+            zone_correct: Some(p.position.zone == p.truth_zone),
         })
         .collect()
 }

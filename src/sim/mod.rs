@@ -19,7 +19,7 @@ pub use paper::{run_papers, HipeTable5, HoangTable1, PaperExperiment, PaperRepor
 pub use trajectory::{Pose, Trajectory};
 
 use crate::radio::{FitOptions, Reading, RssiModel, Scan, TransmitterId};
-use crate::site::{BuildOptions, Site, SiteBuilder};
+use crate::site::{BuildOptions, Site, SiteBuilder, ZoneKind};
 use nalgebra::Point2;
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
@@ -79,11 +79,20 @@ impl Default for OfficeConfig {
     }
 }
 
+/// A zone of the simulated office: its name, kind, states, and the rectangle it covers
+/// (x min, x max, y min, y max, m), which decides the true zone of a walker.
+type OfficeZone = (String, ZoneKind, Vec<u32>, [f64; 4]);
+
+/// The office's state positions, walkable edges and zones.
+type OfficePlan = (Vec<Point2<f64>>, Vec<(u32, u32)>, Vec<OfficeZone>);
+
 /// The office floor of Hoang Fig. 3 in spirit: ten rooms off a long aisle and a staircase
-/// hall, 81 surveyed states 3-4.25 m apart (Hoang: 81 regular states, 3-5 m apart).
-fn office_plan() -> (Vec<Point2<f64>>, Vec<(u32, u32)>) {
+/// hall, 81 surveyed states 3-4.25 m apart (Hoang: 81 regular states, 3-5 m apart). The rooms,
+/// the aisle and the hall are its zones.
+fn office_plan() -> OfficePlan {
     let mut points = Vec::new();
     let mut edges = Vec::new();
+    let mut zones: Vec<OfficeZone> = Vec::new();
     let mut add = |p: Point2<f64>| {
         points.push(p);
         (points.len() - 1) as u32
@@ -93,6 +102,7 @@ fn office_plan() -> (Vec<Point2<f64>>, Vec<(u32, u32)>) {
     for w in aisle.windows(2) {
         edges.push((w[0], w[1]));
     }
+    zones.push(("aisle".into(), ZoneKind::Corridor, aisle.clone(), [0.0, 34.0, 10.0, 13.0]));
     // Ten 6.8 m x 10 m rooms, five on each side, each a 2 x 3 grid; the door is at the cell
     // nearest the aisle.
     for side in [0, 1] {
@@ -112,6 +122,13 @@ fn office_plan() -> (Vec<Point2<f64>>, Vec<(u32, u32)>) {
                     edges.push((grid[r][1], grid[r + 1][1]));
                 }
             }
+            let y_range = if side == 0 { [0.0, 10.0] } else { [13.0, 23.0] };
+            zones.push((
+                format!("room {}", 5 * side + room + 1),
+                ZoneKind::Room,
+                grid.iter().flatten().copied().collect(),
+                [x0, x0 + 6.8, y_range[0], y_range[1]],
+            ));
             let door = grid[0][0];
             let nearest = *aisle
                 .iter()
@@ -140,7 +157,13 @@ fn office_plan() -> (Vec<Point2<f64>>, Vec<(u32, u32)>) {
         }
     }
     edges.push((aisle[10], hall[2][0]));
-    return (points, edges);
+    zones.push((
+        "stair hall".into(),
+        ZoneKind::Hall,
+        hall.iter().flatten().copied().collect(),
+        [34.0, 40.0, 0.0, 23.0],
+    ));
+    return (points, edges, zones);
 
     // The aisle's x coordinates, for door placement (states are added in order).
     fn points_x(aisle_index: u32) -> f64 {
@@ -188,6 +211,8 @@ pub struct Office {
     pub field: RadioField,
     points: Vec<Point2<f64>>,
     adjacency: Vec<Vec<u32>>,
+    /// The rectangle of each zone, by zone index.
+    zone_areas: Vec<[f64; 4]>,
 }
 
 /// One epoch of a simulated walk.
@@ -197,6 +222,8 @@ pub struct WalkEpoch {
     pub scan: Scan,
     /// Where the phone really was.
     pub truth: Point2<f64>,
+    /// The zone (room, aisle, hall) it was in, an index into the site's zones.
+    pub zone: Option<usize>,
 }
 
 /// A simulated walk.
@@ -219,7 +246,7 @@ const OFFICE_SIZE_M: (f64, f64) = (40.0, 23.0);
 impl Office {
     /// Generates the office: places access points and fits every state from its training scans.
     pub fn generate(config: &OfficeConfig) -> Office {
-        let (points, edges) = office_plan();
+        let (points, edges, zones) = office_plan();
         let mut rng = ChaCha8Rng::seed_from_u64(config.seed);
         let access_points = (0..config.access_points)
             .map(|k| {
@@ -257,12 +284,21 @@ impl Office {
             adjacency[a as usize].push(b);
             adjacency[b as usize].push(a);
         }
+        for (name, kind, states, _) in &zones {
+            builder.zone(name, *kind, states.clone());
+        }
+        let zone_areas = zones.iter().map(|z| z.3).collect();
         let options = BuildOptions {
             model: config.model,
             fit: FitOptions { clip_dbm: config.clip_dbm, ..FitOptions::default() },
         };
         let site = builder.build(options).expect("the office plan is a valid site");
-        Office { site, field, points, adjacency }
+        Office { site, field, points, adjacency, zone_areas }
+    }
+
+    /// The zone whose area holds `p` (the first, on a shared wall), by zone index.
+    pub fn zone_at(&self, p: Point2<f64>) -> Option<usize> {
+        self.zone_areas.iter().position(|a| p.x >= a[0] && p.x <= a[1] && p.y >= a[2] && p.y <= a[3])
     }
 
     /// Surveyed state positions, by state index.
@@ -299,7 +335,11 @@ impl Office {
             .take_while(|&t_ns| t_ns <= trajectory.end_ns())
             .map(|t_ns| {
                 let truth = trajectory.pose_at(t_ns).position;
-                WalkEpoch { scan: self.field.scan_at(truth, t_ns, &mut rng), truth }
+                WalkEpoch {
+                    scan: self.field.scan_at(truth, t_ns, &mut rng),
+                    truth,
+                    zone: self.zone_at(truth),
+                }
             })
             .collect();
         Walk { epochs, length_m: walked, trajectory }

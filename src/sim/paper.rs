@@ -98,6 +98,9 @@ pub struct PaperReport {
     /// Mean error of the Viterbi track `lag` epochs behind the newest, for lag 0..=6, with
     /// the default engine (Hoang transitions, full motion, pseudo states).
     pub fixed_lag_mean_error_m: Vec<(usize, f64)>,
+    /// Room-level accuracy of each method (El Gemayel et al. §II-B): the share of epochs whose
+    /// most likely zone (one of the ten rooms, the aisle, the stair hall) was the true one.
+    pub room_accuracy: Vec<(String, f64)>,
     /// Surveyed and pseudo states.
     pub surveyed_states: usize,
     /// States after adding pseudo states (Hoang: 81 + 125).
@@ -131,6 +134,7 @@ fn mle(site: &Site, walk: &Walk) -> Vec<EpochError> {
                 error_m: nalgebra::distance(&epoch.truth, &at),
                 accuracy_m: f64::NAN,
                 floor_correct: true,
+                zone_correct: Some(site.zone_of(best) == epoch.zone),
             })
         })
         .collect()
@@ -248,6 +252,7 @@ pub fn run_papers(experiment: &PaperExperiment) -> Result<PaperReport, Error> {
         surveyed_states: surveyed.states().len(),
         states_with_pseudo: pseudo.states().len(),
         epochs: get("rssi_only").epochs,
+        room_accuracy: summaries.iter().map(|(n, s)| (n.clone(), s.zone_hit.unwrap_or(f64::NAN))).collect(),
         summaries,
     })
 }

@@ -1,7 +1,7 @@
 //! Building a site from surveyed places and their training scans: fits every transmitter's
 //! RSSI model at every state (Hoang §3) and derives the map's "unheard" model.
 
-use super::{Edge, Floor, North, Site, SiteError, State, StateKind};
+use super::{Edge, Floor, North, Site, SiteError, State, StateKind, Zone, ZoneKind};
 use crate::radio::{
     unheard_model, FitOptions, Gaussian, RadioMap, RssiModel, Scan, TransmitterId, MAX_STORED_STD_DB,
 };
@@ -20,6 +20,7 @@ pub struct SiteBuilder {
     states: Vec<(State, Vec<TrainingScan>)>,
     edges: Vec<(u32, u32, Option<f64>)>,
     north: North,
+    zones: Vec<Zone>,
 }
 
 impl SiteBuilder {
@@ -50,6 +51,12 @@ impl SiteBuilder {
     /// Adds a walkable edge; `length_m` `None` means the straight line (same floor only).
     pub fn edge(&mut self, a: u32, b: u32, length_m: Option<f64>) {
         self.edges.push((a, b, length_m));
+    }
+
+    /// Groups states (by id) into a zone: a room, a corridor... Checked at
+    /// [`build`](Self::build): names unique and not empty, each state in at most one zone.
+    pub fn zone(&mut self, name: &str, kind: ZoneKind, states: Vec<u32>) {
+        self.zones.push(Zone { name: name.to_owned(), kind, states });
     }
 
     /// Fits every state's fingerprints with `model` and assembles the site.
@@ -165,7 +172,7 @@ impl SiteBuilder {
         }
         let map = RadioMap::new(options.model, clip, unheard, ids, states.len(), triples)
             .map_err(|m| SiteError::Invalid { path: "radio".into(), message: m })?;
-        Ok(Site::from_parts(self.name, self.floors, states, edges, map, self.north))
+        Site::from_parts(self.name, self.floors, states, edges, map, self.north).with_zones(self.zones)
     }
 }
 

@@ -5,8 +5,12 @@
 //! UUIDs: `radio.id_hash` then names the scheme and stores the salt check, and every entry of
 //! `radio.transmitters` is `hashed_wifi` or `hashed_ble` (see [`crate::radio::Salt`]). Files
 //! without `id_hash` are read exactly as before.
+//!
+//! An optional top-level `zones` array groups states into named places (rooms, corridors):
+//! `{"name": "kitchen", "kind": "room", "states": [state ids]}`, each state in at most one
+//! zone. Files without `zones` are read, and written, exactly as before.
 
-use super::{Calibration, Edge, Floor, North, Site, State, StateKind};
+use super::{Calibration, Edge, Floor, North, Site, State, StateKind, ZoneKind};
 use crate::radio::{
     Gaussian, RadioMap, RssiModel, Salt, ScanHasher, TransmitterId, HASH_HEX_DIGITS, ID_HASH_SCHEME,
     ID_HASH_VERSION, MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB,
@@ -123,6 +127,18 @@ pub(super) struct SiteFile {
     edges: Vec<EdgeFile>,
     #[serde(default, skip_serializing_if = "Calibration::is_empty")]
     calibration: Calibration,
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    zones: Vec<ZoneFile>,
+}
+
+#[derive(Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+struct ZoneFile {
+    name: String,
+    #[serde(default)]
+    kind: ZoneKind,
+    /// State ids.
+    states: Vec<u32>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -226,7 +242,7 @@ fn json_error(e: &serde_json::Error) -> SiteError {
 /// Largest |x| and |y| of a state, m. Found with the `site_file` fuzz harness: states at
 /// ±1e308 m made distances overflow to an infinite accuracy radius. 1000 km is more than any
 /// building's frame, and keeps every distance and its square finite.
-const MAX_COORDINATE_M: f64 = 1e6;
+pub const MAX_COORDINATE_M: f64 = 1e6;
 
 /// A validated Gaussian; `path` (formatted only on error) says where it was in the file.
 fn gaussian(path: impl FnOnce() -> String, g: &GaussianFile) -> Result<Gaussian, SiteError> {
@@ -383,6 +399,15 @@ impl Site {
                 })
                 .collect(),
             calibration: self.calibration,
+            zones: self
+                .zones
+                .iter()
+                .map(|z| ZoneFile {
+                    name: z.name.clone(),
+                    kind: z.kind,
+                    states: z.states.iter().map(|&i| self.states[i as usize].id).collect(),
+                })
+                .collect(),
         }
     }
 
@@ -517,8 +542,14 @@ impl Site {
         if !(file.north.site_rotation_rad.is_finite() && file.north.declination_rad.is_finite()) {
             return Err(invalid("north", "angles must be finite"));
         }
+        let (zones, zone_of) = super::zones::validate(
+            file.zones.iter().map(|z| (z.name.clone(), z.kind, &z.states[..])),
+            states.len(),
+            "id",
+            |id| ids.get(&id).copied(),
+        )?;
         let site = Site::from_parts(file.name, floors, states, edges, map, file.north);
-        Ok(Site { id_hashing, ..site.with_calibration(file.calibration)? })
+        Ok(Site { id_hashing, zones, zone_of, ..site.with_calibration(file.calibration)? })
     }
 
     /// The same site with every transmitter id replaced by its hash under `salt`
@@ -775,6 +806,63 @@ mod tests {
             .replace("\"x\": 3, \"y\": 4", "\"x\": 1e6, \"y\": -1e6")
             .replace("\"std_db\": 4", "\"std_db\": 0.01");
         assert!(Site::from_json(edge.as_bytes()).is_ok(), "the limits themselves load");
+    }
+
+    const ZONES: &str = r#","zones": [{"name": "kitchen", "states": [7]}, {"name": "hall", "kind": "corridor", "states": [9]}]}"#;
+
+    fn with_zones(zones: &str) -> String {
+        let end = GOOD.rfind('}').unwrap();
+        format!("{}{}", &GOOD[..end], zones)
+    }
+
+    #[test]
+    fn zones_load_and_round_trip_in_both_encodings() {
+        let site = Site::from_json(with_zones(ZONES).as_bytes()).unwrap();
+        assert_eq!(site.zones().len(), 2);
+        assert_eq!(site.zones()[0].kind, ZoneKind::Room, "room by default");
+        assert_eq!(site.zones()[1].kind, ZoneKind::Corridor);
+        assert_eq!((site.zone_of(0), site.zone_of(1)), (Some(0), Some(1)));
+        let json = site.to_json();
+        assert!(json.contains(r#""zones":[{"name":"kitchen","kind":"room","states":[7]}"#), "{json}");
+        let again = Site::from_json(json.as_bytes()).unwrap();
+        assert_eq!(again.zones(), site.zones());
+        assert_eq!(again.to_json(), json);
+        let packed = Site::from_bytes(&site.to_binary()).unwrap();
+        assert_eq!(packed.zones(), site.zones());
+        assert_eq!(packed.to_json(), json);
+        // Without zones, nothing is written.
+        let plain = Site::from_json(GOOD.as_bytes()).unwrap();
+        assert!(plain.zones().is_empty() && !plain.to_json().contains("zones"));
+        assert!(Site::from_bytes(&plain.to_binary()).unwrap().zones().is_empty());
+    }
+
+    #[test]
+    fn bad_zones_are_named_by_path() {
+        let cases = [
+            (r#","zones": [{"name": "", "states": [7]}]}"#, "zones[0].name"),
+            (r#","zones": [{"name": "a", "states": [7]}, {"name": "a", "states": [9]}]}"#, "zones[1].name"),
+            (r#","zones": [{"name": "a", "states": []}]}"#, "zones[0].states"),
+            (r#","zones": [{"name": "a", "states": [7, 8]}]}"#, "zones[0].states[1]"),
+            (r#","zones": [{"name": "a", "states": [9, 9]}]}"#, "zones[0].states[1]"),
+            (
+                r#","zones": [{"name": "a", "states": [7]}, {"name": "b", "states": [9, 7]}]}"#,
+                "zones[1].states[1]",
+            ),
+            (r#","zones": [{"name": "a", "kind": "cellar", "states": [7]}]}"#, "zones[0].kind"),
+            (r#","zones": [{"name": "a", "states": [7], "floor": 0}]}"#, "zones[0]"),
+            (r#","zones": [{"states": [7]}]}"#, "zones[0]"),
+            (r#","zones": {"name": "a"}}"#, "zones"),
+        ];
+        for (zones, path) in cases {
+            match err(&with_zones(zones)) {
+                SiteError::Invalid { path: p, message } => {
+                    assert!(p.starts_with(path), "{zones}: expected {path}, got {p}: {message}")
+                }
+                other => panic!("{zones}: expected Invalid at {path}, got {other:?}"),
+            }
+        }
+        let message = err(&with_zones(cases[5].0)).to_string();
+        assert!(message.contains("already in zones[0]"), "{message}");
     }
 
     #[test]

@@ -1,17 +1,20 @@
 //! The surveyed site: floors, states (the HMM's possible positions), the walkable graph between
-//! them, and the radio map. Loaded from a versioned site file: JSON, or its binary encoding.
+//! them, the radio map, and optional zones (rooms, corridors) grouping the states. Loaded from a
+//! versioned site file: JSON, or its binary encoding.
 
 mod binary;
 mod builder;
 mod file;
 mod pseudo;
 mod reach;
+mod zones;
 
 pub use binary::{LAYOUT_VERSION as BINARY_LAYOUT_VERSION, SIGNATURE as BINARY_SIGNATURE};
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
-pub use file::{IdHashing, SiteError, FORMAT_VERSION};
+pub use file::{IdHashing, SiteError, FORMAT_VERSION, MAX_COORDINATE_M};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
 pub use reach::ReachTable;
+pub use zones::{most_likely_zone, Zone, ZoneKind, MAX_ZONES};
 
 use crate::radio::RadioMap;
 use nalgebra::Point2;
@@ -146,6 +149,10 @@ pub struct Site {
     calibration: Calibration,
     /// Set when the transmitter ids are salted hashes.
     id_hashing: Option<IdHashing>,
+    /// Named groups of states (rooms, corridors); may be empty.
+    zones: Vec<Zone>,
+    /// Each state's zone index, `zones::NO_ZONE` for none; empty when there are no zones.
+    zone_of: Vec<u32>,
 }
 
 impl Site {
@@ -190,6 +197,8 @@ impl Site {
             spacing_m,
             calibration: Calibration::default(),
             id_hashing: None,
+            zones: Vec::new(),
+            zone_of: Vec::new(),
         }
     }
 

@@ -26,7 +26,8 @@ pub fn interpolate(a: &Gaussian, b: &Gaussian, s: f64) -> Gaussian {
 impl Site {
     /// The site with pseudo states on every same-floor edge between two surveyed states, so
     /// that neighbours are at most `max_spacing_m` apart. Edges between floors (stairs, lifts)
-    /// and edges touching pseudo states are kept as they are.
+    /// and edges touching pseudo states are kept as they are. A pseudo state joins the zone of
+    /// the nearer end of its edge (of the first end, halfway), or none if that end is in none.
     pub fn with_pseudo_states(&self, max_spacing_m: f64) -> Site {
         let radio = self.radio();
         let unheard = radio.unheard();
@@ -38,6 +39,7 @@ impl Site {
         let mut triples: Vec<(u32, u32, Gaussian)> = radio.fingerprints().collect();
         let mut edges = Vec::with_capacity(self.edges.len());
         let mut next_id = self.states.iter().map(|s| s.id).max().map_or(0, |m| m + 1);
+        let mut zones = self.zones.clone();
         for e in &self.edges {
             let (a, b) = (&self.states[e.a as usize], &self.states[e.b as usize]);
             let splittable = a.floor == b.floor
@@ -63,6 +65,10 @@ impl Site {
                     training_scans: 0,
                 });
                 next_id += 1;
+                let nearer = if s <= 0.5 { e.a } else { e.b };
+                if let Some(z) = self.zone_of(nearer as usize) {
+                    zones[z].states.push(index);
+                }
                 let (ma, mb) = (&models[e.a as usize], &models[e.b as usize]);
                 for tx in ma.keys().chain(mb.keys().filter(|t| !ma.contains_key(t))) {
                     let ga = ma.get(tx).unwrap_or(&unheard);
@@ -87,7 +93,8 @@ impl Site {
             Site::from_parts(self.name.clone(), self.floors.clone(), states, edges, map, self.north);
         site.calibration = self.calibration;
         site.id_hashing = self.id_hashing.clone();
-        site
+        // Pseudo states come after the surveyed ones: each zone's list stays ascending.
+        site.with_zones(zones).expect("pseudo states are new states, each added to at most one zone")
     }
 }
 
@@ -128,5 +135,33 @@ mod tests {
         // The file format keeps them.
         let again = Site::from_json(site.to_json().as_bytes()).unwrap();
         assert_eq!(again.states(), site.states());
+    }
+
+    #[test]
+    fn pseudo_states_join_the_zone_of_the_nearer_end() {
+        use crate::site::{Zone, ZoneKind};
+        let mut b = SiteBuilder::new("room and corridor");
+        let f = b.floor("G", 0.0);
+        let s: Vec<u32> = (0..3).map(|k| b.state(f, Point2::new(3.0 * k as f64, 0.0), vec![])).collect();
+        b.edge(s[0], s[1], None);
+        b.edge(s[1], s[2], None);
+        let zones = vec![
+            Zone { name: "room".into(), kind: ZoneKind::Room, states: vec![0] },
+            Zone { name: "corridor".into(), kind: ZoneKind::Corridor, states: vec![1] },
+        ];
+        let site = b.build(BuildOptions::default()).unwrap().with_zones(zones).unwrap();
+        let pseudo = site.with_pseudo_states(PSEUDO_SPACING_M);
+        // Edge 0-1 gets pseudo states at 0.75, 1.5 and 2.25 m; 1-2 at 3.75, 4.5 and 5.25 m.
+        let zone_at = |x: f64| {
+            let i = pseudo.states().iter().position(|st| (st.position.x - x).abs() < 1e-9).unwrap();
+            pseudo.zone_of(i)
+        };
+        assert_eq!([zone_at(0.75), zone_at(1.5), zone_at(2.25)], [Some(0), Some(0), Some(1)]);
+        assert_eq!(
+            [zone_at(3.75), zone_at(4.5), zone_at(5.25), zone_at(6.0)],
+            [Some(1), Some(1), None, None]
+        );
+        let again = Site::from_json(pseudo.to_json().as_bytes()).unwrap();
+        assert_eq!(again.zones(), pseudo.zones());
     }
 }

@@ -1,7 +1,8 @@
 //! Survey walks → a site file: reference states on a regular spacing over where the surveyors
 //! walked, fingerprints fitted from the scans near each (censored Gaussians, Hoang §3), the
 //! walkable graph from the floor plan and from where people actually walked, the site's north
-//! and the walkers' step length.
+//! and the walkers' step length. When the floor plan names its polygons (shops, rooms), the
+//! states inside each named polygon become a zone.
 //!
 //! States never sit on the labelled waypoints: they are grid points, so a method that snaps to
 //! the grid gains nothing from the surveyors' habit of revisiting the same waypoints.
@@ -13,7 +14,7 @@ pub use motion::{calibrate_motion, MotionCalibration};
 use crate::io::ilc::EventOptions;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::{FitOptions, Reading, Scan, TransmitterId};
-use crate::site::{BuildOptions, North, Site, SiteBuilder, SiteError};
+use crate::site::{BuildOptions, North, Site, SiteBuilder, SiteError, Zone, ZoneKind};
 use nalgebra::Point2;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
@@ -115,6 +116,10 @@ pub struct FloorSurvey {
     pub walled_edges: usize,
     /// Plan polygons survey walks went inside, whose outlines are therefore not walls.
     pub open_rooms: usize,
+    /// Zones made from the plan's named polygons that hold at least one state.
+    pub zones: usize,
+    /// States in those zones.
+    pub zoned_states: usize,
     /// Median time between consecutive WiFi scans of a walk, s (the phones' scan interval,
     /// which sets the reading-age limit and the timer epoch's period).
     pub scan_interval_median_s: f64,
@@ -205,6 +210,7 @@ pub fn survey(
     let mut builder = SiteBuilder::new(name);
     builder.north(north);
     let mut reports = Vec::new();
+    let mut zones: Vec<Zone> = Vec::new();
     for floor in floors {
         let index = builder.floor(
             &floor.name,
@@ -267,6 +273,12 @@ pub fn survey(
             }
         }
         report.states = ids.len();
+        if let Some(plan) = floor.plan {
+            let made = plan_zones(&floor.name, plan, ids.iter().map(|(&c, &id)| (centre(c), id)));
+            report.zones = made.len();
+            report.zoned_states = made.iter().map(|z| z.states.len()).sum();
+            zones.extend(made);
+        }
         // A plan polygon that survey walks went inside is open space, not a room with walls:
         // plans label atria, decorative and "auxiliary" areas as polygons too.
         let mut open: Vec<usize> = floor
@@ -312,9 +324,37 @@ pub fn survey(
         }
         reports.push(report);
     }
-    let site = builder.build(build)?;
+    // Builder ids are state indices.
+    let site = builder.build(build)?.with_zones(zones)?;
     let transmitters = site.radio().transmitters().len();
     Ok((site, SurveyReport { floors: reports, transmitters }))
+}
+
+/// Zones from a floor plan's named polygons: each state (position, index) joins the smallest
+/// named polygon holding it. A zone is called `floor/name`, with ` #k` after the name when the
+/// plan has several polygons of that name (k counts them in plan order), so names are unique
+/// in the site. Polygons holding no state make no zone.
+fn plan_zones(floor: &str, plan: &FloorPlan, states: impl Iterator<Item = (Point2<f64>, u32)>) -> Vec<Zone> {
+    let mut members: BTreeMap<usize, Vec<u32>> = BTreeMap::new();
+    for (p, id) in states {
+        if let Some(room) = plan.room_at(p).filter(|&r| !plan.rooms[r].name.trim().is_empty()) {
+            members.entry(room).or_default().push(id);
+        }
+    }
+    members
+        .into_iter()
+        .map(|(room, states)| {
+            let name = &plan.rooms[room].name;
+            let same = plan.rooms.iter().filter(|r| &r.name == name).count();
+            let name = if same > 1 {
+                let k = plan.rooms[..room].iter().filter(|r| &r.name == name).count() + 1;
+                format!("{floor}/{name} #{k}")
+            } else {
+                format!("{floor}/{name}")
+            };
+            Zone { name, kind: ZoneKind::Room, states }
+        })
+        .collect()
 }
 
 #[cfg(test)]
@@ -415,6 +455,58 @@ mod tests {
         .unwrap();
         assert_eq!(report.floors[0].open_rooms, 1);
         assert_eq!(report.floors[0].walled_edges, 0);
+    }
+
+    #[test]
+    fn named_plan_polygons_become_zones() {
+        let rect = |name: &str, x0: f64, x1: f64| crate::io::floor_plan::Room {
+            name: name.into(),
+            polygon: crate::io::floor_plan::Polygon {
+                rings: vec![vec![
+                    Point2::new(x0, -10.0),
+                    Point2::new(x1, -10.0),
+                    Point2::new(x1, 10.0),
+                    Point2::new(x0, 10.0),
+                ]],
+            },
+        };
+        let rooms = vec![
+            rect("kiosk", -1.0, 5.0),
+            rect("", 5.0, 9.0),
+            rect("kiosk", 9.0, 13.0),
+            rect("shop", 13.0, 30.0),
+            rect("far", 50.0, 60.0),
+        ];
+        let plan = FloorPlan { width_m: 60.0, height_m: 20.0, outline: vec![], rooms };
+        let walks = [walk("a", (0.0, 0.0), (20.0, 0.0), 20)];
+        let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
+        let (site, report) = survey("test", &[floor], North::default(), &SurveyOptions::default()).unwrap();
+        let names: Vec<&str> = site.zones().iter().map(|z| z.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["F1/kiosk #1", "F1/kiosk #2", "F1/shop"],
+            "no zone for the unnamed or empty polygon"
+        );
+        assert_eq!(report.floors[0].zones, 3);
+        for (i, s) in site.states().iter().enumerate() {
+            let expected = match s.position.x {
+                x if x < -1.0 => None,
+                x if x < 5.0 => Some(0),
+                x if x < 9.0 => None,
+                x if x < 13.0 => Some(1),
+                _ => Some(2),
+            };
+            assert_eq!(site.zone_of(i), expected, "state at {}", s.position);
+        }
+        let zoned = (0..site.states().len()).filter(|&i| site.zone_of(i).is_some()).count();
+        assert_eq!(report.floors[0].zoned_states, zoned);
+        // Without a plan, no zones.
+        let floor = SurveyFloor { name: "F1".into(), plan: None, walks: walks.iter().collect() };
+        assert!(survey("test", &[floor], North::default(), &SurveyOptions::default())
+            .unwrap()
+            .0
+            .zones()
+            .is_empty());
     }
 
     #[test]

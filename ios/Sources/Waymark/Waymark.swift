@@ -1140,6 +1140,22 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     func advance(timestampNs: UInt64) throws  -> PositionEstimate
     
     /**
+     * The user says they are within `radius_m` of (x, y) on `floor` (a tap on the map): as
+     * `confirm_zone`, pinned to the states within the radius. Throws `InputRejected`, changing
+     * nothing, for a time before the latest position, an unknown floor, a NaN or infinite
+     * coordinate, a radius not > 0, or no surveyed place within the radius.
+     */
+    func confirmPosition(timestampNs: UInt64, x: Double, y: Double, floor: UInt32, radiusM: Double) throws  -> PositionEstimate
+    
+    /**
+     * The user says they are in the zone called `zone` ("I am in the kitchen"): the position
+     * is pinned to its states. At the time of the latest position it corrects that position;
+     * later, it is a new epoch. Kept for learning the user's habits. Throws `InputRejected`,
+     * changing nothing, for a time before the latest position or an unknown zone.
+     */
+    func confirmZone(timestampNs: UInt64, zone: String) throws  -> PositionEstimate
+    
+    /**
      * The fixed-lag position: a few epochs old, but revised by what came after.
      */
     func fixedLagPosition()  -> TrackPoint?
@@ -1154,6 +1170,16 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * many were taken.
      */
     func pushAccelerometer(batch: [MotionSample]) throws  -> UInt32
+    
+    /**
+     * A position from another positioning system (GNSS near an entrance, WiFi RTT, UWB): one
+     * positioning epoch, with the motion since the last one, whose observation is the fix. A
+     * precise fix pulls the estimate to it; a vague one barely moves it. Throws
+     * `InputRejected`, changing nothing, for a time not after the last epoch, a NaN or
+     * infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
+     * site for its accuracy.
+     */
+    func pushFix(fix: PositionFix) throws  -> PositionEstimate
     
     /**
      * Gyroscope samples, oldest first; as `push_accelerometer`.
@@ -1182,6 +1208,13 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * The most likely recent track, oldest first.
      */
     func track()  -> [TrackPoint]
+    
+    /**
+     * Every zone of the site, in the site file's order, with the probability of being in it
+     * now (before the first epoch, its share of the site's states: the prior is uniform).
+     * Empty for a site without zones.
+     */
+    func zonePosterior()  -> [ZoneProbability]
     
 }
 /**
@@ -1303,6 +1336,43 @@ open func advance(timestampNs: UInt64)throws  -> PositionEstimate  {
 }
     
     /**
+     * The user says they are within `radius_m` of (x, y) on `floor` (a tap on the map): as
+     * `confirm_zone`, pinned to the states within the radius. Throws `InputRejected`, changing
+     * nothing, for a time before the latest position, an unknown floor, a NaN or infinite
+     * coordinate, a radius not > 0, or no surveyed place within the radius.
+     */
+open func confirmPosition(timestampNs: UInt64, x: Double, y: Double, floor: UInt32, radiusM: Double)throws  -> PositionEstimate  {
+    return try  FfiConverterTypePositionEstimate_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_confirm_position(
+            self.uniffiCloneHandle(),
+        FfiConverterUInt64.lower(timestampNs),
+        FfiConverterDouble.lower(x),
+        FfiConverterDouble.lower(y),
+        FfiConverterUInt32.lower(floor),
+        FfiConverterDouble.lower(radiusM),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The user says they are in the zone called `zone` ("I am in the kitchen"): the position
+     * is pinned to its states. At the time of the latest position it corrects that position;
+     * later, it is a new epoch. Kept for learning the user's habits. Throws `InputRejected`,
+     * changing nothing, for a time before the latest position or an unknown zone.
+     */
+open func confirmZone(timestampNs: UInt64, zone: String)throws  -> PositionEstimate  {
+    return try  FfiConverterTypePositionEstimate_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_confirm_zone(
+            self.uniffiCloneHandle(),
+        FfiConverterUInt64.lower(timestampNs),
+        FfiConverterString.lower(zone),uniffiCallStatus
+    )
+})
+}
+    
+    /**
      * The fixed-lag position: a few epochs old, but revised by what came after.
      */
 open func fixedLagPosition() -> TrackPoint?  {
@@ -1336,6 +1406,24 @@ open func pushAccelerometer(batch: [MotionSample])throws  -> UInt32  {
     uniffi_waymark_fn_method_positioningengine_push_accelerometer(
             self.uniffiCloneHandle(),
         FfiConverterSequenceTypeMotionSample.lower(batch),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * A position from another positioning system (GNSS near an entrance, WiFi RTT, UWB): one
+     * positioning epoch, with the motion since the last one, whose observation is the fix. A
+     * precise fix pulls the estimate to it; a vague one barely moves it. Throws
+     * `InputRejected`, changing nothing, for a time not after the last epoch, a NaN or
+     * infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
+     * site for its accuracy.
+     */
+open func pushFix(fix: PositionFix)throws  -> PositionEstimate  {
+    return try  FfiConverterTypePositionEstimate_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_push_fix(
+            self.uniffiCloneHandle(),
+        FfiConverterTypePositionFix_lower(fix),uniffiCallStatus
     )
 })
 }
@@ -1402,6 +1490,20 @@ open func track() -> [TrackPoint]  {
     return try!  FfiConverterSequenceTypeTrackPoint.lift(try! rustCall() {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_track(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Every zone of the site, in the site file's order, with the probability of being in it
+     * now (before the first epoch, its share of the site's states: the prior is uniform).
+     * Empty for a site without zones.
+     */
+open func zonePosterior() -> [ZoneProbability]  {
+    return try!  FfiConverterSequenceTypeZoneProbability.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_zone_posterior(
             self.uniffiCloneHandle(),uniffiCallStatus
     )
 })
@@ -1938,6 +2040,17 @@ public struct PositionEstimate: Equatable, Hashable {
      */
     public var floorProbability: Double
     /**
+     * The most likely zone's name (a room, a corridor): the zone holding the most posterior
+     * mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
+     * than in any one. (The defaults here and below only keep code that builds estimates,
+     * such as tests, compiling: the engine always sets both.)
+     */
+    public var zone: String?
+    /**
+     * Probability of `zone` (of being in no zone when it is `null` / `nil`).
+     */
+    public var zoneProbability: Double
+    /**
      * Radius of the 68% circle, m, as Android's `getAccuracy()` and iOS's
      * `horizontalAccuracy`.
      */
@@ -1989,6 +2102,15 @@ public struct PositionEstimate: Equatable, Hashable {
          * Probability of that floor.
          */floorProbability: Double, 
         /**
+         * The most likely zone's name (a room, a corridor): the zone holding the most posterior
+         * mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
+         * than in any one. (The defaults here and below only keep code that builds estimates,
+         * such as tests, compiling: the engine always sets both.)
+         */zone: String? = nil, 
+        /**
+         * Probability of `zone` (of being in no zone when it is `null` / `nil`).
+         */zoneProbability: Double = Double(1.0), 
+        /**
          * Radius of the 68% circle, m, as Android's `getAccuracy()` and iOS's
          * `horizontalAccuracy`.
          */accuracyM: Double, 
@@ -2016,6 +2138,8 @@ public struct PositionEstimate: Equatable, Hashable {
         self.floor = floor
         self.floorName = floorName
         self.floorProbability = floorProbability
+        self.zone = zone
+        self.zoneProbability = zoneProbability
         self.accuracyM = accuracyM
         self.accuracy95M = accuracy95M
         self.headingDeg = headingDeg
@@ -2047,6 +2171,8 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
                 floor: FfiConverterUInt32.read(from: &buf), 
                 floorName: FfiConverterString.read(from: &buf), 
                 floorProbability: FfiConverterDouble.read(from: &buf), 
+                zone: FfiConverterOptionString.read(from: &buf), 
+                zoneProbability: FfiConverterDouble.read(from: &buf), 
                 accuracyM: FfiConverterDouble.read(from: &buf), 
                 accuracy95M: FfiConverterDouble.read(from: &buf), 
                 headingDeg: FfiConverterOptionDouble.read(from: &buf), 
@@ -2064,6 +2190,8 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.floor, into: &buf)
         FfiConverterString.write(value.floorName, into: &buf)
         FfiConverterDouble.write(value.floorProbability, into: &buf)
+        FfiConverterOptionString.write(value.zone, into: &buf)
+        FfiConverterDouble.write(value.zoneProbability, into: &buf)
         FfiConverterDouble.write(value.accuracyM, into: &buf)
         FfiConverterDouble.write(value.accuracy95M, into: &buf)
         FfiConverterOptionDouble.write(value.headingDeg, into: &buf)
@@ -2087,6 +2215,107 @@ public func FfiConverterTypePositionEstimate_lift(_ buf: RustBuffer) throws -> P
 #endif
 public func FfiConverterTypePositionEstimate_lower(_ value: PositionEstimate) -> RustBuffer {
     return FfiConverterTypePositionEstimate.lower(value)
+}
+
+
+/**
+ * A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB.
+ */
+public struct PositionFix: Equatable, Hashable {
+    /**
+     * When it was measured, ns, on the clock of every other input.
+     */
+    public var timestampNs: UInt64
+    /**
+     * x in the site's metric frame, m.
+     */
+    public var x: Double
+    /**
+     * y in the site's metric frame, m.
+     */
+    public var y: Double
+    /**
+     * Floor index in the site file, when the other system knows it (UWB, an RTT access
+     * point's floor); `null` / `nil` for GNSS.
+     */
+    public var floor: UInt32?
+    /**
+     * Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
+     */
+    public var accuracyM: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * When it was measured, ns, on the clock of every other input.
+         */timestampNs: UInt64, 
+        /**
+         * x in the site's metric frame, m.
+         */x: Double, 
+        /**
+         * y in the site's metric frame, m.
+         */y: Double, 
+        /**
+         * Floor index in the site file, when the other system knows it (UWB, an RTT access
+         * point's floor); `null` / `nil` for GNSS.
+         */floor: UInt32? = nil, 
+        /**
+         * Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
+         */accuracyM: Double) {
+        self.timestampNs = timestampNs
+        self.x = x
+        self.y = y
+        self.floor = floor
+        self.accuracyM = accuracyM
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension PositionFix: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypePositionFix: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> PositionFix {
+        return
+            try PositionFix(
+                timestampNs: FfiConverterUInt64.read(from: &buf), 
+                x: FfiConverterDouble.read(from: &buf), 
+                y: FfiConverterDouble.read(from: &buf), 
+                floor: FfiConverterOptionUInt32.read(from: &buf), 
+                accuracyM: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: PositionFix, into buf: inout [UInt8]) {
+        FfiConverterUInt64.write(value.timestampNs, into: &buf)
+        FfiConverterDouble.write(value.x, into: &buf)
+        FfiConverterDouble.write(value.y, into: &buf)
+        FfiConverterOptionUInt32.write(value.floor, into: &buf)
+        FfiConverterDouble.write(value.accuracyM, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePositionFix_lift(_ buf: RustBuffer) throws -> PositionFix {
+    return try FfiConverterTypePositionFix.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePositionFix_lower(_ value: PositionFix) -> RustBuffer {
+    return FfiConverterTypePositionFix.lower(value)
 }
 
 
@@ -2336,6 +2565,85 @@ public func FfiConverterTypeWifiReading_lift(_ buf: RustBuffer) throws -> WifiRe
 #endif
 public func FfiConverterTypeWifiReading_lower(_ value: WifiReading) -> RustBuffer {
     return FfiConverterTypeWifiReading.lower(value)
+}
+
+
+/**
+ * A zone of the site and how likely the phone is to be in it.
+ */
+public struct ZoneProbability: Equatable, Hashable {
+    /**
+     * The zone's name, unique in the site.
+     */
+    public var name: String
+    /**
+     * What kind of place it is.
+     */
+    public var kind: ZoneKind
+    /**
+     * Posterior probability of being in it, now.
+     */
+    public var probability: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The zone's name, unique in the site.
+         */name: String, 
+        /**
+         * What kind of place it is.
+         */kind: ZoneKind, 
+        /**
+         * Posterior probability of being in it, now.
+         */probability: Double) {
+        self.name = name
+        self.kind = kind
+        self.probability = probability
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension ZoneProbability: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeZoneProbability: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ZoneProbability {
+        return
+            try ZoneProbability(
+                name: FfiConverterString.read(from: &buf), 
+                kind: FfiConverterTypeZoneKind.read(from: &buf), 
+                probability: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: ZoneProbability, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.name, into: &buf)
+        FfiConverterTypeZoneKind.write(value.kind, into: &buf)
+        FfiConverterDouble.write(value.probability, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeZoneProbability_lift(_ buf: RustBuffer) throws -> ZoneProbability {
+    return try FfiConverterTypeZoneProbability.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeZoneProbability_lower(_ value: ZoneProbability) -> RustBuffer {
+    return FfiConverterTypeZoneProbability.lower(value)
 }
 
 
@@ -2649,11 +2957,15 @@ enum PositioningError: Swift.Error, Equatable, Hashable, Foundation.LocalizedErr
          */reason: String
     )
     /**
-     * An input was rejected; the engine is unchanged and goes on. A scan or an advance whose
-     * time is not after the last epoch's; a scan with no readings, with an RSSI that is NaN,
-     * infinite, below -1000 dBm or above +100 dBm, with no transmitter the site knows, or with
-     * a malformed transmitter id: a BSSID, UUID or address that does not parse (in Kotlin, one
-     * holding a lone UTF-16 surrogate too), a beacon with neither a UUID nor an address.
+     * An input was rejected; the engine is unchanged and goes on. A scan, an advance or a
+     * position fix whose time is not after the last epoch's, or feedback whose time is before
+     * it; a scan with no readings, with an RSSI that is NaN, infinite, below -1000 dBm or
+     * above +100 dBm, with no transmitter the site knows, or with a malformed transmitter id:
+     * a BSSID, UUID or address that does not parse (in Kotlin, one holding a lone UTF-16
+     * surrogate too), a beacon with neither a UUID nor an address; a position fix or a
+     * confirmed position with a NaN or infinite coordinate, an accuracy or radius not > 0, a
+     * floor the site does not have, or too far from the site; feedback naming a zone the
+     * site does not have.
      */
     case InputRejected(
         /**
@@ -2982,6 +3294,155 @@ public func FfiConverterTypeTransitionKind_lower(_ value: TransitionKind) -> Rus
 }
 
 
+
+/**
+ * What kind of place a zone is.
+ */
+
+public enum ZoneKind: Equatable, Hashable {
+    
+    /**
+     * A room (an office, a kitchen, a shop).
+     */
+    case room
+    /**
+     * A corridor or aisle.
+     */
+    case corridor
+    /**
+     * A hall, an atrium, a concourse.
+     */
+    case hall
+    /**
+     * A staircase.
+     */
+    case stairs
+    /**
+     * A lift (elevator) or its lobby.
+     */
+    case lift
+    /**
+     * An entrance.
+     */
+    case entrance
+    /**
+     * Anything else.
+     */
+    case other
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension ZoneKind: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeZoneKind: FfiConverterRustBuffer {
+    typealias SwiftType = ZoneKind
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ZoneKind {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .room
+        
+        case 2: return .corridor
+        
+        case 3: return .hall
+        
+        case 4: return .stairs
+        
+        case 5: return .lift
+        
+        case 6: return .entrance
+        
+        case 7: return .other
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: ZoneKind, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .room:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .corridor:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .hall:
+            writeInt(&buf, Int32(3))
+        
+        
+        case .stairs:
+            writeInt(&buf, Int32(4))
+        
+        
+        case .lift:
+            writeInt(&buf, Int32(5))
+        
+        
+        case .entrance:
+            writeInt(&buf, Int32(6))
+        
+        
+        case .other:
+            writeInt(&buf, Int32(7))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeZoneKind_lift(_ buf: RustBuffer) throws -> ZoneKind {
+    return try FfiConverterTypeZoneKind.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeZoneKind_lower(_ value: ZoneKind) -> RustBuffer {
+    return FfiConverterTypeZoneKind.lower(value)
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionUInt32: FfiConverterRustBuffer {
+    typealias SwiftType = UInt32?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterUInt32.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterUInt32.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
@@ -3001,6 +3462,30 @@ fileprivate struct FfiConverterOptionDouble: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterDouble.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionString: FfiConverterRustBuffer {
+    typealias SwiftType = String?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterString.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterString.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }
@@ -3250,6 +3735,31 @@ fileprivate struct FfiConverterSequenceTypeWifiReading: FfiConverterRustBuffer {
     }
 }
 
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeZoneProbability: FfiConverterRustBuffer {
+    typealias SwiftType = [ZoneProbability]
+
+    public static func write(_ value: [ZoneProbability], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeZoneProbability.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [ZoneProbability] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [ZoneProbability]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeZoneProbability.read(from: &buf))
+        }
+        return seq
+    }
+}
+
 
 public typealias TransmitterIdString = String
 
@@ -3335,6 +3845,12 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_advance() != 26132) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_positioningengine_confirm_position() != 57798) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_confirm_zone() != 17419) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_positioningengine_fixed_lag_position() != 24784) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -3342,6 +3858,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_push_accelerometer() != 36579) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_push_fix() != 24136) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_push_gyroscope() != 39222) {
@@ -3357,6 +3876,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_track() != 56838) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_zone_posterior() != 53398) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_subscription_cancel() != 31759) {

@@ -211,6 +211,7 @@ fn demo(args: &DemoArgs) -> ExitCode {
             "max_error_m": s.max_error_m,
             "accuracy_68_hit": s.accuracy_68_hit,
             "median_accuracy_m": s.median_accuracy_m,
+            "room_accuracy": s.zone_hit,
         });
         println!("{value}");
         return ExitCode::SUCCESS;
@@ -275,6 +276,9 @@ fn demo(args: &DemoArgs) -> ExitCode {
         100.0 * s.accuracy_68_hit,
         s.median_accuracy_m
     );
+    if let Some(hit) = s.zone_hit {
+        println!("  right room (10 rooms, the aisle, the stair hall) in {:.1}% of epochs", 100.0 * hit);
+    }
     ExitCode::SUCCESS
 }
 
@@ -313,6 +317,7 @@ fn simulate(args: &SimulateArgs) -> ExitCode {
             "hoang_table1": report.hoang_table1,
             "hipe_table5": report.hipe_table5,
             "fixed_lag_mean_error_m": report.fixed_lag_mean_error_m,
+            "room_accuracy": report.room_accuracy.iter().cloned().collect::<std::collections::BTreeMap<_, _>>(),
             "summaries": report.summaries.iter().map(|(n, s)| (n.clone(), s)).collect::<std::collections::BTreeMap<_, _>>(),
         });
         println!("{value}");
@@ -350,6 +355,12 @@ fn simulate(args: &SimulateArgs) -> ExitCode {
     println!("\nViterbi track of the default engine (Hoang, full motion, pseudo states): mean error by lag");
     for (lag, e) in &report.fixed_lag_mean_error_m {
         println!("  lag {lag}: {e:.2} m");
+    }
+    println!(
+        "\nRoom-level accuracy (El Gemayel et al.): epochs whose most likely zone (10 rooms, the aisle, the stair hall) is the true one"
+    );
+    for (name, hit) in &report.room_accuracy {
+        println!("  {name:<36} {:>6.1}%", 100.0 * hit);
     }
     ExitCode::SUCCESS
 }

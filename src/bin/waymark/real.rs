@@ -499,14 +499,31 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             surveyed_s - loaded_s,
             started.elapsed().as_secs_f64() - surveyed_s
         );
+        // Room-level accuracy only for a site with zones (from named plan polygons).
+        let zones = report.configurations.values().any(|r| r.pooled.zone_hit.is_some());
         println!(
-            "{:<26} {:>7} {:>7} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6} {:>7}",
-            "configuration", "mean", "rmse", "p50", "p90", "max", "hit68", "hit95", "floor", "epochs"
+            "{:<26} {:>7} {:>7} {:>7} {:>7} {:>7} {:>6} {:>6} {:>6}{} {:>7}",
+            "configuration",
+            "mean",
+            "rmse",
+            "p50",
+            "p90",
+            "max",
+            "hit68",
+            "hit95",
+            "floor",
+            if zones { format!(" {:>6}", "zone") } else { String::new() },
+            "epochs"
         );
         for (key, r) in &report.configurations {
             let m = &r.pooled;
+            let zone = match (zones, m.zone_hit) {
+                (false, _) => String::new(),
+                (true, Some(hit)) => format!(" {hit:>6.3}"),
+                (true, None) => format!(" {:>6}", "-"),
+            };
             println!(
-                "{key:<26} {:>7.2} {:>7.2} {:>7.2} {:>7.2} {:>7.1} {:>6.2} {:>6.2} {:>6.3} {:>7}",
+                "{key:<26} {:>7.2} {:>7.2} {:>7.2} {:>7.2} {:>7.1} {:>6.2} {:>6.2} {:>6.3}{zone} {:>7}",
                 m.mean_m,
                 m.rmse_m,
                 m.p50_m,
@@ -516,6 +533,13 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
                 m.accuracy_95_hit,
                 m.floor_hit,
                 m.epochs
+            );
+        }
+        if let Some(share) = report.configurations.values().find_map(|r| r.pooled.in_zone) {
+            println!(
+                "zone: the most likely zone is the zone of the state nearest the truth (or both none); \
+                 the truth was in a zone at {:.1}% of the scored points",
+                100.0 * share
             );
         }
     }

@@ -194,6 +194,40 @@ final class WaymarkTests: XCTestCase {
         XCTAssertNotNil(engine.position())
     }
 
+    // Zones (the office's rooms, aisle and stair hall), user feedback and a position fix.
+    func testZonesFeedbackAndPositionFixes() throws {
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let zones = engine.zonePosterior()
+        XCTAssertEqual(zones.count, 12)
+        XCTAssertEqual(zones[0].name, "aisle")
+        XCTAssertEqual(zones[0].kind, .corridor)
+        let first = try engine.pushScan(scan: try walk().epochs[0].scan)
+        XCTAssertTrue(first.zone == nil || zones.contains { $0.name == first.zone })
+        // "I am in room 3", about the position just shown.
+        let pinned = try engine.confirmZone(timestampNs: first.timestampNs, zone: "room 3")
+        XCTAssertEqual(pinned.zone, "room 3")
+        XCTAssertEqual(pinned.zoneProbability, 1, accuracy: 1e-9)
+        XCTAssertThrowsError(try engine.confirmZone(timestampNs: first.timestampNs + 1, zone: "cellar")) {
+            guard case PositioningError.InputRejected = $0 else { return XCTFail("expected inputRejected, got \($0)") }
+        }
+        // "Within 2 m of the aisle's first state", later.
+        let tapped = try engine.confirmPosition(
+            timestampNs: first.timestampNs + 5_000_000_000, x: 1.7, y: 11.5, floor: 0, radiusM: 2)
+        XCTAssertEqual(tapped.zone, "aisle")
+        // A precise fix 40 s later (time to walk there) at the stair hall's middle state.
+        let fixed = try engine.pushFix(
+            fix: PositionFix(timestampNs: first.timestampNs + 45_000_000_000, x: 35.5, y: 11.5, accuracyM: 0.5))
+        XCTAssertEqual(fixed.zone, "stair hall")
+        XCTAssertLessThan(hypot(fixed.x - 35.5, fixed.y - 11.5), 1)
+        XCTAssertThrowsError(
+            try engine.pushFix(
+                fix: PositionFix(timestampNs: first.timestampNs + 46_000_000_000, x: .nan, y: 11.5, floor: nil, accuracyM: 3))
+        ) {
+            guard case PositioningError.InputRejected = $0 else { return XCTFail("expected inputRejected, got \($0)") }
+        }
+        XCTAssertEqual(engine.position(), fixed)
+    }
+
     // A site whose transmitter ids are salted hashes: with its salt the engine positions exactly
     // as on the raw site; without it, or with another, it refuses to start with a typed error.
     func testAHashedSiteNeedsItsSalt() throws {

@@ -371,6 +371,16 @@ uint64_t uniffi_waymark_fn_constructor_positioningengine_new(RustBuffer site_jso
 RustBuffer uniffi_waymark_fn_method_positioningengine_advance(uint64_t ptr, uint64_t timestamp_ns, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_CONFIRM_POSITION
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_CONFIRM_POSITION
+RustBuffer uniffi_waymark_fn_method_positioningengine_confirm_position(uint64_t ptr, uint64_t timestamp_ns, double x, double y, uint32_t floor, double radius_m, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_CONFIRM_ZONE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_CONFIRM_ZONE
+RustBuffer uniffi_waymark_fn_method_positioningengine_confirm_zone(uint64_t ptr, uint64_t timestamp_ns, RustBuffer zone, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_FIXED_LAG_POSITION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_FIXED_LAG_POSITION
 RustBuffer uniffi_waymark_fn_method_positioningengine_fixed_lag_position(uint64_t ptr, RustCallStatus *_Nonnull out_status
@@ -384,6 +394,11 @@ RustBuffer uniffi_waymark_fn_method_positioningengine_position(uint64_t ptr, Rus
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_ACCELEROMETER
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_ACCELEROMETER
 uint32_t uniffi_waymark_fn_method_positioningengine_push_accelerometer(uint64_t ptr, RustBuffer batch, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_FIX
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_FIX
+RustBuffer uniffi_waymark_fn_method_positioningengine_push_fix(uint64_t ptr, RustBuffer fix, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_GYROSCOPE
@@ -409,6 +424,11 @@ uint64_t uniffi_waymark_fn_method_positioningengine_subscribe(uint64_t ptr, uint
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_TRACK
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_TRACK
 RustBuffer uniffi_waymark_fn_method_positioningengine_track(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_ZONE_POSTERIOR
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_ZONE_POSTERIOR
+RustBuffer uniffi_waymark_fn_method_positioningengine_zone_posterior(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SUBSCRIPTION
@@ -727,6 +747,18 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_advance(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_CONFIRM_POSITION
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_CONFIRM_POSITION
+uint16_t uniffi_waymark_checksum_method_positioningengine_confirm_position(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_CONFIRM_ZONE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_CONFIRM_ZONE
+uint16_t uniffi_waymark_checksum_method_positioningengine_confirm_zone(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_FIXED_LAG_POSITION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_FIXED_LAG_POSITION
 uint16_t uniffi_waymark_checksum_method_positioningengine_fixed_lag_position(void
@@ -742,6 +774,12 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_position(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_PUSH_ACCELEROMETER
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_PUSH_ACCELEROMETER
 uint16_t uniffi_waymark_checksum_method_positioningengine_push_accelerometer(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_PUSH_FIX
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_PUSH_FIX
+uint16_t uniffi_waymark_checksum_method_positioningengine_push_fix(void
     
 );
 #endif
@@ -772,6 +810,12 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_subscribe(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_TRACK
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_TRACK
 uint16_t uniffi_waymark_checksum_method_positioningengine_track(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_ZONE_POSTERIOR
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_ZONE_POSTERIOR
+uint16_t uniffi_waymark_checksum_method_positioningengine_zone_posterior(void
     
 );
 #endif

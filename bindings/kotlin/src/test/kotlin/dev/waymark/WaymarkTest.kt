@@ -186,6 +186,44 @@ class WaymarkTest {
     }
 
     @Test
+    fun zonesFeedbackAndPositionFixes() {
+        PositioningEngine.fromPath(sitePath, EngineOptions()).use { engine ->
+            val zones = engine.zonePosterior()
+            assertEquals(12, zones.size)
+            assertEquals("aisle", zones[0].name)
+            assertEquals(ZoneKind.CORRIDOR, zones[0].kind)
+            assertEquals(ZoneKind.HALL, zones[11].kind)
+            val first = pushEpoch(engine, walk[0]) ?: pushEpoch(engine, walk[1])!!
+            assertTrue(first.zone == null || zones.any { it.name == first.zone })
+            assertTrue(first.zoneProbability in 0.0..1.0 + 1e-9)
+            // "I am in room 3", about the position just shown.
+            val pinned = engine.confirmZone(first.timestampNs, "room 3")
+            assertEquals("room 3", pinned.zone)
+            assertEquals(1.0, pinned.zoneProbability, 1e-9)
+            assertEquals(1.0, engine.zonePosterior().first { it.name == "room 3" }.probability, 1e-9)
+            try {
+                engine.confirmZone(first.timestampNs + 1UL, "cellar")
+                fail("an unknown zone was accepted")
+            } catch (e: PositioningException.InputRejected) {
+                assertTrue(e.reason.contains("cellar"))
+            }
+            // "Within 2 m of the aisle's first state", later.
+            val tapped = engine.confirmPosition(first.timestampNs + 5_000_000_000UL, 1.7, 11.5, 0U, 2.0)
+            assertEquals("aisle", tapped.zone)
+            // A precise fix 40 s later (time to walk there) at the stair hall's middle state.
+            val fixed = engine.pushFix(PositionFix(first.timestampNs + 45_000_000_000UL, 35.5, 11.5, accuracyM = 0.5))
+            assertEquals("stair hall", fixed.zone)
+            assertTrue(hypot(fixed.x - 35.5, fixed.y - 11.5) < 1.0)
+            try {
+                engine.pushFix(PositionFix(first.timestampNs + 46_000_000_000UL, Double.NaN, 11.5, null, 3.0))
+                fail("a NaN fix was accepted")
+            } catch (e: PositioningException.InputRejected) {
+            }
+            assertEquals(fixed, engine.position())
+        }
+    }
+
+    @Test
     fun anInjectedPanicIsAnExceptionAndTheEngineGoesOn() {
         val engine = PositioningEngine.fromPath(sitePath, EngineOptions())
         val counter = Counter()
