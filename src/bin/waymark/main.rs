@@ -2,6 +2,7 @@
 //! accuracy. `waymark demo` runs the engine on a built-in simulated office.
 
 mod bench;
+mod hmm;
 mod real;
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -43,6 +44,10 @@ enum Command {
     /// (`site unpack`), hash their transmitter ids with a salt (`site hash`), check a salt
     /// (`site check`).
     Site(real::SiteArgs),
+    /// The HMM learning core on a JSON model (`hmm decode`: forward-backward and Viterbi;
+    /// `hmm fit`: Baum-Welch), for checking against other implementations. Input from a file
+    /// or standard input, JSON on standard output, exit status 2 on bad input.
+    Hmm(hmm::HmmArgs),
 }
 
 #[derive(clap::Args)]
@@ -155,6 +160,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => real::eval(&args),
         Command::Bench(args) => bench::bench(&args),
         Command::Site(args) => real::site(&args),
+        Command::Hmm(args) => hmm::hmm(&args),
     }
 }
 
