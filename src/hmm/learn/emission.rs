@@ -131,37 +131,59 @@ impl<const D: usize> GaussianMixtures<D> {
 
     /// ln p_i(o), eq. 7.
     pub fn ln_emission(&self, i: usize, o: &SVector<f64, D>) -> f64 {
-        let components = self.components(i);
-        let mut max = f64::NEG_INFINITY;
         // One component per cell point (§II-C): a 4 m × 8 m room on a 1 m grid has 32.
         let mut buffer = [0.0; 32];
-        // Two passes over ln_pdf beyond that.
+        let components = self.components(i);
         if components.len() <= buffer.len() {
-            for (b, g) in buffer.iter_mut().zip(components) {
-                *b = g.ln_pdf(o);
-                max = max.max(*b);
-            }
-            let s: f64 = buffer[..components.len()].iter().map(|v| (v - max).exp()).sum();
-            return max + s.ln() - (components.len() as f64).ln();
+            return log_mean_exp(components, o, &mut buffer[..components.len()]);
         }
-        for g in components {
-            max = max.max(g.ln_pdf(o));
-        }
-        let s: f64 = components.iter().map(|g| (g.ln_pdf(o) - max).exp()).sum();
-        max + s.ln() - (components.len() as f64).ln()
+        log_mean_exp(components, o, &mut vec![0.0; components.len()])
     }
 
     /// The T × N table ln p_i(o_t) of a sequence. Observations must be finite.
     pub fn log_emissions(&self, observations: &[SVector<f64, D>]) -> EpochMatrix {
-        let n = self.states();
+        let mut responsibilities = Vec::new();
+        self.log_emissions_and_responsibilities(observations, &mut responsibilities)
+    }
+
+    /// [`Self::log_emissions`], and in `responsibilities` (T × C, C the components) each
+    /// component's share of its state's density, N_m(o_t) / Σ_l N_l(o_t): eq. 13's bracket,
+    /// which the E-step would otherwise compute again.
+    pub(super) fn log_emissions_and_responsibilities(
+        &self,
+        observations: &[SVector<f64, D>],
+        responsibilities: &mut Vec<f64>,
+    ) -> EpochMatrix {
+        let (n, c) = (self.states(), self.components.len());
         let mut table = EpochMatrix::zeros(n, observations.len());
-        for (t, o) in observations.iter().enumerate() {
+        responsibilities.clear();
+        responsibilities.resize(c * observations.len(), 0.0);
+        for ((t, o), shares) in observations.iter().enumerate().zip(responsibilities.chunks_mut(c.max(1))) {
             for (i, e) in table.row_mut(t).iter_mut().enumerate() {
-                *e = self.ln_emission(i, o);
+                let range = self.start[i]..self.start[i + 1];
+                let share = &mut shares[range.clone()];
+                *e = log_mean_exp(&self.components[range], o, share);
+                let total: f64 = share.iter().sum();
+                share.iter_mut().for_each(|r| *r /= total);
             }
         }
         table
     }
+}
+
+/// ln (1/M Σ_m N_m(o)) of M components; leaves exp(ln N_m(o) − max_m ln N_m(o)) in `scratch`.
+fn log_mean_exp<const D: usize>(components: &[Gaussian<D>], o: &SVector<f64, D>, scratch: &mut [f64]) -> f64 {
+    let mut max = f64::NEG_INFINITY;
+    for (b, g) in scratch.iter_mut().zip(components) {
+        *b = g.ln_pdf(o);
+        max = max.max(*b);
+    }
+    let mut sum = 0.0;
+    for b in scratch.iter_mut() {
+        *b = (*b - max).exp();
+        sum += *b;
+    }
+    max + sum.ln() - (components.len() as f64).ln()
 }
 
 #[cfg(test)]

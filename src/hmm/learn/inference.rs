@@ -153,6 +153,8 @@ pub(super) struct Forward {
     pub normaliser: Vec<f64>,
     /// ln p(o_1..T) = Σ_t (m_t + ln c_t).
     pub log_likelihood: f64,
+    /// Epochs at which the chain was restarted (see [`forward_into`]), ascending.
+    pub restarts: Vec<usize>,
 }
 
 /// Scratch buffers reused across sequences.
@@ -166,12 +168,20 @@ pub(super) struct Scratch {
 }
 
 /// The forward recursion, `alpha` reused when it has the right shape.
+///
+/// An epoch in `restartable` (ascending) that no state reachable with probability ≥ 1e-300 can
+/// explain restarts the chain instead of failing: its prediction becomes uniform over the
+/// states that can emit there, and the transition into it is cut (the backward pass treats
+/// the epoch before as the end of a sequence). Baum-Welch passes the epochs with user
+/// feedback: a state the user names but the model rules out (its probability underflowed)
+/// would otherwise make α_t zero everywhere, and the paper's pinned forward variable 0 / 0.
 pub(super) fn forward_into(
     chain: &Chain,
     emissions: &EpochMatrix,
     sequence: usize,
     scratch: &mut Scratch,
     alpha: Option<EpochMatrix>,
+    restartable: &[usize],
 ) -> Result<Forward, LearnError> {
     let n = chain.states();
     check_shape(n, emissions)?;
@@ -184,6 +194,7 @@ pub(super) fn forward_into(
     let transition = chain.transition();
     let pred = &mut scratch.pred;
     let mut log_likelihood = 0.0;
+    let mut restarts = Vec::new();
     for t in 0..epochs {
         pred.clear();
         if t == 0 {
@@ -208,14 +219,20 @@ pub(super) fn forward_into(
         }
         let e = emissions.row(t);
         // m_t: the best emission among reachable states, so every b̃ ≤ 1.
-        let mut m = f64::NEG_INFINITY;
-        for (&p, &e) in pred.iter().zip(e) {
-            if p > 0.0 && e > m {
-                m = e;
-            }
-        }
+        let best = |pred: &[f64]| {
+            pred.iter().zip(e).filter(|(&p, _)| p > 0.0).map(|(_, &e)| e).fold(f64::NEG_INFINITY, f64::max)
+        };
+        let mut m = best(pred);
         if m == f64::NEG_INFINITY {
-            return Err(LearnError::Impossible { sequence, epoch: t });
+            let possible = e.iter().filter(|&&v| v > f64::NEG_INFINITY).count();
+            if t == 0 || possible == 0 || restartable.binary_search(&t).is_err() {
+                return Err(LearnError::Impossible { sequence, epoch: t });
+            }
+            for (p, &v) in pred.iter_mut().zip(e) {
+                *p = if v > f64::NEG_INFINITY { 1.0 / possible as f64 } else { 0.0 };
+            }
+            m = best(pred);
+            restarts.push(t);
         }
         let row = alpha.row_mut(t);
         let mut c = 0.0;
@@ -248,7 +265,7 @@ pub(super) fn forward_into(
         normaliser.push(c);
         log_likelihood += m + c.ln();
     }
-    Ok(Forward { alpha, shift, normaliser, log_likelihood })
+    Ok(Forward { alpha, shift, normaliser, log_likelihood, restarts })
 }
 
 fn check_shape(n: usize, emissions: &EpochMatrix) -> Result<(), LearnError> {
@@ -290,6 +307,14 @@ pub(super) fn backward(
     on_epoch(epochs - 1, last);
     let (to_all, p_all) = (transition.destinations(), transition.probabilities());
     for t in (0..epochs - 1).rev() {
+        if forward.restarts.binary_search(&(t + 1)).is_ok() {
+            // The chain restarted at t + 1: epoch t ends a segment, β̂_t = 1, no ξ_t.
+            let alpha = forward.alpha.row(t);
+            beta.clear();
+            beta.extend(alpha.iter().map(|&a| if a > 0.0 { 1.0 } else { 0.0 }));
+            on_epoch(t, alpha);
+            continue;
+        }
         std::mem::swap(beta, next_beta);
         // w_j = b̃_{t+1}(j) β̂_{t+1}(j), zero where α̂_{t+1}(j) = 0.
         let (m, c) = (forward.shift[t + 1], forward.normaliser[t + 1]);
@@ -349,7 +374,7 @@ pub struct Posterior {
 /// sequence or however far apart the log-emissions; probabilities below 1e-300 are dropped.
 pub fn forward_backward(chain: &Chain, log_emission: &EpochMatrix) -> Result<Posterior, LearnError> {
     let mut scratch = Scratch::default();
-    let forward = forward_into(chain, log_emission, 0, &mut scratch, None)?;
+    let forward = forward_into(chain, log_emission, 0, &mut scratch, None, &[])?;
     let mut smoothed = EpochMatrix::zeros(chain.states(), log_emission.epochs());
     backward(chain, log_emission, &forward, &mut scratch, None, |t, gamma| {
         smoothed.row_mut(t).copy_from_slice(gamma);

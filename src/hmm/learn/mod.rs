@@ -27,13 +27,15 @@
 //!   the posteriors returned), O(N) for the backward pass; Viterbi O(T · (E + N)) time and
 //!   O(T · N) back-pointers (4 bytes each).
 //! - one Baum-Welch iteration: time O(T · (E + C · D²)) per sequence plus O(C · D³) for the
-//!   Cholesky factors; memory O(E + C · D² + T_max · N): the transition counts, the
-//!   components' sufficient statistics, and the log-emissions and forward variables of one
-//!   sequence at a time.
+//!   Cholesky factors; memory O(E + C · D² + T_max · (N + C)): the transition counts, the
+//!   components' sufficient statistics, and one sequence at a time's log-emissions, forward
+//!   variables and component responsibilities (eq. 13's bracket, kept from the emission pass
+//!   so that no Gaussian is evaluated twice).
 //!
-//! A 10 000-state site with ~100 neighbours per state (E = 10⁶) and 500-epoch sequences needs
-//! 12 MB for the transitions and counts and 2 × 500 × 10 000 × 8 B = 80 MB for one sequence's
-//! emissions and forward variables; a dense N × N matrix would be 800 MB per copy.
+//! A 10 000-state site with ~100 neighbours per state (E = 10⁶), one component per state and
+//! 500-epoch sequences needs 12 MB for the transitions and their counts and
+//! 3 × 500 × 10 000 × 8 B = 120 MB for one sequence's tables; a dense N × N matrix would be
+//! 800 MB per copy. (Only the time per epoch grows with E, not with N².)
 
 mod baum_welch;
 mod chain;
