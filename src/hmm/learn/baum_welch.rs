@@ -113,29 +113,31 @@ impl FitOptions {
 impl Default for FitOptions {
     /// The regularised fit for the live engine, positions in metres. Measured with
     /// `cargo run --release --example baum_welch_options` (`waymark simulate --experiment
-    /// baum-welch`, El Gemayel §IV, on seeds 1-3; the CLI's default is seed 0): room accuracy
-    /// after ten runs with feedback 0.1 and with feedback decaying from 0.2, averaged over the
-    /// seeds. Each run's outcome depends on the local maximum Baum-Welch finds, so single seeds
-    /// vary by ±10 points between options that are equally good on average.
+    /// baum-welch`, El Gemayel §IV, seeds 1-3; the CLI's default is seed 0): room accuracy
+    /// after ten runs with feedback 0.1 / decaying from 0.2, averaged over the seeds; default
+    /// 69.4% / 76.6% in 21 s. Which local maximum Baum-Welch finds moves single seeds by ±10
+    /// points, so no alternative below was consistently better: an earlier sweep, with other
+    /// feedback epochs drawn, ranked them differently (there the default had 71.5% / 86.9%,
+    /// 1/3 m² 74.8% / 83.8%, no floor 64.2% / 72.5%).
     fn default() -> Self {
         Self {
             // The paper stops when "the improvement of the likelihood is negligible" (§III-A.3).
-            // 1e-3 nats per observation: 71.5% / 86.9% in 24 s; 1e-4: 70.3% / 87.5% in 59 s;
-            // 1e-2: 58.5% / 86.4% in 9 s.
+            // 1e-4 nats per observation: 77.1% / 75.4% in 55 s; 1e-2: 66.8% / 76.0% in 9 s.
             tolerance: Some(1e-3),
-            // Binds only on the first runs from §IV's initialisation (~100 iterations); 200:
-            // 70.8% / 86.3%.
+            // Binds on the first run from §IV's initialisation (~50-100 iterations to converge);
+            // 200: 68.4% / 78.5%.
             max_iterations: 50,
             // A tenth of an observed move on every allowed transition, so that none vanishes
-            // and feedback is rarely ruled out: 0 gave 70.6% / 81.0%, 1 gave 71.9% / 84.3%.
+            // and feedback is rarely ruled out: 0 gave 70.9% / 71.5%, 1 gave 73.7% / 75.1%.
             transition_pseudocount: 0.1,
             // π is the row out of "before the first epoch": the same prior as a transition row.
+            // (The experiment's walks all start at the entrance, so it cannot measure this.)
             initial_pseudocount: 0.1,
             covariance_floor: 1e-9,
             // The spread of a position uniform over a 1 m × 1 m cell (El Gemayel §IV's cell
             // size), 1/12 m² per axis: a component stands for one cell, and its observations
-            // vary at least as much as the true positions inside it. Without it components
-            // collapse (64.2% / 72.5%); 1/3 m² gave 74.8% / 83.8%.
+            // vary at least as much as the true positions inside it. No floor: 74.0% / 77.7%
+            // (and components collapse onto single points); 1/3 m²: 77.7% / 82.7%.
             min_variance: 1.0 / 12.0,
             restart_on_contradicted_feedback: true,
             learn_transitions: true,
