@@ -1,8 +1,10 @@
 //! The hidden Markov model over the site's states: sparse transitions, the forward recursion
-//! (Hoang eq. 3) and the position estimate (Hoang eq. 4).
+//! (Hoang eq. 3) and the position estimate (Hoang eq. 4); and, in [`learn`], exact inference and
+//! Baum-Welch learning (El Gemayel et al.).
 
 mod estimate;
 mod forward;
+pub mod learn;
 mod motion;
 mod transition;
 mod viterbi;

@@ -2,6 +2,7 @@
 //! points with log-distance path loss and log-normal shadowing, clipping, training scans fitted
 //! by the EM, and random walks on the walkable graph. Everything is seeded and deterministic.
 
+pub mod baum_welch;
 mod experiment;
 pub mod imu;
 pub mod longrun;
