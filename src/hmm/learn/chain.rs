@@ -118,7 +118,7 @@ impl SparseTransition {
     }
 
     /// Range of row i's entries in [`Self::probabilities`].
-    pub(super) fn row_range(&self, i: usize) -> std::ops::Range<usize> {
+    pub fn row_range(&self, i: usize) -> std::ops::Range<usize> {
         self.start[i]..self.start[i + 1]
     }
 

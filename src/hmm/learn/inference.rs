@@ -382,6 +382,59 @@ pub fn forward_backward(chain: &Chain, log_emission: &EpochMatrix) -> Result<Pos
     Ok(Posterior { log_likelihood: forward.log_likelihood, filtered: forward.alpha, smoothed })
 }
 
+/// What [`expected_counts`] summed over its sequences.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ExpectedCounts {
+    /// ln p(o | θ) summed over the sequences.
+    pub log_likelihood: f64,
+    /// Σ_t ξ_t(i, j) (eq. 9) per allowed transition, in the order of
+    /// [`SparseTransition::probabilities`](super::SparseTransition::probabilities).
+    pub transitions: Vec<f64>,
+    /// Expected sequence starts per state (γ_1).
+    pub initial: Vec<f64>,
+    /// Epochs at which a sequence was restarted on feedback the model ruled out.
+    pub restarts: usize,
+}
+
+/// The E-step of Baum-Welch for any emission model: each sequence is given by its
+/// log-emissions (feedback already applied with [`EpochMatrix::pin`]) and the epochs at which
+/// the chain may restart when the model rules the observation out (see
+/// [`FitOptions::restart_on_contradicted_feedback`](super::FitOptions); pass the feedback
+/// epochs, or none). `on_epoch(sequence, t, γ_t)` sees every smoothed posterior, for the
+/// caller's own emission statistics. [`fit`](super::fit) runs the same recursions for its
+/// Gaussian mixtures; the live engine's habit learning (`crate::habits`) uses this with
+/// emissions that change from epoch to epoch.
+pub fn expected_counts(
+    chain: &Chain,
+    sequences: &[(EpochMatrix, Vec<usize>)],
+    mut on_epoch: impl FnMut(usize, usize, &[f64]),
+) -> Result<ExpectedCounts, LearnError> {
+    let mut scratch = Scratch::default();
+    let mut counts = ExpectedCounts {
+        log_likelihood: 0.0,
+        transitions: vec![0.0; chain.transition().allowed()],
+        initial: vec![0.0; chain.states()],
+        restarts: 0,
+    };
+    let mut alpha = None;
+    for (s, (emissions, restartable)) in sequences.iter().enumerate() {
+        let forward = forward_into(chain, emissions, s, &mut scratch, alpha.take(), restartable)?;
+        counts.log_likelihood += forward.log_likelihood;
+        counts.restarts += forward.restarts.len();
+        let initial = &mut counts.initial;
+        backward(chain, emissions, &forward, &mut scratch, Some(&mut counts.transitions), |t, gamma| {
+            if t == 0 {
+                for (p, &g) in initial.iter_mut().zip(gamma) {
+                    *p += g;
+                }
+            }
+            on_epoch(s, t, gamma);
+        });
+        alpha = Some(forward.alpha);
+    }
+    Ok(counts)
+}
+
 /// The most likely state sequence and its log-probability ln p(s_1..T, o_1..T), by max-product
 /// in log space over the allowed transitions. Ties go to the lowest state index.
 pub fn viterbi(chain: &Chain, log_emission: &EpochMatrix) -> Result<(Vec<u32>, f64), LearnError> {

@@ -46,7 +46,10 @@ pub mod json;
 pub use baum_welch::{fit, log_likelihood, FitOptions, FitReport, GaussianHmm, Sequence};
 pub use chain::{Chain, SparseTransition, ROW_SUM_TOLERANCE};
 pub use emission::{Gaussian, GaussianMixtures};
-pub use inference::{decode, forward_backward, viterbi, Decoded, EpochMatrix, Known, Posterior};
+pub use inference::{
+    decode, expected_counts, forward_backward, viterbi, Decoded, EpochMatrix, ExpectedCounts, Known,
+    Posterior,
+};
 
 /// Why a model, an observation sequence or a fit was refused. Nothing is changed when one is
 /// returned.
