@@ -171,6 +171,9 @@ pub struct EngineConfig {
     /// sequences El Gemayel et al. learn from with feedback (§IV-C: "observation sequences of
     /// length 500"). 0 keeps none.
     pub history_epochs: usize,
+    /// How [`Engine::learn_habits`](crate::Engine::learn_habits) learns and how the learned
+    /// habits are applied ([`crate::habits`]).
+    pub habits: crate::habits::HabitOptions,
 }
 
 impl Default for EngineConfig {
@@ -195,6 +198,7 @@ impl Default for EngineConfig {
             site_calibration: true,
             site_salt: None,
             history_epochs: 500,
+            habits: crate::habits::HabitOptions::default(),
         }
     }
 }
@@ -241,6 +245,9 @@ impl EngineConfig {
     /// Checks every field; the message names the field and the rule.
     pub fn validate(&self) -> Result<(), Error> {
         let fail = |m: String| Err(Error::InvalidConfig(m));
+        if let Err(e) = self.habits.check() {
+            return fail(e.to_string());
+        }
         if !(self.max_speed_mps.is_finite() && self.max_speed_mps > 0.0) {
             return fail(format!("max_speed_mps must be finite and > 0 (got {})", self.max_speed_mps));
         }

@@ -8,6 +8,7 @@
 use crate::config::{EngineConfig, TransitionModel};
 use crate::error::{Error, InputError};
 use crate::fix::{self, PositionFix};
+use crate::habits::{FixError, HabitError, HabitModel, HabitPrior, HabitReport, Habitual};
 use crate::history::{EpochInput, EpochRecord, History};
 use crate::hmm::{
     estimate, ForwardFilter, HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach,
@@ -230,6 +231,9 @@ pub struct Engine {
     zone_mass: Vec<f64>,
     /// Recent epochs and the user's feedback, for a later learning pass.
     history: History,
+    /// What the user's walks taught ([`Engine::learn_habits`]), and its transition multipliers.
+    habits: HabitModel,
+    habit_prior: HabitPrior,
 }
 
 /// What an epoch changes besides the filter and the Viterbi window, which keep their own
@@ -255,6 +259,7 @@ impl Engine {
         let rssi_weight = config.rssi_weight_for(&site);
         let accuracy_scale = config.accuracy_scale_for(&site);
         let site_zones = site.zones().len();
+        let habits = HabitModel::new(&site);
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,
             viterbi: ViterbiWindow::new(n, config.track_window_epochs),
@@ -274,6 +279,8 @@ impl Engine {
             id_hasher,
             zone_mass: vec![0.0; site_zones],
             history: History::new(config.history_epochs),
+            habits,
+            habit_prior: HabitPrior::default(),
             config,
             undo: Undo::default(),
         })
@@ -376,6 +383,61 @@ impl Engine {
     fn track_point(&self, timestamp_ns: u64, state: u32) -> TrackPoint {
         let s = &self.site.states()[state as usize];
         TrackPoint { timestamp_ns, state, floor: s.floor, x: s.position.x, y: s.position.y }
+    }
+
+    /// Learns the user's habits from the [`history`](Self::history) epochs not learned from
+    /// yet (Baum-Welch with the feedback they hold, [`crate::habits`]), adds them to the
+    /// engine's model and applies it from the next epoch on. Bounded: at most
+    /// `history_epochs` epochs, a segment at a time. On an error nothing changes.
+    pub fn learn_habits(&mut self) -> Result<HabitReport, HabitError> {
+        let records: Vec<EpochRecord> = self.history.records().iter().cloned().collect();
+        let mut model = self.habits.clone();
+        let report = model.learn(&self.site, &self.reach, &[&records], &self.config.habits)?;
+        self.set_habits(model);
+        Ok(report)
+    }
+
+    /// Learns from epochs recorded elsewhere (other sessions' histories, survey walks), as
+    /// [`learn_habits`](Self::learn_habits) does from this engine's own.
+    pub fn learn_habits_from(&mut self, sequences: &[&[EpochRecord]]) -> Result<HabitReport, HabitError> {
+        let mut model = self.habits.clone();
+        let report = model.learn(&self.site, &self.reach, sequences, &self.config.habits)?;
+        self.set_habits(model);
+        Ok(report)
+    }
+
+    /// The learned habits.
+    pub fn habits(&self) -> &HabitModel {
+        &self.habits
+    }
+
+    /// The fix error learned so far (zero bias, unit spread before any fix was learned from).
+    pub fn fix_error(&self) -> FixError {
+        self.habits.fix_error(&self.config.habits)
+    }
+
+    /// The learned habits as JSON, to keep per user ([`HabitModel::to_json`]).
+    pub fn export_habits(&self) -> String {
+        self.habits.to_json()
+    }
+
+    /// Replaces the habits by a model exported on this site; refused (nothing changes) when it
+    /// does not parse, is of a newer layout, or was learned on another site.
+    pub fn import_habits(&mut self, json: &str) -> Result<(), HabitError> {
+        let model = HabitModel::from_json(json, &self.site)?;
+        self.set_habits(model);
+        Ok(())
+    }
+
+    /// Replaces the habits by `model`, which must be of this site.
+    pub fn set_habits(&mut self, model: HabitModel) {
+        self.habit_prior = HabitPrior::new(&model, &self.reach, &self.config.habits);
+        self.habits = model;
+    }
+
+    /// Forgets every habit.
+    pub fn clear_habits(&mut self) {
+        self.set_habits(HabitModel::new(&self.site));
     }
 
     /// Takes a batch of accelerometer samples (m/s², gravity included, phone frame). Samples
@@ -498,7 +560,15 @@ impl Engine {
 
     fn fix_epoch(&mut self, fix: &PositionFix) -> Result<Position, InputError> {
         self.check_time(fix.timestamp_ns)?;
-        fix::ln_likelihood(&self.site, fix, &mut self.ln_emission)?;
+        // The learned fix error (§II-C): the bias taken off, the spread widened.
+        let error = self.fix_error();
+        let corrected = PositionFix {
+            x: fix.x - error.bias_m[0],
+            y: fix.y - error.bias_m[1],
+            accuracy_m: fix.accuracy_m * error.spread,
+            ..*fix
+        };
+        fix::ln_likelihood(&self.site, &corrected, &mut self.ln_emission)?;
         Ok(self.atomically(true, |engine| {
             let motion = engine.motion_until(fix.timestamp_ns, None);
             engine.stats.fixes_accepted += 1;
@@ -594,7 +664,7 @@ impl Engine {
         }
         self.viterbi.pin(&self.ln_emission);
         let position = self.locate(latest);
-        self.conclude(position, |history, p| history.pin_latest(states, p.floor, p.x, p.y))
+        self.conclude(position, |history, p| history.pin_latest(states, p.floor, p.x, p.y, p.accuracy_m))
     }
 
     /// Runs the part of an accepted epoch that changes the engine so that it happens whole or
@@ -728,7 +798,15 @@ impl Engine {
             radio_log_evidence: (input == EpochInput::Scan).then_some(evidence),
         });
         self.conclude(position, |history, p| {
-            history.push(EpochRecord { timestamp_ns, input, floor: p.floor, x: p.x, y: p.y, allowed })
+            history.push(EpochRecord {
+                timestamp_ns,
+                input,
+                floor: p.floor,
+                x: p.x,
+                y: p.y,
+                accuracy_m: p.accuracy_m,
+                allowed,
+            })
         })
     }
 
@@ -892,6 +970,10 @@ impl Engine {
             }
             TransitionModel::Hoang => &hoang,
         };
+        // Learned habits multiplied in (issue 6: "a prior multiplied into the motion-based
+        // transition of each epoch").
+        let habitual = Habitual { inner: transition, prior: &self.habit_prior };
+        let transition: &dyn Transition = if self.habit_prior.is_empty() { transition } else { &habitual };
         self.viterbi.step(timestamp_ns, transition, &self.ln_emission);
         let result = self.filter.step(Some(transition), &self.ln_emission);
         result.unwrap_or_else(|_| self.restart())

@@ -33,6 +33,9 @@ pub struct EpochRecord {
     pub x: f64,
     /// Estimate y, m.
     pub y: f64,
+    /// The estimate's 68% radius, m: the spread of this epoch's observation when the epochs
+    /// are learned from ([`crate::habits`]).
+    pub accuracy_m: f64,
     /// User feedback: the states (indices, ascending) the user said they were in at this
     /// epoch; `None` without feedback. A learning pass zeroes the forward variable outside
     /// them (§IV-C).
@@ -76,14 +79,14 @@ impl History {
     /// Feedback for the newest epoch, and its revised estimate: its allowed states become
     /// their intersection with `allowed` (sorted), or `allowed` itself when there were none
     /// or nothing is in both (the user corrected themselves: the latest word wins).
-    pub fn pin_latest(&mut self, allowed: &[u32], floor: usize, x: f64, y: f64) {
+    pub fn pin_latest(&mut self, allowed: &[u32], floor: usize, x: f64, y: f64, accuracy_m: f64) {
         let Some(latest) = self.records.back_mut() else { return };
         let both: Vec<u32> = match &latest.allowed {
             Some(before) => before.iter().copied().filter(|s| allowed.binary_search(s).is_ok()).collect(),
             None => Vec::new(),
         };
         latest.allowed = Some(if both.is_empty() { allowed.to_vec() } else { both });
-        (latest.floor, latest.x, latest.y) = (floor, x, y);
+        (latest.floor, latest.x, latest.y, latest.accuracy_m) = (floor, x, y, accuracy_m);
     }
 }
 
@@ -92,23 +95,31 @@ mod tests {
     use super::*;
 
     fn record(t: u64) -> EpochRecord {
-        EpochRecord { timestamp_ns: t, input: EpochInput::Scan, floor: 0, x: 0.0, y: 0.0, allowed: None }
+        EpochRecord {
+            timestamp_ns: t,
+            input: EpochInput::Scan,
+            floor: 0,
+            x: 0.0,
+            y: 0.0,
+            accuracy_m: 3.0,
+            allowed: None,
+        }
     }
 
     #[test]
     fn keeps_the_newest_epochs_and_their_feedback() {
         let mut h = History::new(3);
-        h.pin_latest(&[1], 0, 0.0, 0.0); // nothing yet: nothing happens
+        h.pin_latest(&[1], 0, 0.0, 0.0, 1.0); // nothing yet: nothing happens
         for t in 0..5 {
             h.push(record(t));
         }
         let times: Vec<u64> = h.records().iter().map(|r| r.timestamp_ns).collect();
         assert_eq!(times, [2, 3, 4]);
-        h.pin_latest(&[1, 2, 3], 0, 1.0, 2.0);
-        h.pin_latest(&[2, 3, 7], 0, 1.5, 2.0);
+        h.pin_latest(&[1, 2, 3], 0, 1.0, 2.0, 1.0);
+        h.pin_latest(&[2, 3, 7], 0, 1.5, 2.0, 1.0);
         assert_eq!(h.records()[2].allowed, Some(vec![2, 3]));
         assert_eq!(h.records()[2].x, 1.5);
-        h.pin_latest(&[9], 0, 1.5, 2.0);
+        h.pin_latest(&[9], 0, 1.5, 2.0, 1.0);
         assert_eq!(h.records()[2].allowed, Some(vec![9]), "a contradiction: the latest word wins");
         assert_eq!(h.records()[1].allowed, None);
         let mut none = History::new(0);

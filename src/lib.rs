@@ -8,6 +8,7 @@ pub mod error;
 pub mod eval;
 pub mod ffi;
 pub mod fix;
+pub mod habits;
 pub mod history;
 pub mod hmm;
 pub mod io;
