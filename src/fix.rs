@@ -3,7 +3,9 @@
 //! from some other system, and its probability in state i is a Gaussian around the state's
 //! position (eq. 7 with one cell point per state, M_i = 1, mean l_i and Σ = σ²·I). An epoch
 //! with a fix is combined with the motion transition exactly as a scan epoch is; only its
-//! emission differs. A learned bias per cell (§II-C, eq. 4) is left for the learning pass.
+//! emission differs. [`crate::habits`] learns the fixes' error (one bias vector and one factor
+//! on σ, not the paper's bias per cell: a user's history rarely holds enough fixes per cell),
+//! and the engine takes it off each fix before this emission.
 
 use crate::error::InputError;
 use crate::site::{Site, MAX_COORDINATE_M};

@@ -84,7 +84,16 @@ pub struct HabitOptions {
     /// Most states one segment may involve; a segment over more is skipped and counted.
     /// Default 20 000: with 500 epochs, 80 MB for the forward variables in the worst case.
     pub max_segment_states: usize,
+    /// The strength κ with which the learned moves are applied in the filter
+    /// ([`HabitPrior`]); `None` (default): chosen by each pass on held-out segments
+    /// ([`STRENGTHS`]), so habits that do not predict the user's next moves are not applied.
+    pub strength: Option<f64>,
 }
+
+/// The strengths a pass tries, as pseudo-counts per reachable move: from Laplace's 1 to 1000,
+/// where a state needs about a thousand passes through it per reachable neighbour before its
+/// habits double a move's weight. A log grid, as for γ.
+pub const STRENGTHS: [f64; 7] = [1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0];
 
 impl Default for HabitOptions {
     fn default() -> Self {
@@ -95,6 +104,7 @@ impl Default for HabitOptions {
             tolerance: 1e-3,
             max_gap_s: 48.0,
             max_segment_states: 20_000,
+            strength: None,
         }
     }
 }
@@ -107,14 +117,15 @@ impl HabitOptions {
             ("fix_prior_fixes", self.fix_prior_fixes),
             ("tolerance", self.tolerance),
             ("max_gap_s", self.max_gap_s),
+            ("strength", self.strength.unwrap_or(1.0)),
         ] {
             if !(v.is_finite() && v >= 0.0) {
                 return Err(HabitError::Invalid { path: format!("options.{name}"), message: format!("{v}") });
             }
         }
-        if self.pseudocount <= 0.0 {
+        if self.pseudocount <= 0.0 || self.strength.is_some_and(|k| k <= 0.0) {
             return Err(HabitError::Invalid {
-                path: "options.pseudocount".into(),
+                path: "options.pseudocount / options.strength".into(),
                 message: "must be > 0, or an unseen move would become impossible".into(),
             });
         }
@@ -248,6 +259,9 @@ pub struct HabitModel {
     fix: FixStatistics,
     epochs: u64,
     learned_through_ns: Option<u64>,
+    /// κ with which the moves are applied; `None`: not applied (not enough evidence yet that
+    /// they predict anything).
+    strength: Option<f64>,
 }
 
 /// The JSON form.
@@ -260,6 +274,8 @@ struct ModelFile {
     epochs: u64,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     learned_through_ns: Option<u64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    strength: Option<f64>,
     transitions: Vec<RowFile>,
     fix: FixStatistics,
 }
@@ -297,6 +313,12 @@ pub struct HabitReport {
     pub learned_transitions: usize,
     /// The fix error after the pass.
     pub fix_error: FixError,
+    /// Per strength of [`STRENGTHS`]: ln p of the held-out segments' moves under the other
+    /// half's habits, minus ln p under the uniform reachability, nats per move (the first
+    /// half predicting the second and the reverse). Empty with fewer than two segments.
+    pub strength_gain: Vec<(f64, f64)>,
+    /// The strength chosen (`None`: habits not applied).
+    pub strength: Option<f64>,
 }
 
 impl HabitModel {
@@ -308,6 +330,7 @@ impl HabitModel {
             fix: FixStatistics::default(),
             epochs: 0,
             learned_through_ns: None,
+            strength: None,
         }
     }
 
@@ -344,6 +367,11 @@ impl HabitModel {
             .unwrap_or(0.0)
     }
 
+    /// κ with which the learned moves are applied; `None`: they are not.
+    pub fn strength(&self) -> Option<f64> {
+        self.strength
+    }
+
     /// The fix statistics.
     pub fn fix_statistics(&self) -> &FixStatistics {
         &self.fix
@@ -362,6 +390,7 @@ impl HabitModel {
             site: self.site.clone(),
             epochs: self.epochs,
             learned_through_ns: self.learned_through_ns,
+            strength: self.strength,
             transitions: self
                 .rows
                 .iter()
@@ -434,6 +463,11 @@ impl HabitModel {
                 return Err(invalid(format!("transitions[{r}].from"), format!("state {} twice", row.from)));
             }
         }
+        if let Some(k) = file.strength {
+            if !(k.is_finite() && k > 0.0) {
+                return Err(invalid("strength".into(), format!("{k} is not a pseudo-count > 0")));
+            }
+        }
         let f = &file.fix;
         let fix_values =
             [f.fixes, f.weight, f.normalised_square, f.weighted_residual[0], f.weighted_residual[1]];
@@ -450,6 +484,7 @@ impl HabitModel {
             fix: file.fix,
             epochs: file.epochs,
             learned_through_ns: file.learned_through_ns,
+            strength: file.strength,
         })
     }
 
@@ -526,7 +561,23 @@ impl HabitModel {
             }
             report.iterations += 1;
         }
+        // How strongly to apply them: chosen on held-out segments (or given).
+        let strength = match options.strength {
+            Some(k) => Some(k),
+            None if segments.len() >= 2 => {
+                report.strength_gain = self.strength_gains(site, reach, &segments, options)?;
+                report
+                    .strength_gain
+                    .iter()
+                    .filter(|g| g.1 > 0.0)
+                    .max_by(|a, b| a.1.total_cmp(&b.1))
+                    .map(|g| g.0)
+            }
+            None => self.strength,
+        };
         // Commit.
+        self.strength = strength;
+        report.strength = strength;
         for ((i, j), c) in learned {
             if c < NEGLIGIBLE_COUNT {
                 continue;
@@ -545,6 +596,62 @@ impl HabitModel {
         report.learned_transitions = self.learned_transitions();
         report.fix_error = self.fix_error(options);
         Ok(report)
+    }
+}
+
+impl HabitModel {
+    /// [`HabitReport::strength_gain`]: each segment's moves as the uniform reachability sees
+    /// them (one E-step with no habits, so nothing learned leaks into what is scored), the
+    /// even segments' plus the model's counts predicting the odd segments', and the reverse.
+    fn strength_gains(
+        &self,
+        site: &Site,
+        reach: &ReachTable,
+        segments: &[Segment],
+        options: &HabitOptions,
+    ) -> Result<Vec<(f64, f64)>, HabitError> {
+        let uniform = HabitModel::new(site);
+        let none = BTreeMap::new();
+        let mut halves = [BTreeMap::new(), BTreeMap::new()];
+        for (k, segment) in segments.iter().enumerate() {
+            let mut fix = FixStatistics::default();
+            segment.expect(
+                site,
+                &uniform,
+                &none,
+                FixError::default(),
+                options,
+                &mut halves[k % 2],
+                &mut fix,
+            )?;
+        }
+        let mut gains = vec![0.0; STRENGTHS.len()];
+        let mut moves = 0.0;
+        for (train, test) in [(&halves[0], &halves[1]), (&halves[1], &halves[0])] {
+            // The training half's counts (with the model's), by row.
+            let mut rows: BTreeMap<u32, BTreeMap<u32, f64>> = BTreeMap::new();
+            for (&i, row) in &self.rows {
+                rows.entry(i).or_default().extend(row.iter().copied());
+            }
+            for (&(i, j), &c) in train {
+                *rows.entry(i).or_default().entry(j).or_insert(0.0) += c;
+            }
+            for (&(i, j), &c) in test {
+                let n = reach.reachable(i as usize, reach.radius_m()).len().max(1) as f64;
+                let (c_ij, c_i) = rows
+                    .get(&i)
+                    .map_or((0.0, 0.0), |r| (r.get(&j).copied().unwrap_or(0.0), r.values().sum::<f64>()));
+                moves += c;
+                for (g, &kappa) in gains.iter_mut().zip(&STRENGTHS) {
+                    *g += c * (((c_ij + kappa) / (c_i + n * kappa)).ln() + n.ln());
+                }
+            }
+        }
+        Ok(STRENGTHS
+            .iter()
+            .zip(gains)
+            .map(|(&k, g)| (k, if moves > 0.0 { g / moves } else { 0.0 }))
+            .collect())
     }
 }
 
@@ -786,12 +893,12 @@ struct PriorRow {
 }
 
 impl HabitPrior {
-    /// The multipliers of `model` over `reach`.
-    pub fn new(model: &HabitModel, reach: &ReachTable, options: &HabitOptions) -> Self {
+    /// The multipliers of `model` over `reach`, at the model's strength (none without one).
+    pub fn new(model: &HabitModel, reach: &ReachTable) -> Self {
         let n = reach.state_count();
         let mut row_of = vec![u32::MAX; n];
         let mut rows = Vec::new();
-        let kappa = options.pseudocount;
+        let Some(kappa) = model.strength else { return Self::default() };
         for (&i, learned) in &model.rows {
             let Some(slot) = row_of.get_mut(i as usize) else { continue };
             let reachable = reach.reachable(i as usize, reach.radius_m()).len() as f64;

@@ -4,8 +4,10 @@
 //!
 //! No configuration reads a test walk's waypoints except to score it.
 
-use super::replay::{replay, MotionMask, ReplayOptions};
+use super::replay::{replay, MotionMask, ReplayOptions, WaypointFeedback};
 use crate::engine::Engine;
+use crate::habits::{HabitModel, HabitReport};
+use crate::history::EpochRecord;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::Scan;
 use crate::site::{Calibration, North, Site};
@@ -72,6 +74,9 @@ pub enum EvalError {
     /// Nothing to evaluate.
     #[error("{0}")]
     Empty(String),
+    /// Habits could not be learned.
+    #[error(transparent)]
+    Habits(#[from] crate::habits::HabitError),
 }
 
 impl FloorData {
@@ -401,6 +406,8 @@ pub struct EvalOptions {
     pub configurations: Vec<String>,
     /// Worker threads for replays.
     pub threads: usize,
+    /// Habits every engine configuration starts with ([`survey_habits`]); `None`: none.
+    pub habits: Option<Arc<HabitModel>>,
 }
 
 impl Default for EvalOptions {
@@ -412,6 +419,7 @@ impl Default for EvalOptions {
             north: North::default(),
             configurations: Vec::new(),
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            habits: None,
         }
     }
 }
@@ -444,6 +452,20 @@ pub struct EvalReport {
     pub states: usize,
     /// Wall-clock time of the whole evaluation, s.
     pub seconds: f64,
+    /// Every configuration again with habits learned from the survey walks (`--habits`).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub habits: Option<HabitsComparison>,
+}
+
+/// The configurations run with habits learned from the survey walks ([`survey_habits`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct HabitsComparison {
+    /// What the learning pass did.
+    pub learning: HabitReport,
+    /// Learning time (survey replays and Baum-Welch), s.
+    pub learning_seconds: f64,
+    /// Per configuration key, with the habits.
+    pub configurations: BTreeMap<String, ConfigurationReport>,
 }
 
 /// One test walk's estimates per configuration, for plots.
@@ -576,6 +598,9 @@ pub fn evaluate_on(
                 config.track_window_epochs = longest;
             }
             let Ok(mut engine) = Engine::new(Arc::clone(site), config) else { continue };
+            if let Some(habits) = &options.habits {
+                engine.set_habits(HabitModel::clone(habits));
+            }
             let r = replay(&mut engine, trace, &ReplayOptions { mask, ..options.replay });
             let live = live_estimates(&r.positions);
             // Smoothed points carry the live radius of their epoch.
@@ -643,6 +668,36 @@ pub fn evaluate_on(
         );
     }
     Ok((reports, results))
+}
+
+/// Radius confirmed around a survey walk's waypoint, in grid spacings: √2/2 reaches the
+/// states of the cell the waypoint is in (a waypoint is a surveyor's tap on the plan, not a
+/// state), so every confirmation names one to four states.
+pub const WAYPOINT_FEEDBACK_SPACINGS: f64 = std::f64::consts::FRAC_1_SQRT_2;
+
+/// Habits learned from the survey walks (issue 6, El Gemayel §III-A and §IV-C): each survey
+/// walk replayed through the engine as shipped, its waypoints given as the surveyor's
+/// feedback, then one Baum-Welch pass over all of them. Test walks are never read.
+pub fn survey_habits(
+    site: &Arc<Site>,
+    floors: &[FloorData],
+    options: &EvalOptions,
+) -> Result<(HabitModel, HabitReport), EvalError> {
+    let config = EngineConfig { history_epochs: usize::MAX, ..options.engine_config() };
+    let jobs: Vec<(usize, &Trace)> =
+        floors.iter().enumerate().flat_map(|(f, floor)| floor.survey.iter().map(move |t| (f, t))).collect();
+    let radius_m = site.spacing_m() * WAYPOINT_FEEDBACK_SPACINGS;
+    let histories: Vec<Vec<EpochRecord>> = parallel_map(&jobs, options.threads, |&(floor, trace)| {
+        let Ok(mut engine) = Engine::new(Arc::clone(site), config.clone()) else { return Vec::new() };
+        let feedback = Some(WaypointFeedback { floor, radius_m });
+        replay(&mut engine, trace, &ReplayOptions { feedback, ..options.replay });
+        engine.history().iter().cloned().collect()
+    });
+    let sequences: Vec<&[EpochRecord]> = histories.iter().map(Vec::as_slice).collect();
+    let reach = crate::site::ReachTable::build(site, config.reach_radius_m);
+    let mut model = HabitModel::new(site);
+    let report = model.learn(site, &reach, &sequences, &config.habits)?;
+    Ok((model, report))
 }
 
 /// `f` over `items` on `threads` worker threads, results in input order.

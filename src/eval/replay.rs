@@ -74,6 +74,19 @@ pub struct ReplayOptions {
     pub min_scan_interval_ns: Option<u64>,
     /// Motion withheld.
     pub mask: MotionMask,
+    /// Give the walk's waypoints to the engine as user feedback
+    /// ([`Engine::confirm_position`]): a surveyor confirming where they are. Only for walks
+    /// the engine may learn from (survey walks), never for walks that are scored.
+    pub feedback: Option<WaypointFeedback>,
+}
+
+/// Waypoints as feedback: the walk's floor in the site, and the radius of the circle confirmed.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WaypointFeedback {
+    /// Index of the walk's floor in the site.
+    pub floor: usize,
+    /// Radius confirmed around each waypoint, m.
+    pub radius_m: f64,
 }
 
 impl Default for ReplayOptions {
@@ -83,6 +96,7 @@ impl Default for ReplayOptions {
             timer_ns: Some(2_000_000_000),
             min_scan_interval_ns: None,
             mask: MotionMask::Auto,
+            feedback: None,
         }
     }
 }
@@ -111,8 +125,24 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
     };
     let mut last_epoch: Option<u64> = None;
     let mut last_scan: Option<u64> = None;
+    let mut waypoints = trace.waypoints.iter().peekable();
     for event in trace.events(&options.events) {
         let t = event.timestamp_ns();
+        if let Some(feedback) = options.feedback {
+            // Waypoints up to this event's time, confirmed in order (once an epoch exists).
+            while let Some(w) = waypoints.next_if(|w| w.timestamp_ns < t) {
+                if last_epoch.is_some_and(|l| w.timestamp_ns >= l) {
+                    if let Ok(p) =
+                        engine.confirm_position(w.timestamp_ns, w.x, w.y, feedback.floor, feedback.radius_m)
+                    {
+                        if last_epoch != Some(p.timestamp_ns) {
+                            last_epoch = Some(p.timestamp_ns);
+                            out.positions.push(p);
+                        }
+                    }
+                }
+            }
+        }
         let result = match event {
             Event::Accelerometer(batch) => {
                 engine.push_accelerometer(&batch);

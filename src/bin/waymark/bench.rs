@@ -168,6 +168,9 @@ fn run(args: &BenchArgs) -> Result<Value, String> {
         if !args.json {
             eprintln!("{n} states: epoch p50 {p50:.3} ms");
         }
+        if n == REFERENCE_STATES {
+            report.extend(habits_figures(&site, &engine, &walk, args.warm_up)?);
+        }
         if n <= args.dense_max_states {
             let dense_ms = dense_epoch_ms(&site, &scaled, &walk[..walk.len().min(args.warm_up + 5)]);
             dense_p50.insert(key.clone(), json!(dense_ms));
@@ -192,6 +195,40 @@ fn run(args: &BenchArgs) -> Result<Value, String> {
     report.insert("cdylib_bytes".into(), json!(cdylib_bytes(args.cdylib.as_deref())));
     report.insert("heard_per_scan".into(), json!(ScaleConfig::default().heard));
     Ok(json!(report))
+}
+
+/// Habits at the reference size: the time `learn_habits` takes over the walk's history (at
+/// most `history_epochs`), the model's size, and the epoch time with the learned moves applied
+/// (forced on at strength 1: one walk is one segment, which a pass would not apply).
+fn habits_figures(
+    site: &Arc<Site>,
+    walked: &Engine,
+    walk: &[waymark::sim::scale::ScaleEpoch],
+    warm_up: usize,
+) -> Result<BTreeMap<String, Value>, String> {
+    let records: Vec<_> = walked.history().iter().cloned().collect();
+    let mut config = EngineConfig::default();
+    config.habits.strength = Some(1.0);
+    let mut engine = Engine::new(Arc::clone(site), config).map_err(|e| e.to_string())?;
+    let start = Clock::now();
+    let learned = engine.learn_habits_from(&[&records]).map_err(|e| e.to_string())?;
+    let learn_ms = ms(start);
+    let mut times = Vec::with_capacity(walk.len());
+    for (k, epoch) in walk.iter().enumerate() {
+        let start = Clock::now();
+        engine.push_scan_with_motion(&epoch.scan, &epoch.motion).map_err(|e| e.to_string())?;
+        if k >= warm_up {
+            times.push(ms(start));
+        }
+    }
+    let mut out = BTreeMap::new();
+    out.insert("habits_learn_ms".into(), json!(learn_ms));
+    out.insert("habits_learn_epochs".into(), json!(learned.epochs));
+    out.insert("habits_learned_transitions".into(), json!(learned.learned_transitions));
+    out.insert("habits_largest_segment_states".into(), json!(learned.largest_segment_states));
+    out.insert("habits_json_bytes".into(), json!(engine.export_habits().len()));
+    out.insert("epoch_ms_p50_with_habits".into(), json!(percentile(&mut times, 0.5)));
+    Ok(out)
 }
 
 /// Median over the epochs after the warm-up of the dense forward step on the same site and

@@ -179,6 +179,14 @@ pub struct EvalArgs {
     /// Largest σ a fitted fingerprint may have, dB.
     #[arg(long)]
     max_std_db: Option<f64>,
+    /// Also learn habits from the survey walks (their waypoints as the surveyor's feedback) and
+    /// run every configuration again with them: the table compares the two.
+    #[arg(long)]
+    habits: bool,
+    /// Strength of the applied habits, as a pseudo-count per reachable move (default: chosen
+    /// on held-out survey walks).
+    #[arg(long)]
+    habit_strength: Option<f64>,
 }
 
 fn fail(verb: &str, e: impl std::fmt::Display) -> ExitCode {
@@ -455,6 +463,9 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     if let Some(t) = args.threads {
         options.threads = t;
     }
+    if let Some(k) = args.habit_strength {
+        options.engine.habits.strength = Some(k);
+    }
     let loaded_s = started.elapsed().as_secs_f64();
     let bar = progress_bar(args.json, evaluation::CALIBRATION_FOLDS as u64, "calibrating (folds)");
     let (site, survey, calibration) = match evaluation::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
@@ -476,6 +487,26 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             return fail("eval", e);
         }
     }
+    let habits = if args.habits {
+        let learning_started = Instant::now();
+        let bar = progress_bar(args.json, 1, "learning habits from the survey walks");
+        let (model, learning) = match evaluation::survey_habits(&site, &floors, &options) {
+            Ok(m) => m,
+            Err(e) => return fail("eval", e),
+        };
+        bar.finish_and_clear();
+        let learning_seconds = learning_started.elapsed().as_secs_f64();
+        let with = EvalOptions { habits: Some(Arc::new(model)), ..options.clone() };
+        let bar = progress_bar(args.json, walks as u64, "replaying test walks with habits");
+        let (configurations, _) = match evaluation::evaluate_on(&site, &floors, &with, &|| bar.inc(1)) {
+            Ok(r) => r,
+            Err(e) => return fail("eval", e),
+        };
+        bar.finish_and_clear();
+        Some(evaluation::HabitsComparison { learning, learning_seconds, configurations })
+    } else {
+        None
+    };
     let test: Vec<&Trace> = floors.iter().flat_map(|f| &f.test).collect();
     let pdr = waymark::eval::pdr::evaluate_pdr(&test, &options.engine.motion_for(&site));
     let report = evaluation::EvalReport {
@@ -486,6 +517,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         test_walks: walks,
         states: site.states().len(),
         seconds: started.elapsed().as_secs_f64(),
+        habits,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
@@ -542,8 +574,43 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
                 100.0 * share
             );
         }
+        if let Some(h) = &report.habits {
+            print_habits(&report.configurations, h);
+        }
     }
     ExitCode::SUCCESS
+}
+
+/// The configurations without and with habits, side by side.
+fn print_habits(
+    without: &std::collections::BTreeMap<String, evaluation::ConfigurationReport>,
+    habits: &evaluation::HabitsComparison,
+) {
+    let l = &habits.learning;
+    println!(
+        "\nhabits from the survey walks: {} epochs in {} segments ({} with feedback), {} iterations, \
+         {} transitions learned, largest segment {} states, {} restarts; {:.1} s",
+        l.epochs,
+        l.segments,
+        l.feedback_epochs,
+        l.iterations,
+        l.learned_transitions,
+        l.largest_segment_states,
+        l.restarts,
+        habits.learning_seconds
+    );
+    println!(
+        "{:<26} {:>15} {:>15} {:>13} {:>13} {:>7}",
+        "configuration", "mean (without)", "mean (habits)", "p50", "hit68", "floor"
+    );
+    for (key, with) in &habits.configurations {
+        let Some(plain) = without.get(key) else { continue };
+        let (a, b) = (&plain.pooled, &with.pooled);
+        println!(
+            "{key:<26} {:>15.3} {:>15.3} {:>6.2}→{:<6.2} {:>6.3}→{:<6.3} {:>7.3}",
+            a.mean_m, b.mean_m, a.p50_m, b.p50_m, a.accuracy_68_hit, b.accuracy_68_hit, b.floor_hit
+        );
+    }
 }
 
 /// One SVG per test walk (plan, truth, the live, Viterbi and k-NN tracks) and the pooled error
