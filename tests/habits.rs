@@ -205,3 +205,32 @@ fn feedback_steers_what_is_learned() {
         assert!(model.count(i, i + 1) > 0.9, "state {i}: {}", model.count(i, i + 1));
     }
 }
+
+#[test]
+fn habits_that_do_not_predict_are_not_applied() {
+    let site = Arc::new(two_floor_site());
+    // Consistent laps: the held-out laps are predicted, so the habits are applied.
+    let mut east = engine_on(&site);
+    walk_east(&mut east, 0..6);
+    let report = east.learn_habits().unwrap();
+    assert_eq!(report.strength_gain.len(), waymark::habits::STRENGTHS.len(), "{report:?}");
+    assert!(report.strength.is_some() && report.strength == east.habits().strength(), "{report:?}");
+    assert!(report.strength_gain.iter().any(|g| g.1 > 0.0), "{report:?}");
+
+    // Laps alternating east and west: the even laps say "east", the odd ones "west", so
+    // neither half predicts the other and nothing is applied.
+    let mut both = engine_on(&site);
+    for lap in 0..6u64 {
+        for k in 0..5u64 {
+            let x = if lap % 2 == 0 { 3.0 * k as f64 } else { 12.0 - 3.0 * k as f64 };
+            both.push_scan(&scan(SECOND * (1 + lap * 60 + k), &readings_at(x))).unwrap();
+        }
+    }
+    let report = both.learn_habits().unwrap();
+    assert!(report.learned_transitions > 0, "the moves are still counted: {report:?}");
+    assert_eq!(report.strength, None, "{report:?}");
+    assert!(report.strength_gain.iter().all(|g| g.1 <= 0.0), "{report:?}");
+    let mut plain = engine_on(&site);
+    let t = 1000 * SECOND;
+    assert_eq!(predicted_from_the_middle(&mut both, t), predicted_from_the_middle(&mut plain, t));
+}
