@@ -431,7 +431,7 @@ impl Engine {
 
     /// Replaces the habits by `model`, which must be of this site.
     pub fn set_habits(&mut self, model: HabitModel) {
-        self.habit_prior = HabitPrior::new(&model, &self.reach);
+        self.habit_prior = HabitPrior::new(&model, &self.reach, self.site.spacing_m());
         self.habits = model;
     }
 

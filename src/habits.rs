@@ -288,6 +288,35 @@ struct RowFile {
     count: Vec<f64>,
 }
 
+/// How well habits at one strength predicted the held-out moves.
+#[derive(Clone, Copy, Debug, PartialEq, Serialize)]
+pub struct StrengthGain {
+    /// κ.
+    pub strength: f64,
+    /// Mean gain over the uniform reachability, nats per held-out move.
+    pub gain: f64,
+    /// Its standard error (moves taken as independent, so an underestimate).
+    pub standard_error: f64,
+}
+
+/// Habits are applied only when their held-out gain exceeds this many standard errors: about
+/// 97.7% one-sided confidence that they predict the user's moves at all (the usual two-σ level).
+pub const SIGNIFICANT_GAIN_ERRORS: f64 = 2.0;
+
+/// The strength to apply, from the held-out gains: the weakest (largest κ) whose gain is within
+/// one standard error of the best (the one-standard-error rule of cross-validation: Breiman et
+/// al. 1984, §3.4.3; Hastie, Tibshirani & Friedman, *Elements of Statistical Learning* §7.10),
+/// and only when that gain is significantly above zero ([`SIGNIFICANT_GAIN_ERRORS`]).
+pub fn choose_strength(gains: &[StrengthGain]) -> Option<f64> {
+    let best = gains.iter().max_by(|a, b| a.gain.total_cmp(&b.gain))?;
+    let chosen = gains
+        .iter()
+        .filter(|g| g.gain >= best.gain - best.standard_error)
+        .max_by(|a, b| a.strength.total_cmp(&b.strength))?;
+    (chosen.gain > SIGNIFICANT_GAIN_ERRORS * chosen.standard_error && chosen.gain > 0.0)
+        .then_some(chosen.strength)
+}
+
 /// What a learning pass did.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct HabitReport {
@@ -316,7 +345,7 @@ pub struct HabitReport {
     /// Per strength of [`STRENGTHS`]: ln p of the held-out segments' moves under the other
     /// half's habits, minus ln p under the uniform reachability, nats per move (the first
     /// half predicting the second and the reverse). Empty with fewer than two segments.
-    pub strength_gain: Vec<(f64, f64)>,
+    pub strength_gain: Vec<StrengthGain>,
     /// The strength chosen (`None`: habits not applied).
     pub strength: Option<f64>,
 }
@@ -528,7 +557,9 @@ impl HabitModel {
         report.feedback_epochs = segments.iter().map(|s| s.known.len()).sum();
         report.fix_epochs = segments.iter().flat_map(|s| &s.epochs).filter(|e| e.fix.is_some()).count();
         report.largest_segment_states = segments.iter().map(|s| s.states.len()).max().unwrap_or(0);
-        let newest = sequences.iter().flat_map(|s| s.iter()).map(|r| r.timestamp_ns).max();
+        // Epochs of a lone-epoch run at the end stay unlearned: they may start the next pass's
+        // segment.
+        let newest = segments.iter().map(|s| s.last_ns).max();
 
         // Baum-Welch: E-step under the current estimate, M-step = prior counts + expected counts.
         let mut learned: BTreeMap<(u32, u32), f64> = BTreeMap::new();
@@ -566,12 +597,7 @@ impl HabitModel {
             Some(k) => Some(k),
             None if segments.len() >= 2 => {
                 report.strength_gain = self.strength_gains(site, reach, &segments, options)?;
-                report
-                    .strength_gain
-                    .iter()
-                    .filter(|g| g.1 > 0.0)
-                    .max_by(|a, b| a.1.total_cmp(&b.1))
-                    .map(|g| g.0)
+                choose_strength(&report.strength_gain)
             }
             None => self.strength,
         };
@@ -609,7 +635,7 @@ impl HabitModel {
         reach: &ReachTable,
         segments: &[Segment],
         options: &HabitOptions,
-    ) -> Result<Vec<(f64, f64)>, HabitError> {
+    ) -> Result<Vec<StrengthGain>, HabitError> {
         let uniform = HabitModel::new(site);
         let none = BTreeMap::new();
         let mut halves = [BTreeMap::new(), BTreeMap::new()];
@@ -625,8 +651,9 @@ impl HabitModel {
                 &mut fix,
             )?;
         }
-        let mut gains = vec![0.0; STRENGTHS.len()];
-        let mut moves = 0.0;
+        // Per strength: Σ c, Σ c·v and Σ c·v² of the per-move gains v, weighted by the
+        // expected count c of each held-out move.
+        let mut sums = vec![[0.0f64; 3]; STRENGTHS.len()];
         for (train, test) in [(&halves[0], &halves[1]), (&halves[1], &halves[0])] {
             // The training half's counts (with the model's), by row.
             let mut rows: BTreeMap<u32, BTreeMap<u32, f64>> = BTreeMap::new();
@@ -637,20 +664,32 @@ impl HabitModel {
                 *rows.entry(i).or_default().entry(j).or_insert(0.0) += c;
             }
             for (&(i, j), &c) in test {
-                let n = reach.reachable(i as usize, reach.radius_m()).len().max(1) as f64;
-                let (c_ij, c_i) = rows
-                    .get(&i)
-                    .map_or((0.0, 0.0), |r| (r.get(&j).copied().unwrap_or(0.0), r.values().sum::<f64>()));
-                moves += c;
-                for (g, &kappa) in gains.iter_mut().zip(&STRENGTHS) {
-                    *g += c * (((c_ij + kappa) / (c_i + n * kappa)).ln() + n.ln());
+                let train_row = rows.get(&i);
+                let count = |k: u32| train_row.and_then(|r| r.get(&k).copied()).unwrap_or(0.0);
+                let rings = Rings::of(reach, i as usize, site.spacing_m(), count);
+                let Some(&(_, d)) = reach.reachable(i as usize, reach.radius_m()).iter().find(|e| e.0 == j)
+                else {
+                    continue;
+                };
+                for (sum, &kappa) in sums.iter_mut().zip(&STRENGTHS) {
+                    let v = (rings.probability(d, count(j), kappa) * rings.size(d)).ln();
+                    sum[0] += c;
+                    sum[1] += c * v;
+                    sum[2] += c * v * v;
                 }
             }
         }
         Ok(STRENGTHS
             .iter()
-            .zip(gains)
-            .map(|(&k, g)| (k, if moves > 0.0 { g / moves } else { 0.0 }))
+            .zip(sums)
+            .map(|(&kappa, [n, sv, svv])| {
+                if n <= 0.0 {
+                    return StrengthGain { strength: kappa, gain: 0.0, standard_error: 0.0 };
+                }
+                let mean = sv / n;
+                let variance = (svv / n - mean * mean).max(0.0);
+                StrengthGain { strength: kappa, gain: mean, standard_error: (variance / n).sqrt() }
+            })
             .collect())
     }
 }
@@ -687,6 +726,8 @@ struct Observation {
 
 /// A segment of epochs and the states it involves.
 struct Segment {
+    /// Time of its last epoch, ns.
+    last_ns: u64,
     /// Global state indices, ascending.
     states: Vec<u32>,
     epochs: Vec<Observation>,
@@ -763,7 +804,8 @@ impl Segment {
                 to
             })
             .collect();
-        Some(Self { states, epochs, known, pairs })
+        let last_ns = run.last().map_or(0, |r| r.timestamp_ns);
+        Some(Self { last_ns, states, epochs, known, pairs })
     }
 
     /// One E-step over this segment under the prior `model` plus this pass's current `learned`
@@ -873,10 +915,13 @@ impl Segment {
     }
 }
 
-/// The learned transitions as multipliers, for the engine's reach table: row i's multiplier
-/// for j is h_ij = n_i (c_ij + κ) / (c_i + n_i κ), the learned probability over the uniform
-/// 1/n_i, where n_i is the number of states the table lets i reach and c_i = Σ_j c_ij. A state
-/// with no learned count has no row (h = 1).
+/// The learned transitions as multipliers, for the engine's reach table. The moves from i are
+/// grouped in rings of equal walking distance (one grid spacing wide): how far the user went
+/// in an epoch is the motion's to say (Hoang eq. 11), so a habit only says which way. Row i's
+/// multiplier for j in ring r is h_ij = n_r (c_ij + κ) / (c_r + n_r κ), the learned
+/// probability of j within its ring over the uniform 1/n_r, where n_r is the number of states
+/// in the ring and c_r their summed counts; a ring with no count, and a state with no learned
+/// count, keep h = 1.
 #[derive(Clone, Debug, Default)]
 pub struct HabitPrior {
     /// Index into `rows` per state, `u32::MAX` for none.
@@ -894,24 +939,27 @@ struct PriorRow {
 
 impl HabitPrior {
     /// The multipliers of `model` over `reach`, at the model's strength (none without one).
-    pub fn new(model: &HabitModel, reach: &ReachTable) -> Self {
+    pub fn new(model: &HabitModel, reach: &ReachTable, spacing_m: f64) -> Self {
         let n = reach.state_count();
         let mut row_of = vec![u32::MAX; n];
         let mut rows = Vec::new();
         let Some(kappa) = model.strength else { return Self::default() };
         for (&i, learned) in &model.rows {
             let Some(slot) = row_of.get_mut(i as usize) else { continue };
-            let reachable = reach.reachable(i as usize, reach.radius_m()).len() as f64;
-            let total: f64 = learned.iter().map(|e| e.1).sum();
-            if total <= 0.0 || reachable == 0.0 {
+            let count = |j: u32| learned.binary_search_by_key(&j, |e| e.0).map_or(0.0, |k| learned[k].1);
+            let rings = Rings::of(reach, i as usize, spacing_m, count);
+            if rings.total() <= 0.0 {
                 continue;
             }
-            let norm = reachable / (total + reachable * kappa);
+            let mut entries: Vec<(u32, f64)> = reach
+                .reachable(i as usize, reach.radius_m())
+                .iter()
+                .map(|&(j, d)| (j, rings.probability(d, count(j), kappa) * rings.size(d)))
+                .collect();
+            entries.sort_unstable_by_key(|e| e.0);
+            entries.dedup_by_key(|e| e.0);
             *slot = rows.len() as u32;
-            rows.push(PriorRow {
-                default: norm * kappa,
-                entries: learned.iter().map(|&(j, c)| (j, norm * (c + kappa))).collect(),
-            });
+            rows.push(PriorRow { default: 1.0, entries });
         }
         Self { row_of, rows }
     }
@@ -954,5 +1002,54 @@ impl Transition for Habitual<'_> {
         let floor = self.inner.row(i, row);
         self.prior.apply(i, row);
         floor
+    }
+}
+
+/// The moves from one state grouped by walking distance: ring k holds the states whose walking
+/// distance rounds to k grid spacings.
+struct Rings {
+    spacing_m: f64,
+    /// Per ring: (states, summed count).
+    rings: BTreeMap<u32, (f64, f64)>,
+}
+
+impl Rings {
+    fn of(reach: &ReachTable, i: usize, spacing_m: f64, count: impl Fn(u32) -> f64) -> Self {
+        let mut rings: BTreeMap<u32, (f64, f64)> = BTreeMap::new();
+        for &(j, d) in reach.reachable(i, reach.radius_m()) {
+            let ring = rings.entry(Self::ring(f64::from(d), spacing_m)).or_default();
+            ring.0 += 1.0;
+            ring.1 += count(j);
+        }
+        Self { spacing_m, rings }
+    }
+
+    fn ring(walk_m: f64, spacing_m: f64) -> u32 {
+        (walk_m / spacing_m.max(1e-9)).round().clamp(0.0, f64::from(u32::MAX)) as u32
+    }
+
+    fn get(&self, walk_m: f32) -> (f64, f64) {
+        self.rings.get(&Self::ring(f64::from(walk_m), self.spacing_m)).copied().unwrap_or((1.0, 0.0))
+    }
+
+    /// States in the ring at `walk_m`.
+    fn size(&self, walk_m: f32) -> f64 {
+        self.get(walk_m).0
+    }
+
+    /// The learned probability of a move with count `c` within its ring at strength κ; the
+    /// uniform 1/n_r in a ring with no count.
+    fn probability(&self, walk_m: f32, c: f64, kappa: f64) -> f64 {
+        let (n, total) = self.get(walk_m);
+        if total <= 0.0 {
+            1.0 / n
+        } else {
+            (c + kappa) / (total + n * kappa)
+        }
+    }
+
+    /// All counts.
+    fn total(&self) -> f64 {
+        self.rings.values().map(|r| r.1).sum()
     }
 }
