@@ -5,8 +5,8 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use waymark::ffi::uniffi::{
-    BeaconReading, EngineOptions, MotionSample, PositionEstimate, PositionListener, PositioningEngine,
-    PositioningError, RadioScan, StatusUpdate, WifiReading,
+    BeaconReading, EngineOptions, FixError, MotionSample, PositionEstimate, PositionFix, PositionListener,
+    PositioningEngine, PositioningError, RadioScan, StatusUpdate, WifiReading,
 };
 use waymark::radio::TransmitterId;
 use waymark::sim::{imu, Office, OfficeConfig};
@@ -312,4 +312,156 @@ fn log_records_reach_the_sink() {
         sink.0.lock().unwrap()
     );
     init_logging(None, LogLevel::Error);
+}
+
+/// A walk through the office with a fix 1.5 m east and 0.5 m north of the truth half a second
+/// after every third scan, and the user confirming their room after every seventh. Returns
+/// (fixes, confirmations) accepted.
+fn walk_with_fixes_and_feedback(engine: &PositioningEngine, office: &Office, seed: u64) -> (u32, u32) {
+    let walk = office.walk(seed, 60.0);
+    let (mut fixes, mut confirmations) = (0, 0);
+    for (k, epoch) in walk.epochs.iter().enumerate() {
+        let t = epoch.scan.timestamp_ns;
+        if engine.push_scan(scan(&epoch.scan)).is_err() {
+            continue;
+        }
+        if k % 7 == 3 {
+            if let Some(zone) = epoch.zone {
+                let name = office.site.zones()[zone].name.clone();
+                if engine.confirm_zone(t, name).is_ok() {
+                    confirmations += 1;
+                }
+            }
+        }
+        if k % 3 == 1 {
+            let fix = PositionFix {
+                timestamp_ns: t + 500_000_000,
+                x: epoch.truth.x + 1.5,
+                y: epoch.truth.y + 0.5,
+                floor: Some(0),
+                accuracy_m: 2.0,
+            };
+            if engine.push_fix(fix).is_ok() {
+                fixes += 1;
+            }
+        }
+    }
+    (fixes, confirmations)
+}
+
+#[test]
+fn habits_are_learned_exported_and_imported_through_the_ffi() {
+    let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
+    let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
+    let unlearned = FixError { bias_x_m: 0.0, bias_y_m: 0.0, spread: 1.0 };
+    assert_eq!(engine.fix_error(), unlearned);
+    let (fixes, confirmations) = walk_with_fixes_and_feedback(&engine, &office, 11);
+    assert!(fixes > 10 && confirmations > 3, "{fixes} fixes, {confirmations} confirmations");
+
+    let report = engine.learn_habits().unwrap();
+    assert!(report.epochs > 0 && report.segments > 0 && report.iterations >= 1, "{report:?}");
+    assert_eq!(report.fix_epochs, fixes, "{report:?}");
+    assert!(report.feedback_epochs >= confirmations, "{report:?}");
+    assert!(report.learned_transitions > 0, "{report:?}");
+    assert_eq!(report.total_epochs, u64::from(report.epochs));
+    // The strength the core chose, as the FFI reports it (none for a single segment).
+    let applied = if report.segments < 2 { None } else { report.strength };
+    assert_eq!(report.strength, applied, "{report:?}");
+    assert!(report.strength.map_or(true, |k| k > 0.0), "{report:?}");
+    let ll = &report.log_likelihood;
+    assert_eq!(ll.len() as u32, report.iterations + 1, "{report:?}");
+    assert!(ll.windows(2).all(|w| w[1] >= w[0] - 1e-6), "{ll:?}");
+    // The fixes' bias is learned (toward +x, +y), and fixError says what learnHabits said.
+    let learned = engine.fix_error();
+    assert_eq!(learned, report.fix_error);
+    assert!(
+        learned.bias_x_m > 0.3 && learned.bias_y_m > 0.0 && learned.bias_x_m > learned.bias_y_m,
+        "{learned:?}"
+    );
+    // Each epoch once: a second pass has nothing to learn and changes nothing.
+    let json = engine.export_habits();
+    let again = engine.learn_habits().unwrap();
+    assert_eq!((again.epochs, again.segments), (0, 0), "{again:?}");
+    assert!(again.log_likelihood.is_empty(), "{again:?}");
+    assert_eq!(again.total_epochs, report.total_epochs);
+    assert_eq!(engine.export_habits(), json);
+
+    // Into a second engine on the same site: the same model.
+    let other = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
+    let empty = other.export_habits();
+    assert_ne!(empty, json);
+    other.import_habits(json.clone().into()).unwrap();
+    assert_eq!(other.export_habits(), json);
+    assert_eq!(other.fix_error(), learned);
+
+    // Refused models throw HabitsRejected, reach onError, and change nothing.
+    let counter = Arc::new(Counter::default());
+    let _subscription = Arc::clone(&other).subscribe(counter.clone());
+    // Another site (the office with another seed has the same states, so the same key).
+    let elsewhere = waymark::sim::scale::ScaleSite::generate(&waymark::sim::scale::ScaleConfig {
+        states: 200,
+        ..Default::default()
+    });
+    let foreign = PositioningEngine::new(elsewhere.json, EngineOptions::default()).unwrap();
+    let mut value: serde_json::Value = serde_json::from_str(&json).unwrap();
+    value["version"] = 999.into();
+    let newer = value.to_string();
+    let refused = [
+        String::new(),
+        "{".into(),
+        "null".into(),
+        "\u{0}".into(),
+        json.replace("waymark-habits", "waymark-site"),
+        newer,
+        json.replacen("\"count\":[", "\"count\":[-1,", 1),
+        foreign.export_habits(),
+    ];
+    for (k, bad) in refused.iter().enumerate() {
+        match other.import_habits(bad.clone().into()) {
+            Err(PositioningError::HabitsRejected { reason }) => assert!(!reason.is_empty()),
+            result => panic!("{}: expected HabitsRejected, got {result:?}", &bad[..bad.len().min(80)]),
+        }
+        assert_eq!(other.export_habits(), json, "a refused model changed the habits");
+        assert_eq!(counter.errors.load(Ordering::SeqCst), k + 1);
+    }
+    assert_eq!(other.fix_error(), learned);
+
+    other.clear_habits();
+    assert_eq!(other.export_habits(), empty);
+    assert_eq!(other.fix_error(), unlearned);
+}
+
+#[test]
+fn learning_while_other_threads_push_and_read() {
+    let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
+    let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
+    let walk = office.walk(4, 120.0);
+    let counter = Arc::new(Counter::default());
+    let _subscription = Arc::clone(&engine).subscribe(counter.clone());
+    let learned = std::thread::scope(|scope| {
+        let pusher = scope.spawn(|| {
+            for epoch in &walk.epochs {
+                let _ = engine.push_scan(scan(&epoch.scan));
+                let _ = engine.fix_error();
+            }
+        });
+        let learner = scope.spawn(|| {
+            let mut epochs = 0;
+            for _ in 0..20 {
+                epochs += u64::from(engine.learn_habits().unwrap().epochs);
+                let json = engine.export_habits();
+                engine.import_habits(json.into()).unwrap();
+            }
+            epochs
+        });
+        pusher.join().unwrap();
+        learner.join().unwrap()
+    });
+    let last = engine.learn_habits().unwrap();
+    // No epoch learned twice, and no pass lost, whichever thread got there first. (A pass
+    // that finds a single new epoch skips it for good: hence at most, not exactly, every
+    // accepted epoch.)
+    assert_eq!(learned + u64::from(last.epochs), last.total_epochs);
+    let positions = counter.positions.load(Ordering::SeqCst) as u64;
+    assert!(last.total_epochs <= positions && last.total_epochs > positions / 2, "{last:?}, {positions}");
 }

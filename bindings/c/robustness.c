@@ -17,7 +17,8 @@
 static int known(waymark_result r) {
     return r == WAYMARK_RESULT_OK || r == WAYMARK_RESULT_NULL_PARAMETER || r == WAYMARK_RESULT_INVALID_SITE ||
            r == WAYMARK_RESULT_INVALID_CONFIG || r == WAYMARK_RESULT_INPUT_REJECTED ||
-           r == WAYMARK_RESULT_NO_POSITION || r == WAYMARK_RESULT_INVALID_UTF8 || r == WAYMARK_RESULT_PANIC;
+           r == WAYMARK_RESULT_NO_POSITION || r == WAYMARK_RESULT_INVALID_UTF8 || r == WAYMARK_RESULT_SALT_MISMATCH ||
+           r == WAYMARK_RESULT_HABITS_REJECTED || r == WAYMARK_RESULT_BUFFER_TOO_SMALL || r == WAYMARK_RESULT_PANIC;
 }
 
 static int finite_position(const waymark_position *p) {
@@ -110,6 +111,16 @@ static void null_engine(void) {
     CHECK(waymark_engine_zone_count(NULL, &zones) == WAYMARK_RESULT_NULL_PARAMETER, "zone count");
     CHECK(waymark_engine_zone_name(NULL, 0, name, sizeof name, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "zone name");
     CHECK(waymark_engine_zone_posterior(NULL, posterior, 2) == WAYMARK_RESULT_NULL_PARAMETER, "zone posterior");
+    waymark_habit_report report;
+    waymark_fix_error fix_error;
+    size_t json_len;
+    CHECK(waymark_engine_learn_habits(NULL, &report) == WAYMARK_RESULT_NULL_PARAMETER, "learn habits");
+    CHECK(waymark_engine_learn_habits(NULL, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "learn habits, NULL out");
+    CHECK(waymark_engine_export_habits(NULL, name, sizeof name, &json_len) == WAYMARK_RESULT_NULL_PARAMETER,
+          "export habits");
+    CHECK(waymark_engine_import_habits(NULL, "{}") == WAYMARK_RESULT_NULL_PARAMETER, "import habits");
+    CHECK(waymark_engine_clear_habits(NULL) == WAYMARK_RESULT_NULL_PARAMETER, "clear habits");
+    CHECK(waymark_engine_fix_error(NULL, &fix_error) == WAYMARK_RESULT_NULL_PARAMETER, "fix error");
 }
 
 /* A callback that calls back into the engine: no lock is held while it runs. */
@@ -122,6 +133,7 @@ static void reentrant(void *userdata, const waymark_position *p) {
     CHECK(waymark_engine_position(engine, &again) == WAYMARK_RESULT_OK, "position from the callback");
     waymark_sample s = {p->timestamp_ns + 1, 0, 0, 9.81};
     CHECK(waymark_engine_push_accelerometer(engine, &s, 1, NULL) == WAYMARK_RESULT_OK, "push from the callback");
+    CHECK(waymark_engine_learn_habits(engine, NULL) == WAYMARK_RESULT_OK, "learn from the callback");
 }
 
 static void garbage(waymark_engine *engine) {
@@ -213,6 +225,53 @@ static void garbage(waymark_engine *engine) {
     CHECK(waymark_engine_advance(engine, t, &p) == WAYMARK_RESULT_OK && reentrant_calls == 2, "cleared");
 }
 
+/* Habits after the garbage: learning from that history works, and garbage models are refused
+ * with a code while the engine's model stays as it was. */
+static void habit_garbage(waymark_engine *engine) {
+    waymark_habit_report r;
+    CHECK(waymark_engine_learn_habits(engine, &r) == WAYMARK_RESULT_OK, "learn from the garbage's history");
+    CHECK(isfinite(r.fix_error.bias_x_m) && isfinite(r.fix_error.bias_y_m) && r.fix_error.spread > 0,
+          "finite fix error");
+    size_t len = 0, got = 0;
+    CHECK(waymark_engine_export_habits(engine, NULL, 0, &len) == WAYMARK_RESULT_BUFFER_TOO_SMALL, "length");
+    char *json = malloc(len + 1), *after = malloc(len + 1);
+    CHECK(waymark_engine_export_habits(engine, json, len + 1, NULL) == WAYMARK_RESULT_OK, "export");
+    char tiny[1] = {'x'};
+    CHECK(waymark_engine_export_habits(engine, tiny, 1, &got) == WAYMARK_RESULT_BUFFER_TOO_SMALL && tiny[0] == 0 &&
+              got == len,
+          "one-byte buffer");
+    CHECK(waymark_engine_export_habits(engine, NULL, 1, &got) == WAYMARK_RESULT_NULL_PARAMETER, "NULL buffer");
+    for (size_t i = 0; i < COUNT(BAD_UTF8); i++)
+        CHECK(waymark_engine_import_habits(engine, BAD_UTF8[i]) == WAYMARK_RESULT_INVALID_UTF8, "model %zu", i);
+    for (size_t i = 0; i < COUNT(BAD_TEXT); i++)
+        CHECK(waymark_engine_import_habits(engine, BAD_TEXT[i]) == WAYMARK_RESULT_HABITS_REJECTED, "model %zu", i);
+    const char *models[] = {
+        "{\"format\":\"waymark-habits\"}",
+        "{\"format\":\"waymark-habits\",\"version\":-1}",
+        "{\"format\":\"waymark-habits\",\"version\":1e999}",
+        "{\"format\":\"waymark-habits\",\"version\":18446744073709551616}",
+        "{\"format\":\"waymark-habits\",\"version\":1,\"epochs\":NaN}",
+    };
+    for (size_t i = 0; i < COUNT(models); i++)
+        CHECK(waymark_engine_import_habits(engine, models[i]) == WAYMARK_RESULT_HABITS_REJECTED, "model %s",
+              models[i]);
+    size_t deep = 100000;
+    char *nested = malloc(deep + 1);
+    if (nested) {
+        memset(nested, '[', deep);
+        nested[deep] = 0;
+        CHECK(waymark_engine_import_habits(engine, nested) == WAYMARK_RESULT_HABITS_REJECTED, "[[[");
+        memset(nested, '{', deep);
+        CHECK(waymark_engine_import_habits(engine, nested) == WAYMARK_RESULT_HABITS_REJECTED, "{{{");
+        free(nested);
+    }
+    CHECK(waymark_engine_export_habits(engine, after, len + 1, &got) == WAYMARK_RESULT_OK && strcmp(after, json) == 0,
+          "refused models changed the habits");
+    CHECK(waymark_engine_import_habits(engine, json) == WAYMARK_RESULT_OK, "its own model back");
+    free(json);
+    free(after);
+}
+
 int main(int argc, char **argv) {
     size_t len = 0;
     char *json = site_argument(argc, argv, &len);
@@ -224,6 +283,7 @@ int main(int argc, char **argv) {
     free(json);
     if (!engine) return 1;
     garbage(engine);
+    habit_garbage(engine);
 
     /* After all that, the engine positions as usual and every result code was a known one. */
     waymark_position before, p;

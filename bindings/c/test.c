@@ -2,7 +2,8 @@
  * scans through the C ABI, checks positions against the truth, and exercises the error paths
  * (NULL, bad JSON, out-of-order time, NaN samples). The walk is replayed again on the same site
  * with its transmitter ids hashed, with the salt; without it or with another one the engine
- * refuses to start. Run under valgrind by test.sh. */
+ * refuses to start. Habits are learned from the walk, exported, imported into another engine,
+ * refused when they do not fit, and cleared. Run under valgrind by test.sh. */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -370,6 +371,175 @@ static void zones_and_feedback(const char *site_path) {
     waymark_engine_free(engine);
 }
 
+/* The walk again, with a position fix 1.5 m east and 0.5 m north of the truth just after
+ * every third position, and the user confirming where they are after every seventh: the
+ * history habits are learned from. Counts the accepted fixes and confirmations. */
+static void replay_with_fixes(waymark_engine *engine, const char *walk_path, int *fixes, int *confirmations) {
+    FILE *f = fopen(walk_path, "r");
+    CHECK(f != NULL, "open walk");
+    if (!f) return;
+    unsigned long long t;
+    double tx, ty;
+    size_t na, ng, nm, nw;
+    int positions = 0;
+    while (fscanf(f, " E %llu %lf %lf %zu %zu %zu %zu", &t, &tx, &ty, &na, &ng, &nm, &nw) == 7) {
+        waymark_sample *a = read_samples(f, na), *g = read_samples(f, ng), *m = read_samples(f, nm);
+        waymark_engine_push_accelerometer(engine, a, na, NULL);
+        waymark_engine_push_gyroscope(engine, g, ng, NULL);
+        waymark_engine_push_magnetometer(engine, m, nm, NULL);
+        free(a);
+        free(g);
+        free(m);
+        waymark_wifi_reading *w = calloc(nw ? nw : 1, sizeof *w);
+        char (*bssids)[32] = calloc(nw ? nw : 1, sizeof *bssids);
+        for (size_t i = 0; i < nw; i++) {
+            if (fscanf(f, "%31s %lf", bssids[i], &w[i].rssi_dbm) != 2) exit(2);
+            w[i].bssid = bssids[i];
+        }
+        if (waymark_engine_push_scan(engine, t, w, nw, NULL, 0, NULL) == WAYMARK_RESULT_OK) {
+            positions++;
+            if (positions % 7 == 3 &&
+                waymark_engine_confirm_position(engine, t, tx, ty, 0, 1.5, NULL) == WAYMARK_RESULT_OK)
+                (*confirmations)++;
+            if (positions % 3 == 1 &&
+                waymark_engine_push_fix(engine, t + 1000, tx + 1.5, ty + 0.5, 0, 2.0, NULL) == WAYMARK_RESULT_OK)
+                (*fixes)++;
+        }
+        free(w);
+        free(bssids);
+    }
+    fclose(f);
+}
+
+/* Habits: learned from a walk, exported (the buffer protocol), imported into a second engine,
+ * refused models leave the engine unchanged, cleared. */
+static void habits(const char *site_path, const char *walk_path) {
+    waymark_engine *engine = NULL, *other = NULL;
+    CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "site");
+    CHECK(waymark_engine_new_from_path(site_path, &other) == WAYMARK_RESULT_OK, "second engine");
+    waymark_fix_error e = {NAN, NAN, NAN};
+    CHECK(waymark_engine_fix_error(engine, &e) == WAYMARK_RESULT_OK && e.bias_x_m == 0 && e.bias_y_m == 0 &&
+              e.spread == 1,
+          "nothing learned yet: bias (%g, %g) spread %g", e.bias_x_m, e.bias_y_m, e.spread);
+    int fixes = 0, confirmations = 0;
+    replay_with_fixes(engine, walk_path, &fixes, &confirmations);
+    CHECK(fixes > 5 && confirmations > 2, "%d fixes, %d confirmations", fixes, confirmations);
+
+    waymark_habit_report r;
+    memset(&r, 0xff, sizeof r);
+    CHECK(waymark_engine_learn_habits(engine, &r) == WAYMARK_RESULT_OK, "learn");
+    printf("habits: %zu epochs in %zu segments, %zu fixes, %zu feedback, %zu iterations, ln p %.1f -> %.1f, "
+           "%zu transitions, fix bias (%.2f, %.2f) spread %.2f\n",
+           r.epochs, r.segments, r.fix_epochs, r.feedback_epochs, r.iterations, r.log_likelihood_first,
+           r.log_likelihood_last, r.learned_transitions, r.fix_error.bias_x_m, r.fix_error.bias_y_m,
+           r.fix_error.spread);
+    CHECK(r.epochs > 10 && r.segments >= 1 && r.iterations >= 1, "report: %zu epochs", r.epochs);
+    CHECK(r.fix_epochs == (size_t)fixes, "fix epochs %zu of %d", r.fix_epochs, fixes);
+    CHECK(r.feedback_epochs >= (size_t)confirmations, "feedback epochs %zu of %d", r.feedback_epochs, confirmations);
+    CHECK(r.log_likelihood_count == r.iterations + 1 && r.log_likelihood_last >= r.log_likelihood_first - 1e-6,
+          "log-likelihood %zu values, %g -> %g", r.log_likelihood_count, r.log_likelihood_first,
+          r.log_likelihood_last);
+    CHECK(r.learned_transitions > 0 && r.total_epochs == r.epochs, "%zu transitions", r.learned_transitions);
+    /* 1.5 m east, 0.5 m north, shrunk toward 0 by the prior's 5 pseudo-fixes. */
+    CHECK(r.fix_error.bias_x_m > 0.3 && r.fix_error.bias_y_m > 0 && r.fix_error.bias_x_m > r.fix_error.bias_y_m &&
+              r.fix_error.spread > 0,
+          "learned bias (%g, %g)", r.fix_error.bias_x_m, r.fix_error.bias_y_m);
+    CHECK(waymark_engine_fix_error(engine, &e) == WAYMARK_RESULT_OK && e.bias_x_m == r.fix_error.bias_x_m &&
+              e.bias_y_m == r.fix_error.bias_y_m && e.spread == r.fix_error.spread,
+          "fix_error says what learn_habits said");
+    /* Each epoch once: nothing new to learn. */
+    waymark_habit_report again;
+    CHECK(waymark_engine_learn_habits(engine, &again) == WAYMARK_RESULT_OK && again.epochs == 0 &&
+              again.log_likelihood_count == 0 && isnan(again.log_likelihood_first) &&
+              again.total_epochs == r.total_epochs,
+          "second pass: %zu epochs", again.epochs);
+    CHECK(waymark_engine_learn_habits(engine, NULL) == WAYMARK_RESULT_OK, "NULL report");
+
+    /* Export: ask the length, a buffer one byte short, then the right size. */
+    size_t json_len = 0, empty_len = 0;
+    CHECK(waymark_engine_export_habits(engine, NULL, 0, &json_len) == WAYMARK_RESULT_BUFFER_TOO_SMALL &&
+              json_len > 100,
+          "length query: %zu", json_len);
+    char *json = malloc(json_len + 1);
+    memset(json, 'x', json_len + 1);
+    size_t got = 0;
+    CHECK(waymark_engine_export_habits(engine, json, json_len, &got) == WAYMARK_RESULT_BUFFER_TOO_SMALL &&
+              got == json_len && json[0] == 0 && json[1] == 'x',
+          "one byte short: an empty string, no truncated JSON");
+    CHECK(waymark_last_error(NULL, 0) > 0, "message for a short buffer");
+    CHECK(waymark_engine_export_habits(engine, json, json_len + 1, &got) == WAYMARK_RESULT_OK &&
+              strlen(json) == json_len && strstr(json, "\"waymark-habits\"") != NULL,
+          "export");
+    CHECK(waymark_engine_export_habits(engine, NULL, 8, &got) == WAYMARK_RESULT_NULL_PARAMETER, "NULL buffer");
+    CHECK(waymark_engine_export_habits(NULL, json, json_len + 1, &got) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL engine");
+
+    /* Into the second engine: the same model. */
+    CHECK(waymark_engine_export_habits(other, NULL, 0, &empty_len) == WAYMARK_RESULT_BUFFER_TOO_SMALL, "length");
+    char *empty = malloc(empty_len + 1);
+    CHECK(waymark_engine_export_habits(other, empty, empty_len + 1, NULL) == WAYMARK_RESULT_OK, "empty export");
+    CHECK(waymark_engine_import_habits(other, json) == WAYMARK_RESULT_OK, "import");
+    char *back = malloc(json_len + 1);
+    CHECK(waymark_engine_export_habits(other, back, json_len + 1, &got) == WAYMARK_RESULT_OK &&
+              strcmp(back, json) == 0,
+          "imported model exports the same JSON");
+    CHECK(waymark_engine_fix_error(other, &e) == WAYMARK_RESULT_OK && e.bias_x_m == r.fix_error.bias_x_m,
+          "imported fix error");
+
+    /* Refused models: HABITS_REJECTED (or a typed argument error), and nothing changes. */
+    char *wrong_site = malloc(json_len + 1);
+    strcpy(wrong_site, json);
+    char *digest = strstr(wrong_site, "\"digest\":\"");
+    CHECK(digest != NULL, "a digest in the export");
+    if (digest) digest[10] = digest[10] == '0' ? '1' : '0';
+    char *negative = malloc(json_len + 8);
+    const char *count = strstr(json, "\"count\":[");
+    CHECK(count != NULL, "a learned count in the export");
+    if (count) {
+        size_t head = (size_t)(count - json) + strlen("\"count\":[");
+        memcpy(negative, json, head);
+        strcpy(negative + head, "-1,");
+        strcat(negative, json + head);
+    }
+    const char *rejected[] = {"", "{", "null", "[]", "{\"format\":\"waymark-site\",\"version\":1}",
+                              "{\"format\":\"waymark-habits\",\"version\":99}", wrong_site, negative};
+    for (size_t i = 0; i < sizeof rejected / sizeof *rejected; i++) {
+        CHECK(waymark_engine_import_habits(other, rejected[i]) == WAYMARK_RESULT_HABITS_REJECTED,
+              "refused model %zu", i);
+        char message[256];
+        CHECK(waymark_last_error(message, sizeof message) > 0, "message for refused model %zu", i);
+        if (i == 6) CHECK(strstr(message, "another site") != NULL, "wrong site: %s", message);
+        CHECK(waymark_engine_export_habits(other, back, json_len + 1, &got) == WAYMARK_RESULT_OK &&
+                  strcmp(back, json) == 0,
+              "refused model %zu changed the habits", i);
+    }
+    CHECK(waymark_engine_import_habits(other, "\xff\xfe") == WAYMARK_RESULT_INVALID_UTF8, "not UTF-8");
+    CHECK(waymark_engine_import_habits(other, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL json");
+    CHECK(waymark_engine_import_habits(NULL, json) == WAYMARK_RESULT_NULL_PARAMETER, "NULL engine");
+    CHECK(waymark_engine_export_habits(other, back, json_len + 1, &got) == WAYMARK_RESULT_OK &&
+              strcmp(back, json) == 0,
+          "bad arguments changed the habits");
+
+    /* Cleared: the empty model again. */
+    CHECK(waymark_engine_clear_habits(other) == WAYMARK_RESULT_OK, "clear");
+    CHECK(waymark_engine_export_habits(other, back, json_len + 1, &got) == WAYMARK_RESULT_OK &&
+              strcmp(back, empty) == 0,
+          "cleared");
+    CHECK(waymark_engine_fix_error(other, &e) == WAYMARK_RESULT_OK && e.bias_x_m == 0 && e.spread == 1,
+          "cleared fix error");
+    CHECK(waymark_engine_clear_habits(NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL engine");
+    CHECK(waymark_engine_learn_habits(NULL, &r) == WAYMARK_RESULT_NULL_PARAMETER, "NULL engine");
+    CHECK(waymark_engine_fix_error(NULL, &e) == WAYMARK_RESULT_NULL_PARAMETER, "NULL engine");
+    CHECK(waymark_engine_fix_error(other, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL out");
+    free(json);
+    free(empty);
+    free(back);
+    free(wrong_site);
+    free(negative);
+    waymark_engine_free(engine);
+    waymark_engine_free(other);
+}
+
 int main(int argc, char **argv) {
     if (argc != 6) {
         fprintf(stderr, "usage: %s site.json walk.txt site-hashed.json salt.hex site.wmsite\n", argv[0]);
@@ -382,6 +552,7 @@ int main(int argc, char **argv) {
     address_beacons(argv[1]);
     zones_and_feedback(argv[1]);
     walk(argv[1], argv[2], NULL, 0);
+    habits(argv[1], argv[2]);
     walk(argv[5], argv[2], NULL, 0);
     binary_site(argv[5]);
     walk(argv[3], argv[2], salt, salt_len);

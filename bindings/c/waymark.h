@@ -66,8 +66,21 @@ enum waymark_result
    */
   WAYMARK_RESULT_SALT_MISMATCH = 7,
   /**
-   * Waymark panicked (a bug); the engine stays usable. A scan or an advance that panicked
-   * half-way is undone: the engine is as it was before the call, and no callback hears of it.
+   * `waymark_engine_import_habits` refused the model and the engine's habits are unchanged:
+   * the JSON does not parse, is not a Waymark habit model, is of a newer layout than this
+   * build reads, was learned on another site (or another build of the site file), or holds
+   * a value out of range; `waymark_last_error` says which, with the field's path.
+   */
+  WAYMARK_RESULT_HABITS_REJECTED = 8,
+  /**
+   * The caller's buffer is too small for the whole text; nothing but an empty string was
+   * written to it, and the length it needs was returned (`waymark_engine_export_habits`).
+   */
+  WAYMARK_RESULT_BUFFER_TOO_SMALL = 9,
+  /**
+   * Waymark panicked, or refused its own data (a bug); the engine stays usable. A scan or
+   * an advance that panicked half-way is undone: the engine is as it was before the call,
+   * and no callback hears of it.
    */
   WAYMARK_RESULT_PANIC = 99,
 };
@@ -224,6 +237,89 @@ typedef struct {
    */
   uint32_t steps;
 } waymark_position;
+
+/**
+ * The learned error of external position fixes: subtract the bias from a fix, then widen its
+ * accuracy by `spread` (the engine does both to every fix it takes).
+ */
+typedef struct {
+  /**
+   * Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
+   */
+  double bias_x_m;
+  /**
+   * Mean error along the site's y axis, m.
+   */
+  double bias_y_m;
+  /**
+   * Factor on the fixes' own accuracy (1: they are as good as they say).
+   */
+  double spread;
+} waymark_fix_error;
+
+/**
+ * What one `waymark_engine_learn_habits` pass did.
+ */
+typedef struct {
+  /**
+   * Epochs of the history learned from in this pass (those learned before are skipped).
+   */
+  size_t epochs;
+  /**
+   * Runs of epochs without a long gap learned from.
+   */
+  size_t segments;
+  /**
+   * Runs skipped: a single epoch, or over too many states.
+   */
+  size_t segments_skipped;
+  /**
+   * Epochs with the user's feedback.
+   */
+  size_t feedback_epochs;
+  /**
+   * Epochs of position fixes.
+   */
+  size_t fix_epochs;
+  /**
+   * Baum-Welch iterations run.
+   */
+  size_t iterations;
+  /**
+   * Values of ln p(observations | model) computed: one before each iteration and one for
+   * the learned model; 0 when there was nothing to learn from.
+   */
+  size_t log_likelihood_count;
+  /**
+   * The first of them (before learning), nats; NaN when there is none.
+   */
+  double log_likelihood_first;
+  /**
+   * The last (the learned model), nats, never below the first; NaN when there is none.
+   */
+  double log_likelihood_last;
+  /**
+   * Feedback epochs the habits ruled out, at which learning restarted.
+   */
+  size_t restarts;
+  /**
+   * Transitions with a learned count after the pass (all passes so far).
+   */
+  size_t learned_transitions;
+  /**
+   * Epochs learned from over all passes, including those of an imported model.
+   */
+  uint64_t total_epochs;
+  /**
+   * The fix error after the pass.
+   */
+  waymark_fix_error fix_error;
+  /**
+   * How strongly the learned moves are applied (a pseudo-count per reachable move); NaN
+   * when they are not (they did not yet predict held-out parts of the history).
+   */
+  double strength;
+} waymark_habit_report;
 
 /**
  * Called with every new position, in the order of the epochs, never from two threads at once,
@@ -401,6 +497,51 @@ waymark_result waymark_engine_zone_posterior(const waymark_engine *engine,
  * The latest position into `*out`, or `NoPosition`.
  */
 waymark_result waymark_engine_position(const waymark_engine *engine, waymark_position *out);
+
+/**
+ * Learns the user's habits from the epochs of the engine's history not learned from yet
+ * (the last 500, with the user's feedback and position fixes): which way they usually go
+ * from each place, and the error of their position fixes. From the next epoch on the learned
+ * moves weigh on the motion model and fixes are corrected. Each epoch is learned from once.
+ * It runs on the calling thread for up to a few hundred milliseconds on a large site; other
+ * calls on the engine wait for it, and the callback is not called from it. `*out` (may be
+ * NULL) receives what the pass did. Keep the result with `waymark_engine_export_habits`.
+ */
+waymark_result waymark_engine_learn_habits(waymark_engine *engine, waymark_habit_report *out);
+
+/**
+ * Writes the learned habits as versioned JSON (NUL-terminated UTF-8), to store per user and
+ * site and give back to `waymark_engine_import_habits` in a later session, and their length
+ * in bytes without the NUL into `*json_len` (may be NULL). The JSON is never truncated: when
+ * it does not fit in `len` bytes with its NUL, `buf` receives an empty string (when `len` >
+ * 0) and the call returns `WAYMARK_RESULT_BUFFER_TOO_SMALL`; call again with `*json_len` + 1
+ * bytes. `buf` may be NULL with `len` 0 to ask the length. Another thread's learning or
+ * import may change the model between the two calls, so loop until `WAYMARK_RESULT_OK`.
+ */
+waymark_result waymark_engine_export_habits(const waymark_engine *engine,
+                                            char *buf,
+                                            size_t len,
+                                            size_t *json_len);
+
+/**
+ * Replaces the engine's habits by a model from `waymark_engine_export_habits` on the same
+ * site (`json`: NUL-terminated UTF-8), learning on from where it left off. A model that does
+ * not parse, is not a habit model, is of a newer layout, was learned on another site or
+ * another build of the site file, or holds a value out of range returns
+ * `WAYMARK_RESULT_HABITS_REJECTED` and changes nothing.
+ */
+waymark_result waymark_engine_import_habits(waymark_engine *engine, const char *json);
+
+/**
+ * Forgets every learned habit and the fix error.
+ */
+waymark_result waymark_engine_clear_habits(waymark_engine *engine);
+
+/**
+ * The fix error learned so far into `*out`: zero bias and spread 1 before any fix was
+ * learned from.
+ */
+waymark_result waymark_engine_fix_error(const waymark_engine *engine, waymark_fix_error *out);
 
 /**
  * Sets (or, with a NULL callback, clears) the function called with every new position (see

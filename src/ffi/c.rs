@@ -52,8 +52,17 @@ pub enum waymark_result {
     /// The site's transmitter ids are salted hashes and no salt, or not the salt they were
     /// hashed with, was given (`waymark_engine_new_with_salt`).
     SaltMismatch = 7,
-    /// Waymark panicked (a bug); the engine stays usable. A scan or an advance that panicked
-    /// half-way is undone: the engine is as it was before the call, and no callback hears of it.
+    /// `waymark_engine_import_habits` refused the model and the engine's habits are unchanged:
+    /// the JSON does not parse, is not a Waymark habit model, is of a newer layout than this
+    /// build reads, was learned on another site (or another build of the site file), or holds
+    /// a value out of range; `waymark_last_error` says which, with the field's path.
+    HabitsRejected = 8,
+    /// The caller's buffer is too small for the whole text; nothing but an empty string was
+    /// written to it, and the length it needs was returned (`waymark_engine_export_habits`).
+    BufferTooSmall = 9,
+    /// Waymark panicked, or refused its own data (a bug); the engine stays usable. A scan or
+    /// an advance that panicked half-way is undone: the engine is as it was before the call,
+    /// and no callback hears of it.
     Panic = 99,
 }
 
@@ -159,6 +168,61 @@ pub struct waymark_position {
     pub scenario: u32,
     /// Steps since the previous epoch.
     pub steps: u32,
+}
+
+/// The learned error of external position fixes: subtract the bias from a fix, then widen its
+/// accuracy by `spread` (the engine does both to every fix it takes).
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct waymark_fix_error {
+    /// Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
+    pub bias_x_m: f64,
+    /// Mean error along the site's y axis, m.
+    pub bias_y_m: f64,
+    /// Factor on the fixes' own accuracy (1: they are as good as they say).
+    pub spread: f64,
+}
+
+impl From<crate::habits::FixError> for waymark_fix_error {
+    fn from(e: crate::habits::FixError) -> Self {
+        Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
+    }
+}
+
+/// What one `waymark_engine_learn_habits` pass did.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct waymark_habit_report {
+    /// Epochs of the history learned from in this pass (those learned before are skipped).
+    pub epochs: usize,
+    /// Runs of epochs without a long gap learned from.
+    pub segments: usize,
+    /// Runs skipped: a single epoch, or over too many states.
+    pub segments_skipped: usize,
+    /// Epochs with the user's feedback.
+    pub feedback_epochs: usize,
+    /// Epochs of position fixes.
+    pub fix_epochs: usize,
+    /// Baum-Welch iterations run.
+    pub iterations: usize,
+    /// Values of ln p(observations | model) computed: one before each iteration and one for
+    /// the learned model; 0 when there was nothing to learn from.
+    pub log_likelihood_count: usize,
+    /// The first of them (before learning), nats; NaN when there is none.
+    pub log_likelihood_first: f64,
+    /// The last (the learned model), nats, never below the first; NaN when there is none.
+    pub log_likelihood_last: f64,
+    /// Feedback epochs the habits ruled out, at which learning restarted.
+    pub restarts: usize,
+    /// Transitions with a learned count after the pass (all passes so far).
+    pub learned_transitions: usize,
+    /// Epochs learned from over all passes, including those of an imported model.
+    pub total_epochs: u64,
+    /// The fix error after the pass.
+    pub fix_error: waymark_fix_error,
+    /// How strongly the learned moves are applied (a pseudo-count per reachable move); NaN
+    /// when they are not (they did not yet predict held-out parts of the history).
+    pub strength: f64,
 }
 
 /// Called with every new position, in the order of the epochs, never from two threads at once,
@@ -745,6 +809,137 @@ pub extern "C" fn waymark_engine_position(
             waymark_result::Ok
         }
         None => fail(waymark_result::NoPosition, "no epoch has run yet"),
+    })
+}
+
+/// Learns the user's habits from the epochs of the engine's history not learned from yet
+/// (the last 500, with the user's feedback and position fixes): which way they usually go
+/// from each place, and the error of their position fixes. From the next epoch on the learned
+/// moves weigh on the motion model and fixes are corrected. Each epoch is learned from once.
+/// It runs on the calling thread for up to a few hundred milliseconds on a large site; other
+/// calls on the engine wait for it, and the callback is not called from it. `*out` (may be
+/// NULL) receives what the pass did. Keep the result with `waymark_engine_export_habits`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_learn_habits(
+    engine: *mut waymark_engine,
+    out: *mut waymark_habit_report,
+) -> waymark_result {
+    with_engine(engine, |inner| {
+        let report = match inner.learn_habits() {
+            Ok(report) => report,
+            // Its input is the engine's own history and validated options: a bug.
+            Err(e) => return fail(waymark_result::Panic, format!("learning habits: {e}")),
+        };
+        let learned = report.segments > 0;
+        let ll = |v: Option<&f64>| v.filter(|_| learned).copied().unwrap_or(f64::NAN);
+        let converted = waymark_habit_report {
+            epochs: report.epochs,
+            segments: report.segments,
+            segments_skipped: report.segments_skipped,
+            feedback_epochs: report.feedback_epochs,
+            fix_epochs: report.fix_epochs,
+            iterations: report.iterations,
+            log_likelihood_count: if learned { report.log_likelihood.len() } else { 0 },
+            log_likelihood_first: ll(report.log_likelihood.first()),
+            log_likelihood_last: ll(report.log_likelihood.last()),
+            restarts: report.restarts,
+            learned_transitions: report.learned_transitions,
+            total_epochs: inner.habits().epochs(),
+            fix_error: report.fix_error.into(),
+            strength: inner.habits().strength().unwrap_or(f64::NAN),
+        };
+        if !out.is_null() {
+            // SAFETY: a non-NULL `out` points to writable storage for one waymark_habit_report.
+            unsafe { *out = converted };
+        }
+        waymark_result::Ok
+    })
+}
+
+/// Writes the learned habits as versioned JSON (NUL-terminated UTF-8), to store per user and
+/// site and give back to `waymark_engine_import_habits` in a later session, and their length
+/// in bytes without the NUL into `*json_len` (may be NULL). The JSON is never truncated: when
+/// it does not fit in `len` bytes with its NUL, `buf` receives an empty string (when `len` >
+/// 0) and the call returns `WAYMARK_RESULT_BUFFER_TOO_SMALL`; call again with `*json_len` + 1
+/// bytes. `buf` may be NULL with `len` 0 to ask the length. Another thread's learning or
+/// import may change the model between the two calls, so loop until `WAYMARK_RESULT_OK`.
+#[no_mangle]
+pub extern "C" fn waymark_engine_export_habits(
+    engine: *const waymark_engine,
+    buf: *mut c_char,
+    len: usize,
+    json_len: *mut usize,
+) -> waymark_result {
+    if buf.is_null() && len > 0 {
+        return fail(waymark_result::NullParameter, "buf must not be NULL when len > 0");
+    }
+    with_engine(engine, |inner| {
+        let json = inner.export_habits();
+        if !json_len.is_null() {
+            // SAFETY: a non-NULL `json_len` points to one writable size_t.
+            unsafe { *json_len = json.len() };
+        }
+        if json.len() >= len {
+            copy_string("", buf, len);
+            return fail(
+                waymark_result::BufferTooSmall,
+                format!("the habits' JSON needs {} bytes with its NUL, the buffer has {len}", json.len() + 1),
+            );
+        }
+        copy_string(&json, buf, len);
+        waymark_result::Ok
+    })
+}
+
+/// Replaces the engine's habits by a model from `waymark_engine_export_habits` on the same
+/// site (`json`: NUL-terminated UTF-8), learning on from where it left off. A model that does
+/// not parse, is not a habit model, is of a newer layout, was learned on another site or
+/// another build of the site file, or holds a value out of range returns
+/// `WAYMARK_RESULT_HABITS_REJECTED` and changes nothing.
+#[no_mangle]
+pub extern "C" fn waymark_engine_import_habits(
+    engine: *mut waymark_engine,
+    json: *const c_char,
+) -> waymark_result {
+    with_engine(engine, |inner| {
+        let json = match string_arg(json, "json") {
+            Ok(json) => json,
+            Err(code) => return code,
+        };
+        match inner.import_habits(&json) {
+            Ok(()) => waymark_result::Ok,
+            Err(e @ crate::habits::HabitError::Learn(_)) => {
+                fail(waymark_result::Panic, format!("importing habits: {e}"))
+            }
+            Err(e) => fail(waymark_result::HabitsRejected, e.to_string()),
+        }
+    })
+}
+
+/// Forgets every learned habit and the fix error.
+#[no_mangle]
+pub extern "C" fn waymark_engine_clear_habits(engine: *mut waymark_engine) -> waymark_result {
+    with_engine(engine, |inner| {
+        inner.clear_habits();
+        waymark_result::Ok
+    })
+}
+
+/// The fix error learned so far into `*out`: zero bias and spread 1 before any fix was
+/// learned from.
+#[no_mangle]
+pub extern "C" fn waymark_engine_fix_error(
+    engine: *const waymark_engine,
+    out: *mut waymark_fix_error,
+) -> waymark_result {
+    if out.is_null() {
+        return fail(waymark_result::NullParameter, "out must not be NULL");
+    }
+    with_engine(engine, |inner| {
+        let error = inner.fix_error().into();
+        // SAFETY: `out` was checked non-NULL and points to one writable waymark_fix_error.
+        unsafe { *out = error };
+        waymark_result::Ok
     })
 }
 

@@ -45,6 +45,16 @@ pub enum PositioningError {
         /// Missing or wrong (the salt itself is never in the message).
         reason: String,
     },
+    /// `importHabits` refused the model: the JSON does not parse, is not a Waymark habit
+    /// model, is of a newer layout than this build reads, was learned on another site (or
+    /// another build of the site file), or holds a value out of range. `reason` says which,
+    /// with the field's path. The engine's habits are unchanged. A stored model refused for
+    /// its site or its content will never be accepted by this engine: learn afresh.
+    #[error("habit model rejected: {reason}")]
+    HabitsRejected {
+        /// Why.
+        reason: String,
+    },
     /// A bug in Waymark or in a listener: the call had no effect (a scan or an advance that
     /// panicked half-way is undone, and no listener hears its position).
     #[error("internal error: {reason}")]
@@ -409,6 +419,102 @@ pub struct TrackPoint {
     pub y: f64,
     /// Floor index.
     pub floor: u32,
+}
+
+/// The learned error of external position fixes (`pushFix`): subtract the bias from a fix,
+/// then widen its accuracy by `spread`. The engine does both to every fix it takes.
+#[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
+pub struct FixError {
+    /// Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
+    pub bias_x_m: f64,
+    /// Mean error of the fixes along the site's y axis, m.
+    pub bias_y_m: f64,
+    /// Factor on the fixes' own accuracy: 1 when they are as good as they say, 2 when their
+    /// errors are twice what they report.
+    pub spread: f64,
+}
+
+impl From<crate::habits::FixError> for FixError {
+    fn from(e: crate::habits::FixError) -> Self {
+        Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
+    }
+}
+
+/// What one `learnHabits` pass did.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct HabitReport {
+    /// Epochs of the history learned from in this pass (those learned before are skipped).
+    pub epochs: u32,
+    /// Runs of epochs without a long gap learned from.
+    pub segments: u32,
+    /// Runs skipped: a single epoch, or over too many states.
+    pub segments_skipped: u32,
+    /// Epochs with the user's feedback (`confirmZone`, `confirmPosition`).
+    pub feedback_epochs: u32,
+    /// Epochs of position fixes (`pushFix`).
+    pub fix_epochs: u32,
+    /// Baum-Welch iterations run.
+    pub iterations: u32,
+    /// ln p(observations | model) before each iteration and for the learned model, in nats;
+    /// it never decreases. Empty when there was nothing to learn from.
+    pub log_likelihood: Vec<f64>,
+    /// Feedback epochs the habits ruled out, at which learning restarted.
+    pub restarts: u32,
+    /// Transitions between places with a learned count, after the pass (all passes so far).
+    pub learned_transitions: u64,
+    /// Epochs learned from over all passes, including those of an imported model.
+    pub total_epochs: u64,
+    /// The fix error after the pass.
+    pub fix_error: FixError,
+    /// How strongly the learned moves are applied, as a pseudo-count per reachable move;
+    /// `null` / `nil` when they are not (they did not predict held-out parts of the history
+    /// well enough yet, or there was only one part).
+    pub strength: Option<f64>,
+}
+
+fn count(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
+
+fn habit_report(r: &crate::habits::HabitReport, model: &crate::habits::HabitModel) -> HabitReport {
+    HabitReport {
+        epochs: count(r.epochs),
+        segments: count(r.segments),
+        segments_skipped: count(r.segments_skipped),
+        feedback_epochs: count(r.feedback_epochs),
+        fix_epochs: count(r.fix_epochs),
+        iterations: count(r.iterations),
+        log_likelihood: if r.segments == 0 { Vec::new() } else { r.log_likelihood.clone() },
+        restarts: count(r.restarts),
+        learned_transitions: r.learned_transitions as u64,
+        total_epochs: model.epochs(),
+        fix_error: r.fix_error.into(),
+        strength: model.strength(),
+    }
+}
+
+/// A habit model's JSON as an app gives it to `importHabits`. Kotlin and Swift see a `String`.
+///
+/// A Kotlin `String` can hold a lone UTF-16 surrogate, which is not text: uniffi's generated
+/// code would throw `CharacterCodingException` before the call reaches Waymark (and leak the
+/// engine's handle). This type's Kotlin conversion (`uniffi.toml`) replaces each lone
+/// surrogate by `?` instead, so such JSON reaches Waymark and is refused as any malformed
+/// model is (`HabitsRejected`). Valid text is never changed.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct HabitsJson(pub String);
+
+uniffi::custom_newtype!(HabitsJson, String);
+
+impl From<&str> for HabitsJson {
+    fn from(json: &str) -> Self {
+        Self(json.to_owned())
+    }
+}
+
+impl From<String> for HabitsJson {
+    fn from(json: String) -> Self {
+        Self(json)
+    }
 }
 
 /// Something about the session changed.
@@ -836,6 +942,62 @@ impl PositioningEngine {
                 .collect())
         })
         .unwrap_or_default()
+    }
+
+    /// Learns the user's habits from the epochs of this session not learned from yet (the
+    /// engine keeps the last 500, with the user's feedback and position fixes): which way they
+    /// usually go from each place, and the error of their position fixes. From the next epoch
+    /// on, the learned moves weigh on the motion model (a habit only redistributes what the
+    /// motion already allows) and fixes are corrected. Each epoch is learned from once, so
+    /// calling it again soon costs little. It runs on the calling thread for up to a few
+    /// hundred milliseconds on a large site: call it off the main thread, e.g. when a walk
+    /// ends. Other calls on the engine wait for it; listeners are not called from it. Keep
+    /// the result with `exportHabits`.
+    pub fn learn_habits(&self) -> Result<HabitReport, PositioningError> {
+        self.with_engine(|i| match i.engine.learn_habits() {
+            Ok(report) => Ok(habit_report(&report, i.engine.habits())),
+            // Its input is the engine's own history and validated options: a bug.
+            Err(e) => Err(PositioningError::Internal { reason: format!("learning habits: {e}") }),
+        })
+    }
+
+    /// The learned habits as versioned JSON (a few kB to a few hundred kB), to store per user
+    /// and site and give back to `importHabits` in a later session. An engine that learned
+    /// nothing exports an empty model.
+    pub fn export_habits(&self) -> String {
+        self.with_engine(|i| Ok(i.engine.export_habits())).unwrap_or_default()
+    }
+
+    /// Replaces the engine's habits by a model from `exportHabits` on the same site, learning
+    /// on from where it left off. Throws `HabitsRejected`, changing nothing, when the JSON
+    /// does not parse, is not a habit model, is of a newer layout than this build reads, was
+    /// learned on another site or another build of the site file, or holds a value out of
+    /// range.
+    pub fn import_habits(&self, json: HabitsJson) -> Result<(), PositioningError> {
+        self.with_engine(|i| match i.engine.import_habits(&json.0) {
+            Ok(()) => Ok(()),
+            Err(crate::habits::HabitError::Learn(e)) => {
+                Err(PositioningError::Internal { reason: format!("importing habits: {e}") })
+            }
+            Err(e) => Err(PositioningError::HabitsRejected { reason: e.to_string() }),
+        })
+    }
+
+    /// Forgets every learned habit and the fix error (when the user asks, or signs out).
+    pub fn clear_habits(&self) {
+        let _ = self.with_engine(|i| {
+            i.engine.clear_habits();
+            Ok(())
+        });
+    }
+
+    /// The fix error learned so far: zero bias and spread 1 before any fix was learned from.
+    pub fn fix_error(&self) -> FixError {
+        self.with_engine(|i| Ok(i.engine.fix_error().into())).unwrap_or(FixError {
+            bias_x_m: 0.0,
+            bias_y_m: 0.0,
+            spread: 1.0,
+        })
     }
 
     /// The latest position, if any.

@@ -1140,6 +1140,11 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     func advance(timestampNs: UInt64) throws  -> PositionEstimate
     
     /**
+     * Forgets every learned habit and the fix error (when the user asks, or signs out).
+     */
+    func clearHabits() 
+    
+    /**
      * The user says they are within `radius_m` of (x, y) on `floor` (a tap on the map): as
      * `confirm_zone`, pinned to the states within the radius. Throws `InputRejected`, changing
      * nothing, for a time before the latest position, an unknown floor, a NaN or infinite
@@ -1156,9 +1161,43 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     func confirmZone(timestampNs: UInt64, zone: String) throws  -> PositionEstimate
     
     /**
+     * The learned habits as versioned JSON (a few kB to a few hundred kB), to store per user
+     * and site and give back to `importHabits` in a later session. An engine that learned
+     * nothing exports an empty model.
+     */
+    func exportHabits()  -> String
+    
+    /**
+     * The fix error learned so far: zero bias and spread 1 before any fix was learned from.
+     */
+    func fixError()  -> FixError
+    
+    /**
      * The fixed-lag position: a few epochs old, but revised by what came after.
      */
     func fixedLagPosition()  -> TrackPoint?
+    
+    /**
+     * Replaces the engine's habits by a model from `exportHabits` on the same site, learning
+     * on from where it left off. Throws `HabitsRejected`, changing nothing, when the JSON
+     * does not parse, is not a habit model, is of a newer layout than this build reads, was
+     * learned on another site or another build of the site file, or holds a value out of
+     * range.
+     */
+    func importHabits(json: HabitsJson) throws 
+    
+    /**
+     * Learns the user's habits from the epochs of this session not learned from yet (the
+     * engine keeps the last 500, with the user's feedback and position fixes): which way they
+     * usually go from each place, and the error of their position fixes. From the next epoch
+     * on, the learned moves weigh on the motion model (a habit only redistributes what the
+     * motion already allows) and fixes are corrected. Each epoch is learned from once, so
+     * calling it again soon costs little. It runs on the calling thread for up to a few
+     * hundred milliseconds on a large site: call it off the main thread, e.g. when a walk
+     * ends. Other calls on the engine wait for it; listeners are not called from it. Keep
+     * the result with `exportHabits`.
+     */
+    func learnHabits() throws  -> HabitReport
     
     /**
      * The latest position, if any.
@@ -1336,6 +1375,17 @@ open func advance(timestampNs: UInt64)throws  -> PositionEstimate  {
 }
     
     /**
+     * Forgets every learned habit and the fix error (when the user asks, or signs out).
+     */
+open func clearHabits()  {try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_clear_habits(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+    /**
      * The user says they are within `radius_m` of (x, y) on `floor` (a tap on the map): as
      * `confirm_zone`, pinned to the states within the radius. Throws `InputRejected`, changing
      * nothing, for a time before the latest position, an unknown floor, a NaN or infinite
@@ -1373,12 +1423,74 @@ open func confirmZone(timestampNs: UInt64, zone: String)throws  -> PositionEstim
 }
     
     /**
+     * The learned habits as versioned JSON (a few kB to a few hundred kB), to store per user
+     * and site and give back to `importHabits` in a later session. An engine that learned
+     * nothing exports an empty model.
+     */
+open func exportHabits() -> String  {
+    return try!  FfiConverterString.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_export_habits(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The fix error learned so far: zero bias and spread 1 before any fix was learned from.
+     */
+open func fixError() -> FixError  {
+    return try!  FfiConverterTypeFixError_lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_fix_error(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
      * The fixed-lag position: a few epochs old, but revised by what came after.
      */
 open func fixedLagPosition() -> TrackPoint?  {
     return try!  FfiConverterOptionTypeTrackPoint.lift(try! rustCall() {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_fixed_lag_position(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Replaces the engine's habits by a model from `exportHabits` on the same site, learning
+     * on from where it left off. Throws `HabitsRejected`, changing nothing, when the JSON
+     * does not parse, is not a habit model, is of a newer layout than this build reads, was
+     * learned on another site or another build of the site file, or holds a value out of
+     * range.
+     */
+open func importHabits(json: HabitsJson)throws   {try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_import_habits(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeHabitsJson_lower(json),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * Learns the user's habits from the epochs of this session not learned from yet (the
+     * engine keeps the last 500, with the user's feedback and position fixes): which way they
+     * usually go from each place, and the error of their position fixes. From the next epoch
+     * on, the learned moves weigh on the motion model (a habit only redistributes what the
+     * motion already allows) and fixes are corrected. Each epoch is learned from once, so
+     * calling it again soon costs little. It runs on the calling thread for up to a few
+     * hundred milliseconds on a large site: call it off the main thread, e.g. when a walk
+     * ends. Other calls on the engine wait for it; listeners are not called from it. Keep
+     * the result with `exportHabits`.
+     */
+open func learnHabits()throws  -> HabitReport  {
+    return try  FfiConverterTypeHabitReport_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_learn_habits(
             self.uniffiCloneHandle(),uniffiCallStatus
     )
 })
@@ -1917,6 +2029,263 @@ public func FfiConverterTypeEngineOptions_lift(_ buf: RustBuffer) throws -> Engi
 #endif
 public func FfiConverterTypeEngineOptions_lower(_ value: EngineOptions) -> RustBuffer {
     return FfiConverterTypeEngineOptions.lower(value)
+}
+
+
+/**
+ * The learned error of external position fixes (`pushFix`): subtract the bias from a fix,
+ * then widen its accuracy by `spread`. The engine does both to every fix it takes.
+ */
+public struct FixError: Equatable, Hashable {
+    /**
+     * Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
+     */
+    public var biasXM: Double
+    /**
+     * Mean error of the fixes along the site's y axis, m.
+     */
+    public var biasYM: Double
+    /**
+     * Factor on the fixes' own accuracy: 1 when they are as good as they say, 2 when their
+     * errors are twice what they report.
+     */
+    public var spread: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
+         */biasXM: Double, 
+        /**
+         * Mean error of the fixes along the site's y axis, m.
+         */biasYM: Double, 
+        /**
+         * Factor on the fixes' own accuracy: 1 when they are as good as they say, 2 when their
+         * errors are twice what they report.
+         */spread: Double) {
+        self.biasXM = biasXM
+        self.biasYM = biasYM
+        self.spread = spread
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension FixError: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeFixError: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> FixError {
+        return
+            try FixError(
+                biasXM: FfiConverterDouble.read(from: &buf), 
+                biasYM: FfiConverterDouble.read(from: &buf), 
+                spread: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: FixError, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.biasXM, into: &buf)
+        FfiConverterDouble.write(value.biasYM, into: &buf)
+        FfiConverterDouble.write(value.spread, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFixError_lift(_ buf: RustBuffer) throws -> FixError {
+    return try FfiConverterTypeFixError.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFixError_lower(_ value: FixError) -> RustBuffer {
+    return FfiConverterTypeFixError.lower(value)
+}
+
+
+/**
+ * What one `learnHabits` pass did.
+ */
+public struct HabitReport: Equatable, Hashable {
+    /**
+     * Epochs of the history learned from in this pass (those learned before are skipped).
+     */
+    public var epochs: UInt32
+    /**
+     * Runs of epochs without a long gap learned from.
+     */
+    public var segments: UInt32
+    /**
+     * Runs skipped: a single epoch, or over too many states.
+     */
+    public var segmentsSkipped: UInt32
+    /**
+     * Epochs with the user's feedback (`confirmZone`, `confirmPosition`).
+     */
+    public var feedbackEpochs: UInt32
+    /**
+     * Epochs of position fixes (`pushFix`).
+     */
+    public var fixEpochs: UInt32
+    /**
+     * Baum-Welch iterations run.
+     */
+    public var iterations: UInt32
+    /**
+     * ln p(observations | model) before each iteration and for the learned model, in nats;
+     * it never decreases. Empty when there was nothing to learn from.
+     */
+    public var logLikelihood: [Double]
+    /**
+     * Feedback epochs the habits ruled out, at which learning restarted.
+     */
+    public var restarts: UInt32
+    /**
+     * Transitions between places with a learned count, after the pass (all passes so far).
+     */
+    public var learnedTransitions: UInt64
+    /**
+     * Epochs learned from over all passes, including those of an imported model.
+     */
+    public var totalEpochs: UInt64
+    /**
+     * The fix error after the pass.
+     */
+    public var fixError: FixError
+    /**
+     * How strongly the learned moves are applied, as a pseudo-count per reachable move;
+     * `null` / `nil` when they are not (they did not predict held-out parts of the history
+     * well enough yet, or there was only one part).
+     */
+    public var strength: Double?
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Epochs of the history learned from in this pass (those learned before are skipped).
+         */epochs: UInt32, 
+        /**
+         * Runs of epochs without a long gap learned from.
+         */segments: UInt32, 
+        /**
+         * Runs skipped: a single epoch, or over too many states.
+         */segmentsSkipped: UInt32, 
+        /**
+         * Epochs with the user's feedback (`confirmZone`, `confirmPosition`).
+         */feedbackEpochs: UInt32, 
+        /**
+         * Epochs of position fixes (`pushFix`).
+         */fixEpochs: UInt32, 
+        /**
+         * Baum-Welch iterations run.
+         */iterations: UInt32, 
+        /**
+         * ln p(observations | model) before each iteration and for the learned model, in nats;
+         * it never decreases. Empty when there was nothing to learn from.
+         */logLikelihood: [Double], 
+        /**
+         * Feedback epochs the habits ruled out, at which learning restarted.
+         */restarts: UInt32, 
+        /**
+         * Transitions between places with a learned count, after the pass (all passes so far).
+         */learnedTransitions: UInt64, 
+        /**
+         * Epochs learned from over all passes, including those of an imported model.
+         */totalEpochs: UInt64, 
+        /**
+         * The fix error after the pass.
+         */fixError: FixError, 
+        /**
+         * How strongly the learned moves are applied, as a pseudo-count per reachable move;
+         * `null` / `nil` when they are not (they did not predict held-out parts of the history
+         * well enough yet, or there was only one part).
+         */strength: Double?) {
+        self.epochs = epochs
+        self.segments = segments
+        self.segmentsSkipped = segmentsSkipped
+        self.feedbackEpochs = feedbackEpochs
+        self.fixEpochs = fixEpochs
+        self.iterations = iterations
+        self.logLikelihood = logLikelihood
+        self.restarts = restarts
+        self.learnedTransitions = learnedTransitions
+        self.totalEpochs = totalEpochs
+        self.fixError = fixError
+        self.strength = strength
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension HabitReport: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeHabitReport: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> HabitReport {
+        return
+            try HabitReport(
+                epochs: FfiConverterUInt32.read(from: &buf), 
+                segments: FfiConverterUInt32.read(from: &buf), 
+                segmentsSkipped: FfiConverterUInt32.read(from: &buf), 
+                feedbackEpochs: FfiConverterUInt32.read(from: &buf), 
+                fixEpochs: FfiConverterUInt32.read(from: &buf), 
+                iterations: FfiConverterUInt32.read(from: &buf), 
+                logLikelihood: FfiConverterSequenceDouble.read(from: &buf), 
+                restarts: FfiConverterUInt32.read(from: &buf), 
+                learnedTransitions: FfiConverterUInt64.read(from: &buf), 
+                totalEpochs: FfiConverterUInt64.read(from: &buf), 
+                fixError: FfiConverterTypeFixError.read(from: &buf), 
+                strength: FfiConverterOptionDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: HabitReport, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.epochs, into: &buf)
+        FfiConverterUInt32.write(value.segments, into: &buf)
+        FfiConverterUInt32.write(value.segmentsSkipped, into: &buf)
+        FfiConverterUInt32.write(value.feedbackEpochs, into: &buf)
+        FfiConverterUInt32.write(value.fixEpochs, into: &buf)
+        FfiConverterUInt32.write(value.iterations, into: &buf)
+        FfiConverterSequenceDouble.write(value.logLikelihood, into: &buf)
+        FfiConverterUInt32.write(value.restarts, into: &buf)
+        FfiConverterUInt64.write(value.learnedTransitions, into: &buf)
+        FfiConverterUInt64.write(value.totalEpochs, into: &buf)
+        FfiConverterTypeFixError.write(value.fixError, into: &buf)
+        FfiConverterOptionDouble.write(value.strength, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeHabitReport_lift(_ buf: RustBuffer) throws -> HabitReport {
+    return try FfiConverterTypeHabitReport.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeHabitReport_lower(_ value: HabitReport) -> RustBuffer {
+    return FfiConverterTypeHabitReport.lower(value)
 }
 
 
@@ -2982,6 +3351,18 @@ enum PositioningError: Swift.Error, Equatable, Hashable, Foundation.LocalizedErr
          */reason: String
     )
     /**
+     * `importHabits` refused the model: the JSON does not parse, is not a Waymark habit
+     * model, is of a newer layout than this build reads, was learned on another site (or
+     * another build of the site file), or holds a value out of range. `reason` says which,
+     * with the field's path. The engine's habits are unchanged. A stored model refused for
+     * its site or its content will never be accepted by this engine: learn afresh.
+     */
+    case HabitsRejected(
+        /**
+         * Why.
+         */reason: String
+    )
+    /**
      * A bug in Waymark or in a listener: the call had no effect (a scan or an advance that
      * panicked half-way is undone, and no listener hears its position).
      */
@@ -3031,7 +3412,10 @@ public struct FfiConverterTypePositioningError: FfiConverterRustBuffer {
         case 4: return .SaltMismatch(
             reason: try FfiConverterString.read(from: &buf)
             )
-        case 5: return .Internal(
+        case 5: return .HabitsRejected(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 6: return .Internal(
             reason: try FfiConverterString.read(from: &buf)
             )
 
@@ -3066,8 +3450,13 @@ public struct FfiConverterTypePositioningError: FfiConverterRustBuffer {
             FfiConverterString.write(reason, into: &buf)
             
         
-        case let .Internal(reason):
+        case let .HabitsRejected(reason):
             writeInt(&buf, Int32(5))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case let .Internal(reason):
+            writeInt(&buf, Int32(6))
             FfiConverterString.write(reason, into: &buf)
             
         }
@@ -3638,6 +4027,31 @@ fileprivate struct FfiConverterOptionTypeTransmitterIdString: FfiConverterRustBu
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceDouble: FfiConverterRustBuffer {
+    typealias SwiftType = [Double]
+
+    public static func write(_ value: [Double], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterDouble.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [Double] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [Double]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterDouble.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceTypeBeaconReading: FfiConverterRustBuffer {
     typealias SwiftType = [BeaconReading]
 
@@ -3761,6 +4175,46 @@ fileprivate struct FfiConverterSequenceTypeZoneProbability: FfiConverterRustBuff
 }
 
 
+public typealias HabitsJson = String
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeHabitsJson: FfiConverter {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> HabitsJson {
+        return try FfiConverterString.read(from: &buf)
+    }
+
+    public static func write(_ value: HabitsJson, into buf: inout [UInt8]) {
+        return FfiConverterString.write(value, into: &buf)
+    }
+
+    public static func lift(_ value: RustBuffer) throws -> HabitsJson {
+        return try FfiConverterString.lift(value)
+    }
+
+    public static func lower(_ value: HabitsJson) -> RustBuffer {
+        return FfiConverterString.lower(value)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeHabitsJson_lift(_ value: RustBuffer) throws -> HabitsJson {
+    return try FfiConverterTypeHabitsJson.lift(value)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeHabitsJson_lower(_ value: HabitsJson) -> RustBuffer {
+    return FfiConverterTypeHabitsJson.lower(value)
+}
+
+
+
 public typealias TransmitterIdString = String
 
 #if swift(>=5.8)
@@ -3845,13 +4299,28 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_advance() != 26132) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_positioningengine_clear_habits() != 64021) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_positioningengine_confirm_position() != 57798) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_confirm_zone() != 17419) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_positioningengine_export_habits() != 59107) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_fix_error() != 19246) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_positioningengine_fixed_lag_position() != 24784) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_import_habits() != 29156) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_learn_habits() != 5904) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_position() != 4980) {

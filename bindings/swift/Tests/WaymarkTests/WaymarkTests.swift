@@ -228,6 +228,77 @@ final class WaymarkTests: XCTestCase {
         XCTAssertEqual(engine.position(), fixed)
     }
 
+    // Habits: learned from the walk with position fixes and the user's feedback, exported,
+    // imported into a second engine, refused with a typed error when they do not fit, cleared.
+    func testHabitsLearnExportImport() throws {
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        XCTAssertEqual(engine.fixError(), FixError(biasXM: 0, biasYM: 0, spread: 1))
+        var positions = 0, fixes = 0, confirmations = 0
+        for epoch in try walk().epochs {
+            _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
+            _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
+            _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
+            guard (try? engine.pushScan(scan: epoch.scan)) != nil else { continue }
+            positions += 1
+            let (x, y) = (epoch.truth[0], epoch.truth[1])
+            if positions % 7 == 3,
+                (try? engine.confirmPosition(timestampNs: epoch.timestampNs, x: x, y: y, floor: 0, radiusM: 1.5)) != nil
+            {
+                confirmations += 1
+            }
+            if positions % 3 == 1,
+                (try? engine.pushFix(
+                    fix: PositionFix(timestampNs: epoch.timestampNs + 1000, x: x + 1.5, y: y + 0.5, floor: 0, accuracyM: 2)))
+                    != nil
+            {
+                fixes += 1
+            }
+        }
+        XCTAssertGreaterThan(fixes, 5)
+        XCTAssertGreaterThan(confirmations, 2)
+
+        let report = try engine.learnHabits()
+        XCTAssertGreaterThan(report.epochs, 10)
+        XCTAssertGreaterThanOrEqual(report.iterations, 1)
+        XCTAssertEqual(report.fixEpochs, UInt32(fixes))
+        XCTAssertGreaterThanOrEqual(report.feedbackEpochs, UInt32(confirmations))
+        XCTAssertGreaterThan(report.learnedTransitions, 0)
+        XCTAssertEqual(report.totalEpochs, UInt64(report.epochs))
+        XCTAssertEqual(report.logLikelihood.count, Int(report.iterations) + 1)
+        XCTAssertGreaterThanOrEqual(report.logLikelihood.last!, report.logLikelihood.first! - 1e-6)
+        let learned = engine.fixError()
+        XCTAssertEqual(learned, report.fixError)
+        // 1.5 m east, 0.5 m north, shrunk toward 0 by the prior's 5 pseudo-fixes.
+        XCTAssertGreaterThan(learned.biasXM, 0.3)
+        XCTAssertGreaterThan(learned.biasYM, 0)
+        XCTAssertGreaterThan(learned.biasXM, learned.biasYM)
+        XCTAssertEqual(try engine.learnHabits().epochs, 0, "each epoch is learned once")
+
+        let json = engine.exportHabits()
+        let other = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let empty = other.exportHabits()
+        XCTAssertNotEqual(empty, json)
+        try other.importHabits(json: json)
+        XCTAssertEqual(other.exportHabits(), json)
+        XCTAssertEqual(other.fixError(), learned)
+
+        let newer = json.replacingOccurrences(of: "\"version\":1,", with: "\"version\":99,")
+        XCTAssertNotEqual(newer, json)
+        for bad in ["", "{", "null", "{\"format\":\"waymark-site\",\"version\":1}", newer,
+                    json.replacingOccurrences(of: "\"count\":[", with: "\"count\":[-1,")] {
+            XCTAssertThrowsError(try other.importHabits(json: bad)) {
+                guard case PositioningError.HabitsRejected(let reason) = $0 else {
+                    return XCTFail("expected HabitsRejected, got \($0)")
+                }
+                XCTAssertFalse(reason.isEmpty)
+            }
+            XCTAssertEqual(other.exportHabits(), json, "a refused model changed the habits")
+        }
+        other.clearHabits()
+        XCTAssertEqual(other.exportHabits(), empty)
+        XCTAssertEqual(other.fixError(), FixError(biasXM: 0, biasYM: 0, spread: 1))
+    }
+
     // A site whose transmitter ids are salted hashes: with its salt the engine positions exactly
     // as on the raw site; without it, or with another, it refuses to start with a typed error.
     func testAHashedSiteNeedsItsSalt() throws {

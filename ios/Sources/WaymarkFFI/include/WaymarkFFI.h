@@ -371,6 +371,11 @@ uint64_t uniffi_waymark_fn_constructor_positioningengine_new(RustBuffer site_jso
 RustBuffer uniffi_waymark_fn_method_positioningengine_advance(uint64_t ptr, uint64_t timestamp_ns, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_CLEAR_HABITS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_CLEAR_HABITS
+void uniffi_waymark_fn_method_positioningengine_clear_habits(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_CONFIRM_POSITION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_CONFIRM_POSITION
 RustBuffer uniffi_waymark_fn_method_positioningengine_confirm_position(uint64_t ptr, uint64_t timestamp_ns, double x, double y, uint32_t floor, double radius_m, RustCallStatus *_Nonnull out_status
@@ -381,9 +386,29 @@ RustBuffer uniffi_waymark_fn_method_positioningengine_confirm_position(uint64_t 
 RustBuffer uniffi_waymark_fn_method_positioningengine_confirm_zone(uint64_t ptr, uint64_t timestamp_ns, RustBuffer zone, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_EXPORT_HABITS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_EXPORT_HABITS
+RustBuffer uniffi_waymark_fn_method_positioningengine_export_habits(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_FIX_ERROR
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_FIX_ERROR
+RustBuffer uniffi_waymark_fn_method_positioningengine_fix_error(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_FIXED_LAG_POSITION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_FIXED_LAG_POSITION
 RustBuffer uniffi_waymark_fn_method_positioningengine_fixed_lag_position(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_IMPORT_HABITS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_IMPORT_HABITS
+void uniffi_waymark_fn_method_positioningengine_import_habits(uint64_t ptr, RustBuffer json, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_LEARN_HABITS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_LEARN_HABITS
+RustBuffer uniffi_waymark_fn_method_positioningengine_learn_habits(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_POSITION
@@ -747,6 +772,12 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_advance(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_CLEAR_HABITS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_CLEAR_HABITS
+uint16_t uniffi_waymark_checksum_method_positioningengine_clear_habits(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_CONFIRM_POSITION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_CONFIRM_POSITION
 uint16_t uniffi_waymark_checksum_method_positioningengine_confirm_position(void
@@ -759,9 +790,33 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_confirm_zone(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_EXPORT_HABITS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_EXPORT_HABITS
+uint16_t uniffi_waymark_checksum_method_positioningengine_export_habits(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_FIX_ERROR
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_FIX_ERROR
+uint16_t uniffi_waymark_checksum_method_positioningengine_fix_error(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_FIXED_LAG_POSITION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_FIXED_LAG_POSITION
 uint16_t uniffi_waymark_checksum_method_positioningengine_fixed_lag_position(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_IMPORT_HABITS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_IMPORT_HABITS
+uint16_t uniffi_waymark_checksum_method_positioningengine_import_habits(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_LEARN_HABITS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_LEARN_HABITS
+uint16_t uniffi_waymark_checksum_method_positioningengine_learn_habits(void
     
 );
 #endif
