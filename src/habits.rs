@@ -295,7 +295,7 @@ pub struct StrengthGain {
     pub strength: f64,
     /// Mean gain over the uniform reachability, nats per held-out move.
     pub gain: f64,
-    /// Its standard error (moves taken as independent, so an underestimate).
+    /// Its standard error, over segments (the moves of one walk are not independent).
     pub standard_error: f64,
 }
 
@@ -638,57 +638,62 @@ impl HabitModel {
     ) -> Result<Vec<StrengthGain>, HabitError> {
         let uniform = HabitModel::new(site);
         let none = BTreeMap::new();
+        // Each segment's moves, and the two halves' summed.
+        let mut moves: Vec<BTreeMap<(u32, u32), f64>> = Vec::with_capacity(segments.len());
         let mut halves = [BTreeMap::new(), BTreeMap::new()];
         for (k, segment) in segments.iter().enumerate() {
             let mut fix = FixStatistics::default();
-            segment.expect(
-                site,
-                &uniform,
-                &none,
-                FixError::default(),
-                options,
-                &mut halves[k % 2],
-                &mut fix,
-            )?;
+            let mut own = BTreeMap::new();
+            segment.expect(site, &uniform, &none, FixError::default(), options, &mut own, &mut fix)?;
+            for (&key, &c) in &own {
+                *halves[k % 2].entry(key).or_insert(0.0) += c;
+            }
+            moves.push(own);
         }
-        // Per strength: Σ c, Σ c·v and Σ c·v² of the per-move gains v, weighted by the
-        // expected count c of each held-out move.
-        let mut sums = vec![[0.0f64; 3]; STRENGTHS.len()];
-        for (train, test) in [(&halves[0], &halves[1]), (&halves[1], &halves[0])] {
-            // The training half's counts (with the model's), by row.
+        // Per held-out segment and strength: (Σ c, Σ c·v) of the per-move gains v weighted by
+        // the expected count c of each move. Moves within a segment are not independent (one
+        // walk), so the standard error is taken over segments: the ratio estimator's variance
+        // Σ_s (Σ c·v − ḡ Σ c)² / (Σ c)², the delta-method form of a cluster jackknife.
+        let mut per_segment = vec![vec![[0.0f64; 2]; STRENGTHS.len()]; segments.len()];
+        for half in 0..2 {
+            // The other half's counts (with the model's), by row.
             let mut rows: BTreeMap<u32, BTreeMap<u32, f64>> = BTreeMap::new();
             for (&i, row) in &self.rows {
                 rows.entry(i).or_default().extend(row.iter().copied());
             }
-            for (&(i, j), &c) in train {
+            for (&(i, j), &c) in &halves[1 - half] {
                 *rows.entry(i).or_default().entry(j).or_insert(0.0) += c;
             }
-            for (&(i, j), &c) in test {
-                let train_row = rows.get(&i);
-                let count = |k: u32| train_row.and_then(|r| r.get(&k).copied()).unwrap_or(0.0);
-                let rings = Rings::of(reach, i as usize, site.spacing_m(), count);
-                let Some(&(_, d)) = reach.reachable(i as usize, reach.radius_m()).iter().find(|e| e.0 == j)
-                else {
-                    continue;
-                };
-                for (sum, &kappa) in sums.iter_mut().zip(&STRENGTHS) {
-                    let v = (rings.probability(d, count(j), kappa) * rings.size(d)).ln();
-                    sum[0] += c;
-                    sum[1] += c * v;
-                    sum[2] += c * v * v;
+            for (segment, sums) in moves.iter().zip(per_segment.iter_mut()).skip(half).step_by(2) {
+                for (&(i, j), &c) in segment {
+                    let train_row = rows.get(&i);
+                    let count = |k: u32| train_row.and_then(|r| r.get(&k).copied()).unwrap_or(0.0);
+                    let rings = Rings::of(reach, i as usize, site.spacing_m(), count);
+                    let Some(&(_, d)) =
+                        reach.reachable(i as usize, reach.radius_m()).iter().find(|e| e.0 == j)
+                    else {
+                        continue;
+                    };
+                    for (sum, &kappa) in sums.iter_mut().zip(&STRENGTHS) {
+                        let v = (rings.probability(d, count(j), kappa) * rings.size(d)).ln();
+                        sum[0] += c;
+                        sum[1] += c * v;
+                    }
                 }
             }
         }
         Ok(STRENGTHS
             .iter()
-            .zip(sums)
-            .map(|(&kappa, [n, sv, svv])| {
+            .enumerate()
+            .map(|(k, &kappa)| {
+                let n: f64 = per_segment.iter().map(|s| s[k][0]).sum();
                 if n <= 0.0 {
                     return StrengthGain { strength: kappa, gain: 0.0, standard_error: 0.0 };
                 }
-                let mean = sv / n;
-                let variance = (svv / n - mean * mean).max(0.0);
-                StrengthGain { strength: kappa, gain: mean, standard_error: (variance / n).sqrt() }
+                let gain = per_segment.iter().map(|s| s[k][1]).sum::<f64>() / n;
+                let variance =
+                    per_segment.iter().map(|s| (s[k][1] - gain * s[k][0]).powi(2)).sum::<f64>() / (n * n);
+                StrengthGain { strength: kappa, gain, standard_error: variance.sqrt() }
             })
             .collect())
     }
