@@ -217,9 +217,11 @@ pub struct Engine {
     listeners: Vec<(SubscriptionId, Box<dyn PositionListener>)>,
     next_subscription: u64,
     stats: InputStats,
-    /// γ in effect (the configuration's, else the site's) in epochs with and without a
-    /// movement likelihood.
-    rssi_weight: [Option<f64>; 2],
+    /// γ in effect per floor (the configuration's, else the floor's, else the site's) in
+    /// epochs with and without a movement likelihood.
+    rssi_weight: Vec<[Option<f64>; 2]>,
+    /// 1 − γ per floor, the movement likelihood's exponent in eq. 14 (1 without γ).
+    movement_exponent: Vec<f64>,
     /// Factors on the 68% and 95% radii (the site's calibration).
     accuracy_scale: [f64; 2],
     /// Hashes scans' ids with the site's salt when the site's ids are hashed.
@@ -252,7 +254,8 @@ impl Engine {
         let id_hasher = site.scan_hasher(config.site_salt.as_ref())?;
         let n = site.states().len();
         let reach = ReachTable::build(&site, config.reach_radius_m);
-        let rssi_weight = config.rssi_weight_for(&site);
+        let rssi_weight = config.floor_rssi_weights(&site);
+        let movement_exponent = rssi_weight.iter().map(|g| g[0].map_or(1.0, |g| 1.0 - g)).collect();
         let accuracy_scale = config.accuracy_scale_for(&site);
         let site_zones = site.zones().len();
         Ok(Self {
@@ -270,6 +273,7 @@ impl Engine {
             next_subscription: 0,
             stats: InputStats::default(),
             rssi_weight,
+            movement_exponent,
             accuracy_scale,
             id_hasher,
             zone_mass: vec![0.0; site_zones],
@@ -680,14 +684,23 @@ impl Engine {
         // Accepted from here on: the state changes.
         Ok(self.atomically(motion.is_none(), |engine| {
             let motion = engine.motion_until(scan.timestamp_ns, motion);
-            // Hoang eq. 14: p(o | s)^γ, with the γ of an epoch with or without a movement
-            // likelihood to balance against.
+            // Hoang eq. 14: p(o | s)^γ, with the γ of the state's floor in an epoch with or
+            // without a movement likelihood to balance against.
             let with_movement =
                 engine.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some();
-            let gamma = if with_movement { engine.rssi_weight[0] } else { engine.rssi_weight[1] };
-            if let Some(gamma) = gamma {
-                for e in engine.ln_emission.iter_mut() {
-                    *e *= gamma;
+            let k = usize::from(!with_movement);
+            let gammas = &engine.rssi_weight;
+            if gammas.windows(2).all(|w| w[0][k] == w[1][k]) {
+                if let Some(gamma) = gammas.first().and_then(|g| g[k]) {
+                    for e in engine.ln_emission.iter_mut() {
+                        *e *= gamma;
+                    }
+                }
+            } else {
+                for (e, s) in engine.ln_emission.iter_mut().zip(engine.site.states()) {
+                    if let Some(gamma) = gammas.get(s.floor).and_then(|g| g[k]) {
+                        *e *= gamma;
+                    }
                 }
             }
             engine.stats.scans_accepted += 1;
@@ -877,7 +890,7 @@ impl Engine {
             variance_m2: base_variance + spread.0,
             across_variance_m2: base_variance + spread.1,
             mahalanobis_cap: config.hoang.mahalanobis_cap,
-            exponent: self.rssi_weight[0].map_or(1.0, |g| 1.0 - g),
+            exponents: &self.movement_exponent,
         };
         let transition: &dyn Transition = match config.transition {
             TransitionModel::Reach => &reach,

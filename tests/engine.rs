@@ -140,3 +140,39 @@ fn an_rssi_no_receiver_reports_rejects_the_scan() {
     let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark::engine::MAX_RSSI_DBM)])).unwrap();
     assert!(loud.radio_log_evidence.is_some_and(f64::is_finite));
 }
+
+/// Hoang eq. 14 per floor: with γ_f on each floor's states, the posterior within a floor is the
+/// one an engine with that floor's γ everywhere gives (the prediction does not depend on γ
+/// without movement), and an explicit γ in the configuration overrides every floor.
+#[test]
+fn each_floor_weighs_the_radio_by_its_own_gamma() {
+    let gammas = [0.05, 0.6];
+    let site = Arc::new(two_floor_site().with_floor_rssi_weights(&gammas.map(|g| [Some(g), None])).unwrap());
+    let plain = Arc::new(two_floor_site());
+    let posterior = |site: &Arc<Site>, rssi_weight: Option<f64>| {
+        let mut engine =
+            Engine::new(Arc::clone(site), EngineConfig { rssi_weight, ..EngineConfig::default() }).unwrap();
+        // Both floors' transmitters, so that both keep mass.
+        let readings: Vec<(u8, f64)> = readings_at(0, 3.0).into_iter().chain(readings_at(1, 9.0)).collect();
+        engine.push_scan(&scan(SECOND, &readings)).unwrap();
+        engine.posterior().to_vec()
+    };
+    let on_floor = |p: &[f64], f: usize| -> Vec<f64> {
+        let mine: Vec<f64> =
+            site.states().iter().zip(p).filter(|(s, _)| s.floor == f).map(|(_, &p)| p).collect();
+        let total: f64 = mine.iter().sum();
+        mine.iter().map(|p| p / total).collect()
+    };
+    let per_floor = posterior(&site, None);
+    for (f, &g) in gammas.iter().enumerate() {
+        let uniform = posterior(&plain, Some(g));
+        for (a, b) in on_floor(&per_floor, f).iter().zip(on_floor(&uniform, f)) {
+            assert!((a - b).abs() < 1e-9, "floor {f}: {a} vs {b}");
+        }
+    }
+    // Not one γ for the whole site: floor 1's states are weighed differently from floor 0's.
+    let sharp = posterior(&plain, Some(gammas[0]));
+    assert!(on_floor(&per_floor, 1).iter().zip(on_floor(&sharp, 1)).any(|(a, b)| (a - b).abs() > 1e-6));
+    // An explicit γ overrides the floors'.
+    assert_eq!(posterior(&site, Some(0.3)), posterior(&plain, Some(0.3)));
+}
