@@ -232,7 +232,8 @@ impl EngineConfig {
 
     /// γ per floor of `site` (index = floor), as in [`rssi_weight_for`](Self::rssi_weight_for)
     /// but with each floor's own calibrated γ ([`Floor::rssi_weight`](crate::site::Floor))
-    /// before the site-wide one: an explicit `rssi_weight` still overrides every floor.
+    /// before the site-wide one: an explicit `rssi_weight` still overrides every floor. An
+    /// engine runs each epoch at the γ of the floor of its latest estimate.
     pub fn floor_rssi_weights(&self, site: &crate::Site) -> Vec<[Option<f64>; 2]> {
         let c = if self.site_calibration { *site.calibration() } else { crate::site::Calibration::default() };
         site.floors()

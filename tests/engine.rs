@@ -141,38 +141,45 @@ fn an_rssi_no_receiver_reports_rejects_the_scan() {
     assert!(loud.radio_log_evidence.is_some_and(f64::is_finite));
 }
 
-/// Hoang eq. 14 per floor: with γ_f on each floor's states, the posterior within a floor is the
-/// one an engine with that floor's γ everywhere gives (the prediction does not depend on γ
-/// without movement), and an explicit γ in the configuration overrides every floor.
+/// Hoang eq. 14 per floor: an epoch runs at the γ of the floor of the latest estimate (the
+/// site-wide γ before there is one, and for a floor without its own), one γ for every state;
+/// an explicit γ in the configuration overrides every floor.
 #[test]
-fn each_floor_weighs_the_radio_by_its_own_gamma() {
-    let gammas = [0.05, 0.6];
-    let site = Arc::new(two_floor_site().with_floor_rssi_weights(&gammas.map(|g| [Some(g), None])).unwrap());
-    let plain = Arc::new(two_floor_site());
-    let posterior = |site: &Arc<Site>, rssi_weight: Option<f64>| {
-        let mut engine =
-            Engine::new(Arc::clone(site), EngineConfig { rssi_weight, ..EngineConfig::default() }).unwrap();
-        // Both floors' transmitters, so that both keep mass.
-        let readings: Vec<(u8, f64)> = readings_at(0, 3.0).into_iter().chain(readings_at(1, 9.0)).collect();
-        engine.push_scan(&scan(SECOND, &readings)).unwrap();
-        engine.posterior().to_vec()
+fn each_epoch_weighs_the_radio_by_the_gamma_of_the_floor_it_is_on() {
+    use waymark::site::Calibration;
+    let (site_wide, floor_1) = (0.3, 0.05);
+    let with = |floors: [Option<f64>; 2]| {
+        let calibration = Calibration { rssi_weight: Some(site_wide), ..Calibration::default() };
+        let site = two_floor_site().with_calibration(calibration).unwrap();
+        Arc::new(site.with_floor_rssi_weights(&floors.map(|g| [g, None])).unwrap())
     };
-    let on_floor = |p: &[f64], f: usize| -> Vec<f64> {
-        let mine: Vec<f64> =
-            site.states().iter().zip(p).filter(|(s, _)| s.floor == f).map(|(_, &p)| p).collect();
-        let total: f64 = mine.iter().sum();
-        mine.iter().map(|p| p / total).collect()
-    };
-    let per_floor = posterior(&site, None);
-    for (f, &g) in gammas.iter().enumerate() {
-        let uniform = posterior(&plain, Some(g));
-        for (a, b) in on_floor(&per_floor, f).iter().zip(on_floor(&uniform, f)) {
-            assert!((a - b).abs() < 1e-9, "floor {f}: {a} vs {b}");
+    let per_floor = with([None, Some(floor_1)]);
+    let everywhere = with([Some(floor_1), Some(floor_1)]);
+    let none = with([None, None]);
+    let run = |site: &Arc<Site>, rssi_weight: Option<f64>, f: usize| {
+        let config = EngineConfig { rssi_weight, ..EngineConfig::default() };
+        let mut engine = Engine::new(Arc::clone(site), config).unwrap();
+        // Both floors' transmitters, so that both floors keep mass.
+        let mut posteriors = Vec::new();
+        for k in 1..=2 {
+            let readings: Vec<(u8, f64)> = readings_at(f, 3.0)
+                .into_iter()
+                .chain(readings_at(1 - f, 9.0).into_iter().map(|(t, v)| (t, v - 20.0)))
+                .collect();
+            let p = engine.push_scan(&scan(k * SECOND, &readings)).unwrap();
+            assert_eq!(p.floor, f);
+            posteriors.push(engine.posterior().to_vec());
         }
-    }
-    // Not one γ for the whole site: floor 1's states are weighed differently from floor 0's.
-    let sharp = posterior(&plain, Some(gammas[0]));
-    assert!(on_floor(&per_floor, 1).iter().zip(on_floor(&sharp, 1)).any(|(a, b)| (a - b).abs() > 1e-6));
+        posteriors
+    };
+    // On floor 1: the first epoch at the site-wide γ, the second at floor 1's.
+    let on_1 = run(&per_floor, None, 1);
+    assert_eq!(on_1[0], run(&none, None, 1)[0]);
+    assert_eq!(on_1[1], run(&everywhere, None, 1)[1]);
+    assert_ne!(on_1[1], run(&none, None, 1)[1]);
+    // On floor 0, which has no γ of its own: the site-wide γ throughout.
+    assert_eq!(run(&per_floor, None, 0), run(&none, None, 0));
+    assert_ne!(run(&everywhere, None, 0)[1], run(&none, None, 0)[1]);
     // An explicit γ overrides the floors'.
-    assert_eq!(posterior(&site, Some(0.3)), posterior(&plain, Some(0.3)));
+    assert_eq!(run(&per_floor, Some(0.5), 1), run(&none, Some(0.5), 1));
 }

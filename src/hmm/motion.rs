@@ -153,20 +153,13 @@ pub struct HoangTransition<'a> {
     pub across_variance_m2: f64,
     /// Largest Mahalanobis distance taken at face value.
     pub mahalanobis_cap: f64,
-    /// 1 - γ of eq. 14 (1 for eq. 3) per floor, indexed by the floor of the state moved to
-    /// (eq. 14 weighs the movement into state j); a floor past the end takes 1. The floor
-    /// entries of a row (states out of reach) take the exponent of the row's own floor.
-    pub exponents: &'a [f64],
+    /// 1 - γ of eq. 14 (1 for eq. 3).
+    pub exponent: f64,
 }
 
 impl HoangTransition<'_> {
-    /// The exponent for states on `floor`.
-    fn exponent(&self, floor: usize) -> f64 {
-        self.exponents.get(floor).copied().unwrap_or(1.0)
-    }
-
-    /// ln N(v; Δ, Σ_v) with the capped Mahalanobis distance, times `exponent`.
-    fn ln_movement(&self, delta: Vector2<f64>, exponent: f64) -> f64 {
+    /// ln N(v; Δ, Σ_v) with the capped Mahalanobis distance, times the exponent.
+    fn ln_movement(&self, delta: Vector2<f64>) -> f64 {
         let Some([vx, vy]) = self.movement_m else { return 0.0 };
         let v = Vector2::new(vx, vy);
         let residual = v - delta;
@@ -180,7 +173,7 @@ impl HoangTransition<'_> {
             _ => residual.norm_squared() / self.variance_m2.max(self.across_variance_m2),
         }
         .min(self.mahalanobis_cap * self.mahalanobis_cap);
-        exponent * (-0.5 * r2 - self.ln_normaliser())
+        self.exponent * (-0.5 * r2 - self.ln_normaliser())
     }
 
     /// ln(2π √det Σ_v).
@@ -204,11 +197,10 @@ impl Transition for HoangTransition<'_> {
                 let v = self.movement_m.map_or(Vector2::zeros(), |[x, y]| Vector2::new(x, y));
                 v.try_normalize(1e-9).unwrap_or_else(Vector2::zeros) * f64::from(walk_m)
             };
-            row.push((j, high * self.ln_movement(delta, self.exponent(to.floor)).exp()));
+            row.push((j, high * self.ln_movement(delta).exp()));
         }
         let cap = self.movement_m.map_or(0.0, |_| {
-            self.exponent(from.floor)
-                * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - self.ln_normaliser())
+            self.exponent * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - self.ln_normaliser())
         });
         low * cap.exp()
     }
@@ -304,31 +296,8 @@ mod tests {
             variance_m2: along,
             across_variance_m2: across,
             mahalanobis_cap: cap,
-            exponents: &[],
+            exponent: 1.0,
         }
-    }
-
-    #[test]
-    fn the_movement_exponent_is_the_destination_floors() {
-        let site = grid();
-        let table = ReachTable::build(&site, 9.0);
-        let one = one_metre_east(&site, &table, [0.25, 0.25], 3.0);
-        let half = HoangTransition { exponents: &[0.5], ..one };
-        let (mut a, mut b) = (Vec::new(), Vec::new());
-        let (low_one, low_half) = (one.row(12, &mut a), half.row(12, &mut b));
-        // The rows' reachability weights cancel in the ratio: (h·N^½)² / h = h·N.
-        let high = hipe_probabilities(a.len(), 25, one.ratio).0;
-        for (x, y) in a.iter().zip(&b) {
-            assert_eq!(x.0, y.0);
-            assert_relative_eq!(y.1 * y.1 / high, x.1, max_relative = 1e-12);
-        }
-        let low = hipe_probabilities(a.len(), 25, one.ratio).1;
-        assert_relative_eq!(low_half * low_half / low, low_one, max_relative = 1e-12);
-        // An exponent of 1 is eq. 3, as is a floor past the slice (`one`'s is empty).
-        let beyond = HoangTransition { exponents: &[1.0], ..one };
-        let mut c = Vec::new();
-        assert_eq!(beyond.row(12, &mut c), low_one);
-        assert_eq!(c, a);
     }
 
     #[test]
@@ -360,16 +329,8 @@ mod tests {
         let t = one_metre_east(&site, &table, [1.0, 0.25], 10.0);
         // 1 m short along the movement (staying put): 1σ along; 1 m beside the target: 2σ across.
         let normaliser = std::f64::consts::TAU * (1.0f64 * 0.25).sqrt();
-        assert_relative_eq!(
-            t.ln_movement(Vector2::new(0.0, 0.0), 1.0),
-            -0.5 - normaliser.ln(),
-            epsilon = 1e-12
-        );
-        assert_relative_eq!(
-            t.ln_movement(Vector2::new(1.0, 1.0), 1.0),
-            -2.0 - normaliser.ln(),
-            epsilon = 1e-12
-        );
+        assert_relative_eq!(t.ln_movement(Vector2::new(0.0, 0.0)), -0.5 - normaliser.ln(), epsilon = 1e-12);
+        assert_relative_eq!(t.ln_movement(Vector2::new(1.0, 1.0)), -2.0 - normaliser.ln(), epsilon = 1e-12);
     }
 
     #[test]

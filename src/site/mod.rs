@@ -28,9 +28,9 @@ pub struct Floor {
     pub name: String,
     /// Height of the floor above the site's reference, m.
     pub elevation_m: f64,
-    /// γ of Hoang eq. 14 for this floor's states in epochs with a movement likelihood,
-    /// chosen by leave-one-walk-out over the floor's survey walks (Hoang §6.2's jackknife).
-    /// `None`: the site-wide [`Calibration::rssi_weight`].
+    /// γ of Hoang eq. 14 while the engine is on this floor (its latest estimate's floor), in
+    /// epochs with a movement likelihood, chosen by leave-one-walk-out over the floor's survey
+    /// walks (Hoang §6.2's jackknife). `None`: the site-wide [`Calibration::rssi_weight`].
     pub rssi_weight: Option<f64>,
     /// The same in epochs without a movement likelihood; `None`: the site-wide
     /// [`Calibration::rssi_weight_without_movement`].
