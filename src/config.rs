@@ -234,6 +234,33 @@ impl EngineConfig {
         ]
     }
 
+    /// γ per floor of `site` (index = floor), as in [`rssi_weight_for`](Self::rssi_weight_for)
+    /// but with each floor's own calibrated γ ([`Floor::rssi_weight`](crate::site::Floor))
+    /// before the site-wide one: an explicit `rssi_weight` still overrides every floor. An
+    /// engine runs each epoch at the γ of the floor of its latest estimate.
+    pub fn floor_rssi_weights(&self, site: &crate::Site) -> Vec<[Option<f64>; 2]> {
+        let c = if self.site_calibration { *site.calibration() } else { crate::site::Calibration::default() };
+        site.floors()
+            .iter()
+            .map(|f| {
+                let (with, without) = if self.site_calibration {
+                    (f.rssi_weight, f.rssi_weight_without_movement)
+                } else {
+                    (None, None)
+                };
+                [
+                    self.rssi_weight.or(with).or(c.rssi_weight),
+                    self.rssi_weight_without_movement
+                        .or(self.rssi_weight)
+                        .or(without)
+                        .or(c.rssi_weight_without_movement)
+                        .or(with)
+                        .or(c.rssi_weight),
+                ]
+            })
+            .collect()
+    }
+
     /// Factors on the 68% and 95% radii for `site`: the site's calibrated ones, else 1.
     pub fn accuracy_scale_for(&self, site: &crate::Site) -> [f64; 2] {
         match (self.site_calibration, site.calibration().accuracy_scale) {
@@ -314,5 +341,39 @@ mod tests {
         assert!(bad.validate().unwrap_err().to_string().contains("max_speed_mps"));
         let bad = EngineConfig { accuracy_mass: 1.0, ..EngineConfig::default() };
         assert!(bad.validate().unwrap_err().to_string().contains("accuracy_mass"));
+    }
+
+    #[test]
+    fn a_floors_own_gamma_comes_before_the_sites_and_an_explicit_one_before_both() {
+        use crate::site::{BuildOptions, Calibration, SiteBuilder};
+        let mut b = SiteBuilder::new("two");
+        for f in [b.floor("G", 0.0), b.floor("1", 4.0), b.floor("2", 8.0)] {
+            b.state(f, nalgebra::Point2::new(0.0, 0.0), vec![]);
+        }
+        let site = b
+            .build(BuildOptions::default())
+            .unwrap()
+            .with_calibration(Calibration {
+                rssi_weight: Some(0.1),
+                rssi_weight_without_movement: Some(0.3),
+                ..Calibration::default()
+            })
+            .unwrap()
+            .with_floor_rssi_weights(&[[Some(0.01), None], [None, None], [Some(0.03), Some(1.0)]])
+            .unwrap();
+        let config = EngineConfig::default();
+        assert_eq!(config.rssi_weight_for(&site), [Some(0.1), Some(0.3)]);
+        assert_eq!(
+            config.floor_rssi_weights(&site),
+            vec![[Some(0.01), Some(0.3)], [Some(0.1), Some(0.3)], [Some(0.03), Some(1.0)]]
+        );
+        let explicit = EngineConfig { rssi_weight: Some(0.5), ..EngineConfig::default() };
+        assert_eq!(explicit.floor_rssi_weights(&site), vec![[Some(0.5), Some(0.5)]; 3]);
+        let off = EngineConfig { site_calibration: false, ..EngineConfig::default() };
+        assert_eq!(off.floor_rssi_weights(&site), vec![[None, None]; 3]);
+        // Out of range, or more weights than floors: a typed error naming the floor.
+        let bad = site.clone().with_floor_rssi_weights(&[[None, None], [Some(0.0), None]]).unwrap_err();
+        assert!(bad.to_string().contains("floors[1].rssi_weight"), "{bad}");
+        assert!(site.with_floor_rssi_weights(&[[None, None]; 4]).is_err());
     }
 }

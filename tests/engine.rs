@@ -140,3 +140,46 @@ fn an_rssi_no_receiver_reports_rejects_the_scan() {
     let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark::engine::MAX_RSSI_DBM)])).unwrap();
     assert!(loud.radio_log_evidence.is_some_and(f64::is_finite));
 }
+
+/// Hoang eq. 14 per floor: an epoch runs at the γ of the floor of the latest estimate (the
+/// site-wide γ before there is one, and for a floor without its own), one γ for every state;
+/// an explicit γ in the configuration overrides every floor.
+#[test]
+fn each_epoch_weighs_the_radio_by_the_gamma_of_the_floor_it_is_on() {
+    use waymark::site::Calibration;
+    let (site_wide, floor_1) = (0.3, 0.05);
+    let with = |floors: [Option<f64>; 2]| {
+        let calibration = Calibration { rssi_weight: Some(site_wide), ..Calibration::default() };
+        let site = two_floor_site().with_calibration(calibration).unwrap();
+        Arc::new(site.with_floor_rssi_weights(&floors.map(|g| [g, None])).unwrap())
+    };
+    let per_floor = with([None, Some(floor_1)]);
+    let everywhere = with([Some(floor_1), Some(floor_1)]);
+    let none = with([None, None]);
+    let run = |site: &Arc<Site>, rssi_weight: Option<f64>, f: usize| {
+        let config = EngineConfig { rssi_weight, ..EngineConfig::default() };
+        let mut engine = Engine::new(Arc::clone(site), config).unwrap();
+        // Both floors' transmitters, so that both floors keep mass.
+        let mut posteriors = Vec::new();
+        for k in 1..=2 {
+            let readings: Vec<(u8, f64)> = readings_at(f, 3.0)
+                .into_iter()
+                .chain(readings_at(1 - f, 9.0).into_iter().map(|(t, v)| (t, v - 20.0)))
+                .collect();
+            let p = engine.push_scan(&scan(k * SECOND, &readings)).unwrap();
+            assert_eq!(p.floor, f);
+            posteriors.push(engine.posterior().to_vec());
+        }
+        posteriors
+    };
+    // On floor 1: the first epoch at the site-wide γ, the second at floor 1's.
+    let on_1 = run(&per_floor, None, 1);
+    assert_eq!(on_1[0], run(&none, None, 1)[0]);
+    assert_eq!(on_1[1], run(&everywhere, None, 1)[1]);
+    assert_ne!(on_1[1], run(&none, None, 1)[1]);
+    // On floor 0, which has no γ of its own: the site-wide γ throughout.
+    assert_eq!(run(&per_floor, None, 0), run(&none, None, 0));
+    assert_ne!(run(&everywhere, None, 0)[1], run(&none, None, 0)[1]);
+    // An explicit γ overrides the floors'.
+    assert_eq!(run(&per_floor, Some(0.5), 1), run(&none, Some(0.5), 1));
+}

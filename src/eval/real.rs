@@ -11,7 +11,7 @@ use crate::history::EpochRecord;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::Scan;
 use crate::site::{Calibration, North, Site};
-use crate::survey::{positioned_scans, survey, SurveyFloor, SurveyOptions, SurveyReport};
+use crate::survey::{positioned_scans, survey, PreparedSurvey, SurveyFloor, SurveyOptions, SurveyReport};
 use crate::EngineConfig;
 use nalgebra::Point2;
 use serde::Serialize;
@@ -728,31 +728,75 @@ fn parallel_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) ->
     done.into_iter().map(|(_, r)| r).collect()
 }
 
-/// γ values the survey's cross-validation tries: log-spaced from eq. 3's 1 down to 0.003,
+/// γ values the survey's leave-one-walk-out tries: log-spaced from eq. 3's 1 down to 0.003,
 /// the value Hoang §6.2 found by jackknife on field data.
 pub const GAMMA_GRID: [f64; 6] = [0.003, 0.01, 0.03, 0.1, 0.3, 1.0];
 
-/// Folds of the survey's cross-validation: 8, so each site it builds keeps 7/8 of the survey
-/// walks and its radio is nearly as good as the final site's. With 4 folds the radius
-/// factors came out large (a site from 3/4 of the walks errs more): `waymark eval` on F1 held
-/// the 68% circle 0.73 of the time (0.77 on all five floors), with 8 folds 0.70.
-pub const CALIBRATION_FOLDS: usize = 8;
+/// Steps of the survey's calibration, for progress: one per survey walk (each is held out
+/// once).
+pub fn calibration_steps(floors: &[FloorData]) -> usize {
+    floors.iter().map(|f| f.survey.len()).sum()
+}
+
+/// One γ of [`GAMMA_GRID`] on one floor's held-out walks.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct GammaPoint {
+    /// γ.
+    pub gamma: f64,
+    /// Mean held-out error over the floor's epochs, m (floor penalty included).
+    pub mean_error_m: f64,
+    /// Delete-one-walk jackknife standard error of that mean, m: with S_w and n_w the error
+    /// sum and epochs of walk w, θ₋w = (S − S_w) / (N − n_w) and
+    /// SE = √((k − 1)/k · Σ (θ₋w − θ̄)²) over the k walks (Efron & Tibshirani 1993, eq. 11.5).
+    pub jackknife_se_m: f64,
+    /// Walks whose own mean error is least at this γ.
+    pub walks_preferring: usize,
+}
+
+/// Leave-one-walk-out on one floor: each survey walk replayed on a site surveyed without it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FloorCalibrationReport {
+    /// Floor name.
+    pub name: String,
+    /// Survey walks held out that scored at least one epoch.
+    pub walks: usize,
+    /// Held-out epochs scored (with the motion, at each γ).
+    pub epochs: usize,
+    /// The error curve over γ with the motion as the sensors give it.
+    pub gamma: Vec<GammaPoint>,
+    /// The same with the motion withheld.
+    pub gamma_without_movement: Vec<GammaPoint>,
+    /// The γ chosen for this floor: least mean held-out error.
+    pub rssi_weight: Option<f64>,
+    /// The γ chosen for epochs without a movement likelihood.
+    pub rssi_weight_without_movement: Option<f64>,
+    /// Jackknife standard error of the mean error at the chosen γ, m.
+    pub jackknife_se_m: Option<f64>,
+}
 
 /// What the survey's calibration measured.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct CalibrationReport {
-    /// Mean held-out error at each γ of [`GAMMA_GRID`], m (floor penalty included).
+    /// All floors pooled: mean held-out error at each γ of [`GAMMA_GRID`], m (floor penalty
+    /// included).
     pub gamma_mean_error_m: Vec<(f64, f64)>,
     /// The same with the motion withheld.
     pub gamma_without_movement_mean_error_m: Vec<(f64, f64)>,
-    /// The γ chosen.
+    /// The γ of least pooled error: the site-wide γ, for floors without their own.
     pub rssi_weight: Option<f64>,
-    /// The γ chosen for epochs without a movement likelihood.
+    /// The same for epochs without a movement likelihood.
     pub rssi_weight_without_movement: Option<f64>,
-    /// The radius factors chosen (68%, 95%).
+    /// Per floor, in site order: the γ each floor gets.
+    pub floors: Vec<FloorCalibrationReport>,
+    /// The radius factors chosen (68%, 95%), over every held-out epoch at its floor's γ.
     pub accuracy_scale: Option<[f64; 2]>,
     /// Held-out epochs scored.
     pub epochs: usize,
+    /// Sites surveyed for the leave-one-walk-out (one per survey walk).
+    pub sites: usize,
+    /// Mean share of states whose fingerprints those sites fitted afresh (the rest were
+    /// reused from the site of all walks, their training scans being the same).
+    pub refitted_share: f64,
     /// The step length and north fitted on the survey walks.
     pub motion: Option<MotionSummary>,
 }
@@ -769,16 +813,79 @@ pub struct MotionSummary {
 }
 
 /// Calibrates a site from its survey walks: the walkers' step length and the site's north
-/// (from waypoints and steps, [`crate::survey::calibrate_motion`]), then γ and the accuracy
-/// scales by [`CALIBRATION_FOLDS`]-fold cross-validation: a site surveyed without a fold's
-/// walks replays them with the engine as shipped at each γ of [`GAMMA_GRID`]; the γ of least
-/// mean error wins, and the radius factors are the 68th and 95th percentiles of error ÷
-/// radius at that γ. Test walks are never read.
+/// (from waypoints and steps, [`crate::survey::calibrate_motion`]), then γ per floor by
+/// leave-one-walk-out, Hoang §6.2's jackknife with a walk as the unit: each survey walk is
+/// replayed, at each γ of [`GAMMA_GRID`] with the motion and with it withheld, on the site
+/// surveyed from every other walk (all floors), and each floor takes the γ of least mean
+/// held-out error over its walks. The pooled curve gives the site-wide γ. The radius factors
+/// are the 68th and 95th percentiles of error ÷ radius over every held-out epoch at its
+/// floor's γ: pooled, because a percentile needs many epochs and the engine applies one
+/// factor whatever floor it believes. Test walks are never read.
 pub fn calibrate(
     floors: &[FloorData],
     options: &EvalOptions,
     progress: &(dyn Fn() + Sync),
 ) -> Result<(Calibration, North, CalibrationReport), EvalError> {
+    let (site, _, report) = survey_calibrated(floors, options, progress)?;
+    Ok((*site.calibration(), site.north(), report))
+}
+
+/// Per walk, per γ, per motion mask: the held-out epochs.
+type HeldOut = Vec<[Vec<Scored>; 2]>;
+
+/// The γ of least mean error per floor from each walk's held-out epochs, with the jackknife.
+fn gamma_curve(walks: &[&HeldOut], mask: usize) -> (Vec<GammaPoint>, Option<usize>) {
+    let sums: Vec<Vec<(f64, usize)>> = walks
+        .iter()
+        .map(|w| {
+            w.iter().map(|m| (m[mask].iter().map(Scored::penalised_m).sum::<f64>(), m[mask].len())).collect()
+        })
+        .collect();
+    let mut points = Vec::new();
+    for (g, &gamma) in GAMMA_GRID.iter().enumerate() {
+        let (total, n) = sums.iter().fold((0.0, 0usize), |acc, w| (acc.0 + w[g].0, acc.1 + w[g].1));
+        if n == 0 {
+            continue;
+        }
+        let leave_out: Vec<f64> = sums
+            .iter()
+            .filter(|w| w[g].1 > 0 && w[g].1 < n)
+            .map(|w| (total - w[g].0) / (n - w[g].1) as f64)
+            .collect();
+        let k = leave_out.len() as f64;
+        let mean = leave_out.iter().sum::<f64>() / k.max(1.0);
+        let se = if k > 1.0 {
+            ((k - 1.0) / k * leave_out.iter().map(|t| (t - mean).powi(2)).sum::<f64>()).sqrt()
+        } else {
+            f64::NAN
+        };
+        points.push((
+            g,
+            GammaPoint { gamma, mean_error_m: total / n as f64, jackknife_se_m: se, walks_preferring: 0 },
+        ));
+    }
+    for w in &sums {
+        let best = points
+            .iter()
+            .enumerate()
+            .filter(|(_, (g, _))| w[*g].1 > 0)
+            .min_by(|a, b| (w[a.1 .0].0 / w[a.1 .0].1 as f64).total_cmp(&(w[b.1 .0].0 / w[b.1 .0].1 as f64)))
+            .map(|(k, _)| k);
+        if let Some(k) = best {
+            points[k].1.walks_preferring += 1;
+        }
+    }
+    let best = points.iter().min_by(|a, b| a.1.mean_error_m.total_cmp(&b.1.mean_error_m)).map(|p| p.0);
+    (points.into_iter().map(|p| p.1).collect(), best)
+}
+
+/// [`calibrate`], then the site from all survey walks with that calibration and north, each
+/// floor with its γ.
+pub fn survey_calibrated(
+    floors: &[FloorData],
+    options: &EvalOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(Site, SurveyReport, CalibrationReport), EvalError> {
     let mut report = CalibrationReport::default();
     let all: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
     let motion = crate::survey::calibrate_motion(&all, &options.engine.motion);
@@ -790,103 +897,107 @@ pub fn calibrate(
         heading_offset_deg: m.heading_offset_rad.to_degrees(),
         walks: m.walks,
     });
-    // Per γ: every held-out epoch, scored.
-    let mut per_gamma: Vec<Vec<Scored>> = vec![Vec::new(); GAMMA_GRID.len()];
-    let mut per_gamma_still: Vec<Vec<Scored>> = vec![Vec::new(); GAMMA_GRID.len()];
-    for fold in 0..CALIBRATION_FOLDS {
-        let in_fold = |i: usize| i % CALIBRATION_FOLDS == fold;
-        let training: Vec<FloorData> = floors
-            .iter()
-            .map(|f| FloorData {
-                survey: f
-                    .survey
-                    .iter()
-                    .enumerate()
-                    .filter(|(i, _)| !in_fold(*i))
-                    .map(|(_, t)| t.clone())
-                    .collect(),
-                test: Vec::new(),
-                ..f.clone()
-            })
-            .collect();
-        let held_out: Vec<(usize, &Trace)> = floors
-            .iter()
-            .enumerate()
-            .flat_map(|(k, f)| {
-                f.survey.iter().enumerate().filter(|(i, _)| in_fold(*i)).map(move |(_, t)| (k, t))
-            })
-            .collect();
-        if held_out.is_empty() || training.iter().all(|f| f.survey.is_empty()) {
-            continue;
-        }
-        let Ok((site, _)) = survey_site(&training, &EvalOptions { north, ..options.clone() }) else {
-            continue;
-        };
-        let site = Arc::new(site.with_calibration(calibration)?);
-        // Each γ with the motion as the sensors give it, and with the motion withheld.
-        let masks = [MotionMask::Auto, MotionMask::Speed];
-        let mut jobs: Vec<(usize, usize, usize, &Trace)> = Vec::new();
-        for g in 0..GAMMA_GRID.len() {
-            for m in 0..masks.len() {
-                jobs.extend(held_out.iter().map(|&(k, t)| (g, m, k, t)));
-            }
-        }
-        let scored = parallel_map(&jobs, options.threads, |&(g, m, floor, trace)| {
-            let config = EngineConfig { rssi_weight: Some(GAMMA_GRID[g]), ..options.engine_config() };
-            let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else { return (g, m, Vec::new()) };
-            let r = replay(&mut engine, trace, &ReplayOptions { mask: masks[m], ..options.replay });
-            (g, m, score(trace, floor, &live_estimates(&r.positions)).0)
+    let inputs: Vec<SurveyFloor> = floors
+        .iter()
+        .map(|f| SurveyFloor {
+            name: f.name.clone(),
+            plan: f.plan.as_ref(),
+            walks: f.survey.iter().collect(),
+        })
+        .collect();
+    let prepared = PreparedSurvey::new("eval", &inputs, north, &options.survey)?;
+    let full = prepared.fit(&|_, _| true, None, options.threads);
+    let (site, survey) = prepared.assemble(&full)?;
+    // Every survey walk held out once, replayed at each γ with the motion as the sensors give
+    // it and with the motion withheld.
+    let masks = [MotionMask::Auto, MotionMask::Speed];
+    let jobs: Vec<(usize, usize)> = floors
+        .iter()
+        .enumerate()
+        .flat_map(|(f, floor)| (0..floor.survey.len()).map(move |w| (f, w)))
+        .collect();
+    let held_out: Vec<Option<(HeldOut, usize)>> = parallel_map(&jobs, options.threads, |&(f, w)| {
+        let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
+        let fits = prepared.fit(&keep, Some(&full), 1);
+        let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
+        let result = site.map(|site| {
+            let site = Arc::new(site);
+            let trace = &floors[f].survey[w];
+            let per_gamma: HeldOut = GAMMA_GRID
+                .iter()
+                .map(|&gamma| {
+                    masks.map(|mask| {
+                        let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine_config() };
+                        let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
+                            return Vec::new();
+                        };
+                        let r = replay(&mut engine, trace, &ReplayOptions { mask, ..options.replay });
+                        score(trace, f, &live_estimates(&r.positions)).0
+                    })
+                })
+                .collect();
+            (per_gamma, fits.refitted())
         });
-        for (g, m, points) in scored {
-            if m == 0 {
-                per_gamma[g].extend(points);
-            } else {
-                per_gamma_still[g].extend(points);
-            }
-        }
         progress();
-    }
-    let means = |per: &[Vec<Scored>]| -> Vec<(f64, f64)> {
-        GAMMA_GRID
+        result
+    });
+    report.sites = held_out.iter().flatten().count();
+    report.refitted_share = held_out.iter().flatten().map(|h| h.1 as f64).sum::<f64>()
+        / (report.sites.max(1) * site.states().len().max(1)) as f64;
+    // Pooled over every floor's walks.
+    let walks: Vec<&HeldOut> = held_out.iter().flatten().map(|h| &h.0).collect();
+    let (pooled, best) = gamma_curve(&walks, 0);
+    let (pooled_still, best_still) = gamma_curve(&walks, 1);
+    report.gamma_mean_error_m = pooled.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
+    report.gamma_without_movement_mean_error_m =
+        pooled_still.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
+    calibration.rssi_weight = best.map(|k| pooled[k].gamma);
+    calibration.rssi_weight_without_movement = best_still.map(|k| pooled_still[k].gamma);
+    // Per floor.
+    let mut weights = Vec::with_capacity(floors.len());
+    let mut at_chosen: Vec<&Scored> = Vec::new();
+    for (f, floor) in floors.iter().enumerate() {
+        let mine: Vec<&HeldOut> = jobs
             .iter()
-            .zip(per)
-            .filter(|(_, p)| !p.is_empty())
-            .map(|(&g, p)| (g, p.iter().map(Scored::penalised_m).sum::<f64>() / p.len() as f64))
-            .collect()
-    };
-    report.gamma_mean_error_m = means(&per_gamma);
-    report.gamma_without_movement_mean_error_m = means(&per_gamma_still);
-    calibration.rssi_weight_without_movement =
-        report.gamma_without_movement_mean_error_m.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map(|&(g, _)| g);
-    if let Some(&(best, _)) = report.gamma_mean_error_m.iter().min_by(|a, b| a.1.total_cmp(&b.1)) {
-        let points = &per_gamma[GAMMA_GRID.iter().position(|&g| g == best).unwrap_or(0)];
-        let ratio = |q: f64, radius: fn(&Scored) -> f64| {
-            let mut r: Vec<f64> = points.iter().map(|p| p.error_m / radius(p).max(1e-9)).collect();
-            r.sort_by(f64::total_cmp);
-            quantile(&r, q)
-        };
-        let scale = [ratio(0.68, |p| p.accuracy_m), ratio(0.95, |p| p.accuracy_95_m)];
-        calibration.rssi_weight = Some(best);
-        if scale.iter().all(|s| s.is_finite() && *s > 0.0) {
-            calibration.accuracy_scale = Some(scale);
+            .zip(&held_out)
+            .filter(|((ff, _), _)| *ff == f)
+            .filter_map(|(_, h)| h.as_ref().map(|h| &h.0))
+            .collect();
+        let (curve, best) = gamma_curve(&mine, 0);
+        let (curve_still, best_still) = gamma_curve(&mine, 1);
+        let gamma = best.map(|k| curve[k].gamma);
+        let g = gamma.or(calibration.rssi_weight).and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
+        if let Some(g) = g {
+            at_chosen.extend(mine.iter().flat_map(|w| &w[g][0]));
         }
-        report.epochs = points.len();
+        let floor_report = FloorCalibrationReport {
+            name: floor.name.clone(),
+            walks: mine.iter().filter(|w| w.iter().any(|m| !m[0].is_empty())).count(),
+            epochs: g.map_or(0, |g| mine.iter().map(|w| w[g][0].len()).sum()),
+            rssi_weight: gamma,
+            rssi_weight_without_movement: best_still.map(|k| curve_still[k].gamma),
+            jackknife_se_m: best.map(|k| curve[k].jackknife_se_m),
+            gamma: curve,
+            gamma_without_movement: curve_still,
+        };
+        weights.push([floor_report.rssi_weight, floor_report.rssi_weight_without_movement]);
+        report.floors.push(floor_report);
     }
+    let ratio = |q: f64, radius: fn(&Scored) -> f64| {
+        let mut r: Vec<f64> = at_chosen.iter().map(|p| p.error_m / radius(p).max(1e-9)).collect();
+        r.sort_by(f64::total_cmp);
+        quantile(&r, q)
+    };
+    let scale = [ratio(0.68, |p| p.accuracy_m), ratio(0.95, |p| p.accuracy_95_m)];
+    if scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+        calibration.accuracy_scale = Some(scale);
+    }
+    report.epochs = at_chosen.len();
     report.rssi_weight = calibration.rssi_weight;
     report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
     report.accuracy_scale = calibration.accuracy_scale;
-    Ok((calibration, north, report))
-}
-
-/// [`calibrate`], then the site from all survey walks with that calibration and north.
-pub fn survey_calibrated(
-    floors: &[FloorData],
-    options: &EvalOptions,
-    progress: &(dyn Fn() + Sync),
-) -> Result<(Site, SurveyReport, CalibrationReport), EvalError> {
-    let (calibration, north, report) = calibrate(floors, options, progress)?;
-    let (site, survey) = survey_site(floors, &EvalOptions { north, ..options.clone() })?;
-    Ok((site.with_calibration(calibration)?, survey, report))
+    let site = site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?;
+    Ok((site, survey, report))
 }
 
 /// The engine's live positions as estimates.
@@ -903,4 +1014,48 @@ fn live_estimates(positions: &[crate::Position]) -> Vec<Estimate> {
             zone: p.zone,
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn points(errors: &[f64]) -> Vec<Scored> {
+        errors
+            .iter()
+            .map(|&error_m| Scored {
+                error_m,
+                accuracy_m: 1.0,
+                accuracy_95_m: 2.0,
+                floor_correct: true,
+                zone_correct: None,
+                in_zone: None,
+            })
+            .collect()
+    }
+
+    /// Three walks scored at the first two γ of the grid (with the motion; nothing without).
+    fn walk(first: &[f64], second: &[f64]) -> HeldOut {
+        let mut h: HeldOut = vec![[Vec::new(), Vec::new()]; GAMMA_GRID.len()];
+        h[0][0] = points(first);
+        h[1][0] = points(second);
+        h
+    }
+
+    #[test]
+    fn the_gamma_curve_pools_epochs_and_the_jackknife_leaves_out_whole_walks() {
+        let walks = [walk(&[1.0, 1.0], &[2.0, 2.0]), walk(&[3.0], &[1.0]), walk(&[2.0; 3], &[3.0; 3])];
+        let refs: Vec<&HeldOut> = walks.iter().collect();
+        let (curve, best) = gamma_curve(&refs, 0);
+        assert_eq!(curve.len(), 2, "γ without epochs are left out");
+        assert_eq!(best, Some(0));
+        assert_eq!(curve[0].gamma, GAMMA_GRID[0]);
+        assert!((curve[0].mean_error_m - 11.0 / 6.0).abs() < 1e-12);
+        assert!((curve[1].mean_error_m - 14.0 / 6.0).abs() < 1e-12);
+        // Leave-one-walk-out means 9/4, 8/5, 5/3: SE = √(2/3 Σ (θ₋w − θ̄)²).
+        assert!((curve[0].jackknife_se_m - 0.412_909_6).abs() < 1e-6, "{curve:?}");
+        assert_eq!(curve.iter().map(|p| p.walks_preferring).collect::<Vec<_>>(), [2, 1]);
+        // Nothing without the motion.
+        assert_eq!(gamma_curve(&refs, 1), (Vec::new(), None));
+    }
 }

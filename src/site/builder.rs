@@ -31,7 +31,7 @@ impl SiteBuilder {
 
     /// Adds a floor; returns its index.
     pub fn floor(&mut self, name: &str, elevation_m: f64) -> usize {
-        self.floors.push(Floor { name: name.to_owned(), elevation_m });
+        self.floors.push(Floor { name: name.to_owned(), elevation_m, ..Floor::default() });
         self.floors.len() - 1
     }
 
@@ -67,7 +67,6 @@ impl SiteBuilder {
                 message: "a site needs at least one state".into(),
             });
         }
-        let clip = options.fit.clip_dbm;
         let ids: Vec<TransmitterId> = self
             .states
             .iter()
@@ -79,22 +78,15 @@ impl SiteBuilder {
             .collect();
         let index: BTreeMap<&TransmitterId, u32> =
             ids.iter().enumerate().map(|(i, id)| (id, i as u32)).collect();
-        // The radio map stores σ up to `radio::MAX_STORED_STD_DB`; a fit wider than that (a
-        // transmitter heard once, unconstrained EM) is capped there.
-        let fit = FitOptions { max_std_db: options.fit.max_std_db.min(MAX_STORED_STD_DB), ..options.fit };
+        let fit = options.stored_fit();
+        let index = &index;
         let fit_state = |s: usize, scans: &[TrainingScan]| -> Vec<(u32, u32, Gaussian)> {
-            let mut samples: BTreeMap<u32, Vec<f64>> = BTreeMap::new();
-            for (k, scan) in scans.iter().enumerate() {
-                for r in scan.readings.iter().filter(|r| r.rssi_dbm.is_finite()) {
-                    let column =
-                        samples.entry(index[&r.transmitter]).or_insert_with(|| vec![clip; scans.len()]);
-                    // Two readings of one transmitter in a scan: keep the stronger.
-                    column[k] = column[k].max(r.rssi_dbm.max(clip));
-                }
-            }
-            samples
+            let readings = scans.iter().enumerate().flat_map(|(k, scan)| {
+                scan.readings.iter().map(move |r| (index[&r.transmitter], k as u32, r.rssi_dbm))
+            });
+            fit_columns(readings.collect(), scans.len(), options.model, &fit)
                 .into_iter()
-                .filter_map(|(tx, column)| options.model.fit(&column, &fit).map(|g| (s as u32, tx, g)))
+                .map(|(tx, g)| (s as u32, tx, g))
                 .collect()
         };
         // States fit independently: one chunk per core (a building's survey is thousands of
@@ -123,6 +115,42 @@ impl SiteBuilder {
                 .flat_map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
                 .collect()
         });
+        self.assemble(options, ids, triples)
+    }
+
+    /// Adds a state whose fingerprints the caller fits itself (see
+    /// [`build_fitted`](Self::build_fitted)), trained on `training_scans` scans.
+    pub(crate) fn fitted_state(&mut self, floor: usize, position: Point2<f64>, training_scans: u32) -> u32 {
+        let id = self.states.len() as u32;
+        self.states
+            .push((State { id, floor, position, kind: StateKind::Surveyed, training_scans }, Vec::new()));
+        id
+    }
+
+    /// Assembles the site from fingerprints fitted by the caller: (state, index into `ids`,
+    /// model), with the same "unheard" model and checks as [`build`](Self::build).
+    pub(crate) fn build_fitted(
+        self,
+        options: BuildOptions,
+        ids: Vec<TransmitterId>,
+        triples: Vec<(u32, u32, Gaussian)>,
+    ) -> Result<Site, SiteError> {
+        if self.states.is_empty() {
+            return Err(SiteError::Invalid {
+                path: "states".into(),
+                message: "a site needs at least one state".into(),
+            });
+        }
+        self.assemble(options, ids, triples)
+    }
+
+    fn assemble(
+        self,
+        options: BuildOptions,
+        ids: Vec<TransmitterId>,
+        triples: Vec<(u32, u32, Gaussian)>,
+    ) -> Result<Site, SiteError> {
+        let clip = options.fit.clip_dbm;
         let average_std = if triples.is_empty() {
             options.fit.min_std_db
         } else {
@@ -176,6 +204,35 @@ impl SiteBuilder {
     }
 }
 
+/// Fits one state's fingerprints from its training scans given as (transmitter, scan index,
+/// RSSI) readings over `scans` scans: per transmitter heard (with a finite RSSI), the column of
+/// its readings with "not heard" at the clip level `fit.clip_dbm` (the stronger reading when a
+/// scan has two), fitted with `model`. Sorted by transmitter. The fit depends only on the
+/// columns, so a state fitted again from the same scans gets the same models.
+pub(crate) fn fit_columns(
+    mut readings: Vec<(u32, u32, f64)>,
+    scans: usize,
+    model: RssiModel,
+    fit: &FitOptions,
+) -> Vec<(u32, Gaussian)> {
+    let clip = fit.clip_dbm;
+    readings.retain(|r| r.2.is_finite());
+    readings.sort_unstable_by_key(|r| (r.0, r.1));
+    let mut out = Vec::new();
+    let mut column = vec![clip; scans];
+    for group in readings.chunk_by(|a, b| a.0 == b.0) {
+        column.fill(clip);
+        for &(_, k, rssi) in group {
+            let v = &mut column[k as usize];
+            *v = v.max(rssi.max(clip));
+        }
+        if let Some(g) = model.fit(&column, fit) {
+            out.push((group[0].0, g));
+        }
+    }
+    out
+}
+
 /// How [`SiteBuilder::build`] fits fingerprints.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct BuildOptions {
@@ -183,4 +240,13 @@ pub struct BuildOptions {
     pub model: RssiModel,
     /// Clip level, σ floor and EM stopping rule.
     pub fit: FitOptions,
+}
+
+impl BuildOptions {
+    /// `fit` as the builder applies it: the radio map stores σ up to
+    /// `radio::MAX_STORED_STD_DB`, so a fit wider than that (a transmitter heard once,
+    /// unconstrained EM) is capped there.
+    pub(crate) fn stored_fit(&self) -> FitOptions {
+        FitOptions { max_std_db: self.fit.max_std_db.min(MAX_STORED_STD_DB), ..self.fit }
+    }
 }

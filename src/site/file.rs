@@ -147,6 +147,10 @@ struct FloorFile {
     name: String,
     #[serde(default)]
     elevation_m: f64,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    rssi_weight: Option<f64>,
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    rssi_weight_without_movement: Option<f64>,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -361,7 +365,12 @@ impl Site {
             floors: self
                 .floors
                 .iter()
-                .map(|f| FloorFile { name: f.name.clone(), elevation_m: f.elevation_m })
+                .map(|f| FloorFile {
+                    name: f.name.clone(),
+                    elevation_m: f.elevation_m,
+                    rssi_weight: f.rssi_weight,
+                    rssi_weight_without_movement: f.rssi_weight_without_movement,
+                })
                 .collect(),
             radio: RadioFile {
                 model: self.radio.model(),
@@ -528,8 +537,19 @@ impl Site {
             };
             edges.push(Edge { a: a as u32, b: b as u32, length_m });
         }
-        let floors =
-            file.floors.into_iter().map(|f| Floor { name: f.name, elevation_m: f.elevation_m }).collect();
+        let floors: Vec<Floor> = file
+            .floors
+            .into_iter()
+            .map(|f| Floor {
+                name: f.name,
+                elevation_m: f.elevation_m,
+                rssi_weight: f.rssi_weight,
+                rssi_weight_without_movement: f.rssi_weight_without_movement,
+            })
+            .collect();
+        for (i, f) in floors.iter().enumerate() {
+            f.check(i).map_err(|(path, message)| invalid(path, message))?;
+        }
         let map = RadioMap::new(
             radio.model,
             radio.clip_dbm,
@@ -661,6 +681,21 @@ mod tests {
     }
 
     #[test]
+    fn floor_gammas_round_trip_in_both_encodings_and_old_files_have_none() {
+        let plain = Site::from_json(GOOD.as_bytes()).unwrap();
+        assert_eq!(plain.floors()[0].rssi_weight, None);
+        assert!(!plain.to_json().contains("rssi_weight"));
+        let site = plain.with_floor_rssi_weights(&[[Some(0.03), Some(0.1)]]).unwrap();
+        let json = site.to_json();
+        assert!(json.contains(r#""floors":[{"name":"G","elevation_m":0.0,"rssi_weight":0.03,"rssi_weight_without_movement":0.1}]"#), "{json}");
+        let again = Site::from_json(json.as_bytes()).unwrap();
+        assert_eq!(again.floors(), site.floors());
+        let packed = Site::from_bytes(&site.to_binary()).unwrap();
+        assert_eq!(packed.floors(), site.floors());
+        assert_eq!(packed.to_json(), json);
+    }
+
+    #[test]
     fn truncated_file_is_named_as_such() {
         for cut in [10, GOOD.len() / 2, GOOD.len() - 3] {
             assert!(matches!(err(&GOOD[..cut]), SiteError::Truncated { .. }), "cut at {cut}");
@@ -676,6 +711,14 @@ mod tests {
         ));
         let cases = [
             (GOOD.replace("\"format_version\": 1,", ""), "format_version"),
+            (
+                GOOD.replace("{\"name\": \"G\"}", "{\"name\": \"G\", \"rssi_weight\": 1.5}"),
+                "floors[0].rssi_weight",
+            ),
+            (
+                GOOD.replace("{\"name\": \"G\"}", "{\"name\": \"G\", \"rssi_weight_without_movement\": 0}"),
+                "floors[0].rssi_weight_without_movement",
+            ),
             (GOOD.replace("\"std_db\": 4", "\"std_db\": 0"), "states[0].fingerprint[0]"),
             (GOOD.replace("\"tx\": 0", "\"tx\": 3"), "states[0].fingerprint[0].tx"),
             (GOOD.replace("\"id\": 9", "\"id\": 7"), "states[1].id"),

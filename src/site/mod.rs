@@ -10,6 +10,7 @@ mod reach;
 mod zones;
 
 pub use binary::{LAYOUT_VERSION as BINARY_LAYOUT_VERSION, SIGNATURE as BINARY_SIGNATURE};
+pub(crate) use builder::fit_columns;
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
 pub use file::{IdHashing, SiteError, FORMAT_VERSION, MAX_COORDINATE_M};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
@@ -21,12 +22,36 @@ use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
 
 /// A floor of the site.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Floor {
     /// Display name ("B1", "F2", ...).
     pub name: String,
     /// Height of the floor above the site's reference, m.
     pub elevation_m: f64,
+    /// γ of Hoang eq. 14 while the engine is on this floor (its latest estimate's floor), in
+    /// epochs with a movement likelihood, chosen by leave-one-walk-out over the floor's survey
+    /// walks (Hoang §6.2's jackknife). `None`: the site-wide [`Calibration::rssi_weight`].
+    pub rssi_weight: Option<f64>,
+    /// The same in epochs without a movement likelihood; `None`: the site-wide
+    /// [`Calibration::rssi_weight_without_movement`].
+    pub rssi_weight_without_movement: Option<f64>,
+}
+
+impl Floor {
+    /// The first γ out of (0, 1], as (path, message), the floor being `floors[index]`.
+    pub(crate) fn check(&self, index: usize) -> Result<(), (String, String)> {
+        for (name, gamma) in [
+            ("rssi_weight", self.rssi_weight),
+            ("rssi_weight_without_movement", self.rssi_weight_without_movement),
+        ] {
+            if let Some(g) = gamma {
+                if !(g > 0.0 && g <= 1.0) {
+                    return Err((format!("floors[{index}].{name}"), format!("must be in (0, 1], got {g}")));
+                }
+            }
+        }
+        Ok(())
+    }
 }
 
 /// Whether a state was surveyed (has measured fingerprints) or synthesised between surveyed
@@ -251,6 +276,28 @@ impl Site {
     pub fn with_calibration(mut self, calibration: Calibration) -> Result<Site, SiteError> {
         calibration.check().map_err(|(path, message)| SiteError::Invalid { path, message })?;
         self.calibration = calibration;
+        Ok(self)
+    }
+
+    /// The site with each floor's calibrated γ, `weights[f]` = (with, without a movement
+    /// likelihood) for floor `f`; `Err` naming `floors[f].rssi_weight` if one is out of (0, 1]
+    /// or there are more entries than floors. Floors past the end keep theirs.
+    pub fn with_floor_rssi_weights(mut self, weights: &[[Option<f64>; 2]]) -> Result<Site, SiteError> {
+        if weights.len() > self.floors.len() {
+            return Err(SiteError::Invalid {
+                path: "floors".into(),
+                message: format!("{} floor weights for {} floors", weights.len(), self.floors.len()),
+            });
+        }
+        for (f, [with, without]) in weights.iter().enumerate() {
+            let floor = Floor {
+                rssi_weight: *with,
+                rssi_weight_without_movement: *without,
+                ..self.floors[f].clone()
+            };
+            floor.check(f).map_err(|(path, message)| SiteError::Invalid { path, message })?;
+            self.floors[f] = floor;
+        }
         Ok(self)
     }
 

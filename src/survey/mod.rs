@@ -13,7 +13,7 @@ pub use motion::{calibrate_motion, MotionCalibration};
 
 use crate::io::ilc::EventOptions;
 use crate::io::{FloorPlan, Trace};
-use crate::radio::{FitOptions, Reading, Scan, TransmitterId};
+use crate::radio::{FitOptions, Gaussian, Reading, Scan, TransmitterId};
 use crate::site::{BuildOptions, North, Site, SiteBuilder, SiteError, Zone, ZoneKind};
 use nalgebra::Point2;
 use serde::Serialize;
@@ -188,156 +188,482 @@ pub fn survey(
     north: North,
     options: &SurveyOptions,
 ) -> Result<(Site, SurveyReport), SiteError> {
-    let invalid = |path: &str, message: String| SiteError::Invalid { path: path.into(), message };
-    if !(options.spacing_m > 0.0 && options.coverage_m >= 0.0 && options.fingerprint_radius_m > 0.0) {
-        return Err(invalid("survey", "spacing and radii must be positive".into()));
-    }
-    let s = options.spacing_m;
-    let mut build = options.build;
-    if options.measure_clip {
-        let weakest = floors
-            .iter()
-            .flat_map(|f| &f.walks)
-            .flat_map(|w| &w.wifi_scans)
-            .flat_map(|scan| &scan.readings)
-            .filter(|r| matches!(r.transmitter, TransmitterId::Wifi { .. }) && r.rssi_dbm.is_finite())
-            .map(|r| r.rssi_dbm)
-            .fold(f64::INFINITY, f64::min);
-        if weakest.is_finite() {
-            build.fit.clip_dbm = weakest - 1.0;
-        }
-    }
-    let mut builder = SiteBuilder::new(name);
-    builder.north(north);
-    let mut reports = Vec::new();
-    let mut zones: Vec<Zone> = Vec::new();
-    for floor in floors {
-        let index = builder.floor(
-            &floor.name,
-            floor_rank(&floor.name).unwrap_or(reports.len() as i32) as f64 * STOREY_HEIGHT_M,
-        );
-        let mut report = FloorSurvey { name: floor.name.clone(), ..FloorSurvey::default() };
-        // Grid cells near where people walked.
-        let cell = |p: Point2<f64>| ((p.x / s).round() as i64, (p.y / s).round() as i64);
-        let centre = |c: (i64, i64)| Point2::new(c.0 as f64 * s, c.1 as f64 * s);
-        let reach = (options.coverage_m / s).ceil() as i64;
-        let mut cells: BTreeSet<(i64, i64)> = BTreeSet::new();
-        let mut paths = Vec::new();
-        for walk in floor.walks.iter().filter(|w| w.waypoints.len() >= 2) {
-            report.walks += 1;
-            let points = path_points(walk);
-            for &p in &points {
-                let (ci, cj) = cell(p);
-                for di in -reach..=reach {
-                    for dj in -reach..=reach {
-                        let c = (ci + di, cj + dj);
-                        if (centre(c) - p).norm() <= options.coverage_m {
-                            cells.insert(c);
-                        }
-                    }
-                }
-            }
-            paths.push(points);
-        }
-        let mut gaps: Vec<f64> = floor
-            .walks
-            .iter()
-            .flat_map(|w| {
-                w.wifi_scans.windows(2).map(|p| (p[1].timestamp_ns - p[0].timestamp_ns) as f64 * 1e-9)
-            })
-            .collect();
-        gaps.sort_by(f64::total_cmp);
-        report.scan_interval_median_s = gaps.get(gaps.len() / 2).copied().unwrap_or(f64::NAN);
-        // Scans train every cell within the fingerprint radius.
-        let mut training: HashMap<(i64, i64), Vec<Scan>> = HashMap::new();
-        let r = (options.fingerprint_radius_m / s).ceil() as i64;
-        for walk in &floor.walks {
-            for (p, scan) in positioned_scans(walk, options) {
-                report.scans += 1;
-                let (ci, cj) = cell(p);
-                for di in -r..=r {
-                    for dj in -r..=r {
-                        let c = (ci + di, cj + dj);
-                        if cells.contains(&c) && (centre(c) - p).norm() <= options.fingerprint_radius_m {
-                            training.entry(c).or_default().push(scan.clone());
-                        }
-                    }
-                }
-            }
-        }
-        // A state without a scan of its own would be "nowhere" to the radio: leave it out.
-        let mut ids: BTreeMap<(i64, i64), u32> = BTreeMap::new();
-        for c in cells {
-            if let Some(scans) = training.remove(&c) {
-                ids.insert(c, builder.state(index, centre(c), scans));
-            }
-        }
-        report.states = ids.len();
-        if let Some(plan) = floor.plan {
-            let made = plan_zones(&floor.name, plan, ids.iter().map(|(&c, &id)| (centre(c), id)));
-            report.zones = made.len();
-            report.zoned_states = made.iter().map(|z| z.states.len()).sum();
-            zones.extend(made);
-        }
-        // A plan polygon that survey walks went inside is open space, not a room with walls:
-        // plans label atria, decorative and "auxiliary" areas as polygons too.
-        let mut open: Vec<usize> = floor
-            .plan
-            .filter(|_| options.walls)
-            .map(|plan| {
-                (0..plan.rooms.len())
-                    .filter(|&r| paths.iter().flatten().any(|&p| plan.rooms[r].polygon.contains(p)))
-                    .collect()
-            })
-            .unwrap_or_default();
-        open.sort_unstable();
-        report.open_rooms = open.len();
-        // Edges: grid neighbours (8-connected) joined unless a wall separates them, or
-        // whenever a survey walk stepped from one to the other.
-        let mut walked: BTreeSet<((i64, i64), (i64, i64))> = BTreeSet::new();
-        for points in &paths {
-            for w in points.windows(2) {
-                let (a, b) = (cell(w[0]), cell(w[1]));
-                if a != b && (a.0 - b.0).abs() <= 1 && (a.1 - b.1).abs() <= 1 {
-                    walked.insert((a.min(b), a.max(b)));
-                }
-            }
-        }
-        for (&a, &ia) in &ids {
-            for (di, dj) in [(1, 0), (0, 1), (1, 1), (1, -1)] {
-                let b = (a.0 + di, a.1 + dj);
-                let Some(&ib) = ids.get(&b) else { continue };
-                let on_walk = walked.contains(&(a.min(b), a.max(b)));
-                let walled = options.walls
-                    && floor.plan.is_some_and(|plan| plan.crosses_wall_except(centre(a), centre(b), &open));
-                if walled {
-                    report.walled_edges += 1;
-                }
-                if !walled || on_walk {
-                    if walled {
-                        report.walked_edges += 1;
-                    }
-                    builder.edge(ia, ib, None);
-                    report.edges += 1;
-                }
-            }
-        }
-        reports.push(report);
-    }
-    // Builder ids are state indices.
-    let site = builder.build(build)?.with_zones(zones)?;
-    let transmitters = site.radio().transmitters().len();
-    Ok((site, SurveyReport { floors: reports, transmitters }))
+    PreparedSurvey::new(name, floors, north, options)?.site(&|_, _| true, None)
 }
 
-/// Zones from a floor plan's named polygons: each state (position, index) joins the smallest
-/// named polygon holding it. A zone is called `floor/name`, with ` #k` after the name when the
+/// A grid cell, by its indices (the centre is the indices × spacing).
+type Cell = (i64, i64);
+
+/// Training scans of a state, as (walk, scan) indices within its floor.
+type Training = Vec<(u32, u32)>;
+
+/// One survey walk, read once: where it went and its scans with interned transmitters.
+#[derive(Clone, Debug)]
+struct PreparedWalk {
+    /// Points every half metre along the waypoints; empty for a walk with fewer than two.
+    path: Vec<Point2<f64>>,
+    /// Positioned scans, stale readings removed, as (transmitter index, RSSI).
+    scans: Vec<Vec<(u32, f64)>>,
+    /// Times between consecutive WiFi scans, s.
+    gaps: Vec<f64>,
+    /// The weakest finite WiFi reading, dBm (infinite without one).
+    weakest_wifi_dbm: f64,
+}
+
+/// A grid cell some survey walk covered.
+#[derive(Clone, Debug, Default)]
+struct CandidateCell {
+    /// Walks (with a path) that passed within the coverage distance.
+    covered_by: Vec<u32>,
+    /// The scans (walk, scan) within the fingerprint radius, in walk then scan order.
+    training: Vec<(u32, u32)>,
+    /// The smallest named plan polygon holding the centre.
+    room: Option<usize>,
+}
+
+#[derive(Clone, Debug)]
+struct PreparedFloor<'a> {
+    name: String,
+    plan: Option<&'a FloorPlan>,
+    walks: Vec<PreparedWalk>,
+    cells: BTreeMap<Cell, CandidateCell>,
+}
+
+/// One state's fitted fingerprint.
+#[derive(Clone, Debug, PartialEq)]
+struct CellFit {
+    /// Training scans.
+    scans: u32,
+    /// Every transmitter (index into the survey's) read in those scans, sorted.
+    heard: Vec<u32>,
+    /// Model per transmitter heard with a finite RSSI, sorted.
+    models: Vec<(u32, Gaussian)>,
+}
+
+/// The fingerprints of one site built by [`PreparedSurvey`], kept to be reused: a site built
+/// from a subset of the walks refits only the states whose training scans changed.
+#[derive(Clone, Debug)]
+pub struct SurveyFits {
+    /// The clip level they were fitted at, dBm.
+    clip_dbm: f64,
+    /// The walks they were fitted from, per floor.
+    kept: Vec<Vec<bool>>,
+    /// Per floor, per state cell.
+    floors: Vec<BTreeMap<Cell, CellFit>>,
+    /// States fitted afresh (the rest were reused).
+    refitted: usize,
+}
+
+impl SurveyFits {
+    /// States whose fingerprints were fitted afresh rather than reused.
+    pub fn refitted(&self) -> usize {
+        self.refitted
+    }
+
+    /// States.
+    pub fn states(&self) -> usize {
+        self.floors.iter().map(BTreeMap::len).sum()
+    }
+}
+
+/// Survey walks read once (positions, transmitters interned, the grid cells each walk covers
+/// and trains) so that sites from any subset of the walks are cheap: the leave-one-walk-out
+/// of the survey's calibration builds one site per walk. [`survey`] is
+/// `PreparedSurvey::new(..)?.site(all walks, None)`.
+///
+/// A site from a subset equals, fingerprints and all, the site [`survey`] builds from those
+/// walks alone: states, edges and zones are recomputed from the subset's walks, and each
+/// state's fingerprints are refitted unless its training scans (and the clip level) are the
+/// ones the reused [`SurveyFits`] were fitted from, in which case the fit would be the same.
+#[derive(Clone, Debug)]
+pub struct PreparedSurvey<'a> {
+    name: String,
+    north: North,
+    options: SurveyOptions,
+    /// Every transmitter read in a positioned scan, sorted (the radio map's order).
+    transmitters: Vec<TransmitterId>,
+    floors: Vec<PreparedFloor<'a>>,
+}
+
+impl<'a> PreparedSurvey<'a> {
+    /// Reads the walks of `floors`.
+    pub fn new(
+        name: &str,
+        floors: &[SurveyFloor<'a>],
+        north: North,
+        options: &SurveyOptions,
+    ) -> Result<PreparedSurvey<'a>, SiteError> {
+        let invalid = |path: &str, message: String| SiteError::Invalid { path: path.into(), message };
+        if !(options.spacing_m > 0.0 && options.coverage_m >= 0.0 && options.fingerprint_radius_m > 0.0) {
+            return Err(invalid("survey", "spacing and radii must be positive".into()));
+        }
+        let s = options.spacing_m;
+        let cell = |p: Point2<f64>| ((p.x / s).round() as i64, (p.y / s).round() as i64);
+        let centre = |c: Cell| Point2::new(c.0 as f64 * s, c.1 as f64 * s);
+        // Transmitters interned once, in first-seen order, then renumbered in sorted order.
+        let mut interned: HashMap<TransmitterId, u32> = HashMap::new();
+        let mut prepared = Vec::with_capacity(floors.len());
+        for floor in floors {
+            let mut walks = Vec::with_capacity(floor.walks.len());
+            for walk in &floor.walks {
+                let scans = positioned_scans(walk, options)
+                    .into_iter()
+                    .map(|(p, scan)| {
+                        let readings = scan
+                            .readings
+                            .into_iter()
+                            .map(|r| {
+                                let next = interned.len() as u32;
+                                (*interned.entry(r.transmitter).or_insert(next), r.rssi_dbm)
+                            })
+                            .collect::<Vec<_>>();
+                        (p, readings)
+                    })
+                    .collect::<Vec<_>>();
+                let gaps = walk
+                    .wifi_scans
+                    .windows(2)
+                    .map(|p| (p[1].timestamp_ns - p[0].timestamp_ns) as f64 * 1e-9)
+                    .collect();
+                let weakest_wifi_dbm = walk
+                    .wifi_scans
+                    .iter()
+                    .flat_map(|scan| &scan.readings)
+                    .filter(|r| matches!(r.transmitter, TransmitterId::Wifi { .. }) && r.rssi_dbm.is_finite())
+                    .map(|r| r.rssi_dbm)
+                    .fold(f64::INFINITY, f64::min);
+                let path = if walk.waypoints.len() >= 2 { path_points(walk) } else { Vec::new() };
+                walks.push((path, scans, gaps, weakest_wifi_dbm));
+            }
+            prepared.push(walks);
+        }
+        let mut transmitters: Vec<(TransmitterId, u32)> = interned.into_iter().collect();
+        transmitters.sort_unstable();
+        let mut renumber = vec![0u32; transmitters.len()];
+        for (k, (_, old)) in transmitters.iter().enumerate() {
+            renumber[*old as usize] = k as u32;
+        }
+        let transmitters: Vec<TransmitterId> = transmitters.into_iter().map(|(id, _)| id).collect();
+        let mut out = Vec::with_capacity(floors.len());
+        for (floor, walks) in floors.iter().zip(prepared) {
+            // Grid cells near where people walked, and the walks that cover each.
+            let reach = (options.coverage_m / s).ceil() as i64;
+            let mut cells: BTreeMap<Cell, CandidateCell> = BTreeMap::new();
+            for (w, (path, ..)) in walks.iter().enumerate() {
+                for &p in path {
+                    let (ci, cj) = cell(p);
+                    for di in -reach..=reach {
+                        for dj in -reach..=reach {
+                            let c = (ci + di, cj + dj);
+                            if (centre(c) - p).norm() <= options.coverage_m {
+                                let covered = &mut cells.entry(c).or_default().covered_by;
+                                if covered.last() != Some(&(w as u32)) {
+                                    covered.push(w as u32);
+                                }
+                            }
+                        }
+                    }
+                }
+            }
+            // Scans train every covered cell within the fingerprint radius.
+            let r = (options.fingerprint_radius_m / s).ceil() as i64;
+            let mut prepared_walks = Vec::with_capacity(walks.len());
+            for (w, (path, scans, gaps, weakest_wifi_dbm)) in walks.into_iter().enumerate() {
+                let mut interned_scans = Vec::with_capacity(scans.len());
+                for (k, (p, readings)) in scans.into_iter().enumerate() {
+                    let (ci, cj) = cell(p);
+                    for di in -r..=r {
+                        for dj in -r..=r {
+                            let c = (ci + di, cj + dj);
+                            if let Some(candidate) = cells.get_mut(&c) {
+                                if (centre(c) - p).norm() <= options.fingerprint_radius_m {
+                                    candidate.training.push((w as u32, k as u32));
+                                }
+                            }
+                        }
+                    }
+                    interned_scans
+                        .push(readings.into_iter().map(|(t, rssi)| (renumber[t as usize], rssi)).collect());
+                }
+                prepared_walks.push(PreparedWalk { path, scans: interned_scans, gaps, weakest_wifi_dbm });
+            }
+            if let Some(plan) = floor.plan {
+                for (&c, candidate) in cells.iter_mut() {
+                    candidate.room =
+                        plan.room_at(centre(c)).filter(|&r| !plan.rooms[r].name.trim().is_empty());
+                }
+            }
+            out.push(PreparedFloor {
+                name: floor.name.clone(),
+                plan: floor.plan,
+                walks: prepared_walks,
+                cells,
+            });
+        }
+        Ok(PreparedSurvey {
+            name: name.to_owned(),
+            north,
+            options: options.clone(),
+            transmitters,
+            floors: out,
+        })
+    }
+
+    /// Walks on floor `floor` (in the order given).
+    pub fn walk_count(&self, floor: usize) -> usize {
+        self.floors.get(floor).map_or(0, |f| f.walks.len())
+    }
+
+    /// The clip level of a site from the walks `keep` keeps, dBm.
+    fn clip_dbm(&self, keep: &dyn Fn(usize, usize) -> bool) -> f64 {
+        if !self.options.measure_clip {
+            return self.options.build.fit.clip_dbm;
+        }
+        let weakest = self
+            .floors
+            .iter()
+            .enumerate()
+            .flat_map(|(f, floor)| floor.walks.iter().enumerate().filter(move |(w, _)| keep(f, *w)))
+            .map(|(_, w)| w.weakest_wifi_dbm)
+            .fold(f64::INFINITY, f64::min);
+        if weakest.is_finite() {
+            weakest - 1.0
+        } else {
+            self.options.build.fit.clip_dbm
+        }
+    }
+
+    /// Fits the states of the site from the walks `keep(floor, walk)` keeps, reusing from
+    /// `reuse` every state whose training scans are the same; the fits of states that need one
+    /// run on `threads` threads.
+    pub fn fit(
+        &self,
+        keep: &dyn Fn(usize, usize) -> bool,
+        reuse: Option<&SurveyFits>,
+        threads: usize,
+    ) -> SurveyFits {
+        let clip_dbm = self.clip_dbm(keep);
+        let kept: Vec<Vec<bool>> = self
+            .floors
+            .iter()
+            .enumerate()
+            .map(|(f, floor)| (0..floor.walks.len()).map(|w| keep(f, w)).collect())
+            .collect();
+        let reuse = reuse.filter(|r| r.clip_dbm == clip_dbm && r.kept.len() == kept.len());
+        let build =
+            BuildOptions { fit: FitOptions { clip_dbm, ..self.options.build.fit }, ..self.options.build };
+        let fit = build.stored_fit();
+        let mut floors: Vec<BTreeMap<Cell, CellFit>> = vec![BTreeMap::new(); self.floors.len()];
+        // Cells to fit: (floor, cell, kept training scans).
+        let mut todo: Vec<(usize, Cell, Training)> = Vec::new();
+        for (f, floor) in self.floors.iter().enumerate() {
+            let kept = &kept[f];
+            for (&c, candidate) in &floor.cells {
+                if !candidate.covered_by.iter().any(|&w| kept[w as usize]) {
+                    continue;
+                }
+                let training: Training =
+                    candidate.training.iter().copied().filter(|&(w, _)| kept[w as usize]).collect();
+                // A state without a scan of its own would be "nowhere" to the radio: left out.
+                if training.is_empty() {
+                    continue;
+                }
+                // The same scans as the reused fit: every scan it had is still kept.
+                let same = reuse.and_then(|r| {
+                    let was = &r.kept[f];
+                    let unchanged = was.len() == kept.len()
+                        && candidate.training.iter().all(|&(w, _)| was[w as usize] == kept[w as usize]);
+                    unchanged.then(|| r.floors[f].get(&c)).flatten()
+                });
+                match same {
+                    Some(cached) => {
+                        floors[f].insert(c, cached.clone());
+                    }
+                    None => todo.push((f, c, training)),
+                }
+            }
+        }
+        let fit_cell = |f: usize, training: &[(u32, u32)]| -> CellFit {
+            let walks = &self.floors[f].walks;
+            let mut readings = Vec::new();
+            for (k, &(w, scan)) in training.iter().enumerate() {
+                readings.extend(
+                    walks[w as usize].scans[scan as usize].iter().map(|&(t, rssi)| (t, k as u32, rssi)),
+                );
+            }
+            let mut heard: Vec<u32> = readings.iter().map(|r| r.0).collect();
+            heard.sort_unstable();
+            heard.dedup();
+            let models = crate::site::fit_columns(readings, training.len(), build.model, &fit);
+            CellFit { scans: training.len() as u32, heard, models }
+        };
+        let threads = threads.max(1).min(todo.len().max(1));
+        let chunk = todo.len().div_ceil(threads).max(1);
+        let fitted: Vec<(usize, Cell, CellFit)> = if threads == 1 {
+            todo.iter().map(|(f, c, t)| (*f, *c, fit_cell(*f, t))).collect()
+        } else {
+            std::thread::scope(|scope| {
+                let workers: Vec<_> = todo
+                    .chunks(chunk)
+                    .map(|part| {
+                        let fit_cell = &fit_cell;
+                        scope.spawn(move || {
+                            part.iter().map(|(f, c, t)| (*f, *c, fit_cell(*f, t))).collect::<Vec<_>>()
+                        })
+                    })
+                    .collect();
+                workers
+                    .into_iter()
+                    .flat_map(|w| w.join().unwrap_or_else(|e| std::panic::resume_unwind(e)))
+                    .collect()
+            })
+        };
+        let refitted = fitted.len();
+        for (f, c, cell_fit) in fitted {
+            floors[f].insert(c, cell_fit);
+        }
+        SurveyFits { clip_dbm, kept, floors, refitted }
+    }
+
+    /// The site from the walks `keep(floor, walk)` keeps (walk indices as given to
+    /// [`new`](Self::new)), reusing the fingerprints of `reuse` where they are the same.
+    pub fn site(
+        &self,
+        keep: &dyn Fn(usize, usize) -> bool,
+        reuse: Option<&SurveyFits>,
+    ) -> Result<(Site, SurveyReport), SiteError> {
+        let threads =
+            if reuse.is_some() { 1 } else { std::thread::available_parallelism().map_or(1, |n| n.get()) };
+        let fits = self.fit(keep, reuse, threads);
+        self.assemble(&fits)
+    }
+
+    /// The site from fitted states.
+    pub fn assemble(&self, fits: &SurveyFits) -> Result<(Site, SurveyReport), SiteError> {
+        let options = &self.options;
+        let s = options.spacing_m;
+        let centre = |c: Cell| Point2::new(c.0 as f64 * s, c.1 as f64 * s);
+        let cell = |p: Point2<f64>| ((p.x / s).round() as i64, (p.y / s).round() as i64);
+        // The transmitters these states read, renumbered in order.
+        let mut local = vec![u32::MAX; self.transmitters.len()];
+        for cell_fit in fits.floors.iter().flat_map(|f| f.values()) {
+            for &t in &cell_fit.heard {
+                local[t as usize] = 0;
+            }
+        }
+        let mut ids = Vec::new();
+        for (t, slot) in local.iter_mut().enumerate() {
+            if *slot == 0 {
+                *slot = ids.len() as u32;
+                ids.push(self.transmitters[t].clone());
+            }
+        }
+        let mut builder = SiteBuilder::new(&self.name);
+        builder.north(self.north);
+        let mut triples = Vec::new();
+        let mut reports = Vec::new();
+        let mut zones: Vec<Zone> = Vec::new();
+        for (f, (floor, kept)) in self.floors.iter().zip(&fits.kept).enumerate() {
+            let index = builder.floor(
+                &floor.name,
+                floor_rank(&floor.name).unwrap_or(reports.len() as i32) as f64 * STOREY_HEIGHT_M,
+            );
+            let mut report = FloorSurvey { name: floor.name.clone(), ..FloorSurvey::default() };
+            let walks: Vec<&PreparedWalk> =
+                floor.walks.iter().zip(kept).filter(|(_, &k)| k).map(|(w, _)| w).collect();
+            report.walks = walks.iter().filter(|w| !w.path.is_empty()).count();
+            report.scans = walks.iter().map(|w| w.scans.len()).sum();
+            let mut gaps: Vec<f64> = walks.iter().flat_map(|w| w.gaps.iter().copied()).collect();
+            gaps.sort_by(f64::total_cmp);
+            report.scan_interval_median_s = gaps.get(gaps.len() / 2).copied().unwrap_or(f64::NAN);
+            let mut ids_of: BTreeMap<Cell, u32> = BTreeMap::new();
+            for (&c, cell_fit) in &fits.floors[f] {
+                let id = builder.fitted_state(index, centre(c), cell_fit.scans);
+                triples.extend(cell_fit.models.iter().map(|&(t, g)| (id, local[t as usize], g)));
+                ids_of.insert(c, id);
+            }
+            report.states = ids_of.len();
+            if let Some(plan) = floor.plan {
+                let made =
+                    plan_zones(&floor.name, plan, ids_of.iter().map(|(c, &id)| (floor.cells[c].room, id)));
+                report.zones = made.len();
+                report.zoned_states = made.iter().map(|z| z.states.len()).sum();
+                zones.extend(made);
+            }
+            let paths: Vec<&Vec<Point2<f64>>> =
+                walks.iter().map(|w| &w.path).filter(|p| !p.is_empty()).collect();
+            // A plan polygon that survey walks went inside is open space, not a room with
+            // walls: plans label atria, decorative and "auxiliary" areas as polygons too.
+            let mut open: Vec<usize> = floor
+                .plan
+                .filter(|_| options.walls)
+                .map(|plan| {
+                    (0..plan.rooms.len())
+                        .filter(|&r| {
+                            paths.iter().copied().flatten().any(|&p| plan.rooms[r].polygon.contains(p))
+                        })
+                        .collect()
+                })
+                .unwrap_or_default();
+            open.sort_unstable();
+            report.open_rooms = open.len();
+            // Edges: grid neighbours (8-connected) joined unless a wall separates them, or
+            // whenever a survey walk stepped from one to the other.
+            let mut walked: BTreeSet<(Cell, Cell)> = BTreeSet::new();
+            for points in &paths {
+                for w in points.windows(2) {
+                    let (a, b) = (cell(w[0]), cell(w[1]));
+                    if a != b && (a.0 - b.0).abs() <= 1 && (a.1 - b.1).abs() <= 1 {
+                        walked.insert((a.min(b), a.max(b)));
+                    }
+                }
+            }
+            for (&a, &ia) in &ids_of {
+                for (di, dj) in [(1, 0), (0, 1), (1, 1), (1, -1)] {
+                    let b = (a.0 + di, a.1 + dj);
+                    let Some(&ib) = ids_of.get(&b) else { continue };
+                    let on_walk = walked.contains(&(a.min(b), a.max(b)));
+                    let walled = options.walls
+                        && floor
+                            .plan
+                            .is_some_and(|plan| plan.crosses_wall_except(centre(a), centre(b), &open));
+                    if walled {
+                        report.walled_edges += 1;
+                    }
+                    if !walled || on_walk {
+                        if walled {
+                            report.walked_edges += 1;
+                        }
+                        builder.edge(ia, ib, None);
+                        report.edges += 1;
+                    }
+                }
+            }
+            reports.push(report);
+        }
+        let build = BuildOptions {
+            fit: FitOptions { clip_dbm: fits.clip_dbm, ..options.build.fit },
+            ..options.build
+        };
+        // Builder ids are state indices.
+        let site = builder.build_fitted(build, ids, triples)?.with_zones(zones)?;
+        let transmitters = site.radio().transmitters().len();
+        Ok((site, SurveyReport { floors: reports, transmitters }))
+    }
+}
+
+/// Zones from a floor plan's named polygons: each state (its smallest named polygon, index)
+/// joins that polygon. A zone is called `floor/name`, with ` #k` after the name when the
 /// plan has several polygons of that name (k counts them in plan order), so names are unique
 /// in the site. Polygons holding no state make no zone.
-fn plan_zones(floor: &str, plan: &FloorPlan, states: impl Iterator<Item = (Point2<f64>, u32)>) -> Vec<Zone> {
+fn plan_zones(
+    floor: &str,
+    plan: &FloorPlan,
+    states: impl Iterator<Item = (Option<usize>, u32)>,
+) -> Vec<Zone> {
     let mut members: BTreeMap<usize, Vec<u32>> = BTreeMap::new();
-    for (p, id) in states {
-        if let Some(room) = plan.room_at(p).filter(|&r| !plan.rooms[r].name.trim().is_empty()) {
+    for (room, id) in states {
+        if let Some(room) = room {
             members.entry(room).or_default().push(id);
         }
     }
@@ -507,6 +833,72 @@ mod tests {
             .0
             .zones()
             .is_empty());
+    }
+
+    #[test]
+    fn a_site_without_a_walk_reusing_fits_is_the_survey_without_it() {
+        let mut weak = walk("d", (10.0, -4.0), (10.0, 10.0), 14);
+        // The weakest WiFi reading of all: leaving "d" out moves the clip level.
+        weak.wifi_scans[3].readings.push(Reading {
+            transmitter: TransmitterId::wifi("aa:bb:cc:dd:ee:44").unwrap(),
+            rssi_dbm: -99.0,
+            age_ns: 0,
+        });
+        let walks = [
+            walk("a", (0.0, 1.0), (20.0, 1.0), 20),
+            walk("b", (20.0, 1.0), (0.0, 1.0), 20),
+            walk("c", (0.0, 7.0), (16.0, 7.0), 16),
+            weak,
+            walk("e", (22.0, 0.0), (28.0, 0.0), 6),
+        ];
+        let floors = [
+            SurveyFloor { name: "F1".into(), plan: None, walks: walks[..4].iter().collect() },
+            SurveyFloor { name: "F2".into(), plan: None, walks: vec![&walks[0], &walks[1], &walks[4]] },
+        ];
+        let options = SurveyOptions::default();
+        let prepared = PreparedSurvey::new("test", &floors, North::default(), &options).unwrap();
+        let all = prepared.fit(&|_, _| true, None, 2);
+        assert_eq!(all.refitted(), all.states());
+        let (full, _) = prepared.assemble(&all).unwrap();
+        let (direct, _) = survey("test", &floors, North::default(), &options).unwrap();
+        assert_eq!(full.to_json(), direct.to_json());
+        for (f, out) in [(0, 0), (0, 2), (0, 3), (1, 1), (1, 2)] {
+            let keep = |ff: usize, w: usize| !(ff == f && w == out);
+            let fits = prepared.fit(&keep, Some(&all), 1);
+            let (incremental, _) = prepared.assemble(&fits).unwrap();
+            let without: Vec<SurveyFloor> = floors
+                .iter()
+                .enumerate()
+                .map(|(ff, floor)| SurveyFloor {
+                    walks: floor
+                        .walks
+                        .iter()
+                        .enumerate()
+                        .filter(|(w, _)| keep(ff, *w))
+                        .map(|(_, t)| *t)
+                        .collect(),
+                    ..floor.clone()
+                })
+                .collect();
+            let (rebuilt, _) = survey("test", &without, North::default(), &options).unwrap();
+            assert_eq!(incremental.to_json(), rebuilt.to_json(), "without floor {f} walk {out}");
+            assert!(incremental.states().len() <= full.states().len());
+            if (f, out) == (0, 3) {
+                // The clip level moved: every state is fitted again.
+                assert!(incremental.radio().clip_dbm() > full.radio().clip_dbm());
+                assert_eq!(fits.refitted(), fits.states());
+            } else {
+                assert!(fits.refitted() > 0 && fits.refitted() < fits.states(), "{}", fits.refitted());
+            }
+        }
+        // Walk "c" alone covered y = 7 away from "d" (x = 10): its states go with it.
+        let fits = prepared.fit(&|f, w| !(f == 0 && w == 2), Some(&all), 1);
+        let (without_c, _) = prepared.assemble(&fits).unwrap();
+        let high = |site: &Site| {
+            site.states().iter().filter(|s| s.floor == 0 && s.position.y > 5.0 && s.position.x < 6.0).count()
+        };
+        assert!(high(&full) > 0);
+        assert_eq!(high(&without_c), 0);
     }
 
     #[test]
