@@ -54,15 +54,18 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     let floor = &calibration.floors[0];
     assert_eq!(floor.gamma.len(), real::GAMMA_GRID.len());
     assert_eq!(floor.gamma.iter().map(|p| p.walks_preferring).sum::<usize>(), floor.walks);
-    let floor_gamma = floor.rssi_weight.expect("γ per floor");
+    // One floor: its best γ is the site-wide one, so it records none of its own.
+    assert_eq!(floor.best_rssi_weight, Some(gamma));
+    let floor_gamma = floor.rssi_weight;
+    assert_eq!(floor_gamma, None, "{floor:?}");
     assert!(floor.jackknife_se_m.is_some_and(|se| se.is_finite() && se > 0.0), "{floor:?}");
     assert!(calibration.refitted_share > 0.0 && calibration.refitted_share < 1.0);
-    assert_eq!(site.floors()[0].rssi_weight, Some(floor_gamma));
+    assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
 
     // The calibrated site survives its file format.
     let site = Arc::new(Site::from_json(site.to_json().as_bytes()).expect("reloads"));
     assert_eq!(site.calibration().rssi_weight, Some(gamma));
-    assert_eq!(site.floors()[0].rssi_weight, Some(floor_gamma));
+    assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
 
     let (reports, walks) = real::evaluate_on(&site, &floors, &options, &|| {}).expect("replays");
     assert_eq!(walks.len(), 3);

@@ -270,11 +270,12 @@ fn print_calibration(c: &evaluation::CalibrationReport) {
             .map(|p| format!("{}: {:.2} ({})", p.gamma, p.mean_error_m, p.walks_preferring))
             .collect();
         println!(
-            "{:>4}: γ {} ± {:.2} m (without movement {}), {} walks, {} epochs | {}",
+            "{:>4}: best γ {} ± {:.2} m, recorded {} (without movement {}), {} walks, {} epochs | {}",
             f.name,
-            f.rssi_weight.map_or("-".into(), |g| g.to_string()),
+            f.best_rssi_weight.map_or("-".into(), |g| g.to_string()),
             f.jackknife_se_m.unwrap_or(f64::NAN),
-            f.rssi_weight_without_movement.map_or("-".into(), |g| g.to_string()),
+            f.rssi_weight.map_or("site-wide".into(), |g| g.to_string()),
+            f.rssi_weight_without_movement.map_or("site-wide".into(), |g| g.to_string()),
             f.walks,
             f.epochs,
             curve.join(", ")
