@@ -56,6 +56,11 @@ pub const VERSION: u32 = 1;
 /// exp(−4²/2) = 3.4e-4 of the Gaussian's peak. Bounds the states a pass considers.
 pub const CANDIDATE_SIGMAS: f64 = 4.0;
 
+/// The largest count or strength a model file may hold: 10¹², more moves than a phone makes in
+/// a lifetime of 1 s epochs (3·10⁹ in a century). Bounds every sum of counts far from overflow,
+/// so no multiplier can be infinite or NaN.
+pub const MAX_COUNT: f64 = 1e12;
+
 /// Expected counts below this are not stored: such a count moves a multiplier by under 1e-6 of
 /// the pseudo-count.
 const NEGLIGIBLE_COUNT: f64 = 1e-6;
@@ -480,7 +485,7 @@ impl HabitModel {
                 if k > 0 && row.to[k - 1] >= j {
                     return Err(invalid(format!("transitions[{r}].to[{k}]"), "states must ascend".into()));
                 }
-                if !(c.is_finite() && c >= 0.0) {
+                if !(c.is_finite() && (0.0..=MAX_COUNT).contains(&c)) {
                     return Err(invalid(
                         format!("transitions[{r}].count[{k}]"),
                         format!("{c} is not a count"),
@@ -493,14 +498,14 @@ impl HabitModel {
             }
         }
         if let Some(k) = file.strength {
-            if !(k.is_finite() && k > 0.0) {
+            if !(k.is_finite() && k > 0.0 && k <= MAX_COUNT) {
                 return Err(invalid("strength".into(), format!("{k} is not a pseudo-count > 0")));
             }
         }
         let f = &file.fix;
         let fix_values =
             [f.fixes, f.weight, f.normalised_square, f.weighted_residual[0], f.weighted_residual[1]];
-        if fix_values.iter().any(|v| !v.is_finite())
+        if fix_values.iter().any(|v| !(v.is_finite() && v.abs() <= MAX_COUNT))
             || f.fixes < 0.0
             || f.weight < 0.0
             || f.normalised_square < 0.0
@@ -982,7 +987,8 @@ impl HabitPrior {
         for (j, a) in row.iter_mut() {
             let h =
                 prior.entries.binary_search_by_key(j, |e| e.0).map_or(prior.default, |k| prior.entries[k].1);
-            *a *= h;
+            // A model's values are bounded (MAX_COUNT), so h is finite; guard anyway.
+            *a *= if h.is_finite() { h } else { 1.0 };
             after += *a;
         }
         if after > 0.0 && before > 0.0 {

@@ -128,6 +128,14 @@ fn the_model_round_trips_and_bad_models_are_refused() {
             &|e| matches!(e, HabitError::Invalid { path, .. } if path == "transitions[0].to[0]"),
         ),
         (edit(&|v| v["fix"]["weight"] = (-1.0).into()), &|e| matches!(e, HabitError::Invalid { .. })),
+        (
+            edit(&|v| v["transitions"][0]["count"][0] = 1e300.into()),
+            &|e| matches!(e, HabitError::Invalid { path, .. } if path == "transitions[0].count[0]"),
+        ),
+        (
+            edit(&|v| v["strength"] = 1e300.into()),
+            &|e| matches!(e, HabitError::Invalid { path, .. } if path == "strength"),
+        ),
     ];
     for (json, expected) in cases {
         let e = other.import_habits(&json).unwrap_err();
@@ -233,4 +241,31 @@ fn habits_that_do_not_predict_are_not_applied() {
     let mut plain = engine_on(&site);
     let t = 1000 * SECOND;
     assert_eq!(predicted_from_the_middle(&mut both, t), predicted_from_the_middle(&mut plain, t));
+}
+
+proptest::proptest! {
+    #![proptest_config(proptest::prelude::ProptestConfig { cases: 96, ..Default::default() })]
+
+    /// A damaged model (any byte replaced, or the text cut anywhere) is refused or accepted,
+    /// never a panic, and the engine goes on positioning either way.
+    #[test]
+    fn damaged_models_never_break_the_engine(at in 0usize..10_000, byte in 0u8..128, cut in proptest::bool::ANY) {
+        let site = Arc::new(two_floor_site());
+        let mut learned = engine_on(&site);
+        walk_east(&mut learned, 0..3);
+        learned.learn_habits().unwrap();
+        let mut json = learned.export_habits().into_bytes();
+        let at = at % json.len();
+        if cut { json.truncate(at) } else { json[at] = byte }
+        let Ok(text) = String::from_utf8(json) else { return Ok(()) };
+        let mut engine = engine_on(&site);
+        let before = engine.export_habits();
+        match engine.import_habits(&text) {
+            Ok(()) => {}
+            Err(_) => proptest::prop_assert_eq!(engine.export_habits(), before),
+        }
+        let p = engine.push_scan(&scan(SECOND, &readings_at(6.0))).unwrap();
+        proptest::prop_assert!(p.x.is_finite() && p.accuracy_m > 0.0);
+        proptest::prop_assert!((engine.posterior().iter().sum::<f64>() - 1.0).abs() < 1e-9);
+    }
 }
