@@ -30,6 +30,17 @@ static waymark_sample *read_samples(FILE *f, size_t n) {
 }
 
 /* The salt file's hex digits as bytes into `salt` (at most `cap`); the byte count, or 0. */
+/* The `nw` readings of a scan line; the BSSIDs live in `*bssids` (free both). */
+static waymark_wifi_reading *read_scan(FILE *f, size_t nw, char (**bssids)[32]) {
+    waymark_wifi_reading *w = calloc(nw ? nw : 1, sizeof *w);
+    *bssids = calloc(nw ? nw : 1, sizeof **bssids);
+    for (size_t i = 0; i < nw; i++) {
+        if (fscanf(f, "%31s %lf", (*bssids)[i], &w[i].rssi_dbm) != 2) exit(2);
+        w[i].bssid = (*bssids)[i];
+    }
+    return w;
+}
+
 static size_t read_salt(const char *path, uint8_t *salt, size_t cap) {
     size_t len = 0, n = 0;
     char *text = read_file(path, &len);
@@ -65,12 +76,8 @@ static void walk(const char *site_path, const char *walk_path, const uint8_t *sa
         free(a);
         free(g);
         free(m);
-        waymark_wifi_reading *w = calloc(nw ? nw : 1, sizeof *w);
-        char (*bssids)[32] = calloc(nw ? nw : 1, sizeof *bssids);
-        for (size_t i = 0; i < nw; i++) {
-            if (fscanf(f, "%31s %lf", bssids[i], &w[i].rssi_dbm) != 2) exit(2);
-            w[i].bssid = bssids[i];
-        }
+        char (*bssids)[32] = NULL;
+        waymark_wifi_reading *w = read_scan(f, nw, &bssids);
         waymark_position p;
         waymark_result r = waymark_engine_push_scan(engine, t, w, nw, NULL, 0, &p);
         if (r == WAYMARK_RESULT_OK) {
@@ -390,12 +397,8 @@ static void replay_with_fixes(waymark_engine *engine, const char *walk_path, int
         free(a);
         free(g);
         free(m);
-        waymark_wifi_reading *w = calloc(nw ? nw : 1, sizeof *w);
-        char (*bssids)[32] = calloc(nw ? nw : 1, sizeof *bssids);
-        for (size_t i = 0; i < nw; i++) {
-            if (fscanf(f, "%31s %lf", bssids[i], &w[i].rssi_dbm) != 2) exit(2);
-            w[i].bssid = bssids[i];
-        }
+        char (*bssids)[32] = NULL;
+        waymark_wifi_reading *w = read_scan(f, nw, &bssids);
         if (waymark_engine_push_scan(engine, t, w, nw, NULL, 0, NULL) == WAYMARK_RESULT_OK) {
             positions++;
             if (positions % 7 == 3 &&

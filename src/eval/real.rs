@@ -479,16 +479,21 @@ pub struct WalkResult {
     pub estimates: BTreeMap<String, Vec<Estimate>>,
 }
 
-/// Builds the site from the survey walks of `floors` (one multi-floor site).
-pub fn survey_site(floors: &[FloorData], options: &EvalOptions) -> Result<(Site, SurveyReport), EvalError> {
-    let inputs: Vec<SurveyFloor> = floors
+/// The survey walks of `floors` as the survey reads them.
+fn survey_inputs(floors: &[FloorData]) -> Vec<SurveyFloor<'_>> {
+    floors
         .iter()
         .map(|f| SurveyFloor {
             name: f.name.clone(),
             plan: f.plan.as_ref(),
             walks: f.survey.iter().collect(),
         })
-        .collect();
+        .collect()
+}
+
+/// Builds the site from the survey walks of `floors` (one multi-floor site).
+pub fn survey_site(floors: &[FloorData], options: &EvalOptions) -> Result<(Site, SurveyReport), EvalError> {
+    let inputs = survey_inputs(floors);
     Ok(survey("eval", &inputs, options.north, &options.survey)?)
 }
 
@@ -917,14 +922,7 @@ pub fn survey_calibrated(
         heading_offset_deg: m.heading_offset_rad.to_degrees(),
         walks: m.walks,
     });
-    let inputs: Vec<SurveyFloor> = floors
-        .iter()
-        .map(|f| SurveyFloor {
-            name: f.name.clone(),
-            plan: f.plan.as_ref(),
-            walks: f.survey.iter().collect(),
-        })
-        .collect();
+    let inputs = survey_inputs(floors);
     let prepared = PreparedSurvey::new("eval", &inputs, north, &options.survey)?;
     let full = prepared.fit(&|_, _| true, None, options.threads);
     let (site, survey) = prepared.assemble(&full)?;
