@@ -74,10 +74,13 @@ pub struct HabitOptions {
     /// barely moves them, and the prior never makes an allowed move impossible.
     pub pseudocount: f64,
     /// Pseudo-fixes at zero bias and unit spread factor behind the fix-error estimate. Default
-    /// 5: one fix, or a few, cannot shift every later fix; twenty agreeing fixes carry 80% of
-    /// the weight.
+    /// 5, Waymark's choice, not a paper's or a measurement (no data here has external fixes):
+    /// one fix, or a few, cannot shift every later fix; twenty agreeing fixes carry 80% of the
+    /// weight.
     pub fix_prior_fixes: f64,
-    /// Most Baum-Welch iterations per pass. Default 10.
+    /// Most Baum-Welch iterations per pass. Default 10: on the survey walks of the competition
+    /// floors (`waymark eval --habits`) passes stopped on the tolerance after 9 (F1), 5 (F2),
+    /// 7 (B1) and 7 (all five) iterations, so 10 binds only a pass that has not converged.
     pub max_iterations: usize,
     /// Stop when an iteration improves ln p(o | θ) by less than this many nats per epoch.
     /// Default 1e-3, the tolerance of [`FitOptions::default`](crate::hmm::learn::FitOptions).
