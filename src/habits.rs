@@ -409,6 +409,22 @@ impl HabitModel {
         self.strength
     }
 
+    /// Sets κ (`None`: the learned moves are not applied), for a strength chosen outside the
+    /// pass, e.g. by positioning error on labelled walks (`waymark eval --habits`). Refused,
+    /// leaving the model unchanged, unless finite, > 0 and at most [`MAX_COUNT`].
+    pub fn set_strength(&mut self, strength: Option<f64>) -> Result<(), HabitError> {
+        if let Some(k) = strength {
+            if !(k.is_finite() && k > 0.0 && k <= MAX_COUNT) {
+                return Err(HabitError::Invalid {
+                    path: "strength".into(),
+                    message: format!("{k} is not a pseudo-count > 0"),
+                });
+            }
+        }
+        self.strength = strength;
+        Ok(())
+    }
+
     /// The fix statistics.
     pub fn fix_statistics(&self) -> &FixStatistics {
         &self.fix

@@ -77,6 +77,21 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     }
     // The fused engine beats a single scan on average even on this small survey.
     assert!(reports["forward-auto"].pooled.mean_m < reports["wifi-mle"].pooled.mean_m + 1.0);
+
+    // Habits from the survey walks, their strength chosen on the held-out half of them.
+    let (model, learning, selection) = real::survey_habits(&site, &floors, &options).expect("habits");
+    assert!(learning.epochs > 0 && learning.feedback_epochs > 0, "{learning:?}");
+    assert_eq!(selection.walks, 12, "every survey walk held out once");
+    assert!(selection.epochs > 0);
+    assert_eq!(selection.pass_strength, learning.strength);
+    assert_eq!(selection.strengths.len(), real::HELD_OUT_STRENGTHS.len());
+    for p in &selection.strengths {
+        for d in [p.forward_m, p.fixed_lag_m, p.viterbi_m] {
+            assert!(d[0].is_finite() && d[1].is_finite() && d[1] >= 0.0, "{p:?}");
+        }
+    }
+    assert_eq!(real::choose_held_out_strength(&selection.strengths).is_some(), selection.strength.is_some());
+    assert_eq!(model.strength(), selection.strength);
 }
 
 /// A real floor plan (hundreds of rooms in lon/lat) drawn under a walk: every ring of the plan

@@ -462,6 +462,8 @@ pub struct EvalReport {
 pub struct HabitsComparison {
     /// What the learning pass did.
     pub learning: HabitReport,
+    /// How the strength was chosen.
+    pub selection: HabitSelection,
     /// Learning time (survey replays and Baum-Welch), s.
     pub learning_seconds: f64,
     /// Per configuration key, with the habits.
@@ -607,39 +609,12 @@ pub fn evaluate_on(
                 engine.set_habits(HabitModel::clone(habits));
             }
             let r = replay(&mut engine, trace, &ReplayOptions { mask, ..options.replay });
-            let live = live_estimates(&r.positions);
-            // Smoothed points carry the live radius of their epoch.
-            let radius: HashMap<u64, (f64, f64)> =
-                live.iter().map(|e| (e.timestamp_ns, (e.accuracy_m, e.accuracy_95_m))).collect();
-            let smoothed = |points: &[crate::TrackPoint]| -> Vec<Estimate> {
-                points
-                    .iter()
-                    .map(|p| {
-                        let (a68, a95) = radius.get(&p.timestamp_ns).copied().unwrap_or((f64::NAN, f64::NAN));
-                        Estimate {
-                            timestamp_ns: p.timestamp_ns,
-                            floor: p.floor,
-                            x: p.x,
-                            y: p.y,
-                            accuracy_m: a68,
-                            accuracy_95_m: a95,
-                            zone: site.zone_of(p.state as usize),
-                        }
-                    })
-                    .collect()
-            };
+            let [live, lagged, viterbi] = decoded(site, &r);
             if smoothing {
                 if wanted("viterbi-auto") {
-                    result.estimates.insert("viterbi-auto".into(), smoothed(&r.track));
+                    result.estimates.insert("viterbi-auto".into(), viterbi);
                 }
                 if wanted("fixed-lag-auto") {
-                    // The last `lag` epochs get their estimate when the walk ends: from the
-                    // final track, as an app flushing at the end of a session would.
-                    let mut lagged = smoothed(&r.fixed_lag);
-                    let last = lagged.last().map(|e| e.timestamp_ns);
-                    let tail = r.track.iter().filter(|p| !last.is_some_and(|l| p.timestamp_ns <= l));
-                    lagged.extend(smoothed(&tail.cloned().collect::<Vec<_>>()));
-                    lagged.dedup_by_key(|e| e.timestamp_ns);
                     result.estimates.insert("fixed-lag-auto".into(), lagged);
                 }
             }
@@ -680,29 +655,188 @@ pub fn evaluate_on(
 /// state), so every confirmation names one to four states.
 pub const WAYPOINT_FEEDBACK_SPACINGS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
+/// The strengths `waymark eval --habits` tries on held-out survey walks: every other value of
+/// the pass's grid ([`STRENGTHS`](crate::habits::STRENGTHS)) up to 100, where the habits no
+/// longer change any configuration (measured: F1 with `--habit-strength 100` moved every mean
+/// by at most 2 mm, `--habit-strength 1000` by at most 1 mm). Four replays per survey walk.
+pub const HELD_OUT_STRENGTHS: [f64; 3] = [1.0, 10.0, 100.0];
+
+/// How one strength did on held-out survey walks: per decoder, the mean error with the other
+/// half's habits minus the mean error without habits, and its standard error over walks, m
+/// (`[difference, standard error]`; negative: the habits helped).
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct HeldOutStrength {
+    /// κ, as applied to the half's habits.
+    pub strength: f64,
+    /// The live positions (`forward-auto`).
+    pub forward_m: [f64; 2],
+    /// The fixed-lag estimates (`fixed-lag-auto`).
+    pub fixed_lag_m: [f64; 2],
+    /// The Viterbi track (`viterbi-auto`).
+    pub viterbi_m: [f64; 2],
+}
+
+impl HeldOutStrength {
+    /// The three decoders' `[difference, standard error]`.
+    fn decoders(&self) -> [[f64; 2]; 3] {
+        [self.forward_m, self.fixed_lag_m, self.viterbi_m]
+    }
+}
+
+/// How `waymark eval --habits` chose the strength of the survey walks' habits.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct HabitSelection {
+    /// Survey walks replayed with the other half's habits.
+    pub walks: usize,
+    /// Epochs scored (without habits).
+    pub epochs: usize,
+    /// The learning pass's own choice, by how well habits predict held-out moves.
+    pub pass_strength: Option<f64>,
+    /// Per strength of [`HELD_OUT_STRENGTHS`].
+    pub strengths: Vec<HeldOutStrength>,
+    /// The strength applied to the habits of all survey walks (`None`: none applied): the
+    /// chosen half's κ times the ratio of all walks' epochs to a half's, since a multiplier
+    /// depends on its counts relative to κ.
+    pub strength: Option<f64>,
+}
+
+/// The strength whose worst decoder gains most, among those that make every decoder better
+/// by more than one standard error on held-out walks; `None` when none does. Strict on
+/// purpose: positioning is what habits are for, and an improvement within the noise of the
+/// held-out walks is no evidence that they transfer (the one-standard-error rule of
+/// cross-validation: Breiman et al. 1984, §3.4.3; Hastie, Tibshirani & Friedman, *Elements
+/// of Statistical Learning* §7.10, preferring the simpler model, no habits).
+pub fn choose_held_out_strength(points: &[HeldOutStrength]) -> Option<f64> {
+    let worst = |p: &HeldOutStrength| p.decoders().iter().map(|d| d[0]).fold(f64::NEG_INFINITY, f64::max);
+    points
+        .iter()
+        .filter(|p| p.decoders().iter().all(|d| d[0] + d[1] < 0.0))
+        .min_by(|a, b| worst(a).total_cmp(&worst(b)))
+        .map(|p| p.strength)
+}
+
 /// Habits learned from the survey walks (issue 6, El Gemayel §III-A and §IV-C): each survey
 /// walk replayed through the engine as shipped, its waypoints given as the surveyor's
 /// feedback, then one Baum-Welch pass over all of them. Test walks are never read.
+///
+/// The strength is chosen by positioning error ([`HabitSelection`]), by two-fold
+/// cross-fitting: a site surveyed from the even survey walks of each floor (with the full
+/// site's calibration), habits learned there from the same walks, and the odd walks replayed
+/// on it without feedback, at each of [`HELD_OUT_STRENGTHS`] and without habits; then the
+/// halves swapped. The learning pass alone chooses by move prediction, as the engine on a
+/// phone must (it has no truth); here the survey's waypoints are the truth, and predicting the
+/// surveyors' moves slightly better made the Viterbi track worse (F1, κ = 1: 4.84 → 5.13 m,
+/// two test walks taking other corridors). Held out in the radio too, since a walk replayed
+/// on a site surveyed from itself is explained by the radio alone (measured on F1: the
+/// Viterbi track then changed by under 1 mm at κ = 10).
 pub fn survey_habits(
     site: &Arc<Site>,
     floors: &[FloorData],
     options: &EvalOptions,
-) -> Result<(HabitModel, HabitReport), EvalError> {
+) -> Result<(HabitModel, HabitReport, HabitSelection), EvalError> {
     let config = EngineConfig { history_epochs: usize::MAX, ..options.engine_config() };
-    let jobs: Vec<(usize, &Trace)> =
-        floors.iter().enumerate().flat_map(|(f, floor)| floor.survey.iter().map(move |t| (f, t))).collect();
-    let radius_m = site.spacing_m() * WAYPOINT_FEEDBACK_SPACINGS;
-    let histories: Vec<Vec<EpochRecord>> = parallel_map(&jobs, options.threads, |&(floor, trace)| {
-        let Ok(mut engine) = Engine::new(Arc::clone(site), config.clone()) else { return Vec::new() };
-        let feedback = Some(WaypointFeedback { floor, radius_m });
-        replay(&mut engine, trace, &ReplayOptions { feedback, ..options.replay });
-        engine.history().iter().cloned().collect()
-    });
-    let sequences: Vec<&[EpochRecord]> = histories.iter().map(Vec::as_slice).collect();
-    let reach = crate::site::ReachTable::build(site, config.reach_radius_m);
-    let mut model = HabitModel::new(site);
-    let report = model.learn(site, &reach, &sequences, &config.habits)?;
-    Ok((model, report))
+    // (floor, walk within the floor, trace) of every survey walk.
+    let jobs: Vec<(usize, usize, &Trace)> = floors
+        .iter()
+        .enumerate()
+        .flat_map(|(f, floor)| floor.survey.iter().enumerate().map(move |(w, t)| (f, w, t)))
+        .collect();
+    let learn_on = |site: &Arc<Site>, walks: &[&(usize, usize, &Trace)]| {
+        let radius_m = site.spacing_m() * WAYPOINT_FEEDBACK_SPACINGS;
+        let histories: Vec<Vec<EpochRecord>> = parallel_map(walks, options.threads, |&&(floor, _, trace)| {
+            let Ok(mut engine) = Engine::new(Arc::clone(site), config.clone()) else { return Vec::new() };
+            let feedback = Some(WaypointFeedback { floor, radius_m });
+            replay(&mut engine, trace, &ReplayOptions { feedback, ..options.replay });
+            engine.history().iter().cloned().collect()
+        });
+        let sequences: Vec<&[EpochRecord]> = histories.iter().map(Vec::as_slice).collect();
+        let reach = crate::site::ReachTable::build(site, config.reach_radius_m);
+        let mut model = HabitModel::new(site);
+        let report = model.learn(site, &reach, &sequences, &config.habits)?;
+        Ok::<_, EvalError>((model, report))
+    };
+    let (mut model, report) = learn_on(site, &jobs.iter().collect::<Vec<_>>())?;
+    let mut selection = HabitSelection { pass_strength: report.strength, ..HabitSelection::default() };
+    if let Some(given) = config.habits.strength {
+        // `--habit-strength`: applied as given.
+        selection.strength = Some(given);
+        return Ok((model, report, selection));
+    }
+    let inputs = survey_inputs(floors);
+    let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &options.survey)?;
+    let weights: Vec<[Option<f64>; 2]> =
+        site.floors().iter().map(|f| [f.rssi_weight, f.rssi_weight_without_movement]).collect();
+    let per_walk = HELD_OUT_STRENGTHS.len() + 1;
+    // Per held-out walk, per strength (without habits first), per decoder: (Σ error, epochs).
+    let mut scored: Vec<[(f64, usize); 3]> = Vec::new();
+    let mut half_epochs = 0.0;
+    for half in 0..2 {
+        let keep = |_: usize, w: usize| w % 2 == half;
+        let fits = prepared.fit(&keep, None, options.threads);
+        let half_site = Arc::new(
+            prepared
+                .assemble(&fits)?
+                .0
+                .with_calibration(*site.calibration())?
+                .with_floor_rssi_weights(&weights)?,
+        );
+        let (train, held): (Vec<_>, Vec<_>) = jobs.iter().partition(|j| keep(j.0, j.1));
+        let (habits, _) = learn_on(&half_site, &train)?;
+        half_epochs += 0.5 * habits.epochs() as f64;
+        let runs: Vec<(&Trace, usize, Option<f64>)> = held
+            .iter()
+            .flat_map(|&&(f, _, t)| {
+                std::iter::once(None).chain(HELD_OUT_STRENGTHS.map(Some)).map(move |s| (t, f, s))
+            })
+            .collect();
+        scored.extend(parallel_map(&runs, options.threads, |&(trace, floor, strength)| {
+            let window =
+                EngineConfig { track_window_epochs: trace.wifi_scans.len() * 2 + 64, ..config.clone() };
+            let Ok(mut engine) = Engine::new(Arc::clone(&half_site), window) else { return [(0.0, 0); 3] };
+            if let Some(kappa) = strength {
+                let mut h = habits.clone();
+                if h.set_strength(Some(kappa)).is_err() {
+                    return [(0.0, 0); 3];
+                }
+                engine.set_habits(h);
+            }
+            let r = replay(&mut engine, trace, &options.replay);
+            decoded(&half_site, &r).map(|estimates| {
+                let points = score(trace, floor, &estimates).0;
+                (points.iter().map(Scored::penalised_m).sum(), points.len())
+            })
+        }));
+    }
+    selection.walks = scored.len() / per_walk;
+    selection.epochs = scored.iter().step_by(per_walk).map(|s| s[0].1).sum();
+    for (g, &kappa) in HELD_OUT_STRENGTHS.iter().enumerate() {
+        let decoder = |d: usize| -> [f64; 2] {
+            // Paired per walk: Σ error with − Σ error without over the walk's epochs; the
+            // standard error of the ratio over walks (the epochs of one walk are not
+            // independent), as in `HabitModel`'s held-out gains.
+            let pairs: Vec<(f64, f64)> = scored
+                .chunks(per_walk)
+                .map(|walk| (walk[g + 1][d].0 - walk[0][d].0, walk[0][d].1 as f64))
+                .collect();
+            let n: f64 = pairs.iter().map(|p| p.1).sum();
+            if n <= 0.0 {
+                return [f64::NAN, f64::NAN];
+            }
+            let mean = pairs.iter().map(|p| p.0).sum::<f64>() / n;
+            let variance = pairs.iter().map(|p| (p.0 - mean * p.1).powi(2)).sum::<f64>() / (n * n);
+            [mean, variance.sqrt()]
+        };
+        selection.strengths.push(HeldOutStrength {
+            strength: kappa,
+            forward_m: decoder(0),
+            fixed_lag_m: decoder(1),
+            viterbi_m: decoder(2),
+        });
+    }
+    selection.strength = choose_held_out_strength(&selection.strengths)
+        .map(|kappa| kappa * model.epochs() as f64 / half_epochs.max(1.0));
+    model.set_strength(selection.strength)?;
+    Ok((model, report, selection))
 }
 
 /// `f` over `items` on `threads` worker threads, results in input order.
@@ -1023,6 +1157,38 @@ pub fn survey_calibrated(
     Ok((site, survey, report))
 }
 
+/// A replay's three estimates: the live positions, the fixed-lag estimates and the Viterbi
+/// track (the last two need a track window as long as the walk). Smoothed points carry the
+/// live radius of their epoch; the last `lag` epochs get their fixed-lag estimate when the walk
+/// ends, from the final track, as an app flushing at the end of a session would.
+fn decoded(site: &Site, r: &super::replay::Replay) -> [Vec<Estimate>; 3] {
+    let live = live_estimates(&r.positions);
+    let radius: HashMap<u64, (f64, f64)> =
+        live.iter().map(|e| (e.timestamp_ns, (e.accuracy_m, e.accuracy_95_m))).collect();
+    let smoothed = |points: &mut dyn Iterator<Item = &crate::TrackPoint>| -> Vec<Estimate> {
+        points
+            .map(|p| {
+                let (a68, a95) = radius.get(&p.timestamp_ns).copied().unwrap_or((f64::NAN, f64::NAN));
+                Estimate {
+                    timestamp_ns: p.timestamp_ns,
+                    floor: p.floor,
+                    x: p.x,
+                    y: p.y,
+                    accuracy_m: a68,
+                    accuracy_95_m: a95,
+                    zone: site.zone_of(p.state as usize),
+                }
+            })
+            .collect()
+    };
+    let mut lagged = smoothed(&mut r.fixed_lag.iter());
+    let last = lagged.last().map(|e| e.timestamp_ns);
+    lagged.extend(smoothed(&mut r.track.iter().filter(|p| !last.is_some_and(|l| p.timestamp_ns <= l))));
+    lagged.dedup_by_key(|e| e.timestamp_ns);
+    let viterbi = smoothed(&mut r.track.iter());
+    [live, lagged, viterbi]
+}
+
 /// The engine's live positions as estimates.
 fn live_estimates(positions: &[crate::Position]) -> Vec<Estimate> {
     positions
@@ -1041,6 +1207,39 @@ fn live_estimates(positions: &[crate::Position]) -> Vec<Estimate> {
 
 #[cfg(test)]
 mod tests {
+
+    /// A strength is applied only when it makes every decoder better by more than one standard
+    /// error; among those, the one whose worst decoder gains most.
+    #[test]
+    fn habits_apply_only_when_every_decoder_gains_beyond_its_error() {
+        let point = |strength, f: [f64; 2], l: [f64; 2], v: [f64; 2]| HeldOutStrength {
+            strength,
+            forward_m: f,
+            fixed_lag_m: l,
+            viterbi_m: v,
+        };
+        // F1's figures (`waymark eval target/ilc/site1/F1 --habits`): nothing applied.
+        let f1 = [
+            point(1.0, [0.011, 0.019], [-0.029, 0.022], [0.010, 0.025]),
+            point(10.0, [0.002, 0.005], [0.005, 0.004], [-0.001, 0.001]),
+            point(100.0, [0.001, 0.0], [0.001, 0.001], [0.0, 0.0]),
+        ];
+        assert_eq!(choose_held_out_strength(&f1), None);
+        // Forward and fixed-lag gain beyond their errors but the Viterbi track only within
+        // its own: nothing applied.
+        let one_within = [point(1.0, [-0.3, 0.1], [-0.3, 0.1], [-0.05, 0.1])];
+        assert_eq!(choose_held_out_strength(&one_within), None);
+        // Two strengths clear; κ = 10's worst decoder (−0.2) beats κ = 1's (−0.1).
+        let two = [
+            point(1.0, [-0.5, 0.1], [-0.4, 0.1], [-0.2 + 0.1, 0.05]),
+            point(10.0, [-0.3, 0.05], [-0.2, 0.05], [-0.25, 0.05]),
+            point(100.0, [-0.01, 0.001], [-0.01, 0.001], [-0.01, 0.001]),
+        ];
+        assert_eq!(choose_held_out_strength(&two), Some(10.0));
+        // A NaN (no epochs) never counts as a gain.
+        assert_eq!(choose_held_out_strength(&[point(1.0, [f64::NAN; 2], [-1.0, 0.1], [-1.0, 0.1])]), None);
+        assert_eq!(choose_held_out_strength(&[]), None);
+    }
 
     #[test]
     fn a_floor_keeps_its_own_gamma_only_beyond_one_standard_error() {

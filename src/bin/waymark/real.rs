@@ -527,7 +527,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     let habits = if args.habits {
         let learning_started = Instant::now();
         let bar = progress_bar(args.json, 1, "learning habits from the survey walks");
-        let (model, learning) = match evaluation::survey_habits(&site, &floors, &options) {
+        let (model, learning, selection) = match evaluation::survey_habits(&site, &floors, &options) {
             Ok(m) => m,
             Err(e) => return fail("eval", e),
         };
@@ -540,7 +540,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             Err(e) => return fail("eval", e),
         };
         bar.finish_and_clear();
-        Some(evaluation::HabitsComparison { learning, learning_seconds, configurations })
+        Some(evaluation::HabitsComparison { learning, selection, learning_seconds, configurations })
     } else {
         None
     };
@@ -636,6 +636,29 @@ fn print_habits(
         l.largest_segment_states,
         l.restarts,
         habits.learning_seconds
+    );
+    let s = &habits.selection;
+    println!(
+        "strength on {} held-out survey walks ({} epochs), mean error with the other half's habits \
+         minus without, ± SE, m:",
+        s.walks, s.epochs
+    );
+    println!("{:>8} {:>17} {:>17} {:>17}", "κ", "forward", "fixed-lag", "viterbi");
+    for p in &s.strengths {
+        let cell = |d: [f64; 2]| format!("{:+.3} ± {:.3}", d[0], d[1]);
+        println!(
+            "{:>8} {:>17} {:>17} {:>17}",
+            p.strength,
+            cell(p.forward_m),
+            cell(p.fixed_lag_m),
+            cell(p.viterbi_m)
+        );
+    }
+    let shown = |k: Option<f64>| k.map_or("none".to_string(), |k| format!("{k:.3}"));
+    println!(
+        "strength applied: {} (the learning pass alone, by move prediction: {})",
+        shown(s.strength),
+        shown(s.pass_strength)
     );
     println!(
         "{:<26} {:>15} {:>15} {:>13} {:>13} {:>7}",
