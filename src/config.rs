@@ -261,12 +261,16 @@ impl EngineConfig {
             .collect()
     }
 
-    /// Factors on the 68% and 95% radii for `site`: the site's calibrated ones, else 1.
-    pub fn accuracy_scale_for(&self, site: &crate::Site) -> [f64; 2] {
-        match (self.site_calibration, site.calibration().accuracy_scale) {
-            (true, Some(scale)) => scale,
-            _ => [1.0, 1.0],
-        }
+    /// Factors on the 68% and 95% radii for `site`, per motion scenario (indexed by
+    /// [`MdiScenario::index`](crate::sensors::MdiScenario::index)): the site's calibrated ones, else 1.
+    pub fn accuracy_scales_for(&self, site: &crate::Site) -> [[f64; 2]; 4] {
+        crate::sensors::MdiScenario::ALL.map(|s| {
+            if self.site_calibration {
+                site.calibration().accuracy_scale_in(s)
+            } else {
+                [1.0, 1.0]
+            }
+        })
     }
 
     /// Checks every field; the message names the field and the rule.

@@ -223,8 +223,8 @@ pub struct Engine {
     rssi_weight: Vec<[Option<f64>; 2]>,
     /// γ before the engine has a floor: the configuration's, else the site-wide one.
     site_rssi_weight: [Option<f64>; 2],
-    /// Factors on the 68% and 95% radii (the site's calibration).
-    accuracy_scale: [f64; 2],
+    /// Factors on the 68% and 95% radii (the site's calibration), per motion scenario.
+    accuracy_scale: [[f64; 2]; 4],
     /// Hashes scans' ids with the site's salt when the site's ids are hashed.
     id_hasher: Option<ScanHasher>,
     /// What the running epoch may change, as it was before (see [`Engine::atomically`]).
@@ -260,7 +260,7 @@ impl Engine {
         let reach = ReachTable::build(&site, config.reach_radius_m);
         let rssi_weight = config.floor_rssi_weights(&site);
         let site_rssi_weight = config.rssi_weight_for(&site);
-        let accuracy_scale = config.accuracy_scale_for(&site);
+        let accuracy_scale = config.accuracy_scales_for(&site);
         let site_zones = site.zones().len();
         let habits = HabitModel::new(&site);
         Ok(Self {
@@ -823,6 +823,7 @@ impl Engine {
             self.config.accuracy_mass,
             &mut self.scratch,
         );
+        let scale = self.accuracy_scale[position.scenario.index()];
         let (zone, zone_probability) = if self.site.zones().is_empty() {
             (None, 1.0)
         } else {
@@ -836,9 +837,8 @@ impl Engine {
             zone_probability,
             x: e.position.x,
             y: e.position.y,
-            accuracy_m: e.accuracy_m * self.accuracy_scale[0],
-            accuracy_95_m: (e.accuracy_95_m * self.accuracy_scale[1])
-                .max(e.accuracy_m * self.accuracy_scale[0]),
+            accuracy_m: e.accuracy_m * scale[0],
+            accuracy_95_m: (e.accuracy_95_m * scale[1]).max(e.accuracy_m * scale[0]),
             ..position
         }
     }

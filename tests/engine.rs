@@ -183,3 +183,40 @@ fn each_epoch_weighs_the_radio_by_the_gamma_of_the_floor_it_is_on() {
     // An explicit γ overrides the floors'.
     assert_eq!(run(&per_floor, Some(0.5), 1), run(&none, Some(0.5), 1));
 }
+
+/// The radius factors follow the epoch's motion scenario: a scan with no motion before it is a
+/// speed-only epoch, so it gets `speed`'s factors, and the site-wide ones when the scenario has
+/// none of its own. A bad factor is refused with its path.
+#[test]
+fn radius_factors_follow_the_epochs_scenario() {
+    use waymark::sensors::MdiScenario;
+    use waymark::site::{Calibration, ScenarioScales};
+    let radius = |calibration: Calibration| {
+        let site = Arc::new(two_floor_site().with_calibration(calibration).unwrap());
+        let mut engine = Engine::new(site, EngineConfig::default()).unwrap();
+        let p = engine.push_scan(&scan(SECOND, &readings_at(0, 3.0))).unwrap();
+        assert_eq!(p.scenario, MdiScenario::Speed);
+        (p.accuracy_m, p.accuracy_95_m)
+    };
+    let plain = radius(Calibration::default());
+    let site_wide = Calibration { accuracy_scale: Some([2.0, 3.0]), ..Calibration::default() };
+    let scaled = radius(site_wide);
+    assert!((scaled.0 - 2.0 * plain.0).abs() < 1e-9, "{plain:?} {scaled:?}");
+    let mut by_scenario = ScenarioScales::default();
+    by_scenario.set(MdiScenario::Speed, Some([5.0, 7.0]));
+    let own = radius(Calibration { accuracy_scale_by_scenario: by_scenario, ..site_wide });
+    assert!((own.0 - 5.0 * plain.0).abs() < 1e-9, "{plain:?} {own:?}");
+    assert!((own.1 - (7.0 * plain.1).max(own.0)).abs() < 1e-9, "{plain:?} {own:?}");
+    // Another scenario's factors leave a speed-only epoch at the site-wide ones.
+    let mut other = ScenarioScales::default();
+    other.set(MdiScenario::DistanceHeading, Some([5.0, 7.0]));
+    let fallback = radius(Calibration { accuracy_scale_by_scenario: other, ..site_wide });
+    assert!((fallback.0 - scaled.0).abs() < 1e-12);
+
+    let mut bad = ScenarioScales::default();
+    bad.set(MdiScenario::Distance, Some([f64::NAN, 2.0]));
+    let refused =
+        two_floor_site().with_calibration(Calibration { accuracy_scale_by_scenario: bad, ..site_wide });
+    let message = format!("{:?}", refused.err());
+    assert!(message.contains("calibration.accuracy_scale_by_scenario.distance"), "{message}");
+}

@@ -48,6 +48,18 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert!(real::GAMMA_GRID.contains(&gamma));
     let scale = calibration.accuracy_scale.expect("radii calibrated");
     assert!(scale.iter().all(|s| s.is_finite() && *s > 0.0));
+    // Per motion scenario where enough held-out epochs were on the map.
+    assert!(calibration.epochs > 0);
+    for scenario in waymark::sensors::MdiScenario::ALL {
+        let own = calibration.accuracy_scale_by_scenario.get(scenario);
+        let enough = calibration.scenario_epochs[scenario.index()] >= real::MIN_SCENARIO_EPOCHS;
+        assert_eq!(own.is_some(), enough, "{scenario:?}: {calibration:?}");
+        assert!(own.map_or(true, |s| s.iter().all(|s| s.is_finite() && *s > 0.0)));
+    }
+    assert!(calibration
+        .accuracy_scale_by_scenario
+        .get(waymark::sensors::MdiScenario::DistanceHeading)
+        .is_some());
     assert!(calibration.motion.is_some(), "step length and north fitted");
     // Leave-one-walk-out: every survey walk held out once, γ per floor with its curve.
     assert_eq!(calibration.sites, 12);
@@ -65,6 +77,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // The calibrated site survives its file format.
     let site = Arc::new(Site::from_json(site.to_json().as_bytes()).expect("reloads"));
     assert_eq!(site.calibration().rssi_weight, Some(gamma));
+    assert_eq!(site.calibration().accuracy_scale_by_scenario, calibration.accuracy_scale_by_scenario);
     assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
 
     let (reports, walks) = real::evaluate_on(&site, &floors, &options, &|| {}).expect("replays");

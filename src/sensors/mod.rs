@@ -73,6 +73,22 @@ pub enum MdiScenario {
     Speed,
 }
 
+impl MdiScenario {
+    /// Every scenario, from the most motion information to the least.
+    pub const ALL: [MdiScenario; 4] =
+        [MdiScenario::DistanceHeading, MdiScenario::Distance, MdiScenario::HeadingSpeed, MdiScenario::Speed];
+
+    /// Its position in [`ALL`](Self::ALL).
+    pub fn index(self) -> usize {
+        match self {
+            MdiScenario::DistanceHeading => 0,
+            MdiScenario::Distance => 1,
+            MdiScenario::HeadingSpeed => 2,
+            MdiScenario::Speed => 3,
+        }
+    }
+}
+
 /// What the inertial sensors say happened between two epochs.
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct MotionUpdate {

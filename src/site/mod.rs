@@ -123,6 +123,12 @@ pub struct Calibration {
     /// circles held the truth 68% and 95% of the time.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub accuracy_scale: Option<[f64; 2]>,
+    /// The same factors per motion scenario (HIPE Table 1), fitted on the held-out epochs the
+    /// engine positioned in that scenario: the posterior's spread means something else when
+    /// the motion is only a maximum speed than when steps and heading are measured. A scenario
+    /// without its own factors uses `accuracy_scale`.
+    #[serde(default, skip_serializing_if = "ScenarioScales::is_empty")]
+    pub accuracy_scale_by_scenario: ScenarioScales,
     /// The surveyors' step length model, fitted on the survey walks.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step_length: Option<crate::sensors::StepLengthModel>,
@@ -146,15 +152,94 @@ impl Calibration {
                 }
             }
         }
-        if let Some(scale) = self.accuracy_scale {
-            if !scale.iter().all(|s| s.is_finite() && *s > 0.0) {
-                return Err((
-                    "calibration.accuracy_scale".into(),
-                    format!("must be finite and > 0, got {scale:?}"),
-                ));
+        let by_scenario = crate::sensors::MdiScenario::ALL.map(|s| {
+            (
+                format!("calibration.accuracy_scale_by_scenario.{}", ScenarioScales::key(s)),
+                self.accuracy_scale_by_scenario.get(s),
+            )
+        });
+        for (path, scale) in std::iter::once(("calibration.accuracy_scale".to_string(), self.accuracy_scale))
+            .chain(by_scenario)
+        {
+            if let Some(scale) = scale {
+                if !scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+                    return Err((path, format!("must be finite and > 0, got {scale:?}")));
+                }
             }
         }
         Ok(())
+    }
+
+    /// The 68% and 95% radius factors of an epoch in `scenario`: its own, else the site's,
+    /// else none (1).
+    pub fn accuracy_scale_in(&self, scenario: crate::sensors::MdiScenario) -> [f64; 2] {
+        self.accuracy_scale_by_scenario.get(scenario).or(self.accuracy_scale).unwrap_or([1.0, 1.0])
+    }
+}
+
+/// Radius factors (68%, 95%) per motion scenario; `None`: not fitted.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ScenarioScales {
+    /// Steps and heading measured.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distance_heading: Option<[f64; 2]>,
+    /// Steps measured, heading not.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub distance: Option<[f64; 2]>,
+    /// Heading measured, distance from the maximum speed.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub heading_speed: Option<[f64; 2]>,
+    /// The maximum speed only.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub speed: Option<[f64; 2]>,
+}
+
+impl ScenarioScales {
+    /// Whether no scenario has factors.
+    pub fn is_empty(&self) -> bool {
+        *self == ScenarioScales::default()
+    }
+
+    /// The factors of `scenario`.
+    pub fn get(&self, scenario: crate::sensors::MdiScenario) -> Option<[f64; 2]> {
+        *self.slot(scenario)
+    }
+
+    /// Sets the factors of `scenario`.
+    pub fn set(&mut self, scenario: crate::sensors::MdiScenario, scale: Option<[f64; 2]>) {
+        *self.slot_mut(scenario) = scale;
+    }
+
+    /// Its key in the site file.
+    pub fn key(scenario: crate::sensors::MdiScenario) -> &'static str {
+        use crate::sensors::MdiScenario::*;
+        match scenario {
+            DistanceHeading => "distance_heading",
+            Distance => "distance",
+            HeadingSpeed => "heading_speed",
+            Speed => "speed",
+        }
+    }
+
+    fn slot(&self, scenario: crate::sensors::MdiScenario) -> &Option<[f64; 2]> {
+        use crate::sensors::MdiScenario::*;
+        match scenario {
+            DistanceHeading => &self.distance_heading,
+            Distance => &self.distance,
+            HeadingSpeed => &self.heading_speed,
+            Speed => &self.speed,
+        }
+    }
+
+    fn slot_mut(&mut self, scenario: crate::sensors::MdiScenario) -> &mut Option<[f64; 2]> {
+        use crate::sensors::MdiScenario::*;
+        match scenario {
+            DistanceHeading => &mut self.distance_heading,
+            Distance => &mut self.distance,
+            HeadingSpeed => &mut self.heading_speed,
+            Speed => &mut self.speed,
+        }
     }
 }
 
