@@ -422,7 +422,7 @@ fn baum_welch(args: &SimulateArgs) -> ExitCode {
     };
     println!(
         "El Gemayel et al. §IV on a simulated floor (seed {}): {} states (9 corridor sections, 18 rooms), {} cells of\n\
-         1 m x 1 m; TDoA from 4 corner anchors, range biases per cell {bias}, noise σ_n {} m, least-squares positions.\n\
+         1 m x 1 m; TDoA from 4 anchors off the corners, range biases per cell {bias}, noise σ_n {} m, least-squares positions.\n\
          Run k: a new walk of {} epochs, then Baum-Welch to convergence on walks 1..k from run k-1's parameters. Run 0\n\
          is §IV's initialisation: floor-plan transitions uniform, means at the cell centres, Σ = {} I m².\n\
          Room accuracy (the forward algorithm's most probable state is the true one) on {} held-out epochs.\n",
