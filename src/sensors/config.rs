@@ -62,6 +62,16 @@ pub enum StepLengthModel {
         /// The user's constant, m / (m/s²)^(1/4).
         k: f64,
     },
+    /// Kim, Jang, Hwang and Park, "A step, stride and heading determination for the
+    /// pedestrian navigation system", Journal of Global Positioning Systems 3 (2004), eq. 6:
+    /// `k · (Σ|a_i| / N)^(1/3)` with a the gravity-free acceleration norm over the N samples
+    /// of the step, m/s². `k` is per user. An average over the step, where Weinberg's
+    /// a_max − a_min rests on two samples: at 50 Hz a heel strike's spike is caught at a
+    /// random phase, so its peak-to-peak varies from step to step for the same stride.
+    Kim {
+        /// The user's constant, m / (m/s²)^(1/3).
+        k: f64,
+    },
 }
 
 impl Default for StepLengthModel {
@@ -324,7 +334,7 @@ impl MotionConfig {
                 finite("step_length.intercept_m", intercept_m)?;
                 finite("step_length.slope_m_per_hz", slope_m_per_hz)?;
             }
-            StepLengthModel::Weinberg { k } => positive("step_length.k", k)?,
+            StepLengthModel::Weinberg { k } | StepLengthModel::Kim { k } => positive("step_length.k", k)?,
         }
         finite("declination_rad", self.declination_rad)?;
         finite("site_rotation_rad", self.site_rotation_rad)?;

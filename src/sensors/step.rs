@@ -109,6 +109,9 @@ pub struct RawStep {
     pub raw_min: f64,
     /// Peak-to-peak of the smoothed signal over the same span, m/s².
     pub smooth_p2p: f64,
+    /// Mean absolute gravity-free norm (unsmoothed) over the same span, m/s²: the term of
+    /// Kim et al.'s step length (see [`StepLengthModel::Kim`](super::StepLengthModel::Kim)).
+    pub mean_abs: f64,
 }
 
 impl RawStep {
@@ -158,6 +161,8 @@ pub struct StepDetector {
     raw_min: f64,
     smooth_max: f64,
     smooth_min: f64,
+    /// Σ |raw| and the number of samples over the same span as the extremes.
+    raw_abs: (f64, u32),
     raw_start_ns: u64,
 }
 
@@ -188,6 +193,7 @@ impl StepDetector {
             raw_min: f64::INFINITY,
             smooth_max: f64::NEG_INFINITY,
             smooth_min: f64::INFINITY,
+            raw_abs: (0.0, 0),
             raw_start_ns: 0,
         }
     }
@@ -225,6 +231,8 @@ impl StepDetector {
         self.raw_min = self.raw_min.min(raw);
         self.smooth_max = self.smooth_max.max(s);
         self.smooth_min = self.smooth_min.min(s);
+        self.raw_abs.0 += raw.abs();
+        self.raw_abs.1 += 1;
         let tc = self.smooth.center_ns();
         let min_interval_ns = self.min_interval_ns;
         let spaced =
@@ -280,10 +288,12 @@ impl StepDetector {
                 raw_max: self.raw_max,
                 raw_min: self.raw_min,
                 smooth_p2p: self.smooth_max - self.smooth_min,
+                mean_abs: self.raw_abs.0 / f64::from(self.raw_abs.1.max(1)),
             };
             self.reset_extremes(t_ns);
             self.raw_max = raw;
             self.raw_min = raw;
+            self.raw_abs = (raw.abs(), 1);
             self.smooth_max = s;
             self.smooth_min = s;
             step
@@ -296,6 +306,7 @@ impl StepDetector {
         self.raw_min = f64::INFINITY;
         self.smooth_max = f64::NEG_INFINITY;
         self.smooth_min = f64::INFINITY;
+        self.raw_abs = (0.0, 0);
         self.raw_start_ns = t_ns;
     }
 }
@@ -338,6 +349,8 @@ pub struct GaitStep<H> {
     pub period_s: f64,
     /// Peak-to-peak gravity-free acceleration over the step, m/s² (Weinberg's a_max − a_min).
     pub peak_to_peak: f64,
+    /// Mean absolute gravity-free acceleration over the step, m/s² (Kim et al.'s term).
+    pub mean_abs: f64,
     /// What the caller attached to the raw step (its heading).
     pub tag: H,
 }
@@ -480,7 +493,13 @@ impl<H: Copy> GaitValidator<H> {
                     let k = n as u64;
                     for j in 1..=k {
                         let at = if j == k { step.t_ns } else { last + dt * j / k };
-                        out.push(GaitStep { t_ns: at, period_s: period / n, peak_to_peak, tag });
+                        out.push(GaitStep {
+                            t_ns: at,
+                            period_s: period / n,
+                            peak_to_peak,
+                            mean_abs: step.mean_abs,
+                            tag,
+                        });
                     }
                     self.remember_period(period / n);
                     self.last_accepted_ns = Some(step.t_ns);
@@ -493,7 +512,13 @@ impl<H: Copy> GaitValidator<H> {
                 self.pending.push((step, tag));
                 return;
             }
-            out.push(GaitStep { t_ns: step.t_ns, period_s: period, peak_to_peak, tag });
+            out.push(GaitStep {
+                t_ns: step.t_ns,
+                period_s: period,
+                peak_to_peak,
+                mean_abs: step.mean_abs,
+                tag,
+            });
             self.remember_period(period);
             self.last_accepted_ns = Some(step.t_ns);
             return;
@@ -541,6 +566,7 @@ impl<H: Copy> GaitValidator<H> {
                     t_ns: raw.t_ns,
                     period_s: period,
                     peak_to_peak: (raw.raw_max - raw.raw_min).max(0.0),
+                    mean_abs: raw.mean_abs,
                     tag,
                 });
             }
@@ -602,7 +628,7 @@ mod tests {
     }
 
     fn raw(t_ms: u64) -> RawStep {
-        RawStep { t_ns: t_ms * 1_000_000, raw_max: 2.0, raw_min: -2.0, smooth_p2p: 2.5 }
+        RawStep { t_ns: t_ms * 1_000_000, raw_max: 2.0, raw_min: -2.0, smooth_p2p: 2.5, mean_abs: 1.0 }
     }
 
     #[test]
@@ -649,6 +675,7 @@ mod tests {
                 raw_max: 30.0,
                 raw_min: -5.0,
                 smooth_p2p: 17.5,
+                mean_abs: 8.0,
             };
             v.offer(s, (), &mut out);
         }
@@ -674,6 +701,14 @@ mod tests {
                 }
                 // 9 s at 1.8 Hz: 16.2 peaks.
                 assert!((15..=17).contains(&steps.len()), "{kind:?} at {rate} Hz: {}", steps.len());
+                // Kim's term over one period of a 2 m/s² sine: 2 · 2 / π, within
+                // a sample of the span at 20 Hz.
+                for step in &steps[1..steps.len() - 1] {
+                    assert!(
+                        (step.mean_abs / (4.0 / PI) - 1.0).abs() < 0.15,
+                        "{kind:?} at {rate} Hz: {step:?}"
+                    );
+                }
                 if kind == StepDetectorKind::PeakZeroCrossing {
                     // Dated at the peak: (k + 0.25) / 1.8 s after the start.
                     let first = steps[0].t_ns as f64 * 1e-9 - 1.0;

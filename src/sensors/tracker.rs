@@ -63,6 +63,9 @@ pub struct StepEvent {
     /// Peak-to-peak gravity-free acceleration norm over the step, m/s²: what the Weinberg
     /// step-length model uses, and what calibrating it needs.
     pub peak_to_peak_mps2: f64,
+    /// Mean absolute gravity-free acceleration norm over the step, m/s²: what the Kim
+    /// step-length model uses, and what calibrating it needs.
+    pub mean_abs_accel_mps2: f64,
 }
 
 /// The heading filter's current state, trusted or not.
@@ -236,6 +239,7 @@ impl MotionTracker {
                 intercept_m + slope_m_per_hz * f
             }
             StepLengthModel::Weinberg { k } => k * step.peak_to_peak.powf(0.25),
+            StepLengthModel::Kim { k } => k * step.mean_abs.max(0.0).cbrt(),
         };
         length.clamp(0.05, 2.5)
     }
@@ -276,6 +280,7 @@ impl MotionTracker {
                             heading_sigma_rad,
                             period_s: step.period_s,
                             peak_to_peak_mps2: step.peak_to_peak,
+                            mean_abs_accel_mps2: step.mean_abs,
                         });
                     }
                     self.gait_out = out;
@@ -552,7 +557,8 @@ mod tests {
 
     #[test]
     fn step_length_models() {
-        let step = GaitStep { t_ns: 0, period_s: 0.5, peak_to_peak: 16.0, tag: StepTag::default() };
+        let step =
+            GaitStep { t_ns: 0, period_s: 0.5, peak_to_peak: 16.0, mean_abs: 8.0, tag: StepTag::default() };
         let with = |step_length| {
             MotionTracker::new(MotionConfig { step_length, ..MotionConfig::default() }).unwrap()
         };
@@ -563,6 +569,9 @@ mod tests {
         // 0.4 × 16^(1/4) = 0.8.
         let weinberg = StepLengthModel::Weinberg { k: 0.4 };
         assert!((with(weinberg).step_length(&step) - 0.8).abs() < 1e-12);
+        // 0.35 × 8^(1/3) = 0.7.
+        let kim = StepLengthModel::Kim { k: 0.35 };
+        assert!((with(kim).step_length(&step) - 0.7).abs() < 1e-12);
         // A 10 Hz "period" is clamped to the fastest cadence, 2.5 Hz.
         let fast = GaitStep { period_s: 0.1, ..step };
         assert!((with(linear).step_length(&fast) - 0.825).abs() < 1e-12);
