@@ -351,6 +351,8 @@ pub struct GaitStep<H> {
     pub peak_to_peak: f64,
     /// Mean absolute gravity-free acceleration over the step, m/s² (Kim et al.'s term).
     pub mean_abs: f64,
+    /// Whether it is the first step of a bout.
+    pub bout_start: bool,
     /// What the caller attached to the raw step (its heading).
     pub tag: H,
 }
@@ -526,6 +528,7 @@ impl<H: Copy> GaitValidator<H> {
                             period_s: period / n,
                             peak_to_peak,
                             mean_abs: step.mean_abs,
+                            bout_start: false,
                             tag,
                         });
                     }
@@ -545,6 +548,7 @@ impl<H: Copy> GaitValidator<H> {
                 period_s: period,
                 peak_to_peak,
                 mean_abs: step.mean_abs,
+                bout_start: false,
                 tag,
             });
             self.remember_period(period);
@@ -596,6 +600,7 @@ impl<H: Copy> GaitValidator<H> {
                     period_s: period,
                     peak_to_peak: (raw.raw_max - raw.raw_min).max(0.0),
                     mean_abs: raw.mean_abs,
+                    bout_start: k == 0,
                     tag,
                 });
             }

@@ -117,8 +117,12 @@ fn median(values: &[f64]) -> Option<f64> {
 struct WalkSums {
     /// Waypoint path length, m.
     path_m: f64,
-    /// Steps between the first and last waypoint.
+    /// Steps between the first and last waypoint, each weighted by the fraction of the
+    /// model's length it is given (`step_from_rest_fraction` for a first step from rest, 1
+    /// for the others): the constant model's term.
     steps: f64,
+    /// Steps between the first and last waypoint.
+    count: usize,
     /// Σ step frequency (1/period, clamped to the cadence range), Hz.
     frequency: f64,
     /// Σ (peak-to-peak)^(1/4), Weinberg's term.
@@ -202,17 +206,20 @@ pub fn calibrate_motion(survey: &[&Trace], base: &MotionConfig) -> Option<Motion
             let mut s = WalkSums {
                 path_m: trace.path_length_m(),
                 steps: 0.0,
+                count: 0,
                 frequency: 0.0,
                 weinberg: 0.0,
                 kim: 0.0,
             };
             for step in steps_within(&steps, span) {
-                s.steps += 1.0;
-                s.frequency += frequency(step, base);
-                s.weinberg += step.peak_to_peak_mps2.max(0.0).powf(0.25);
-                s.kim += step.mean_abs_accel_mps2.max(0.0).cbrt();
+                let w = if step.from_rest { base.step_from_rest_fraction } else { 1.0 };
+                s.count += 1;
+                s.steps += w;
+                s.frequency += w * frequency(step, base);
+                s.weinberg += w * step.peak_to_peak_mps2.max(0.0).powf(0.25);
+                s.kim += w * step.mean_abs_accel_mps2.max(0.0).cbrt();
             }
-            if s.path_m >= MIN_PATH_M && s.steps >= MIN_STEPS as f64 {
+            if s.path_m >= MIN_PATH_M && s.count >= MIN_STEPS && s.steps > 0.0 {
                 sums.push(s);
             }
         }
@@ -277,7 +284,7 @@ pub fn calibrate_motion(survey: &[&Trace], base: &MotionConfig) -> Option<Motion
         walks: survey.len(),
         distance_walks: used.len(),
         heading_walks: walk_offsets.len(),
-        steps: used.iter().map(|s| s.steps as u64).sum(),
+        steps: used.iter().map(|s| s.count as u64).sum(),
         distance_m: used.iter().map(|s| s.path_m).sum(),
         distance_residuals: used.iter().map(|s| (predict(&step_length, s) - s.path_m) / s.path_m).collect(),
         heading_residuals_rad: walk_offsets
@@ -443,6 +450,7 @@ mod tests {
             .map(|&(n, f)| WalkSums {
                 path_m: 0.3 * n + 0.2 * f,
                 steps: n,
+                count: n as usize,
                 frequency: f,
                 weinberg: 2.0 * n,
                 kim: 4.0 * n,
