@@ -8,34 +8,22 @@
 //!
 //! On ILC 2.0 site 1 (`/work/main/target/ilc/site1/{B1,F1,F2,F3,F4}/path_data_files`, one
 //! OPPO PBCM10 at 50 Hz) with the default `MotionConfig`, calibrated
-//! on all 459 survey walks and scored on the 112 test walks: distance error mean 8.8 %,
-//! median 5.7 %, pooled 0.5 %; heading RMSE 18.6°, median |error| 10.7° over 5 850 steps.
+//! on all 459 survey walks and scored on the 112 test walks: distance error mean 10.8 %,
+//! median 6.8 %, pooled 0.5 %; heading RMSE 18.4°, median |error| 10.7° over 5 767 steps.
 //! Per floor (each calibrated on its own survey walks), mean / pooled distance error and
-//! heading RMSE: B1 11.0 % / 1.4 % / 19.0°, F1 5.2 % / 1.0 % / 17.5°, F2 10.0 % / 2.2 % /
-//! 19.3°, F3 8.8 % / 0.4 % / 16.8°, F4 7.3 % / 1.0 % / 19.9°. The chosen step length model
-//! is Kim's (k ≈ 0.47) everywhere: its leave-one-walk-out error on survey walks is 7.5 %
-//! pooled, against 8.3 % for Weinberg, 9.8 % for a constant length and 9.6 % linear in
-//! frequency. (Before Kim's model, the cadence check on a run's mean period and the step
-//! from rest: test walks 10.8 % / 6.8 % / 0.5 %, survey walks 8.8 % with Weinberg.)
-//!
-//! What is left is mostly the walks' own step length, not their step counts: the error
-//! falls with the waypoint path's length (short walks with few waypoints overshoot, and on
-//! some the gyro shows the walker did not go straight between two waypoints, so the
-//! polyline is shorter than the walk), and on walks without a pause it follows the walk's
-//! apparent speed (path / duration), which the acceleration explains only in part.
+//! heading RMSE: B1 13.4 % / 1.5 % / 18.7°, F1 6.3 % / 0.5 % / 17.5°, F2 12.6 % / 1.4 % /
+//! 19.1°, F3 10.7 % / 0.8 % / 16.8°, F4 8.9 % / 1.6 % / 19.6°. The chosen step length model
+//! is Weinberg (k ≈ 0.367) everywhere: its leave-one-walk-out error on survey walks is
+//! 8.8 % pooled, against 10.5 % for a constant length and 10.4 % linear in frequency.
 //!
 //! `WAYMARK_MOTION_CONFIG` may hold a `MotionConfig` as JSON (missing fields at their
-//! defaults) to try other tracker settings. With `WAYMARK_PDR_WALKS=1` every test walk is
-//! also listed (with the pooled calibration): waypoints, path, duration between the first
-//! and last waypoint, steps counted there, distance, signed error, cadence and the longest
-//! stretch without a step (missed steps, or a pause).
+//! defaults) to try other tracker settings.
 
 use std::path::{Path, PathBuf};
 use waymark::eval::pdr::{evaluate_pdr, PdrReport};
 use waymark::io::ilc::Trace;
 use waymark::sensors::MotionConfig;
 use waymark::survey::calibrate_motion;
-use waymark::survey::motion::replay_steps;
 
 fn read_floor(dir: &Path) -> (Vec<Trace>, Vec<Trace>) {
     let mut files: Vec<PathBuf> = std::fs::read_dir(dir)
@@ -53,31 +41,6 @@ fn read_floor(dir: &Path) -> (Vec<Trace>, Vec<Trace>) {
         }
     }
     (survey, test)
-}
-
-/// One line per walk: what the tracker counted between the first and last waypoint.
-fn walks(floor: &str, test: &[&Trace], config: &MotionConfig) {
-    for trace in test {
-        let (Some(first), Some(last)) = (trace.waypoints.first(), trace.waypoints.last()) else { continue };
-        let (a, b) = (first.timestamp_ns, last.timestamp_ns);
-        let (Some(steps), true) = (replay_steps(trace, config), b > a) else { continue };
-        let times: Vec<u64> = steps.iter().map(|s| s.timestamp_ns).filter(|&t| t >= a && t <= b).collect();
-        let distance: f64 =
-            steps.iter().filter(|s| s.timestamp_ns >= a && s.timestamp_ns <= b).map(|s| s.length_m).sum();
-        let path = trace.path_length_m();
-        let span = (b - a) as f64 * 1e-9;
-        let bounds: Vec<u64> =
-            std::iter::once(a).chain(times.iter().copied()).chain(std::iter::once(b)).collect();
-        let gap = bounds.windows(2).map(|w| (w[1] - w[0]) as f64 * 1e-9).fold(0.0, f64::max);
-        println!(
-            "{floor:<8} {:<25} {:>9} {path:>6.1} {span:>7.1} {:>5} {distance:>6.1} {:>+6.1} % {:>10.2} {gap:>13.1}",
-            trace.name,
-            trace.waypoints.len(),
-            times.len(),
-            100.0 * (distance - path) / path.max(1e-9),
-            times.len() as f64 / span
-        );
-    }
 }
 
 fn line(name: &str, r: &PdrReport) {
@@ -159,12 +122,5 @@ fn main() {
     let survey: Vec<&Trace> = floors.iter().flat_map(|f| f.1.iter()).collect();
     let test: Vec<&Trace> = floors.iter().flat_map(|f| f.2.iter()).collect();
     show("pooled", &survey, &test);
-    if std::env::var_os("WAYMARK_PDR_WALKS").is_some() {
-        let (_, config) = calibrate(&survey);
-        println!("floor    walk                      waypoints path_m  span_s steps dist_m  error  cadence_hz longest_gap_s");
-        for (name, _, test) in &floors {
-            walks(name, &test.iter().collect::<Vec<_>>(), &config);
-        }
-    }
     line("uncalib.", &evaluate_pdr(&test, &base));
 }

@@ -62,16 +62,6 @@ pub enum StepLengthModel {
         /// The user's constant, m / (m/s²)^(1/4).
         k: f64,
     },
-    /// Kim, Jang, Hwang and Park, "A step, stride and heading determination for the
-    /// pedestrian navigation system", Journal of Global Positioning Systems 3 (2004), eq. 6:
-    /// `k · (Σ|a_i| / N)^(1/3)` with a the gravity-free acceleration norm over the N samples
-    /// of the step, m/s². `k` is per user. An average over the step, where Weinberg's
-    /// a_max − a_min rests on two samples: at 50 Hz a heel strike's spike is caught at a
-    /// random phase, so its peak-to-peak varies from step to step for the same stride.
-    Kim {
-        /// The user's constant, m / (m/s²)^(1/3).
-        k: f64,
-    },
 }
 
 impl Default for StepLengthModel {
@@ -255,20 +245,6 @@ pub struct MotionConfig {
     /// rather than having no heading at all. Measured, 100 gave 4.14° fused RMSE against
     /// 4.03°.
     pub disturbed_variance_factor: f64,
-    /// Length of the first step of a bout that starts from rest (the phone still since the
-    /// last step, or no step counted yet), as a fraction of what the step length model gives.
-    /// Default 0: walking from rest to rest with N foot contacts moves the body N − 1 step
-    /// lengths, since it starts and ends midway between the feet (the first contact is a
-    /// whole step ahead of the standing foot, the body half of it; the closing step brings the
-    /// feet together, the body half a step). The half of the closing step cannot be known
-    /// until the walker stops, so both halves are taken from the first step. Measured on the
-    /// 459 survey walks of Indoor Location Competition 2.0 site 1, each from rest to rest
-    /// (`cargo run --release --example pdr_real -- target/ilc/site1/*/path_data_files`, with
-    /// `WAYMARK_MOTION_CONFIG='{"step_from_rest_fraction": 1}'` for the former behaviour):
-    /// the leave-one-walk-out step length error (Kim's model) is 7.7 % at 1, 7.6 % at 0.5
-    /// and 7.5 % at 0 (a free intercept per walk, fitted, is 0.82 m, about one step). A
-    /// tracker started while its user walks undercounts one step once.
-    pub step_from_rest_fraction: f64,
     /// Relative standard deviation of the distance walked. Default 0.08: HIPE §5.2 / Table 3,
     /// a generic step length errs by about ±8 % for a specific pedestrian.
     pub distance_sigma_fraction: f64,
@@ -318,7 +294,6 @@ impl Default for MotionConfig {
             disagreement_rad: 10.0 * deg,
             disturbance_hold_s: 2.0,
             disturbed_variance_factor: 10_000.0,
-            step_from_rest_fraction: 0.0,
             distance_sigma_fraction: 0.08,
             max_gap_s: 0.5,
             max_backlog_s: 10.0,
@@ -349,7 +324,7 @@ impl MotionConfig {
                 finite("step_length.intercept_m", intercept_m)?;
                 finite("step_length.slope_m_per_hz", slope_m_per_hz)?;
             }
-            StepLengthModel::Weinberg { k } | StepLengthModel::Kim { k } => positive("step_length.k", k)?,
+            StepLengthModel::Weinberg { k } => positive("step_length.k", k)?,
         }
         finite("declination_rad", self.declination_rad)?;
         finite("site_rotation_rad", self.site_rotation_rad)?;
@@ -393,12 +368,6 @@ impl MotionConfig {
         positive("max_interval_change", self.max_interval_change)?;
         positive("max_step_acceleration_mps2", self.max_step_acceleration_mps2)?;
         positive("max_step_roughness", self.max_step_roughness)?;
-        if !(0.0..=1.0).contains(&self.step_from_rest_fraction) {
-            return Err(Error::InvalidConfig(format!(
-                "step_from_rest_fraction must be within 0..=1 (got {})",
-                self.step_from_rest_fraction
-            )));
-        }
         positive("gravity_lowpass_s", self.gravity_lowpass_s)?;
         positive("compass_sigma_rad", self.compass_sigma_rad)?;
         positive("compass_correlation_s", self.compass_correlation_s)?;

@@ -109,9 +109,6 @@ pub struct RawStep {
     pub raw_min: f64,
     /// Peak-to-peak of the smoothed signal over the same span, m/s².
     pub smooth_p2p: f64,
-    /// Mean absolute gravity-free norm (unsmoothed) over the same span, m/s²: the term of
-    /// Kim et al.'s step length (see [`StepLengthModel::Kim`](super::StepLengthModel::Kim)).
-    pub mean_abs: f64,
 }
 
 impl RawStep {
@@ -161,8 +158,6 @@ pub struct StepDetector {
     raw_min: f64,
     smooth_max: f64,
     smooth_min: f64,
-    /// Σ |raw| and the number of samples over the same span as the extremes.
-    raw_abs: (f64, u32),
     raw_start_ns: u64,
 }
 
@@ -193,7 +188,6 @@ impl StepDetector {
             raw_min: f64::INFINITY,
             smooth_max: f64::NEG_INFINITY,
             smooth_min: f64::INFINITY,
-            raw_abs: (0.0, 0),
             raw_start_ns: 0,
         }
     }
@@ -231,8 +225,6 @@ impl StepDetector {
         self.raw_min = self.raw_min.min(raw);
         self.smooth_max = self.smooth_max.max(s);
         self.smooth_min = self.smooth_min.min(s);
-        self.raw_abs.0 += raw.abs();
-        self.raw_abs.1 += 1;
         let tc = self.smooth.center_ns();
         let min_interval_ns = self.min_interval_ns;
         let spaced =
@@ -288,12 +280,10 @@ impl StepDetector {
                 raw_max: self.raw_max,
                 raw_min: self.raw_min,
                 smooth_p2p: self.smooth_max - self.smooth_min,
-                mean_abs: self.raw_abs.0 / f64::from(self.raw_abs.1.max(1)),
             };
             self.reset_extremes(t_ns);
             self.raw_max = raw;
             self.raw_min = raw;
-            self.raw_abs = (raw.abs(), 1);
             self.smooth_max = s;
             self.smooth_min = s;
             step
@@ -306,7 +296,6 @@ impl StepDetector {
         self.raw_min = f64::INFINITY;
         self.smooth_max = f64::NEG_INFINITY;
         self.smooth_min = f64::INFINITY;
-        self.raw_abs = (0.0, 0);
         self.raw_start_ns = t_ns;
     }
 }
@@ -349,29 +338,15 @@ pub struct GaitStep<H> {
     pub period_s: f64,
     /// Peak-to-peak gravity-free acceleration over the step, m/s² (Weinberg's a_max − a_min).
     pub peak_to_peak: f64,
-    /// Mean absolute gravity-free acceleration over the step, m/s² (Kim et al.'s term).
-    pub mean_abs: f64,
-    /// Whether it is the first step of a bout.
-    pub bout_start: bool,
     /// What the caller attached to the raw step (its heading).
     pub tag: H,
 }
 
 /// Counts steps only within a bout of regular steps at a walking cadence: `confirm_steps`
-/// consecutive raw steps whose mean period is in [1/max_cadence, 1/min_cadence], each period
-/// within `max_interval_change` of that mean (so none shorter than (1 − max_interval_change)
-/// / max_cadence), and no acceleration above `max_step_acceleration_mps2`; those are then all
-/// counted, and later steps as long as they keep the cadence. Shaking (too fast, irregular,
-/// too strong) never completes a bout.
-///
-/// The cadence range bounds the walker's pace, the run's mean period, not each interval:
-/// a step is dated at its acceleration peak, which jitters by a sample or two (20-40 ms at
-/// 50 Hz) around the gait's rhythm, so a walker at 2.2-2.4 Hz shows single intervals under
-/// 0.4 s (1 / 2.5 Hz). Requiring every interval of the run to be at least 0.4 s broke such
-/// runs before they were confirmed. Measured on the 459 survey walks of Indoor Location
-/// Competition 2.0 site 1 (`cargo run --release --example pdr_real -- target/ilc/site1/*/path_data_files`):
-/// the leave-one-walk-out step length error went from 8.1 % to 7.7 % (Kim's model), and
-/// the simulator sweep of [`MotionConfig`] still counts no step shaken.
+/// consecutive raw steps with periods in [1/max_cadence, 1/min_cadence], each within
+/// `max_interval_change` of the previous, and no acceleration above
+/// `max_step_acceleration_mps2`; those are then all counted, and later steps as long as they
+/// keep the cadence. Shaking (too fast, irregular, too strong) never completes a bout.
 #[derive(Clone, Debug)]
 pub struct GaitValidator<H> {
     min_period_ns: u64,
@@ -447,24 +422,6 @@ impl<H: Copy> GaitValidator<H> {
             .all(|w| ((w[1].0.t_ns - w[0].0.t_ns) as f64 - mean).abs() <= self.max_change * mean)
     }
 
-    /// The shortest interval a run being confirmed may contain: the fastest cadence's period
-    /// less the regularity tolerance (a shorter one cannot be within `max_change` of a mean at
-    /// a walking pace).
-    fn shortest_pending_period_ns(&self) -> u64 {
-        (self.min_period_ns as f64 * (1.0 - self.max_change).max(0.0)) as u64
-    }
-
-    /// Whether the pending steps' mean period is at least the fastest cadence's period (the
-    /// slowest is bounded interval by interval: a longer one ends the run).
-    fn paced(&self) -> bool {
-        let n = self.pending.len();
-        if n < 2 {
-            return true;
-        }
-        let span = self.pending[n - 1].0.t_ns - self.pending[0].0.t_ns;
-        span >= self.min_period_ns * (n as u64 - 1)
-    }
-
     fn end_bout(&mut self) {
         self.walking = false;
         self.rejected += self.pending.len() as u64;
@@ -523,14 +480,7 @@ impl<H: Copy> GaitValidator<H> {
                     let k = n as u64;
                     for j in 1..=k {
                         let at = if j == k { step.t_ns } else { last + dt * j / k };
-                        out.push(GaitStep {
-                            t_ns: at,
-                            period_s: period / n,
-                            peak_to_peak,
-                            mean_abs: step.mean_abs,
-                            bout_start: false,
-                            tag,
-                        });
+                        out.push(GaitStep { t_ns: at, period_s: period / n, peak_to_peak, tag });
                     }
                     self.remember_period(period / n);
                     self.last_accepted_ns = Some(step.t_ns);
@@ -543,14 +493,7 @@ impl<H: Copy> GaitValidator<H> {
                 self.pending.push((step, tag));
                 return;
             }
-            out.push(GaitStep {
-                t_ns: step.t_ns,
-                period_s: period,
-                peak_to_peak,
-                mean_abs: step.mean_abs,
-                bout_start: false,
-                tag,
-            });
+            out.push(GaitStep { t_ns: step.t_ns, period_s: period, peak_to_peak, tag });
             self.remember_period(period);
             self.last_accepted_ns = Some(step.t_ns);
             return;
@@ -563,7 +506,7 @@ impl<H: Copy> GaitValidator<H> {
         }
         if let Some(&(last, _)) = self.pending.last() {
             let dt = step.t_ns.saturating_sub(last.t_ns);
-            if dt < self.shortest_pending_period_ns() || dt > self.max_period_ns {
+            if dt < self.min_period_ns || dt > self.max_period_ns {
                 self.end_bout();
             }
         }
@@ -572,9 +515,8 @@ impl<H: Copy> GaitValidator<H> {
             self.pending.remove(0);
             self.rejected += 1;
         }
-        if self.pending.len() >= self.confirm && !(self.regular() && self.paced()) {
-            // Not (yet) a regular run at a walking pace: the oldest step may be the odd one
-            // out; wait for more.
+        if self.pending.len() >= self.confirm && !self.regular() {
+            // Not (yet) a regular run: the oldest step may be the odd one out; wait for more.
             return;
         }
         if self.pending.len() >= self.confirm {
@@ -599,8 +541,6 @@ impl<H: Copy> GaitValidator<H> {
                     t_ns: raw.t_ns,
                     period_s: period,
                     peak_to_peak: (raw.raw_max - raw.raw_min).max(0.0),
-                    mean_abs: raw.mean_abs,
-                    bout_start: k == 0,
                     tag,
                 });
             }
@@ -662,7 +602,7 @@ mod tests {
     }
 
     fn raw(t_ms: u64) -> RawStep {
-        RawStep { t_ns: t_ms * 1_000_000, raw_max: 2.0, raw_min: -2.0, smooth_p2p: 2.5, mean_abs: 1.0 }
+        RawStep { t_ns: t_ms * 1_000_000, raw_max: 2.0, raw_min: -2.0, smooth_p2p: 2.5 }
     }
 
     #[test]
@@ -689,26 +629,6 @@ mod tests {
         assert!(!v.walking());
     }
 
-    /// A walker at 2.35 Hz whose peaks jitter by a sample: one interval of 0.38 s, under the
-    /// fastest cadence's 0.4 s, does not stop the run from being confirmed; a regular run at
-    /// 3.2 Hz (0.31 s, within the regularity tolerance of 0.4 s) never is.
-    #[test]
-    fn the_cadence_bounds_the_runs_mean_period() {
-        let mut v = GaitValidator::<()>::new(&config());
-        let mut out = Vec::new();
-        for t in [1000, 1440, 1820, 2250, 2680] {
-            v.offer(raw(t), (), &mut out);
-        }
-        assert!(v.walking());
-        assert_eq!(out.len(), 5);
-        let mut v = GaitValidator::<()>::new(&config());
-        let mut out = Vec::new();
-        for k in 0..20 {
-            v.offer(raw(1000 + 310 * k), (), &mut out);
-        }
-        assert!(out.is_empty() && !v.walking(), "{out:?}");
-    }
-
     #[test]
     fn fast_irregular_or_strong_runs_are_not_counted() {
         let c = config();
@@ -729,7 +649,6 @@ mod tests {
                 raw_max: 30.0,
                 raw_min: -5.0,
                 smooth_p2p: 17.5,
-                mean_abs: 8.0,
             };
             v.offer(s, (), &mut out);
         }
@@ -755,14 +674,6 @@ mod tests {
                 }
                 // 9 s at 1.8 Hz: 16.2 peaks.
                 assert!((15..=17).contains(&steps.len()), "{kind:?} at {rate} Hz: {}", steps.len());
-                // Kim's term over one period of a 2 m/s² sine: 2 · 2 / π, within
-                // a sample of the span at 20 Hz.
-                for step in &steps[1..steps.len() - 1] {
-                    assert!(
-                        (step.mean_abs / (4.0 / PI) - 1.0).abs() < 0.15,
-                        "{kind:?} at {rate} Hz: {step:?}"
-                    );
-                }
                 if kind == StepDetectorKind::PeakZeroCrossing {
                     // Dated at the peak: (k + 0.25) / 1.8 s after the start.
                     let first = steps[0].t_ns as f64 * 1e-9 - 1.0;

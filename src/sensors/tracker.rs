@@ -63,12 +63,6 @@ pub struct StepEvent {
     /// Peak-to-peak gravity-free acceleration norm over the step, m/s²: what the Weinberg
     /// step-length model uses, and what calibrating it needs.
     pub peak_to_peak_mps2: f64,
-    /// Mean absolute gravity-free acceleration norm over the step, m/s²: what the Kim
-    /// step-length model uses, and what calibrating it needs.
-    pub mean_abs_accel_mps2: f64,
-    /// Whether it is the first step of a bout from rest, whose length the model's times
-    /// [`MotionConfig::step_from_rest_fraction`].
-    pub from_rest: bool,
 }
 
 /// The heading filter's current state, trusted or not.
@@ -125,8 +119,6 @@ pub struct MotionTracker {
     accel_covered_ns: u64,
     last_accel_ns: Option<u64>,
     interval_disturbed: bool,
-    /// The phone has been still since the last counted step (or no step has been counted).
-    rested: bool,
 }
 
 impl MotionTracker {
@@ -154,7 +146,6 @@ impl MotionTracker {
             accel_covered_ns: 0,
             last_accel_ns: None,
             interval_disturbed: false,
-            rested: true,
             config,
         })
     }
@@ -245,7 +236,6 @@ impl MotionTracker {
                 intercept_m + slope_m_per_hz * f
             }
             StepLengthModel::Weinberg { k } => k * step.peak_to_peak.powf(0.25),
-            StepLengthModel::Kim { k } => k * step.mean_abs.max(0.0).cbrt(),
         };
         length.clamp(0.05, 2.5)
     }
@@ -266,20 +256,12 @@ impl MotionTracker {
                 self.last_accel_ns = Some(t);
                 self.heading.on_accelerometer(t, v);
                 self.gait.tick(t);
-                let raw = self.detector.push(t, v.norm());
-                self.rested |= self.detector.gravity().still();
-                if let Some(raw) = raw {
+                if let Some(raw) = self.detector.push(t, v.norm()) {
                     let tag = StepTag { magnetic: self.heading.state(t).magnetic };
                     let mut out = std::mem::take(&mut self.gait_out);
                     self.gait.offer(raw, tag, &mut out);
                     for step in out.drain(..) {
-                        let from_rest = step.bout_start && self.rested;
-                        self.rested = false;
-                        let length_m = if from_rest {
-                            self.config.step_from_rest_fraction * self.step_length(&step)
-                        } else {
-                            self.step_length(&step)
-                        };
+                        let length_m = self.step_length(&step);
                         let (heading_rad, heading_sigma_rad) = match step.tag.magnetic {
                             Some((yaw, sigma)) if sigma <= self.config.max_heading_sigma_rad => {
                                 (Some(self.site_heading(yaw)), sigma)
@@ -294,8 +276,6 @@ impl MotionTracker {
                             heading_sigma_rad,
                             period_s: step.period_s,
                             peak_to_peak_mps2: step.peak_to_peak,
-                            mean_abs_accel_mps2: step.mean_abs,
-                            from_rest,
                         });
                     }
                     self.gait_out = out;
@@ -572,14 +552,7 @@ mod tests {
 
     #[test]
     fn step_length_models() {
-        let step = GaitStep {
-            t_ns: 0,
-            period_s: 0.5,
-            peak_to_peak: 16.0,
-            mean_abs: 8.0,
-            bout_start: false,
-            tag: StepTag::default(),
-        };
+        let step = GaitStep { t_ns: 0, period_s: 0.5, peak_to_peak: 16.0, tag: StepTag::default() };
         let with = |step_length| {
             MotionTracker::new(MotionConfig { step_length, ..MotionConfig::default() }).unwrap()
         };
@@ -590,56 +563,9 @@ mod tests {
         // 0.4 × 16^(1/4) = 0.8.
         let weinberg = StepLengthModel::Weinberg { k: 0.4 };
         assert!((with(weinberg).step_length(&step) - 0.8).abs() < 1e-12);
-        // 0.35 × 8^(1/3) = 0.7.
-        let kim = StepLengthModel::Kim { k: 0.35 };
-        assert!((with(kim).step_length(&step) - 0.7).abs() < 1e-12);
         // A 10 Hz "period" is clamped to the fastest cadence, 2.5 Hz.
         let fast = GaitStep { period_s: 0.1, ..step };
         assert!((with(linear).step_length(&fast) - 0.825).abs() < 1e-12);
-    }
-
-    /// Still, walking, still, walking, then a second of lost samples while walking: the
-    /// first step after each rest is given `step_from_rest_fraction` of a step, the first
-    /// after the gap (no rest) a whole one.
-    #[test]
-    fn a_step_from_rest_is_shortened() {
-        let walk = |fraction: f64| {
-            let config = MotionConfig { step_from_rest_fraction: fraction, ..MotionConfig::default() };
-            let mut m = MotionTracker::new(config).unwrap();
-            let walking =
-                |t: f64| (3.0..8.0).contains(&t) || (11.0..16.0).contains(&t) || (17.0..22.0).contains(&t);
-            let acc: Vec<_> = (0..2200u64)
-                .filter(|k| !(1600..1700).contains(k))
-                .map(|k| {
-                    let t = k as f64 * 0.01;
-                    let bounce = if walking(t) { 2.0 * (2.0 * PI * 1.8 * t).sin() } else { 0.0 };
-                    sample(k * 10_000_000, 0.0, 0.0, 9.81 + bounce)
-                })
-                .collect();
-            let mut steps = Vec::new();
-            for second in acc.chunks(100) {
-                m.push_accelerometer(second);
-                m.update(second[second.len() - 1].timestamp_ns);
-                steps.extend_from_slice(m.last_steps());
-            }
-            m.update(23_000_000_000);
-            steps.extend_from_slice(m.last_steps());
-            steps
-        };
-        let steps = walk(0.0);
-        let rest: Vec<f64> =
-            steps.iter().filter(|s| s.from_rest).map(|s| s.timestamp_ns as f64 * 1e-9).collect();
-        let all: Vec<(f64, bool)> =
-            steps.iter().map(|s| (s.timestamp_ns as f64 * 1e-9, s.from_rest)).collect();
-        assert_eq!(rest.len(), 2, "{rest:?} {all:?}");
-        assert!((3.0..4.0).contains(&rest[0]) && (11.0..12.0).contains(&rest[1]), "{rest:?}");
-        assert!(steps.iter().any(|s| s.timestamp_ns > 17_000_000_000));
-        for s in &steps {
-            assert_eq!(s.length_m, if s.from_rest { 0.0 } else { 0.7 }, "{s:?}");
-        }
-        let whole = walk(1.0);
-        assert_eq!(whole.len(), steps.len());
-        assert!(whole.iter().all(|s| s.length_m == 0.7));
     }
 
     #[test]

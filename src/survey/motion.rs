@@ -117,18 +117,12 @@ fn median(values: &[f64]) -> Option<f64> {
 struct WalkSums {
     /// Waypoint path length, m.
     path_m: f64,
-    /// Steps between the first and last waypoint, each weighted by the fraction of the
-    /// model's length it is given (`step_from_rest_fraction` for a first step from rest, 1
-    /// for the others): the constant model's term.
-    steps: f64,
     /// Steps between the first and last waypoint.
-    count: usize,
+    steps: f64,
     /// Σ step frequency (1/period, clamped to the cadence range), Hz.
     frequency: f64,
     /// Σ (peak-to-peak)^(1/4), Weinberg's term.
     weinberg: f64,
-    /// Σ (mean |a|)^(1/3), Kim's term.
-    kim: f64,
 }
 
 /// How well one step length model fitted, by leave-one-walk-out cross-validation.
@@ -150,7 +144,7 @@ pub struct MotionCalibration {
     /// relative distance error.
     pub step_length: StepLengthModel,
     /// Every candidate, with its cross-validated error: constant length (HIPE §3.1),
-    /// Weinberg (AN-602), linear in frequency (Shin et al. 2007), Kim et al. (2004).
+    /// Weinberg (AN-602), linear in frequency (Shin et al. 2007).
     pub candidates: Vec<ModelFit>,
     /// Site heading = magnetic azimuth + this, rad: declination and the site's rotation from
     /// north folded together (they cannot be told apart from walks).
@@ -203,23 +197,13 @@ pub fn calibrate_motion(survey: &[&Trace], base: &MotionConfig) -> Option<Motion
     for trace in survey {
         let Some(steps) = replay_steps(trace, &replay_config) else { continue };
         if let Some(span) = waypoint_span(trace) {
-            let mut s = WalkSums {
-                path_m: trace.path_length_m(),
-                steps: 0.0,
-                count: 0,
-                frequency: 0.0,
-                weinberg: 0.0,
-                kim: 0.0,
-            };
+            let mut s = WalkSums { path_m: trace.path_length_m(), steps: 0.0, frequency: 0.0, weinberg: 0.0 };
             for step in steps_within(&steps, span) {
-                let w = if step.from_rest { base.step_from_rest_fraction } else { 1.0 };
-                s.count += 1;
-                s.steps += w;
-                s.frequency += w * frequency(step, base);
-                s.weinberg += w * step.peak_to_peak_mps2.max(0.0).powf(0.25);
-                s.kim += w * step.mean_abs_accel_mps2.max(0.0).cbrt();
+                s.steps += 1.0;
+                s.frequency += frequency(step, base);
+                s.weinberg += step.peak_to_peak_mps2.max(0.0).powf(0.25);
             }
-            if s.path_m >= MIN_PATH_M && s.count >= MIN_STEPS && s.steps > 0.0 {
+            if s.path_m >= MIN_PATH_M && s.steps >= MIN_STEPS as f64 {
                 sums.push(s);
             }
         }
@@ -256,7 +240,7 @@ pub fn calibrate_motion(survey: &[&Trace], base: &MotionConfig) -> Option<Motion
     if used.is_empty() {
         return None;
     }
-    let candidates: Vec<ModelFit> = [fit_constant, fit_weinberg, fit_linear, fit_kim]
+    let candidates: Vec<ModelFit> = [fit_constant, fit_weinberg, fit_linear]
         .iter()
         .filter_map(|fit| {
             let model = fit(&used)?;
@@ -284,7 +268,7 @@ pub fn calibrate_motion(survey: &[&Trace], base: &MotionConfig) -> Option<Motion
         walks: survey.len(),
         distance_walks: used.len(),
         heading_walks: walk_offsets.len(),
-        steps: used.iter().map(|s| s.count as u64).sum(),
+        steps: used.iter().map(|s| s.steps as u64).sum(),
         distance_m: used.iter().map(|s| s.path_m).sum(),
         distance_residuals: used.iter().map(|s| (predict(&step_length, s) - s.path_m) / s.path_m).collect(),
         heading_residuals_rad: walk_offsets
@@ -309,7 +293,6 @@ fn predict(model: &StepLengthModel, s: &WalkSums) -> f64 {
     match *model {
         StepLengthModel::Constant { length_m } => length_m * s.steps,
         StepLengthModel::Weinberg { k } => k * s.weinberg,
-        StepLengthModel::Kim { k } => k * s.kim,
         StepLengthModel::LinearFrequency { intercept_m, slope_m_per_hz } => {
             intercept_m * s.steps + slope_m_per_hz * s.frequency
         }
@@ -328,12 +311,6 @@ fn fit_constant(walks: &[WalkSums]) -> Option<StepLengthModel> {
 fn fit_weinberg(walks: &[WalkSums]) -> Option<StepLengthModel> {
     let w: f64 = walks.iter().map(|s| s.weinberg).sum();
     (w > 0.0).then(|| StepLengthModel::Weinberg { k: walks.iter().map(|s| s.path_m).sum::<f64>() / w })
-}
-
-/// k = Σ path / Σ (mean |a|)^(1/3), as `fit_constant`.
-fn fit_kim(walks: &[WalkSums]) -> Option<StepLengthModel> {
-    let w: f64 = walks.iter().map(|s| s.kim).sum();
-    (w > 0.0).then(|| StepLengthModel::Kim { k: walks.iter().map(|s| s.path_m).sum::<f64>() / w })
 }
 
 /// path = a · steps + b · Σ f by least squares, weighted by 1 / steps (each walk's error
@@ -433,13 +410,8 @@ mod tests {
 
     const L_ROUTE: [(f64, f64); 3] = [(0.0, 0.0), (0.0, 40.0), (30.0, 40.0)];
 
-    fn fits(walks: &[WalkSums]) -> (StepLengthModel, StepLengthModel, StepLengthModel, StepLengthModel) {
-        (
-            fit_constant(walks).unwrap(),
-            fit_weinberg(walks).unwrap(),
-            fit_linear(walks).unwrap(),
-            fit_kim(walks).unwrap(),
-        )
+    fn fits(walks: &[WalkSums]) -> (StepLengthModel, StepLengthModel, StepLengthModel) {
+        (fit_constant(walks).unwrap(), fit_weinberg(walks).unwrap(), fit_linear(walks).unwrap())
     }
 
     #[test]
@@ -447,21 +419,13 @@ mod tests {
         // path = 0.3 N + 0.2 F exactly, for walks of various frequencies.
         let walks: Vec<WalkSums> = [(10.0, 18.0), (40.0, 80.0), (25.0, 40.0), (60.0, 100.0)]
             .iter()
-            .map(|&(n, f)| WalkSums {
-                path_m: 0.3 * n + 0.2 * f,
-                steps: n,
-                count: n as usize,
-                frequency: f,
-                weinberg: 2.0 * n,
-                kim: 4.0 * n,
-            })
+            .map(|&(n, f)| WalkSums { path_m: 0.3 * n + 0.2 * f, steps: n, frequency: f, weinberg: 2.0 * n })
             .collect();
-        let (constant, weinberg, linear, kim) = fits(&walks);
+        let (constant, weinberg, linear) = fits(&walks);
         let path: f64 = walks.iter().map(|w| w.path_m).sum();
         let n: f64 = walks.iter().map(|w| w.steps).sum();
         assert_eq!(constant, StepLengthModel::Constant { length_m: path / n });
         assert_eq!(weinberg, StepLengthModel::Weinberg { k: path / (2.0 * n) });
-        assert_eq!(kim, StepLengthModel::Kim { k: path / (4.0 * n) });
         let StepLengthModel::LinearFrequency { intercept_m, slope_m_per_hz } = linear else { panic!() };
         assert!((intercept_m - 0.3).abs() < 1e-9 && (slope_m_per_hz - 0.2).abs() < 1e-9, "{linear:?}");
         for w in &walks {
