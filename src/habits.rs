@@ -710,17 +710,26 @@ impl HabitModel {
             .iter()
             .enumerate()
             .map(|(k, &kappa)| {
-                let n: f64 = per_segment.iter().map(|s| s[k][0]).sum();
-                if n <= 0.0 {
-                    return StrengthGain { strength: kappa, gain: 0.0, standard_error: 0.0 };
-                }
-                let gain = per_segment.iter().map(|s| s[k][1]).sum::<f64>() / n;
-                let variance =
-                    per_segment.iter().map(|s| (s[k][1] - gain * s[k][0]).powi(2)).sum::<f64>() / (n * n);
-                StrengthGain { strength: kappa, gain, standard_error: variance.sqrt() }
+                let clusters: Vec<(f64, f64)> = per_segment.iter().map(|s| (s[k][0], s[k][1])).collect();
+                let (gain, standard_error) = clustered_ratio(&clusters).unwrap_or((0.0, 0.0));
+                StrengthGain { strength: kappa, gain, standard_error }
             })
             .collect())
     }
+}
+
+/// The ratio estimate r = Σ y / Σ w over clusters of (w, y), and its standard error
+/// √(Σ (y − r w)²) / Σ w, the delta-method form of a cluster jackknife: for means over units
+/// that are not independent within a cluster (the moves of one segment, the epochs of one
+/// walk). `None` when Σ w ≤ 0.
+pub fn clustered_ratio(clusters: &[(f64, f64)]) -> Option<(f64, f64)> {
+    let n: f64 = clusters.iter().map(|c| c.0).sum();
+    if n.is_nan() || n <= 0.0 {
+        return None;
+    }
+    let ratio = clusters.iter().map(|c| c.1).sum::<f64>() / n;
+    let variance = clusters.iter().map(|c| (c.1 - ratio * c.0).powi(2)).sum::<f64>() / (n * n);
+    Some((ratio, variance.sqrt()))
 }
 
 /// Runs of `records` with no gap over `max_gap_s`.
@@ -1081,5 +1090,21 @@ impl Rings {
     /// All counts.
     fn total(&self) -> f64 {
         self.rings.values().map(|r| r.1).sum()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::clustered_ratio;
+
+    /// By hand: clusters (w, y) = (1, 2) and (3, 2) give r = 4/4 = 1, residuals 2 − 1 = 1 and
+    /// 2 − 3 = −1, standard error √2 / 4; no weight gives none.
+    #[test]
+    fn clustered_ratio_by_hand() {
+        let (r, se) = clustered_ratio(&[(1.0, 2.0), (3.0, 2.0)]).unwrap();
+        assert!((r - 1.0).abs() < 1e-12 && (se - 2f64.sqrt() / 4.0).abs() < 1e-12, "{r} {se}");
+        assert_eq!(clustered_ratio(&[]), None);
+        assert_eq!(clustered_ratio(&[(0.0, 5.0)]), None);
+        assert_eq!(clustered_ratio(&[(f64::NAN, 1.0)]), None);
     }
 }

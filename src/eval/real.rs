@@ -6,7 +6,7 @@
 
 use super::replay::{replay, MotionMask, ReplayOptions, WaypointFeedback};
 use crate::engine::Engine;
-use crate::habits::{HabitModel, HabitReport};
+use crate::habits::{clustered_ratio, HabitModel, HabitReport};
 use crate::history::EpochRecord;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::Scan;
@@ -789,42 +789,40 @@ pub fn survey_habits(
                 std::iter::once(None).chain(HELD_OUT_STRENGTHS.map(Some)).map(move |s| (t, f, s))
             })
             .collect();
-        scored.extend(parallel_map(&runs, options.threads, |&(trace, floor, strength)| {
+        let results = parallel_map(&runs, options.threads, |&(trace, floor, strength)| {
             let window =
                 EngineConfig { track_window_epochs: trace.wifi_scans.len() * 2 + 64, ..config.clone() };
-            let Ok(mut engine) = Engine::new(Arc::clone(&half_site), window) else { return [(0.0, 0); 3] };
+            let mut engine = Engine::new(Arc::clone(&half_site), window).ok()?;
             if let Some(kappa) = strength {
                 let mut h = habits.clone();
-                if h.set_strength(Some(kappa)).is_err() {
-                    return [(0.0, 0); 3];
-                }
+                h.set_strength(Some(kappa)).ok()?;
                 engine.set_habits(h);
             }
             let r = replay(&mut engine, trace, &options.replay);
-            decoded(&half_site, &r).map(|estimates| {
+            Some(decoded(&half_site, &r).map(|estimates| {
                 let points = score(trace, floor, &estimates).0;
                 (points.iter().map(Scored::penalised_m).sum(), points.len())
-            })
-        }));
+            }))
+        });
+        // A walk counts only with every one of its runs: the differences are paired.
+        for walk in results.chunks(per_walk) {
+            if let Some(runs) = walk.iter().copied().collect::<Option<Vec<_>>>() {
+                scored.extend(runs);
+            }
+        }
     }
     selection.walks = scored.len() / per_walk;
     selection.epochs = scored.iter().step_by(per_walk).map(|s| s[0].1).sum();
     for (g, &kappa) in HELD_OUT_STRENGTHS.iter().enumerate() {
         let decoder = |d: usize| -> [f64; 2] {
-            // Paired per walk: Σ error with − Σ error without over the walk's epochs; the
-            // standard error of the ratio over walks (the epochs of one walk are not
-            // independent), as in `HabitModel`'s held-out gains.
-            let pairs: Vec<(f64, f64)> = scored
+            // Paired per walk: Σ error with − Σ error without over the walk's epochs, weighted
+            // by its epochs; the standard error over walks (the epochs of one walk are not
+            // independent).
+            let clusters: Vec<(f64, f64)> = scored
                 .chunks(per_walk)
-                .map(|walk| (walk[g + 1][d].0 - walk[0][d].0, walk[0][d].1 as f64))
+                .map(|walk| (walk[0][d].1 as f64, walk[g + 1][d].0 - walk[0][d].0))
                 .collect();
-            let n: f64 = pairs.iter().map(|p| p.1).sum();
-            if n <= 0.0 {
-                return [f64::NAN, f64::NAN];
-            }
-            let mean = pairs.iter().map(|p| p.0).sum::<f64>() / n;
-            let variance = pairs.iter().map(|p| (p.0 - mean * p.1).powi(2)).sum::<f64>() / (n * n);
-            [mean, variance.sqrt()]
+            clustered_ratio(&clusters).map_or([f64::NAN, f64::NAN], |(mean, se)| [mean, se])
         };
         selection.strengths.push(HeldOutStrength {
             strength: kappa,
@@ -931,7 +929,9 @@ pub struct CalibrationReport {
     pub rssi_weight_without_movement: Option<f64>,
     /// Per floor, in site order: the γ each floor gets.
     pub floors: Vec<FloorCalibrationReport>,
-    /// The radius factors chosen (68%, 95%), over every held-out epoch at its floor's γ.
+    /// The radius factors chosen (68%, 95%), over the held-out epochs on the map (`OnMap`)
+    /// with the motion as the sensors give it, each at the γ the engine gives it on its floor:
+    /// the fallback for a scenario without its own.
     pub accuracy_scale: Option<[f64; 2]>,
     /// The factors per motion scenario: over the held-out epochs (on the map) the engine
     /// positioned in that scenario, with the motion as the sensors give it, withheld, distance
@@ -943,7 +943,7 @@ pub struct CalibrationReport {
     /// Held-out epochs the radius factors were fitted on.
     pub epochs: usize,
     /// Held-out epochs left out of the radius factors: their truth was off the held-out
-    /// site's map ([`OnMap`]).
+    /// site's map (`OnMap`).
     pub epochs_off_map: usize,
     /// Sites surveyed for the leave-one-walk-out (one per survey walk).
     pub sites: usize,

@@ -21,7 +21,7 @@ pub trait Transition {
 /// tracked posterior has mass on a few hundred states.
 pub const PRUNE_MASS: f64 = 1e-15;
 
-/// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least [`PRUNE_MASS`].
+/// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least `PRUNE_MASS`.
 pub fn predict(transition: &dyn Transition, prior: &[f64], out: &mut [f64], row: &mut Vec<(u32, f64)>) {
     let mut shared = 0.0;
     out.fill(0.0);

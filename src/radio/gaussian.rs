@@ -154,7 +154,7 @@ impl LnCdfTable {
         })
     }
 
-    /// ln Φ(z): interpolated within [`TABLE_Z`], exact outside.
+    /// ln Φ(z): interpolated within `TABLE_Z`, exact outside.
     #[inline]
     pub fn ln_cdf(&self, z: f64) -> f64 {
         let u = (z - TABLE_Z.0) * TABLE_KNOTS_PER_Z;

@@ -19,7 +19,7 @@
 //!   results" (§IV-A). With the same draws but no dominant move, feedback 0.1 ended ten runs
 //!   4.5, 6.8, 7.6 and 20 points below the true parameters (seeds 0-3).
 //! - **Observations** (§II-C, §IV): the true position is uniform in its state; the range
-//!   differences to anchors 2-4 (anchor 1 the reference; the anchors [`ANCHOR_MARGIN_M`]
+//!   differences to anchors 2-4 (anchor 1 the reference; the anchors `ANCHOR_MARGIN_M`
 //!   outside the building's corners) get the fixed bias of the 1 m × 1 m
 //!   cell the position is in, U(0, b_max) or exponential, plus white Gaussian noise σ_n; the
 //!   position is estimated by least squares (Chan & Ho's linear first step, then Gauss-Newton
@@ -343,7 +343,7 @@ fn habits(floor: &Floor, rng: &mut ChaCha8Rng) -> Vec<Vec<(u32, f64)>> {
         .collect()
 }
 
-/// The TDoA system: four anchors around the building's corners ([`ANCHOR_MARGIN_M`]), anchor 0
+/// The TDoA system: four anchors around the building's corners (`ANCHOR_MARGIN_M`), anchor 0
 /// the reference, and the fixed bias of each cell on the three range differences.
 struct Tdoa {
     anchors: [Point2<f64>; 4],
