@@ -273,6 +273,23 @@ impl EngineConfig {
         })
     }
 
+    /// The site's γ per motion scenario for epochs without a movement likelihood
+    /// ([`Calibration::rssi_weight_by_scenario`](crate::site::Calibration)), in
+    /// [`MdiScenario::ALL`](crate::sensors::MdiScenario::ALL) order. `None` for every scenario
+    /// when `rssi_weight` or `rssi_weight_without_movement` is given (an explicit γ overrides
+    /// every calibrated one) or without `site_calibration`; an epoch with `None` takes its
+    /// floor's γ without movement ([`floor_rssi_weights`](Self::floor_rssi_weights)).
+    pub fn scenario_rssi_weights(&self, site: &crate::Site) -> [Option<f64>; 4] {
+        let explicit = self.rssi_weight.is_some() || self.rssi_weight_without_movement.is_some();
+        crate::sensors::MdiScenario::ALL.map(|s| {
+            if self.site_calibration && !explicit {
+                site.calibration().rssi_weight_by_scenario.get(s)
+            } else {
+                None
+            }
+        })
+    }
+
     /// Checks every field; the message names the field and the rule.
     pub fn validate(&self) -> Result<(), Error> {
         let fail = |m: String| Err(Error::InvalidConfig(m));

@@ -223,6 +223,9 @@ pub struct Engine {
     rssi_weight: Vec<[Option<f64>; 2]>,
     /// γ before the engine has a floor: the configuration's, else the site-wide one.
     site_rssi_weight: [Option<f64>; 2],
+    /// γ per motion scenario in epochs without a movement likelihood (the site's calibration),
+    /// before the floor's.
+    scenario_rssi_weight: [Option<f64>; 4],
     /// Factors on the 68% and 95% radii (the site's calibration), per motion scenario.
     accuracy_scale: [[f64; 2]; 4],
     /// Hashes scans' ids with the site's salt when the site's ids are hashed.
@@ -260,6 +263,7 @@ impl Engine {
         let reach = ReachTable::build(&site, config.reach_radius_m);
         let rssi_weight = config.floor_rssi_weights(&site);
         let site_rssi_weight = config.rssi_weight_for(&site);
+        let scenario_rssi_weight = config.scenario_rssi_weights(&site);
         let accuracy_scale = config.accuracy_scales_for(&site);
         let site_zones = site.zones().len();
         let habits = HabitModel::new(&site);
@@ -279,6 +283,7 @@ impl Engine {
             stats: InputStats::default(),
             rssi_weight,
             site_rssi_weight,
+            scenario_rssi_weight,
             accuracy_scale,
             id_hasher,
             zone_mass: vec![0.0; site_zones],
@@ -755,10 +760,16 @@ impl Engine {
         Ok(self.atomically(motion.is_none(), |engine| {
             let motion = engine.motion_until(scan.timestamp_ns, motion);
             // Hoang eq. 14: p(o | s)^γ, with the γ of an epoch with or without a movement
-            // likelihood to balance against, of the floor the engine is on.
+            // likelihood to balance against, of the floor the engine is on; without one, the
+            // γ of the epoch's scenario when the site has one (HIPE's ring, sector and disc
+            // are different priors to weigh the radio against).
             let with_movement =
                 engine.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some();
-            let gamma = engine.rssi_weight_now()[usize::from(!with_movement)];
+            let gamma = if with_movement {
+                engine.rssi_weight_now()[0]
+            } else {
+                engine.scenario_rssi_weight[motion.scenario.index()].or(engine.rssi_weight_now()[1])
+            };
             if let Some(gamma) = gamma {
                 for e in engine.ln_emission.iter_mut() {
                     *e *= gamma;

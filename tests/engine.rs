@@ -220,3 +220,65 @@ fn radius_factors_follow_the_epochs_scenario() {
     let message = format!("{:?}", refused.err());
     assert!(message.contains("calibration.accuracy_scale_by_scenario.distance"), "{message}");
 }
+
+/// An epoch without a movement likelihood takes its scenario's γ when the site has one (a
+/// distance-only epoch the site's `distance` γ), else the γ without movement; an explicit γ in
+/// the configuration overrides both, and a γ out of (0, 1] is refused with its path.
+#[test]
+fn an_epoch_without_movement_takes_its_scenarios_gamma() {
+    use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
+    use waymark::site::{Calibration, PerScenario};
+    let (without, distance_only) = (0.3, 0.05);
+    let site = |by_scenario: Option<f64>, without: f64| {
+        let mut rssi_weight_by_scenario = PerScenario::default();
+        rssi_weight_by_scenario.set(MdiScenario::Distance, by_scenario);
+        let calibration = Calibration {
+            rssi_weight_without_movement: Some(without),
+            rssi_weight_by_scenario,
+            ..Calibration::default()
+        };
+        Arc::new(two_floor_site().with_calibration(calibration).unwrap())
+    };
+    // Two scans, each after a metre walked with no heading (HIPE's ring), or with no motion
+    // at all (speed only).
+    let run = |site: &Arc<Site>, config: EngineConfig, walked: bool| {
+        let mut engine = Engine::new(Arc::clone(site), config).unwrap();
+        let mut posteriors = Vec::new();
+        for k in 1..=2u64 {
+            let s = scan(k * SECOND, &readings_at(0, 3.0 + k as f64));
+            let p = if walked {
+                let motion = MotionUpdate {
+                    start_ns: (k - 1) * SECOND,
+                    end_ns: k * SECOND,
+                    steps: 1,
+                    distance_m: Some(1.0),
+                    distance_sigma_m: 0.1,
+                    motion_state: MotionState::Walking,
+                    scenario: MdiScenario::Distance,
+                    ..MotionUpdate::default()
+                };
+                engine.push_scan_with_motion(&s, &motion).unwrap()
+            } else {
+                engine.push_scan(&s).unwrap()
+            };
+            assert_eq!(p.scenario, if walked { MdiScenario::Distance } else { MdiScenario::Speed });
+            posteriors.push(engine.posterior().to_vec());
+        }
+        posteriors
+    };
+    let default = EngineConfig::default;
+    let own = site(Some(distance_only), without);
+    assert_eq!(run(&own, default(), true), run(&site(None, distance_only), default(), true));
+    assert_ne!(run(&own, default(), true), run(&site(None, without), default(), true));
+    // A speed-only epoch on the same site: the γ without movement.
+    assert_eq!(run(&own, default(), false), run(&site(None, without), default(), false));
+    // An explicit γ overrides the scenario's.
+    let explicit = EngineConfig { rssi_weight_without_movement: Some(0.5), ..default() };
+    assert_eq!(run(&own, explicit.clone(), true), run(&site(None, without), explicit, true));
+    let refused = two_floor_site().with_calibration(Calibration {
+        rssi_weight_by_scenario: PerScenario { heading_speed: Some(0.0), ..PerScenario::default() },
+        ..Calibration::default()
+    });
+    let message = format!("{:?}", refused.err());
+    assert!(message.contains("calibration.rssi_weight_by_scenario.heading_speed"), "{message}");
+}

@@ -10,6 +10,7 @@ use crate::habits::{clustered_ratio, HabitModel, HabitReport};
 use crate::history::EpochRecord;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::Scan;
+use crate::sensors::MdiScenario;
 use crate::site::{Calibration, North, Site};
 use crate::survey::{positioned_scans, survey, PreparedSurvey, SurveyFloor, SurveyOptions, SurveyReport};
 use crate::EngineConfig;
@@ -927,6 +928,12 @@ pub struct CalibrationReport {
     pub rssi_weight: Option<f64>,
     /// The same for epochs without a movement likelihood.
     pub rssi_weight_without_movement: Option<f64>,
+    /// All floors pooled, with only the distance and with only the heading: the curve each
+    /// scenario's own γ is chosen on (`rssi_weight_by_scenario`).
+    pub gamma_by_scenario: crate::site::PerScenario<Vec<GammaPoint>>,
+    /// The γ of those scenarios, when their own beat `rssi_weight_without_movement` on their
+    /// curve by more than its standard error.
+    pub rssi_weight_by_scenario: crate::site::PerScenario<f64>,
     /// Per floor, in site order: the γ each floor gets.
     pub floors: Vec<FloorCalibrationReport>,
     /// The radius factors chosen (68%, 95%), over the held-out epochs on the map (`OnMap`)
@@ -983,12 +990,12 @@ pub fn calibrate(
     Ok((*site.calibration(), site.north(), report))
 }
 
-/// Per walk, per γ, per motion mask: the held-out epochs.
-type HeldOut = Vec<[Vec<Scored>; 2]>;
+/// Per walk, per γ, per motion mask (`survey_calibrated`'s `masks`): the held-out epochs.
+type HeldOut = Vec<[Vec<Scored>; 4]>;
 
 /// Per motion mask of the calibration: each held-out epoch, whether its truth was on the
 /// held-out site's map, and the scenario the engine positioned it in.
-type Tagged = [Vec<(Scored, bool, crate::sensors::MdiScenario)>; 4];
+type Tagged = [Vec<(Scored, bool, MdiScenario)>; 4];
 
 /// Fewest held-out epochs a scenario's radius factors are fitted on: the 95th percentile then
 /// rests on at least ten epochs beyond it.
@@ -1080,7 +1087,7 @@ pub fn survey_calibrated(
     let (site, survey) = prepared.assemble(&full)?;
     // Every survey walk held out once, replayed at each γ with the motion as the sensors give
     // it and with the motion withheld.
-    // The first two pick γ; all four fit the radius factors of every scenario.
+    // Each picks the γ of its scenario; all four fit the radius factors of every scenario.
     let masks = [MotionMask::Auto, MotionMask::Speed, MotionMask::Distance, MotionMask::HeadingSpeed];
     let jobs: Vec<(usize, usize)> = floors
         .iter()
@@ -1118,7 +1125,7 @@ pub fn survey_calibrated(
                                 .map(|(s, (p, truth))| (s, mapped.contains(truth), p.scenario))
                                 .collect::<Vec<_>>()
                         });
-                        let plain = [0, 1].map(|m| runs[m].iter().map(|t| t.0).collect());
+                        let plain = [0, 1, 2, 3].map(|m| runs[m].iter().map(|t| t.0).collect());
                         tagged.push(runs);
                         plain
                     })
@@ -1140,6 +1147,14 @@ pub fn survey_calibrated(
         pooled_still.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
     calibration.rssi_weight = best.map(|k| pooled[k].gamma);
     calibration.rssi_weight_without_movement = best_still.map(|k| pooled_still[k].gamma);
+    // Distance only and heading only: their own γ when it beats the γ without movement on
+    // their own held-out curve by more than its standard error (`own_gamma`).
+    for (mask, scenario) in [(2, MdiScenario::Distance), (3, MdiScenario::HeadingSpeed)] {
+        let (curve, best) = gamma_curve(&walks, mask);
+        let own = own_gamma(&curve, best, calibration.rssi_weight_without_movement);
+        calibration.rssi_weight_by_scenario.set(scenario, own);
+        report.gamma_by_scenario.set(scenario, Some(curve));
+    }
     // Per floor.
     let mut weights = Vec::with_capacity(floors.len());
     let mut at_chosen: Vec<&Scored> = Vec::new();
@@ -1162,21 +1177,22 @@ pub fn survey_calibrated(
         let gamma = own_gamma(&curve, best, calibration.rssi_weight);
         let g = gamma.or(calibration.rssi_weight).and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
         let gamma_still = own_gamma(&curve_still, best_still, calibration.rssi_weight_without_movement);
-        let g_still = gamma_still
-            .or(calibration.rssi_weight_without_movement)
-            .and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
+        let g_still = gamma_still.or(calibration.rssi_weight_without_movement);
+        let g_still = g_still.and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
         // Each epoch at the γ the engine gives it: only distance-and-heading epochs have
-        // Hoang's movement likelihood (eq. 11); distance only, heading only (HIPE's ring and
-        // sector) and speed only run at the γ chosen without one.
-        for (k, chosen) in [g, g_still].into_iter().enumerate() {
-            let Some(chosen) = chosen else { continue };
+        // Hoang's movement likelihood (eq. 11); distance only and heading only (HIPE's ring
+        // and sector) run at their scenario's γ if the site has one, and they and speed only
+        // otherwise at the γ chosen without one.
+        let at = |g: Option<f64>| g.and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
+        let chosen = MdiScenario::ALL.map(|sc| match sc {
+            MdiScenario::DistanceHeading => g,
+            _ => at(calibration.rssi_weight_by_scenario.get(sc)).or(g_still),
+        });
+        for scenario in MdiScenario::ALL {
+            let Some(chosen) = chosen[scenario.index()] else { continue };
             for walk in &mine_tagged {
                 for (m, run) in walk[chosen].iter().enumerate() {
-                    for (p, on_map, scenario) in run {
-                        let still = *scenario != crate::sensors::MdiScenario::DistanceHeading;
-                        if usize::from(still) != k {
-                            continue;
-                        }
+                    for (p, on_map, _) in run.iter().filter(|t| t.2 == scenario) {
                         if !on_map {
                             report.epochs_off_map += usize::from(m == 0);
                             continue;
@@ -1217,7 +1233,7 @@ pub fn survey_calibrated(
         scale.iter().all(|s| s.is_finite() && *s > 0.0).then_some(scale)
     };
     calibration.accuracy_scale = scales(&at_chosen);
-    for scenario in crate::sensors::MdiScenario::ALL {
+    for scenario in MdiScenario::ALL {
         let points = &by_scenario[scenario.index()];
         report.scenario_epochs[scenario.index()] = points.len();
         let scale = if points.len() >= MIN_SCENARIO_EPOCHS { scales(points) } else { None };
@@ -1226,6 +1242,7 @@ pub fn survey_calibrated(
     report.epochs = at_chosen.len();
     report.rssi_weight = calibration.rssi_weight;
     report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
+    report.rssi_weight_by_scenario = calibration.rssi_weight_by_scenario;
     report.accuracy_scale = calibration.accuracy_scale;
     report.accuracy_scale_by_scenario = calibration.accuracy_scale_by_scenario;
     let site = site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?;
@@ -1380,7 +1397,7 @@ mod tests {
 
     /// Three walks scored at the first two γ of the grid (with the motion; nothing without).
     fn walk(first: &[f64], second: &[f64]) -> HeldOut {
-        let mut h: HeldOut = vec![[Vec::new(), Vec::new()]; GAMMA_GRID.len()];
+        let mut h: HeldOut = vec![Default::default(); GAMMA_GRID.len()];
         h[0][0] = points(first);
         h[1][0] = points(second);
         h

@@ -119,6 +119,13 @@ pub struct Calibration {
     /// chosen the same way with the motion withheld.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rssi_weight_without_movement: Option<f64>,
+    /// γ per motion scenario in its epochs without a movement likelihood, before
+    /// `rssi_weight_without_movement`: the radio then competes with HIPE's ring (distance
+    /// only), sector (heading only) or disc (speed only), each a different prior to balance.
+    /// The survey's calibration fits `distance` and `heading_speed` with those sensors alone
+    /// (speed's is `rssi_weight_without_movement`).
+    #[serde(default, skip_serializing_if = "PerScenario::is_empty")]
+    pub rssi_weight_by_scenario: PerScenario<f64>,
     /// Factors on the posterior's 68% and 95% radii so that, on held-out survey walks, the
     /// circles held the truth 68% and 95% of the time.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -127,7 +134,7 @@ pub struct Calibration {
     /// engine positioned in that scenario: the posterior's spread means something else when
     /// the motion is only a maximum speed than when steps and heading are measured. A scenario
     /// without its own factors uses `accuracy_scale`.
-    #[serde(default, skip_serializing_if = "ScenarioScales::is_empty")]
+    #[serde(default, skip_serializing_if = "PerScenario::is_empty")]
     pub accuracy_scale_by_scenario: ScenarioScales,
     /// The surveyors' step length model, fitted on the survey walks.
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -149,6 +156,14 @@ impl Calibration {
             if let Some(g) = gamma {
                 if !(g > 0.0 && g <= 1.0) {
                     return Err((format!("calibration.{name}"), format!("must be in (0, 1], got {g}")));
+                }
+            }
+        }
+        for s in crate::sensors::MdiScenario::ALL {
+            if let Some(g) = self.rssi_weight_by_scenario.get(s) {
+                if !(g > 0.0 && g <= 1.0) {
+                    let path = format!("calibration.rssi_weight_by_scenario.{}", ScenarioScales::key(s));
+                    return Err((path, format!("must be in (0, 1], got {g}")));
                 }
             }
         }
@@ -178,37 +193,40 @@ impl Calibration {
 }
 
 /// Radius factors (68%, 95%) per motion scenario; `None`: not fitted.
+pub type ScenarioScales = PerScenario<[f64; 2]>;
+
+/// A value per motion scenario (HIPE Table 1); `None`: not fitted.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
-pub struct ScenarioScales {
+pub struct PerScenario<T> {
     /// Steps and heading measured.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub distance_heading: Option<[f64; 2]>,
+    pub distance_heading: Option<T>,
     /// Steps measured, heading not.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub distance: Option<[f64; 2]>,
+    pub distance: Option<T>,
     /// Heading measured, distance from the maximum speed.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub heading_speed: Option<[f64; 2]>,
+    pub heading_speed: Option<T>,
     /// The maximum speed only.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub speed: Option<[f64; 2]>,
+    pub speed: Option<T>,
 }
 
-impl ScenarioScales {
-    /// Whether no scenario has factors.
+impl<T: Clone> PerScenario<T> {
+    /// Whether no scenario has a value.
     pub fn is_empty(&self) -> bool {
-        *self == ScenarioScales::default()
+        crate::sensors::MdiScenario::ALL.iter().all(|&s| self.slot(s).is_none())
     }
 
-    /// The factors of `scenario`.
-    pub fn get(&self, scenario: crate::sensors::MdiScenario) -> Option<[f64; 2]> {
-        *self.slot(scenario)
+    /// The value of `scenario`.
+    pub fn get(&self, scenario: crate::sensors::MdiScenario) -> Option<T> {
+        self.slot(scenario).clone()
     }
 
-    /// Sets the factors of `scenario`.
-    pub fn set(&mut self, scenario: crate::sensors::MdiScenario, scale: Option<[f64; 2]>) {
-        *self.slot_mut(scenario) = scale;
+    /// Sets the value of `scenario`.
+    pub fn set(&mut self, scenario: crate::sensors::MdiScenario, value: Option<T>) {
+        *self.slot_mut(scenario) = value;
     }
 
     /// Its key in the site file.
@@ -222,7 +240,7 @@ impl ScenarioScales {
         }
     }
 
-    fn slot(&self, scenario: crate::sensors::MdiScenario) -> &Option<[f64; 2]> {
+    fn slot(&self, scenario: crate::sensors::MdiScenario) -> &Option<T> {
         use crate::sensors::MdiScenario::*;
         match scenario {
             DistanceHeading => &self.distance_heading,
@@ -232,7 +250,7 @@ impl ScenarioScales {
         }
     }
 
-    fn slot_mut(&mut self, scenario: crate::sensors::MdiScenario) -> &mut Option<[f64; 2]> {
+    fn slot_mut(&mut self, scenario: crate::sensors::MdiScenario) -> &mut Option<T> {
         use crate::sensors::MdiScenario::*;
         match scenario {
             DistanceHeading => &mut self.distance_heading,

@@ -8,6 +8,7 @@ use std::time::Instant;
 use waymark::eval::real::{self as evaluation, EvalOptions, FloorData, CONFIGURATIONS};
 use waymark::eval::replay::{self as replaying, ReplayOptions};
 use waymark::io::Trace;
+use waymark::sensors::MdiScenario;
 use waymark::{Engine, EngineConfig, Salt, Site};
 
 /// The environment variable that may hold the salt (hex) when no `--salt-file` is given.
@@ -258,6 +259,20 @@ fn print_calibration(c: &evaluation::CalibrationReport) {
         c.motion.as_ref().map(|m| m.step_length),
         c.motion.as_ref().map_or(0.0, |m| m.heading_offset_deg)
     );
+    for (name, scenario) in
+        [("distance only", MdiScenario::Distance), ("heading only", MdiScenario::HeadingSpeed)]
+    {
+        let Some(curve) = c.gamma_by_scenario.get(scenario) else { continue };
+        let curve: Vec<String> = curve
+            .iter()
+            .map(|p| format!("{}: {:.2} ± {:.2}", p.gamma, p.mean_error_m, p.jackknife_se_m))
+            .collect();
+        println!(
+            "γ {name}: {} | {}",
+            c.rssi_weight_by_scenario.get(scenario).map_or("as without movement".into(), |g| g.to_string()),
+            curve.join(", ")
+        );
+    }
     println!(
         "γ per floor by leave-one-walk-out ({} sites, {:.0}% of states refitted per site); mean held-out error, m, at each γ (walks preferring it):",
         c.sites,
