@@ -715,7 +715,7 @@ fn plot(
         let path = dir.join(format!("{}-{}.svg", floors[f].name, trace.name));
         plot_walk(&path, &title, floors[f].plan.as_ref(), &truth, &tracks).map_err(|e| e.to_string())?;
         for (key, estimates) in &result.estimates {
-            let (epochs, _) = evaluation::score(trace, f, estimates);
+            let (epochs, _) = evaluation::score_scans(trace, f, estimates, None);
             errors.entry(key).or_default().extend(epochs.iter().map(|s| s.penalised_m()));
         }
     }
