@@ -123,6 +123,9 @@ pub struct FloorSurvey {
     /// Median time between consecutive WiFi scans of a walk, s (the phones' scan interval,
     /// which sets the reading-age limit and the timer epoch's period).
     pub scan_interval_median_s: f64,
+    /// 99th percentile of the same, s: how long a replay's beacons wait for the next WiFi
+    /// scan, and its timer for one, before an epoch goes without it.
+    pub scan_interval_p99_s: f64,
 }
 
 /// The survey's outcome.
@@ -576,6 +579,7 @@ impl<'a> PreparedSurvey<'a> {
             let mut gaps: Vec<f64> = walks.iter().flat_map(|w| w.gaps.iter().copied()).collect();
             gaps.sort_by(f64::total_cmp);
             report.scan_interval_median_s = gaps.get(gaps.len() / 2).copied().unwrap_or(f64::NAN);
+            report.scan_interval_p99_s = gaps.get(gaps.len() * 99 / 100).copied().unwrap_or(f64::NAN);
             let mut ids_of: BTreeMap<Cell, u32> = BTreeMap::new();
             for (&c, cell_fit) in &fits.floors[f] {
                 let id = builder.fitted_state(index, centre(c), cell_fit.scans);
