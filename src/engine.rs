@@ -759,18 +759,7 @@ impl Engine {
         // Accepted from here on: the state changes.
         Ok(self.atomically(motion.is_none(), |engine| {
             let motion = engine.motion_until(scan.timestamp_ns, motion);
-            // Hoang eq. 14: p(o | s)^γ, with the γ of an epoch with or without a movement
-            // likelihood to balance against, of the floor the engine is on; without one, the
-            // γ of the epoch's scenario when the site has one (HIPE's ring, sector and disc
-            // are different priors to weigh the radio against).
-            let with_movement =
-                engine.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some();
-            let gamma = if with_movement {
-                engine.rssi_weight_now()[0]
-            } else {
-                engine.scenario_rssi_weight[motion.scenario.index()].or(engine.rssi_weight_now()[1])
-            };
-            if let Some(gamma) = gamma {
+            if let Some(gamma) = engine.epoch_rssi_weight(scan.timestamp_ns, &motion) {
                 for e in engine.ln_emission.iter_mut() {
                     *e *= gamma;
                 }
@@ -967,19 +956,20 @@ impl Engine {
             reach_m: speed_reach,
             ratio: ratio_max,
             movement_m: motion.displacement_m,
+            walked_m: motion.distance_m.filter(|_| motion.scenario == MdiScenario::Distance),
             variance_m2: base_variance + spread.0,
             across_variance_m2: base_variance + spread.1,
             mahalanobis_cap: config.hoang.mahalanobis_cap,
-            exponent: self.rssi_weight_now()[0].map_or(1.0, |g| 1.0 - g),
+            exponent: self.epoch_rssi_weight(timestamp_ns, motion).map_or(1.0, |g| 1.0 - g),
         };
         let transition: &dyn Transition = match config.transition {
             TransitionModel::Reach => &reach,
             TransitionModel::Hipe => &hipe,
-            // Hoang's Gaussian needs the movement vector; with only a distance or only a
-            // heading, HIPE's ring or sector still uses what was measured (HIPE Table 1).
+            // Hoang's Gaussian needs a measured distance (the movement vector, or the distance
+            // alone); with only a heading, HIPE's sector still uses what was measured (HIPE
+            // Table 1).
             TransitionModel::Hoang
-                if motion.displacement_m.is_none()
-                    && matches!(motion.scenario, MdiScenario::Distance | MdiScenario::HeadingSpeed) =>
+                if motion.displacement_m.is_none() && motion.scenario == MdiScenario::HeadingSpeed =>
             {
                 &hipe
             }
@@ -992,6 +982,30 @@ impl Engine {
         self.viterbi.step(timestamp_ns, transition, &self.ln_emission);
         let result = self.filter.step(Some(transition), &self.ln_emission);
         result.unwrap_or_else(|_| self.restart())
+    }
+
+    /// Hoang eq. 14's γ for an epoch at `timestamp_ns` with `motion`, of the floor the engine
+    /// is on: that of an epoch with the movement vector's likelihood when its transition has
+    /// one, else the γ of the epoch's scenario when the site has one (the distance-only
+    /// likelihood, HIPE's sector and the reach alone are different priors to weigh the radio
+    /// against), else that of an epoch without a movement likelihood. The first epoch has no
+    /// transition at all and a gap longer than the walking-distance table is bridged by the
+    /// speed bound alone: both weigh the radio as without a movement likelihood (measured: the
+    /// first epoch at the γ with movement, 0.03 on the five competition floors, left the
+    /// posterior so flat that the floor with the most states took the first estimate, and 4 of
+    /// 112 test walks began on a wrong floor).
+    fn epoch_rssi_weight(&self, timestamp_ns: u64, motion: &MotionUpdate) -> Option<f64> {
+        let [with_movement, without] = self.rssi_weight_now();
+        let Some(last) = self.last_epoch_ns else { return without };
+        let dt_s = timestamp_ns.saturating_sub(last) as f64 * 1e-9;
+        if self.config.max_speed_mps * dt_s > self.reach.radius_m() {
+            return without;
+        }
+        if self.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some() {
+            with_movement
+        } else {
+            self.scenario_rssi_weight[motion.scenario.index()].or(without)
+        }
     }
 
     /// γ (with, without a movement likelihood) for the coming epoch: that of the floor of the

@@ -221,9 +221,10 @@ fn radius_factors_follow_the_epochs_scenario() {
     assert!(message.contains("calibration.accuracy_scale_by_scenario.distance"), "{message}");
 }
 
-/// An epoch without a movement likelihood takes its scenario's γ when the site has one (a
-/// distance-only epoch the site's `distance` γ), else the γ without movement; an explicit γ in
-/// the configuration overrides both, and a γ out of (0, 1] is refused with its path.
+/// An epoch without the movement vector's likelihood takes its scenario's γ when the site has
+/// one (a distance-only epoch the site's `distance` γ), else the γ without movement; the first
+/// epoch, which has no transition at all, takes the γ without movement; an explicit γ in the
+/// configuration overrides both, and a γ out of (0, 1] is refused with its path.
 #[test]
 fn an_epoch_without_movement_takes_its_scenarios_gamma() {
     use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
@@ -239,7 +240,7 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
         };
         Arc::new(two_floor_site().with_calibration(calibration).unwrap())
     };
-    // Two scans, each after a metre walked with no heading (HIPE's ring), or with no motion
+    // Two scans, each after a metre walked with no heading, or with no motion
     // at all (speed only).
     let run = |site: &Arc<Site>, config: EngineConfig, walked: bool| {
         let mut engine = Engine::new(Arc::clone(site), config).unwrap();
@@ -268,8 +269,11 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
     };
     let default = EngineConfig::default;
     let own = site(Some(distance_only), without);
-    assert_eq!(run(&own, default(), true), run(&site(None, distance_only), default(), true));
-    assert_ne!(run(&own, default(), true), run(&site(None, without), default(), true));
+    let (walked, reference) = (run(&own, default(), true), run(&site(None, without), default(), true));
+    assert_eq!(walked[0], reference[0], "the first epoch weighs the radio as without movement");
+    assert_ne!(walked[1], reference[1], "a distance-only epoch takes the distance γ");
+    // With the distance γ as the γ without movement too, only the first epoch differs.
+    assert_ne!(walked[0], run(&site(None, distance_only), default(), true)[0]);
     // A speed-only epoch on the same site: the γ without movement.
     assert_eq!(run(&own, default(), false), run(&site(None, without), default(), false));
     // An explicit γ overrides the scenario's.

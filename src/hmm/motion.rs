@@ -130,6 +130,11 @@ impl Transition for HipeTransition<'_> {
 /// v_max·Δt (Hoang §6.1, with HIPE's floor a_h/K elsewhere), times the movement likelihood
 /// N(v; l_j - l_i, Σ_v) of eq. 11, raised to 1 - γ as in eq. 14.
 ///
+/// With only the distance walked measured (no heading), the observation is that scalar d and
+/// its likelihood is eq. 11's along-track term, N(d; w_ij, σ²) with w_ij the walking distance
+/// from i to j and σ² the along-track variance: HIPE's ring (eq. 7) with a Gaussian edge
+/// instead of a hard one, so that a miscounted epoch costs density, not the state.
+///
 /// The Mahalanobis distance is capped (at 3 by default) so that a wrong step count or heading
 /// cannot make a state impossible: beyond the cap every state has the cap's density, which is
 /// also the density of the floor entries.
@@ -145,6 +150,9 @@ pub struct HoangTransition<'a> {
     pub ratio: f64,
     /// The measured movement vector v_t in the site frame, m; `None`: no movement term.
     pub movement_m: Option<[f64; 2]>,
+    /// The measured walking distance, m, used when `movement_m` is `None` (distance without
+    /// heading); `None` with it: no movement term.
+    pub walked_m: Option<f64>,
     /// Σ_v along the measured movement, m² (Hoang §6.1: Σ_v = 0.25 m² · I).
     pub variance_m2: f64,
     /// Σ_v across the measured movement, m²: equal to `variance_m2` for Hoang's isotropic Σ_v;
@@ -180,6 +188,17 @@ impl HoangTransition<'_> {
     fn ln_normaliser(&self) -> f64 {
         (std::f64::consts::TAU * (self.variance_m2 * self.across_variance_m2).sqrt()).ln()
     }
+
+    /// ln N(d; w, σ²) along the track, with the capped Mahalanobis distance, times the exponent.
+    fn ln_walked(&self, d: f64, walk_m: f64) -> f64 {
+        let r2 = ((d - walk_m).powi(2) / self.variance_m2).min(self.mahalanobis_cap * self.mahalanobis_cap);
+        self.exponent * (-0.5 * r2 - self.ln_walked_normaliser())
+    }
+
+    /// ln √(2π σ²).
+    fn ln_walked_normaliser(&self) -> f64 {
+        0.5 * (std::f64::consts::TAU * self.variance_m2).ln()
+    }
 }
 
 impl Transition for HoangTransition<'_> {
@@ -197,11 +216,22 @@ impl Transition for HoangTransition<'_> {
                 let v = self.movement_m.map_or(Vector2::zeros(), |[x, y]| Vector2::new(x, y));
                 v.try_normalize(1e-9).unwrap_or_else(Vector2::zeros) * f64::from(walk_m)
             };
-            row.push((j, high * self.ln_movement(delta).exp()));
+            let ln = match (self.movement_m, self.walked_m) {
+                (None, Some(d)) => self.ln_walked(d, f64::from(walk_m)),
+                _ => self.ln_movement(delta),
+            };
+            row.push((j, high * ln.exp()));
         }
-        let cap = self.movement_m.map_or(0.0, |_| {
-            self.exponent * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - self.ln_normaliser())
-        });
+        let cap = match (self.movement_m, self.walked_m) {
+            (Some(_), _) => {
+                self.exponent * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - self.ln_normaliser())
+            }
+            (None, Some(_)) => {
+                self.exponent
+                    * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - self.ln_walked_normaliser())
+            }
+            (None, None) => 0.0,
+        };
         low * cap.exp()
     }
 }
@@ -293,6 +323,7 @@ mod tests {
             reach_m: 4.5,
             ratio: 200_000.0,
             movement_m: Some([1.0, 0.0]),
+            walked_m: None,
             variance_m2: along,
             across_variance_m2: across,
             mahalanobis_cap: cap,
@@ -331,6 +362,36 @@ mod tests {
         let normaliser = std::f64::consts::TAU * (1.0f64 * 0.25).sqrt();
         assert_relative_eq!(t.ln_movement(Vector2::new(0.0, 0.0)), -0.5 - normaliser.ln(), epsilon = 1e-12);
         assert_relative_eq!(t.ln_movement(Vector2::new(1.0, 1.0)), -2.0 - normaliser.ln(), epsilon = 1e-12);
+    }
+
+    #[test]
+    fn distance_alone_is_a_gaussian_ring_in_walking_distance() {
+        let site = grid();
+        let table = ReachTable::build(&site, 9.0);
+        let t = HoangTransition {
+            movement_m: None,
+            walked_m: Some(2.0),
+            ..one_metre_east(&site, &table, [0.25, 0.25], 3.0)
+        };
+        let mut row = Vec::new();
+        let floor = t.row(12, &mut row);
+        let weight = |j: u32| row.iter().find(|e| e.0 == j).unwrap().1;
+        let (high, _) = hipe_probabilities(row.len(), 25, 200_000.0);
+        let peak = high / (std::f64::consts::TAU * 0.25).sqrt();
+        // Every state 2 m away on the 4-connected grid, whatever the direction, is at the peak:
+        // two east (14), two west (10), one north and one east (18, walked round the corner).
+        for j in [14, 10, 2, 22, 18, 6] {
+            assert_relative_eq!(weight(j), peak, epsilon = 1e-12);
+        }
+        // One metre away (13, 11) is 1 m = 2σ short; staying put (12) is capped at 3σ, as is
+        // the floor.
+        assert_relative_eq!(weight(13), peak * (-2.0f64).exp(), epsilon = 1e-12);
+        assert_relative_eq!(weight(12), peak * (-4.5f64).exp(), epsilon = 1e-12);
+        assert_relative_eq!(
+            floor / weight(12),
+            hipe_probabilities(row.len(), 25, 200_000.0).1 / high,
+            epsilon = 1e-12
+        );
     }
 
     #[test]
