@@ -1,0 +1,102 @@
+//! Per-walk look at `waymark eval`'s configurations on recorded floors, in about 40 s for the
+//! five competition floors (the full `eval` spends most of its 13 minutes calibrating γ and the
+//! radius factors by leave-one-walk-out): the site is surveyed from the survey walks with the
+//! step length and north calibrated on them, but γ is given (`GAMMA`, `GAMMA_WITHOUT`; by
+//! default 0.03 and 0.1, what the five floors calibrate). Prints, per configuration, the mean
+//! error at the WiFi scans and the walks whose first estimate is on a wrong floor; the paired
+//! difference of consecutive configurations (in `CONFIGS` order) with its standard error over
+//! walks; and one line per test walk. Errors do not depend on the radius factors, so the means
+//! are those of `waymark eval` at the same γ.
+//!
+//! ```text
+//! CONFIGS=forward-distance,forward-heading-speed,forward-speed \
+//!   cargo run --release --example walk_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}
+//! ```
+//!
+//! `BEACON_WAIT_MS` replays with another beacon wait (`EventOptions::beacon_wait_ns`).
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use waymark::eval::real::{evaluate_on, score_scans, survey_site, EvalOptions, FloorData};
+use waymark::io::ilc::Trace;
+use waymark::site::Calibration;
+
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let dirs: Vec<PathBuf> = std::env::args().skip(1).map(PathBuf::from).collect();
+    let floors = dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?;
+    let mut options = EvalOptions::default();
+    options.replay.events.beacon_wait_ns =
+        env_or("BEACON_WAIT_MS", options.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
+    let survey: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
+    let motion =
+        waymark::survey::calibrate_motion(&survey, &options.engine.motion).ok_or("no motion calibration")?;
+    options.north = motion.north();
+    let configs: Vec<String> = env_or("CONFIGS", "forward-auto,viterbi-auto,wifi-knn".to_string())
+        .split(',')
+        .map(String::from)
+        .collect();
+    options.configurations = configs.clone();
+    let (site, _) = survey_site(&floors, &options)?;
+    let calibration = Calibration {
+        rssi_weight: Some(env_or("GAMMA", 0.03)),
+        rssi_weight_without_movement: Some(env_or("GAMMA_WITHOUT", 0.1)),
+        step_length: Some(motion.step_length),
+        ..Calibration::default()
+    };
+    let site = Arc::new(site.with_calibration(calibration)?);
+    let (reports, results) = evaluate_on(&site, &floors, &options, &|| ())?;
+    let tests: Vec<(usize, &Trace)> =
+        floors.iter().enumerate().flat_map(|(f, floor)| floor.test.iter().map(move |t| (f, t))).collect();
+    // Per configuration and walk: (Σ error with the floor penalty, scans, first estimate off floor).
+    let mut walks: BTreeMap<&str, Vec<(f64, usize, bool)>> = BTreeMap::new();
+    for key in &configs {
+        for (result, &(f, trace)) in results.iter().zip(&tests) {
+            let estimates = result.estimates.get(key).map_or(&[][..], Vec::as_slice);
+            let (scans, _) = score_scans(trace, f, estimates, None);
+            let first_off = estimates.first().is_some_and(|e| e.floor != f);
+            walks.entry(key).or_default().push((
+                scans.iter().map(|s| s.penalised_m()).sum(),
+                scans.len(),
+                first_off,
+            ));
+        }
+    }
+    for key in &configs {
+        let (r, w) = (&reports[key].pooled, &walks[key.as_str()]);
+        let off = w.iter().filter(|x| x.2).count();
+        println!(
+            "{key:<26} mean {:.3} m  floor hit {:.4}  scans {}  first estimate on a wrong floor in {off} of {} walks",
+            r.mean_m,
+            r.floor_hit,
+            r.epochs,
+            w.len()
+        );
+    }
+    for pair in configs.windows(2) {
+        let (a, b) = (&walks[pair[0].as_str()], &walks[pair[1].as_str()]);
+        let n: usize = a.iter().map(|x| x.1).sum();
+        let d: Vec<(f64, f64)> = a.iter().zip(b).map(|(x, y)| (x.0 - y.0, x.1 as f64)).collect();
+        let delta = d.iter().map(|x| x.0).sum::<f64>() / n as f64;
+        // Standard error of a ratio estimate, clustered by walk.
+        let se = d.iter().map(|&(s, k)| (s - k * delta).powi(2)).sum::<f64>().sqrt() / n as f64;
+        println!("{} − {}: {delta:+.3} ± {se:.3} m", pair[0], pair[1]);
+    }
+    for (w, &(f, trace)) in tests.iter().enumerate() {
+        let mut line = format!("{} {:<26} {:5.0} m", floors[f].name, trace.name, trace.path_length_m());
+        for key in &configs {
+            let (sum, n, off) = walks[key.as_str()][w];
+            line += &format!(
+                " | {key} {:6.2} m over {n:3}{}",
+                sum / n.max(1) as f64,
+                if off { " first off floor" } else { "" }
+            );
+        }
+        println!("{line}");
+    }
+    Ok(())
+}
