@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Throwaway analysis of examples/pdr_diag.rs's TSV (standard library only; not part of the
+"""Analysis of examples/pdr_diag.rs's TSV (standard library only; not part of the
 product). Every section prints the figure quoted in the diagnosis of the PDR distance error.
 
     cargo run --release --example pdr_diag -- .../site1/{B1,F1,F2,F3,F4}/path_data_files > /tmp/diag.tsv

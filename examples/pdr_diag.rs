@@ -1,10 +1,10 @@
-//! Throwaway diagnosis of the PDR distance error on ILC 2.0 walks (not part of the product):
+//! Diagnosis of the PDR distance error on ILC 2.0 walks (analysis, not part of the product):
 //! writes one TSV row per walk (`walk` rows) and one per waypoint segment (`seg` rows), with
 //! the step length calibrated on the pooled SURVEY walks (i % 5 ≠ 4), as `pdr_real`'s
 //! "pooled" line.
 //!
 //! ```text
-//! cargo run --release --example pdr_diag -- /work/main/target/ilc/site1/{B1,F1,F2,F3,F4}/path_data_files > /tmp/diag.tsv
+//! cargo run --release --example pdr_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}/path_data_files > /tmp/diag.tsv
 //! python3 examples/pdr_diag.py /tmp/diag.tsv
 //! ```
 //!
