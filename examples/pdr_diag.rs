@@ -36,11 +36,7 @@ fn read_floor(dir: &Path) -> Vec<(bool, Trace)> {
         .filter(|p| p.extension().is_some_and(|x| x == "txt"))
         .collect();
     files.sort();
-    files
-        .iter()
-        .enumerate()
-        .filter_map(|(i, f)| Trace::read(f).ok().map(|t| (i % 5 == 4, t)))
-        .collect()
+    files.iter().enumerate().filter_map(|(i, f)| Trace::read(f).ok().map(|t| (i % 5 == 4, t))).collect()
 }
 
 fn main() {
@@ -126,7 +122,17 @@ fn main() {
             let p: Vec<f64> = inside.iter().map(|s| s.period_s).collect();
             println!(
                 "first\t{floor}\t{}\t{}\t{:.3}\t{:.3}\t{:.3}\t{:.3}\t{:.3}\t{:.3}\t{:.3}\t{:.3}\t{:.3}",
-                t.name, u8::from(*test), wt[0] / m, wt[1] / m, wt[2] / m, wt[3] / m, wt[wt.len() - 1] / m, p[0], p[1], p[2], p[3]
+                t.name,
+                u8::from(*test),
+                wt[0] / m,
+                wt[1] / m,
+                wt[2] / m,
+                wt[3] / m,
+                wt[wt.len() - 1] / m,
+                p[0],
+                p[1],
+                p[2],
+                p[3]
             );
         }
         for i in 0..w.len() - 1 {
@@ -154,7 +160,8 @@ fn main() {
                 }
             }
             let net = ex.hypot(ny);
-            let tin = if i > 0 { wrap_angle(bearing(i) - bearing(i - 1)).abs().to_degrees() } else { f64::NAN };
+            let tin =
+                if i > 0 { wrap_angle(bearing(i) - bearing(i - 1)).abs().to_degrees() } else { f64::NAN };
             println!(
                 "seg\t{floor}\t{}\t{}\t{len:.3}\t{i}\t{:.2}\t{}\t0\t{:.3}\t{ws:.3}\t0\t0\t0\t{gap:.2}\t0\t{tin:.1}\t{wiggle:.1}\t{net:.3}\t0\t0\t0\t0",
                 t.name,
