@@ -15,8 +15,9 @@ pub enum TransitionModel {
     /// HIPE's high/low regions from the measured distance and heading (HIPE eqs. 5-11).
     Hipe,
     /// Hoang's Gaussian on the movement vector over the reachable states (Hoang eqs. 11, 14)
-    /// when distance and heading are both measured; in epochs with only one of them, HIPE's
-    /// ring or sector (which uses it), and with neither, the reachable states.
+    /// when distance and heading are both measured; with the distance alone, its along-track
+    /// term on the walking distance; with the heading alone, HIPE's sector (which uses it);
+    /// with neither, the reachable states.
     #[default]
     Hoang,
 }
