@@ -3,7 +3,8 @@
 //! radius factors by leave-one-walk-out): the site is surveyed from the survey walks with the
 //! step length and north calibrated on them, but γ is given (`GAMMA`, `GAMMA_WITHOUT`; by
 //! default 0.03 and 0.1, what the five floors calibrate). Prints, per configuration, the mean
-//! error at the WiFi scans and the walks whose first estimate is on a wrong floor; the paired
+//! error at the WiFi scans and the walks whose first estimate, and whose first scored scan, is
+//! on a wrong floor; the paired
 //! difference of consecutive configurations (in `CONFIGS` order) with its standard error over
 //! walks; and one line per test walk. Errors do not depend on the radius factors, so the means
 //! are those of `waymark eval` at the same γ.
@@ -52,25 +53,25 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let (reports, results) = evaluate_on(&site, &floors, &options, &|| ())?;
     let tests: Vec<(usize, &Trace)> =
         floors.iter().enumerate().flat_map(|(f, floor)| floor.test.iter().map(move |t| (f, t))).collect();
-    // Per configuration and walk: (Σ error with the floor penalty, scans, first estimate off floor).
-    let mut walks: BTreeMap<&str, Vec<(f64, usize, bool)>> = BTreeMap::new();
+    // Per configuration and walk: (Σ error with the floor penalty, scans, first estimate off
+    // floor, first scored scan off floor).
+    let mut walks: BTreeMap<&str, Vec<(f64, usize, bool, bool)>> = BTreeMap::new();
     for key in &configs {
         for (result, &(f, trace)) in results.iter().zip(&tests) {
             let estimates = result.estimates.get(key).map_or(&[][..], Vec::as_slice);
             let (scans, _) = score_scans(trace, f, estimates, None);
             let first_off = estimates.first().is_some_and(|e| e.floor != f);
-            walks.entry(key).or_default().push((
-                scans.iter().map(|s| s.penalised_m()).sum(),
-                scans.len(),
-                first_off,
-            ));
+            let first_scan_off = scans.first().is_some_and(|s| !s.floor_correct);
+            let sum = scans.iter().map(|s| s.penalised_m()).sum();
+            walks.entry(key).or_default().push((sum, scans.len(), first_off, first_scan_off));
         }
     }
     for key in &configs {
         let (r, w) = (&reports[key].pooled, &walks[key.as_str()]);
         let off = w.iter().filter(|x| x.2).count();
+        let scan_off = w.iter().filter(|x| x.3).count();
         println!(
-            "{key:<26} mean {:.3} m  floor hit {:.4}  scans {}  first estimate on a wrong floor in {off} of {} walks",
+            "{key:<26} mean {:.3} m  floor hit {:.4}  scans {}  first estimate on a wrong floor in {off} of {} walks, first scored scan in {scan_off}",
             r.mean_m,
             r.floor_hit,
             r.epochs,
@@ -89,7 +90,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     for (w, &(f, trace)) in tests.iter().enumerate() {
         let mut line = format!("{} {:<26} {:5.0} m", floors[f].name, trace.name, trace.path_length_m());
         for key in &configs {
-            let (sum, n, off) = walks[key.as_str()][w];
+            let (sum, n, off, _) = walks[key.as_str()][w];
             line += &format!(
                 " | {key} {:6.2} m over {n:3}{}",
                 sum / n.max(1) as f64,
