@@ -79,13 +79,14 @@ pub struct Position {
 pub struct TrackPoint {
     /// Epoch time, ns.
     pub timestamp_ns: u64,
-    /// Index of the state on the most likely path.
+    /// Index of the state on the most likely path ([`Engine::track`]), or holding the most
+    /// smoothed mass ([`Engine::fixed_lag_position`]).
     pub state: u32,
-    /// Its floor.
+    /// The floor.
     pub floor: usize,
-    /// Its x, m.
+    /// x, m: the state's on the track, the smoothed estimate's for the fixed-lag position.
     pub x: f64,
-    /// Its y, m.
+    /// y, m, likewise.
     pub y: f64,
 }
 
@@ -381,12 +382,28 @@ impl Engine {
         self.viterbi.path().into_iter().map(|(t, s)| self.track_point(t, s)).collect()
     }
 
-    /// The position `fixed_lag_epochs` epochs ago on the most likely path: later than the live
-    /// estimate, but it has seen what came after.
+    /// The position `fixed_lag_epochs` epochs ago, smoothed by what came after: the current
+    /// posterior carried back along the Viterbi back-pointers (each state's mass to the state
+    /// its best path passed through then), and Hoang eq. 4 over that, as the live estimate is
+    /// over the posterior. The exact fixed-lag smoother sums over every path into each state
+    /// rather than following the best; this keeps to what the Viterbi window already holds, in
+    /// O(lag × N). `state` is the state holding the most carried mass. Measured on the five
+    /// competition floors (`examples/walk_diag.rs` with `FP_RADIUS=8`): 4.61 m mean error
+    /// against 4.95 m for the lagged Viterbi state alone and 4.83 m for the live estimate.
     pub fn fixed_lag_position(&self) -> Option<TrackPoint> {
-        let path = self.viterbi.path();
-        let lag = self.config.fixed_lag_epochs.min(path.len().saturating_sub(1));
-        path.len().checked_sub(1 + lag).map(|k| self.track_point(path[k].0, path[k].1))
+        let lag = self.config.fixed_lag_epochs.min(self.viterbi.len().saturating_sub(1));
+        let (mut carried, mut scratch) = (Vec::new(), Vec::new());
+        let timestamp_ns =
+            self.viterbi.ancestors(lag, self.filter.posterior(), &mut carried, &mut scratch)?;
+        let e = estimate(
+            &self.site,
+            &carried,
+            self.config.estimate_states,
+            self.config.accuracy_mass,
+            &mut Vec::new(),
+        );
+        let state = (0..carried.len()).max_by(|&a, &b| carried[a].total_cmp(&carried[b]))? as u32;
+        Some(TrackPoint { timestamp_ns, state, floor: e.floor, x: e.position.x, y: e.position.y })
     }
 
     fn track_point(&self, timestamp_ns: u64, state: u32) -> TrackPoint {
