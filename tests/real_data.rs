@@ -61,6 +61,19 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
         .get(waymark::sensors::MdiScenario::DistanceHeading)
         .is_some());
     assert!(calibration.motion.is_some(), "step length and north fitted");
+    // The fingerprint radius: neighbouring radii of the grid from its middle scored on
+    // held-out walks, the least error chosen and surveyed with, inside what was tried unless
+    // at the grid's end.
+    let curve = &calibration.fingerprint_radius_mean_error_m;
+    let grid = real::FINGERPRINT_RADIUS_GRID;
+    let tried: Vec<usize> = curve.iter().map(|c| grid.iter().position(|&r| r == c.0).unwrap()).collect();
+    assert!(tried.len() >= 3 && tried.windows(2).all(|w| w[1] == w[0] + 1), "{curve:?}");
+    assert!(tried.contains(&(grid.len() / 2)));
+    assert!(curve.iter().all(|c| c.1.is_finite() && c.1 > 0.0 && c.2 > 0), "{curve:?}");
+    let least = (0..curve.len()).min_by(|&a, &b| curve[a].1.total_cmp(&curve[b].1)).unwrap();
+    assert_eq!(calibration.fingerprint_radius_m, curve[least].0);
+    assert!(least > 0 || tried[0] == 0, "the search stops only at a valley: {curve:?}");
+    assert!(least + 1 < curve.len() || tried[least] + 1 == grid.len(), "{curve:?}");
     // Leave-one-walk-out: every survey walk held out once, γ per floor with its curve.
     assert_eq!(calibration.sites, 12);
     let floor = &calibration.floors[0];

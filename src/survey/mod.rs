@@ -30,12 +30,14 @@ pub struct SurveyOptions {
     /// A grid point becomes a state when a survey walk passed within this distance, m. One
     /// spacing: the grid then covers a corridor two to three states wide around each walk.
     pub coverage_m: f64,
-    /// A survey scan trains every state within this distance of where it was taken, m. 5 m:
-    /// a state then sees about two walking seconds of scans either side of it, 20-30 scans
-    /// where a corridor was walked a few times. Measured on the F1 split (`waymark eval
-    /// target/ilc/site1/F1 --fingerprint-radius-m R`): single-scan MLE 8.17 / 6.58 m mean and
-    /// the fused engine 7.83 / 6.28 m for R = 3 / 5 m; the other four floors were not used to
-    /// choose it.
+    /// A survey scan trains every state within this distance of where it was taken, m.
+    /// `waymark survey` and `waymark eval` choose it per site by cross-validation on the
+    /// survey walks ([`crate::eval::real::FINGERPRINT_RADIUS_GRID`]; 8 m on the five
+    /// competition floors pooled and on F1 alone); this is the radius used without that
+    /// calibration. 5 m: a state then sees about two walking seconds of scans either side of
+    /// it, 20-30 scans where a corridor was walked a few times. Measured on the F1 split
+    /// (`waymark eval target/ilc/site1/F1 --fingerprint-radius-m R`): single-scan MLE 8.17 /
+    /// 6.58 m mean and the fused engine 7.83 / 6.28 m for R = 3 / 5 m.
     pub fingerprint_radius_m: f64,
     /// Whether the floor plan's polygons cut the walkable graph (except where a survey walk
     /// crossed them). Off by default: on the competition's plans, shop and "auxiliary area"

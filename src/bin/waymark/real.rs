@@ -149,7 +149,8 @@ pub struct EvalArgs {
     /// Grid spacing of the surveyed states, m (default 2).
     #[arg(long)]
     spacing_m: Option<f64>,
-    /// A survey scan trains the states within this distance, m (default 3).
+    /// A survey scan trains the states within this distance, m (default: chosen by the
+    /// survey's cross-validation, `FINGERPRINT_RADIUS_GRID`).
     #[arg(long)]
     fingerprint_radius_m: Option<f64>,
     /// Readings older than this before their scan count as not heard, ms (default 2000).
@@ -215,7 +216,7 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
     let options = EvalOptions::default();
     let bar = progress_bar(
         false,
-        evaluation::calibration_steps(&floors) as u64,
+        evaluation::calibration_steps(&floors, &options) as u64,
         "calibrating (leave one walk out)",
     );
     let (site, report, calibration) = match evaluation::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
@@ -258,6 +259,17 @@ fn print_calibration(c: &evaluation::CalibrationReport) {
         c.accuracy_scale,
         c.motion.as_ref().map(|m| m.step_length),
         c.motion.as_ref().map_or(0.0, |m| m.heading_offset_deg)
+    );
+    let radius_curve: Vec<String> =
+        c.fingerprint_radius_mean_error_m.iter().map(|(r, e, _)| format!("{r:.1} m: {e:.2}")).collect();
+    println!(
+        "fingerprint radius {:.1} m{}",
+        c.fingerprint_radius_m,
+        if radius_curve.is_empty() {
+            " (given)".to_string()
+        } else {
+            format!(" by 5-fold held-out engine error at each radius's best γ | {}", radius_curve.join(", "))
+        }
     );
     for (name, scenario) in
         [("distance only", MdiScenario::Distance), ("heading only", MdiScenario::HeadingSpeed)]
@@ -482,6 +494,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     }
     if let Some(r) = args.fingerprint_radius_m {
         options.survey.fingerprint_radius_m = r;
+        options.calibrate_fingerprint_radius = false;
     }
     if let Some(v) = args.min_std_db {
         options.survey.build.fit.min_std_db = v;
@@ -517,7 +530,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     let loaded_s = started.elapsed().as_secs_f64();
     let bar = progress_bar(
         args.json,
-        evaluation::calibration_steps(&floors) as u64,
+        evaluation::calibration_steps(&floors, &options) as u64,
         "calibrating (leave one walk out)",
     );
     let (site, survey, calibration) = match evaluation::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
