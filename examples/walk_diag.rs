@@ -7,7 +7,7 @@
 //! on a wrong floor; the paired
 //! difference of consecutive configurations (in `CONFIGS` order) with its standard error over
 //! walks; and one line per test walk. Errors do not depend on the radius factors, so the means
-//! are those of `waymark eval` at the same γ.
+//! are those of `waymark eval` at the same γ and fingerprint radius (`FP_RADIUS`).
 //!
 //! ```text
 //! CONFIGS=forward-distance,forward-heading-speed,forward-speed \
@@ -15,6 +15,11 @@
 //! ```
 //!
 //! `BEACON_WAIT_MS` replays with another beacon wait (`EventOptions::beacon_wait_ns`).
+//! `FP_RADIUS` surveys with that fingerprint radius, m (default the uncalibrated
+//! `SurveyOptions` one, 5 m; `waymark eval` calibrates it, 8 m on the five floors);
+//! `ESTIMATE_STATES`, `MAX_SPEED`, `MOVEMENT_VAR`, `SPACING`, `MAX_STD` and `AGE_MS` set
+//! `EngineConfig::estimate_states`, `max_speed_mps`, `HoangConfig::movement_variance_m2`,
+//! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -33,6 +38,15 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut options = EvalOptions::default();
     options.replay.events.beacon_wait_ns =
         env_or("BEACON_WAIT_MS", options.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
+    options.engine.estimate_states = env_or("ESTIMATE_STATES", options.engine.estimate_states);
+    options.engine.max_speed_mps = env_or("MAX_SPEED", options.engine.max_speed_mps);
+    options.engine.hoang.movement_variance_m2 =
+        env_or("MOVEMENT_VAR", options.engine.hoang.movement_variance_m2);
+    options.survey.spacing_m = env_or("SPACING", options.survey.spacing_m);
+    options.survey.fingerprint_radius_m = env_or("FP_RADIUS", options.survey.fingerprint_radius_m);
+    options.survey.build.fit.max_std_db = env_or("MAX_STD", options.survey.build.fit.max_std_db);
+    options.survey.max_reading_age_ns =
+        env_or("AGE_MS", options.survey.max_reading_age_ns / 1_000_000) * 1_000_000;
     let survey: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
     let motion =
         waymark::survey::calibrate_motion(&survey, &options.engine.motion).ok_or("no motion calibration")?;
