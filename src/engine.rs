@@ -391,7 +391,12 @@ impl Engine {
     /// competition floors (`examples/walk_diag.rs` with `FP_RADIUS=8`): 4.61 m mean error
     /// against 4.95 m for the lagged Viterbi state alone and 4.83 m for the live estimate.
     pub fn fixed_lag_position(&self) -> Option<TrackPoint> {
-        let lag = self.config.fixed_lag_epochs.min(self.viterbi.len().saturating_sub(1));
+        self.smoothed_position(self.config.fixed_lag_epochs.min(self.viterbi.len().saturating_sub(1)))
+    }
+
+    /// [`fixed_lag_position`](Self::fixed_lag_position) at another lag, epochs; `None` when
+    /// the track holds fewer than `lag` + 1 epochs.
+    pub fn smoothed_position(&self, lag: usize) -> Option<TrackPoint> {
         let (mut carried, mut scratch) = (Vec::new(), Vec::new());
         let timestamp_ns =
             self.viterbi.ancestors(lag, self.filter.posterior(), &mut carried, &mut scratch)?;

@@ -54,7 +54,8 @@ pub struct TrackPoint {
 pub struct TrackedWalk {
     /// Epoch by epoch.
     pub points: Vec<TrackPoint>,
-    /// `lag_errors[lag]`: errors of the track point `lag` epochs back, m.
+    /// `lag_errors[lag]`: errors of the smoothed estimate `lag` epochs back
+    /// ([`Engine::smoothed_position`]), m.
     pub lag_errors: Vec<Vec<f64>>,
 }
 
@@ -87,16 +88,10 @@ pub fn track_walk(
         // A scan where no access point was heard is rejected (and counted): nothing to score.
         let Ok(position) = engine.push_scan(&epoch.scan) else { continue };
         points.push(TrackPoint { truth: epoch.truth, truth_zone: epoch.zone, position });
-        if lags > 0 {
-            let path = engine.track();
-            for (lag, out) in lag_errors.iter_mut().enumerate() {
-                let back = path.len().checked_sub(1 + lag).zip(k.checked_sub(lag));
-                if let Some((i, past)) = back {
-                    out.push(nalgebra::distance(
-                        &walk.epochs[past].truth,
-                        &Point2::new(path[i].x, path[i].y),
-                    ));
-                }
+        for (lag, out) in lag_errors.iter_mut().enumerate() {
+            let back = engine.smoothed_position(lag).zip(k.checked_sub(lag));
+            if let Some((p, past)) = back {
+                out.push(nalgebra::distance(&walk.epochs[past].truth, &Point2::new(p.x, p.y)));
             }
         }
     }

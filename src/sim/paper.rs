@@ -95,7 +95,8 @@ pub struct PaperReport {
     pub hipe_table5: HipeTable5,
     /// Full summaries of every method, by the same names.
     pub summaries: Vec<(String, ErrorSummary)>,
-    /// Mean error of the Viterbi track `lag` epochs behind the newest, for lag 0..=6, with
+    /// Mean error of the smoothed estimate `lag` epochs behind the newest (the fixed-lag
+    /// estimate, `Engine::smoothed_position`), for lag 0..=6, with
     /// the default engine (Hoang transitions, full motion, pseudo states).
     pub fixed_lag_mean_error_m: Vec<(usize, f64)>,
     /// Room-level accuracy of each method (El Gemayel et al. §II-B): the share of epochs whose

@@ -371,7 +371,9 @@ fn simulate(args: &SimulateArgs) -> ExitCode {
     ] {
         println!("  {name:<36} {:>6.2} m {:>6.2} m {:>6.2} m", row.rmse_m, row.mean_m, row.max_m);
     }
-    println!("\nViterbi track of the default engine (Hoang, full motion, pseudo states): mean error by lag");
+    println!(
+        "\nFixed-lag estimate of the default engine (Hoang, full motion, pseudo states): mean error by lag"
+    );
     for (lag, e) in &report.fixed_lag_mean_error_m {
         println!("  lag {lag}: {e:.2} m");
     }
