@@ -1,6 +1,6 @@
 //! Per-walk look at `waymark eval`'s configurations on recorded floors, in about 40 s for the
-//! five competition floors (the full `eval` spends most of its 13 minutes calibrating γ and the
-//! radius factors by leave-one-walk-out): the site is surveyed from the survey walks with the
+//! five competition floors (the full `eval` spends most of its 24 minutes choosing the
+//! fingerprint radius and calibrating γ and the radius factors by leave-one-walk-out): the site is surveyed from the survey walks with the
 //! step length and north calibrated on them, but γ is given (`GAMMA`, `GAMMA_WITHOUT`; by
 //! default 0.03 and 0.1, what the five floors calibrate). Prints, per configuration, the mean
 //! error at the WiFi scans and the walks whose first estimate, and whose first scored scan, is

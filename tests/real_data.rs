@@ -104,7 +104,11 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // The fused engine beats a single scan on average even on this small survey.
     assert!(reports["forward-auto"].pooled.mean_m < reports["wifi-mle"].pooled.mean_m + 1.0);
 
-    // Habits from the survey walks, their strength chosen on the held-out half of them.
+    // Habits from the survey walks, their strength chosen on the held-out half of them, on
+    // sites surveyed as the calibrated one was.
+    let options = options.surveyed_with(&calibration);
+    assert_eq!(options.survey.fingerprint_radius_m, calibration.fingerprint_radius_m);
+    assert!(!options.calibrate_fingerprint_radius);
     let (model, learning, selection) = real::survey_habits(&site, &floors, &options).expect("habits");
     assert!(learning.epochs > 0 && learning.feedback_epochs > 0, "{learning:?}");
     assert_eq!(selection.walks, 12, "every survey walk held out once");

@@ -538,6 +538,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         Err(e) => return fail("eval", e),
     };
     bar.finish_and_clear();
+    let options = options.surveyed_with(&calibration);
     let surveyed_s = started.elapsed().as_secs_f64();
     let site = Arc::new(site);
     let walks: usize = floors.iter().map(|f| f.test.len()).sum();
