@@ -89,6 +89,10 @@ for name, ss in [("first", [v[0] for v in multi]), ("interior", [s for v in mult
     print(f"  SURVEY {name:8s} segments: Σ length / Σ Weinberg = {sum(s['len'] for s in ss) / sum(s['W'] for s in ss):.3f} "
           f"(m per step {sum(s['len'] for s in ss) / sum(s['n'] for s in ss):.3f})")
 
+speeds = [w["L"] / w["T"] for w in walks if w["T"] > 0]
+print(f"  walking speed, waypoint path / span over {len(speeds)} walks: median {st.median(speeds):.2f} m/s, "
+      f"quartiles {' '.join(f'{q:.2f}' for q in st.quantiles(speeds, n=4))} (HIPE's assumed speed: 1 m/s)")
+
 print("\n== 4. per-walk models by leave-one-walk-out on SURVEY walks (>= 10 m, >= 5 steps, Hampel), scored on TEST ==")
 U = [w for w in S if w["N"] >= 5 and w["L"] >= 10]
 rat = [w["L"] / w["N"] for w in U]
