@@ -72,6 +72,16 @@ pub struct Position {
     /// ln p(scan | earlier input): how well the radio map explains this scan; `None` for an
     /// epoch without a scan. Very low values mean the phone hears what the map does not expect.
     pub radio_log_evidence: Option<f64>,
+    /// How much better, per reading, the state that best explains this scan does than a state
+    /// with no fingerprint, nats; `None` for an epoch without a scan. Below the site's
+    /// [`radio_fit_floor`](crate::site::Calibration::radio_fit_floor) the map does not explain
+    /// the scan and the engine positions by the motion alone.
+    pub radio_fit: Option<f64>,
+    /// Distance walked since the radio last explained a scan, m (0 while it does): the phone is
+    /// probably beyond the surveyed area, up to this far from the states the estimate stands
+    /// on, and both radii include it. The steps' length when measured, else HIPE's assumed
+    /// speed (1 m/s) over the time walking or of unknown motion.
+    pub beyond_radio_m: f64,
 }
 
 /// One point of the smoothed track.
@@ -167,6 +177,9 @@ pub struct InputStats {
     /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
     /// when no state could explain a scan.
     pub filter_restarts: u64,
+    /// Accepted scans the map did not explain (a radio fit below the site's floor): their
+    /// epochs moved by the motion alone.
+    pub scans_unexplained: u64,
     /// Position fixes that made an epoch ([`Engine::push_fix`]).
     pub fixes_accepted: u64,
     /// Position fixes rejected: a timestamp not after the last epoch, a NaN or infinite
@@ -240,6 +253,11 @@ pub struct Engine {
     /// What the user's walks taught ([`Engine::learn_habits`]), and its transition multipliers.
     habits: HabitModel,
     habit_prior: HabitPrior,
+    /// The site's [`radio_fit_floor`](crate::site::Calibration::radio_fit_floor), when the
+    /// configuration takes the site's calibration.
+    radio_fit_floor: Option<f64>,
+    /// The radio fit of the scan of the running epoch, and whether it is below the floor.
+    epoch_radio_fit: Option<(f64, bool)>,
 }
 
 /// What an epoch changes besides the filter and the Viterbi window, which keep their own
@@ -268,6 +286,7 @@ impl Engine {
         let accuracy_scale = config.accuracy_scales_for(&site);
         let site_zones = site.zones().len();
         let habits = HabitModel::new(&site);
+        let radio_fit_floor = site.calibration().radio_fit_floor.filter(|_| config.site_calibration);
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,
             viterbi: ViterbiWindow::new(n, config.track_window_epochs),
@@ -291,6 +310,8 @@ impl Engine {
             history: History::new(config.history_epochs),
             habits,
             habit_prior: HabitPrior::default(),
+            radio_fit_floor,
+            epoch_radio_fit: None,
             config,
             undo: Undo::default(),
         })
@@ -739,6 +760,23 @@ impl Engine {
         }
     }
 
+    /// [`Position::beyond_radio_m`] after an epoch whose scan the map did or did not explain
+    /// (`unexplained`; `None`: no scan) with `motion` over `dt_s`: back to 0 when the map
+    /// explains the scan, growing by the distance walked when it does not, or when there was no
+    /// scan since one it did not.
+    fn beyond_radio_m(&self, unexplained: Option<bool>, dt_s: Option<f64>, motion: &MotionUpdate) -> f64 {
+        let before = self.latest.as_ref().map_or(0.0, |p| p.beyond_radio_m);
+        if !unexplained.unwrap_or(before > 0.0) {
+            return 0.0;
+        }
+        let walked = match (motion.distance_m, motion.motion_state) {
+            (Some(d), _) => d,
+            (None, MotionState::Stationary) => 0.0,
+            (None, _) => self.config.hipe.assumed_speed_mps * dt_s.unwrap_or(0.0),
+        };
+        before + walked
+    }
+
     /// The motion given, or what the tracker measured up to `timestamp_ns`.
     fn motion_until(&mut self, timestamp_ns: u64, given: Option<&MotionUpdate>) -> MotionUpdate {
         match given {
@@ -776,7 +814,13 @@ impl Engine {
         if resolved.observations.is_empty() {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
-        self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
+        let ln_unheard = self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
+        let best = self.ln_emission.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let radio_fit = (best - ln_unheard) / resolved.observations.len() as f64;
+        // Only with an estimate to carry on from: the first scan, unexplained or not, is all
+        // there is to go on.
+        let unexplained =
+            self.latest.is_some() && self.radio_fit_floor.is_some_and(|floor| radio_fit < floor);
         let dropped = [resolved.unknown, resolved.duplicates, resolved.stale].map(|n| n as u64);
         // Accepted from here on: the state changes.
         Ok(self.atomically(motion.is_none(), |engine| {
@@ -790,6 +834,13 @@ impl Engine {
             engine.stats.readings_unknown += dropped[0];
             engine.stats.readings_duplicate += dropped[1];
             engine.stats.readings_stale += dropped[2];
+            if unexplained {
+                // Beyond the map the fingerprints would pull the estimate to whichever states
+                // sound least unlike the scan: the motion alone moves it.
+                engine.ln_emission.fill(0.0);
+                engine.stats.scans_unexplained += 1;
+            }
+            engine.epoch_radio_fit = radio_fit.is_finite().then_some((radio_fit, unexplained));
             engine.run_epoch(scan.timestamp_ns, EpochInput::Scan, None, &motion)
         }))
     }
@@ -804,6 +855,9 @@ impl Engine {
         motion: &MotionUpdate,
     ) -> Position {
         let dt_s = self.last_epoch_ns.map(|last| (timestamp_ns - last) as f64 * 1e-9);
+        let radio = self.epoch_radio_fit.take().filter(|_| input == EpochInput::Scan);
+        let beyond_radio_m = self.beyond_radio_m(radio.map(|r| r.1), dt_s, motion);
+        let radio_fit = radio.map(|r| r.0);
         let evidence = self.forward(timestamp_ns, dt_s, motion);
         self.last_epoch_ns = Some(timestamp_ns);
         let position = self.locate(Position {
@@ -822,6 +876,8 @@ impl Engine {
             scenario: motion.scenario,
             steps: motion.steps,
             radio_log_evidence: (input == EpochInput::Scan).then_some(evidence),
+            radio_fit,
+            beyond_radio_m,
         });
         self.conclude(position, |history, p| {
             history.push(EpochRecord {
@@ -859,8 +915,9 @@ impl Engine {
             zone_probability,
             x: e.position.x,
             y: e.position.y,
-            accuracy_m: e.accuracy_m * scale[0],
-            accuracy_95_m: (e.accuracy_95_m * scale[1]).max(e.accuracy_m * scale[0]),
+            accuracy_m: e.accuracy_m * scale[0] + position.beyond_radio_m,
+            accuracy_95_m: (e.accuracy_95_m * scale[1]).max(e.accuracy_m * scale[0])
+                + position.beyond_radio_m,
             ..position
         }
     }

@@ -286,3 +286,73 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
     let message = format!("{:?}", refused.err());
     assert!(message.contains("calibration.rssi_weight_by_scenario.heading_speed"), "{message}");
 }
+
+/// Beyond the surveyed area. A scan the map does not explain (a radio fit below the site's
+/// floor) leaves the estimate to the motion alone, as an epoch without a scan would, and both
+/// radii grow by the distance walked since the radio last explained a scan, motion-only epochs
+/// included; a scan it explains brings them back. The first scan is used whatever its fit, and
+/// an engine told not to take the site's calibration has no floor.
+#[test]
+fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
+    use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
+    use waymark::site::Calibration;
+    let walked = |k: u64| MotionUpdate {
+        start_ns: (k - 1) * SECOND,
+        end_ns: k * SECOND,
+        steps: 2,
+        distance_m: Some(1.5),
+        distance_sigma_m: 0.1,
+        motion_state: MotionState::Walking,
+        scenario: MdiScenario::Distance,
+        ..MotionUpdate::default()
+    };
+    let explained = readings_at(0, 3.0);
+    // Floor 0's transmitters all faint, as nowhere on the map: a state that never heard them
+    // does about as well as any.
+    let unexplained: Vec<(u8, f64)> = (0..3).map(|t| (t, -92.0)).collect();
+    let fit =
+        |readings: &[(u8, f64)]| engine().push_scan(&scan(SECOND, readings)).unwrap().radio_fit.unwrap();
+    let (good, bad) = (fit(&explained), fit(&unexplained));
+    assert!(good > bad + 2.0, "{good} {bad}");
+    let site = |floor: f64| {
+        let calibration = Calibration { radio_fit_floor: Some(floor), ..Calibration::default() };
+        Arc::new(two_floor_site().with_calibration(calibration).unwrap())
+    };
+    let site = site(0.5 * (good + bad));
+
+    // `twin` gets the same input, but no scan where `engine`'s is unexplained.
+    let mut engine = Engine::new(Arc::clone(&site), EngineConfig::default()).unwrap();
+    let mut twin = Engine::new(Arc::clone(&site), EngineConfig::default()).unwrap();
+    // The first scan is all there is to go on.
+    let first = engine.push_scan_with_motion(&scan(SECOND, &unexplained), &walked(1)).unwrap();
+    assert_eq!((first.beyond_radio_m, engine.stats().scans_unexplained), (0.0, 0));
+    twin.push_scan_with_motion(&scan(SECOND, &unexplained), &walked(1)).unwrap();
+    assert_eq!(engine.posterior(), twin.posterior());
+    let p = engine.push_scan_with_motion(&scan(2 * SECOND, &explained), &walked(2)).unwrap();
+    assert_eq!(p.beyond_radio_m, 0.0);
+    twin.push_scan_with_motion(&scan(2 * SECOND, &explained), &walked(2)).unwrap();
+    // Three unexplained scans: each moves the estimate as the motion alone would.
+    for k in 3..=5u64 {
+        twin.advance_with_motion(k * SECOND, &walked(k)).unwrap();
+        let p = engine.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked(k)).unwrap();
+        assert!(p.radio_fit.is_some_and(|f| f < 0.5 * (good + bad)), "{p:?}");
+        assert_eq!(engine.posterior(), twin.posterior());
+        let beyond = 1.5 * (k - 2) as f64;
+        assert!((p.beyond_radio_m - beyond).abs() < 1e-9, "{p:?}");
+        assert!(p.accuracy_m > beyond && p.accuracy_95_m >= p.accuracy_m, "{p:?}");
+    }
+    assert_eq!(engine.stats().scans_unexplained, 3);
+    // No scan since an unexplained one: still growing.
+    let p = engine.advance_with_motion(6 * SECOND, &walked(6)).unwrap();
+    assert!((p.beyond_radio_m - 6.0).abs() < 1e-9, "{p:?}");
+    // Explained again.
+    let p = engine.push_scan_with_motion(&scan(7 * SECOND, &explained), &walked(7)).unwrap();
+    assert_eq!(p.beyond_radio_m, 0.0);
+    assert!(p.accuracy_m < 3.0, "{p:?}");
+
+    let config = EngineConfig { site_calibration: false, ..EngineConfig::default() };
+    let mut plain = Engine::new(site, config).unwrap();
+    plain.push_scan_with_motion(&scan(SECOND, &explained), &walked(1)).unwrap();
+    let p = plain.push_scan_with_motion(&scan(2 * SECOND, &unexplained), &walked(2)).unwrap();
+    assert_eq!((p.beyond_radio_m, plain.stats().scans_unexplained), (0.0, 0));
+}

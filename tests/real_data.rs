@@ -86,11 +86,24 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert!(floor.jackknife_se_m.is_some_and(|se| se.is_finite() && se > 0.0), "{floor:?}");
     assert!(calibration.refitted_share > 0.0 && calibration.refitted_share < 1.0);
     assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
+    // The radio fit floor, and the held-out walks replayed as shipped: every epoch of the
+    // calibration's own replays again, on the map or beyond it.
+    let floor_fit = calibration.radio_fit_floor;
+    let enough = calibration.radio_fit_scans >= real::MIN_SCENARIO_EPOCHS;
+    assert_eq!(floor_fit.is_some(), enough, "{calibration:?}");
+    assert!(floor_fit.map_or(true, f64::is_finite));
+    assert!(calibration.radio_fit_scans > 0 && calibration.radio_fit_scans <= calibration.epochs);
+    assert_eq!(site.calibration().radio_fit_floor, floor_fit);
+    let epochs = |r: &real::OffMapReport| r.bands.iter().map(|b| b.epochs).sum::<usize>();
+    assert_eq!(epochs(&calibration.on_map), calibration.epochs, "{calibration:?}");
+    assert_eq!(epochs(&calibration.off_map), calibration.epochs_off_map, "{calibration:?}");
+    assert_eq!(epochs(&calibration.off_map_without_floor), calibration.epochs_off_map);
 
     // The calibrated site survives its file format.
     let site = Arc::new(Site::from_json(site.to_json().as_bytes()).expect("reloads"));
     assert_eq!(site.calibration().rssi_weight, Some(gamma));
     assert_eq!(site.calibration().accuracy_scale_by_scenario, calibration.accuracy_scale_by_scenario);
+    assert_eq!(site.calibration().radio_fit_floor, floor_fit);
     assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
 
     let (reports, walks) = real::evaluate_on(&site, &floors, &options, &|| {}).expect("replays");

@@ -24,6 +24,7 @@ static int known(waymark_result r) {
 static int finite_position(const waymark_position *p) {
     return isfinite(p->x) && isfinite(p->y) && isfinite(p->floor_probability) && isfinite(p->accuracy_m) &&
            isfinite(p->accuracy_95_m) && p->accuracy_m > 0 && p->accuracy_95_m >= p->accuracy_m &&
+           isfinite(p->beyond_radio_m) && p->beyond_radio_m >= 0 && p->accuracy_m >= p->beyond_radio_m &&
            (isnan(p->heading_deg) || isfinite(p->heading_deg)) && p->motion_state <= 2 && p->scenario <= 3;
 }
 

@@ -85,6 +85,7 @@ static void walk(const char *site_path, const char *walk_path, const uint8_t *sa
             error_sum += hypot(p.x - tx, p.y - ty);
             CHECK(p.accuracy_m > 0 && isfinite(p.x) && isfinite(p.y), "finite position");
             CHECK(p.accuracy_95_m >= p.accuracy_m, "the 95 percent circle holds the 68 percent one");
+            CHECK(p.beyond_radio_m >= 0 && p.accuracy_m >= p.beyond_radio_m, "the radius holds the walk beyond the radio");
         } else {
             CHECK(r == WAYMARK_RESULT_INPUT_REJECTED, "scan result %d", (int)r);
         }

@@ -236,6 +236,11 @@ typedef struct {
    * Steps since the previous epoch.
    */
   uint32_t steps;
+  /**
+   * Distance walked since the radio last explained a scan, m: 0 while it does; above 0 the
+   * phone is probably beyond the surveyed area and both radii include this distance.
+   */
+  double beyond_radio_m;
 } waymark_position;
 
 /**

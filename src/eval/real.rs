@@ -1042,7 +1042,8 @@ pub fn calibration_steps(floors: &[FloorData], options: &EvalOptions) -> usize {
     } else {
         0
     };
-    floors.iter().map(|f| f.survey.len()).sum::<usize>() + radius
+    // The leave-one-walk-out pass, then the shipped engine's pass.
+    2 * floors.iter().map(|f| f.survey.len()).sum::<usize>() + radius
 }
 
 /// One γ of [`GAMMA_GRID`] on one floor's held-out walks.
@@ -1121,6 +1122,19 @@ pub struct CalibrationReport {
     /// Held-out epochs left out of the radius factors: their truth was off the held-out
     /// site's map (`OnMap`).
     pub epochs_off_map: usize,
+    /// How the engine did on those epochs as shipped (every calibrated value, the radio fit
+    /// floor included): what a walk that leaves the surveyed area gets.
+    pub off_map: OffMapReport,
+    /// The same from the calibration's own replays, without the radio fit floor (radii scaled
+    /// by the chosen factors).
+    pub off_map_without_floor: OffMapReport,
+    /// The held-out epochs on the map, replayed with the engine as shipped, as one band.
+    pub on_map: OffMapReport,
+    /// The radio fit floor chosen ([`Calibration::radio_fit_floor`]), nats per reading: none
+    /// from fewer than [`MIN_SCENARIO_EPOCHS`] scans (a 5% percentile then rests on ten below).
+    pub radio_fit_floor: Option<f64>,
+    /// Held-out scans on the map the floor was chosen from.
+    pub radio_fit_scans: usize,
     /// Sites surveyed for the leave-one-walk-out (one per survey walk).
     pub sites: usize,
     /// Mean share of states whose fingerprints those sites fitted afresh (the rest were
@@ -1135,6 +1149,88 @@ pub struct CalibrationReport {
     /// best γ: (radius m, mean error m at the WiFi scans with the floor penalty, scans); empty
     /// when the radius was given.
     pub fingerprint_radius_mean_error_m: Vec<RadiusPoint>,
+}
+
+/// The held-out epochs whose truth was off the held-out site's map, with the motion as the
+/// sensors give it at each floor's γ, by how far beyond the map the truth was.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct OffMapReport {
+    /// Per band of distance beyond the map (bands without epochs left out), the radii
+    /// scaled by the chosen factors of the epoch's scenario.
+    pub bands: Vec<OffMapBand>,
+}
+
+/// One band of [`OffMapReport`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OffMapBand {
+    /// Distance beyond the map, m: from.
+    pub from_m: f64,
+    /// To (exclusive).
+    pub to_m: f64,
+    /// Epochs.
+    pub epochs: usize,
+    /// Mean horizontal error, m (no floor penalty).
+    pub mean_error_m: f64,
+    /// Share whose scaled 68% radius holds the truth.
+    pub accuracy_68_hit: f64,
+    /// Share whose scaled 95% radius holds the truth.
+    pub accuracy_95_hit: f64,
+}
+
+/// Bands of distance beyond the map, m.
+const OFF_MAP_BANDS: [f64; 5] = [0.0, 2.0, 5.0, 10.0, f64::INFINITY];
+
+/// Quantile of the radio fits of held-out scans on the map taken as the floor below which the
+/// map does not explain a scan: a one-sided test at 5%, one scan on the map in twenty called
+/// unexplained. Measured on F2's held-out survey walks (fingerprint radius 8 m): this floor
+/// called unexplained 100% of the scans taken more than 10 m beyond the held-out map, 33% at
+/// 5-10 m, 13% at 2-5 m and 2% within 2 m.
+const RADIO_FIT_FLOOR_QUANTILE: f64 = 0.05;
+
+impl OffMapReport {
+    /// Epochs on the map as one band from 0 to 0 m.
+    fn of_on_map(points: &[&Scored]) -> Self {
+        let n = points.len();
+        if n == 0 {
+            return Self::default();
+        }
+        let share = |hit: fn(&Scored) -> bool| points.iter().filter(|p| hit(p)).count() as f64 / n as f64;
+        Self {
+            bands: vec![OffMapBand {
+                from_m: 0.0,
+                to_m: 0.0,
+                epochs: n,
+                mean_error_m: points.iter().map(|p| p.error_m).sum::<f64>() / n as f64,
+                accuracy_68_hit: share(|p| p.error_m <= p.accuracy_m),
+                accuracy_95_hit: share(|p| p.error_m <= p.accuracy_95_m),
+            }],
+        }
+    }
+
+    fn of(points: &[(&Scored, f64, MdiScenario)], calibration: &Calibration) -> Self {
+        let bands = OFF_MAP_BANDS
+            .windows(2)
+            .filter_map(|w| {
+                let inside: Vec<_> = points.iter().filter(|p| p.1 > w[0] && p.1 <= w[1]).collect();
+                let n = inside.len();
+                (n > 0).then(|| {
+                    let share = |hit: &dyn Fn(&Scored, [f64; 2]) -> bool| {
+                        inside.iter().filter(|p| hit(p.0, calibration.accuracy_scale_in(p.2))).count() as f64
+                            / n as f64
+                    };
+                    OffMapBand {
+                        from_m: w[0],
+                        to_m: w[1],
+                        epochs: n,
+                        mean_error_m: inside.iter().map(|p| p.0.error_m).sum::<f64>() / n as f64,
+                        accuracy_68_hit: share(&|p, s| p.error_m <= s[0] * p.accuracy_m),
+                        accuracy_95_hit: share(&|p, s| p.error_m <= s[1] * p.accuracy_95_m),
+                    }
+                })
+            })
+            .collect();
+        Self { bands }
+    }
 }
 
 /// The motion calibration, for reports.
@@ -1169,9 +1265,24 @@ pub fn calibrate(
 /// Per walk, per γ, per motion mask (`survey_calibrated`'s `masks`): the held-out epochs.
 type HeldOut = Vec<[Vec<Scored>; 4]>;
 
-/// Per motion mask of the calibration: each held-out epoch, whether its truth was on the
-/// held-out site's map, and the scenario the engine positioned it in.
-type Tagged = [Vec<(Scored, bool, MdiScenario)>; 4];
+/// Per motion mask of the calibration: each held-out epoch (`Tag`).
+type Tagged = [Vec<Tag>; 4];
+
+/// A held-out epoch: its score, how far its truth was beyond the held-out site's map (0 on it,
+/// `OnMap`), the scenario the engine positioned it in and the radio fit of its scan.
+type Tag = (Scored, f64, MdiScenario, Option<f64>);
+
+/// The live positions of a replay of `trace` (on floor `floor`), scored and tagged.
+fn tag(trace: &Trace, floor: usize, mapped: &OnMap, positions: &[crate::Position]) -> Vec<Tag> {
+    let scored = score(trace, floor, &live_estimates(positions)).0;
+    // The positions `score` scored, in its order, with the truth's place.
+    let scored_positions = positions.iter().filter_map(|p| trace.position_at(p.timestamp_ns).map(|t| (p, t)));
+    scored
+        .into_iter()
+        .zip(scored_positions)
+        .map(|(s, (p, truth))| (s, mapped.beyond_m(truth), p.scenario, p.radio_fit))
+        .collect()
+}
 
 /// Fewest held-out epochs a scenario's radius factors are fitted on: the 95th percentile then
 /// rests on at least ten epochs beyond it.
@@ -1296,17 +1407,7 @@ pub fn survey_calibrated(
                                 return Vec::new();
                             };
                             let r = replay(&mut engine, trace, &ReplayOptions { mask, ..options.replay });
-                            let scored = score(trace, f, &live_estimates(&r.positions)).0;
-                            // The positions `score` scored, in its order, with the truth's place.
-                            let scored_positions = r
-                                .positions
-                                .iter()
-                                .filter_map(|p| trace.position_at(p.timestamp_ns).map(|t| (p, t)));
-                            scored
-                                .into_iter()
-                                .zip(scored_positions)
-                                .map(|(s, (p, truth))| (s, mapped.contains(truth), p.scenario))
-                                .collect::<Vec<_>>()
+                            tag(trace, f, &mapped, &r.positions)
                         });
                         let plain = [0, 1, 2, 3].map(|m| runs[m].iter().map(|t| t.0).collect());
                         tagged.push(runs);
@@ -1342,6 +1443,8 @@ pub fn survey_calibrated(
     let mut weights = Vec::with_capacity(floors.len());
     let mut at_chosen: Vec<&Scored> = Vec::new();
     let mut by_scenario: [Vec<&Scored>; 4] = Default::default();
+    let mut off_map: Vec<(&Scored, f64, MdiScenario)> = Vec::new();
+    let mut fits_on_map: Vec<f64> = Vec::new();
     for (f, floor) in floors.iter().enumerate() {
         let mine: Vec<&HeldOut> = jobs
             .iter()
@@ -1375,10 +1478,16 @@ pub fn survey_calibrated(
             let Some(chosen) = chosen[scenario.index()] else { continue };
             for walk in &mine_tagged {
                 for (m, run) in walk[chosen].iter().enumerate() {
-                    for (p, on_map, _) in run.iter().filter(|t| t.2 == scenario) {
-                        if !on_map {
-                            report.epochs_off_map += usize::from(m == 0);
+                    for (p, beyond_m, _, fit) in run.iter().filter(|t| t.2 == scenario) {
+                        if *beyond_m > 0.0 {
+                            if m == 0 {
+                                report.epochs_off_map += 1;
+                                off_map.push((p, *beyond_m, scenario));
+                            }
                             continue;
+                        }
+                        if m == 0 {
+                            fits_on_map.extend(*fit);
                         }
                         if m == 0 {
                             at_chosen.push(p);
@@ -1423,11 +1532,42 @@ pub fn survey_calibrated(
         calibration.accuracy_scale_by_scenario.set(scenario, scale);
     }
     report.epochs = at_chosen.len();
+    fits_on_map.sort_by(f64::total_cmp);
+    calibration.radio_fit_floor =
+        (fits_on_map.len() >= MIN_SCENARIO_EPOCHS).then(|| quantile(&fits_on_map, RADIO_FIT_FLOOR_QUANTILE));
+    report.radio_fit_floor = calibration.radio_fit_floor;
+    report.radio_fit_scans = fits_on_map.len();
+    report.off_map_without_floor = OffMapReport::of(&off_map, &calibration);
     report.rssi_weight = calibration.rssi_weight;
     report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
     report.rssi_weight_by_scenario = calibration.rssi_weight_by_scenario;
     report.accuracy_scale = calibration.accuracy_scale;
     report.accuracy_scale_by_scenario = calibration.accuracy_scale_by_scenario;
+    // The held-out walks again with the engine as shipped (every calibrated value, the radio
+    // fit floor included): how it does off the map, and what the floor costs on it.
+    let shipped: Vec<Vec<Tag>> = parallel_map(&jobs, options.threads, |&(f, w)| {
+        let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
+        let fits = prepared.fit(&keep, Some(&full), 1);
+        let site = prepared.assemble(&fits).ok().and_then(|(s, _)| {
+            s.with_calibration(calibration).and_then(|s| s.with_floor_rssi_weights(&weights)).ok()
+        });
+        let tags = site.and_then(|site| {
+            let site = Arc::new(site);
+            let trace = &floors[f].survey[w];
+            let mut engine = Engine::new(Arc::clone(&site), options.engine_config()).ok()?;
+            let r = replay(&mut engine, trace, &options.replay);
+            Some(tag(trace, f, &OnMap::new(&site, f), &r.positions))
+        });
+        progress();
+        tags.unwrap_or_default()
+    });
+    let tags: Vec<&Tag> = shipped.iter().flatten().collect();
+    let off: Vec<(&Scored, f64, MdiScenario)> =
+        tags.iter().filter(|t| t.1 > 0.0).map(|t| (&t.0, t.1, t.2)).collect();
+    let on: Vec<&Scored> = tags.iter().filter(|t| t.1 == 0.0).map(|t| &t.0).collect();
+    // Radii as the engine reported them: the factors are already in.
+    report.off_map = OffMapReport::of(&off, &Calibration::default());
+    report.on_map = OffMapReport::of_on_map(&on);
     let site = site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?;
     Ok((site, survey, report))
 }
@@ -1454,8 +1594,12 @@ impl OnMap {
         Self { radius_m: site.spacing_m() * std::f64::consts::FRAC_1_SQRT_2 + 1e-9, states }
     }
 
-    fn contains(&self, (x, y): (f64, f64)) -> bool {
-        self.states.iter().any(|&(sx, sy)| (sx - x).hypot(sy - y) <= self.radius_m)
+    /// How far `(x, y)` is beyond the map: its distance to the nearest cell (within
+    /// `radius_m` of a state), 0 on the map.
+    fn beyond_m(&self, (x, y): (f64, f64)) -> f64 {
+        let nearest =
+            self.states.iter().map(|&(sx, sy)| (sx - x).hypot(sy - y)).fold(f64::INFINITY, f64::min);
+        (nearest - self.radius_m).max(0.0)
     }
 }
 

@@ -168,6 +168,9 @@ pub struct waymark_position {
     pub scenario: u32,
     /// Steps since the previous epoch.
     pub steps: u32,
+    /// Distance walked since the radio last explained a scan, m: 0 while it does; above 0 the
+    /// phone is probably beyond the surveyed area and both radii include this distance.
+    pub beyond_radio_m: f64,
 }
 
 /// The learned error of external position fixes: subtract the bias from a fix, then widen its
@@ -279,6 +282,7 @@ fn convert(p: &Position) -> waymark_position {
             MdiScenario::Speed => 3,
         },
         steps: p.steps,
+        beyond_radio_m: p.beyond_radio_m,
     }
 }
 

@@ -347,6 +347,11 @@ pub struct PositionEstimate {
     pub scenario: MotionScenario,
     /// Steps since the previous epoch.
     pub steps: u32,
+    /// Distance walked since the radio last explained a scan, m: 0 while it does. Above 0 the
+    /// phone is probably beyond the surveyed area (the site's map does not explain what it
+    /// hears), the estimate follows the motion alone and both radii include this distance.
+    #[uniffi(default = 0.0)]
+    pub beyond_radio_m: f64,
 }
 
 /// A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB.
@@ -623,6 +628,7 @@ fn estimate(p: &engine::Position, names: &Names) -> PositionEstimate {
         motion_state: motion_state(p.motion_state),
         scenario: scenario(p.scenario),
         steps: p.steps,
+        beyond_radio_m: p.beyond_radio_m,
     }
 }
 

@@ -290,7 +290,10 @@ impl RadioMap {
     /// Eq. 10's "absent" terms cover the transmitters of the radios the scan used — WiFi if it
     /// heard any access point, BLE if it heard any beacon — so a beacon-only scan is not read
     /// as "no access point in range". `out.len()` must equal [`state_count`](Self::state_count).
-    pub fn ln_likelihood(&self, observations: &[(u32, f64)], out: &mut [f64]) {
+    ///
+    /// Returns ln p(scan) for a state that models none of the transmitters (every reading from
+    /// the unheard model): what the scan is worth without a fingerprint.
+    pub fn ln_likelihood(&self, observations: &[(u32, f64)], out: &mut [f64]) -> f64 {
         debug_assert_eq!(out.len(), self.state_count());
         let mut scanned = [false; 2];
         for &(t, _) in observations {
@@ -343,6 +346,8 @@ impl RadioMap {
         for v in out.iter_mut() {
             *v += shared;
         }
+        let absent = self.kinds.iter().filter(|&&k| scanned[usize::from(k)]).count();
+        absent as f64 * self.unheard_ln_absent + shared
     }
 }
 
@@ -399,11 +404,13 @@ mod tests {
                 [vec![(0, -62.0), (1, -79.0)], vec![(2, -92.0)], vec![(0, -100.0), (2, -99.0)], vec![]]
             {
                 let mut out = vec![0.0; 2];
-                map.ln_likelihood(&heard, &mut out);
+                let unheard = map.ln_likelihood(&heard, &mut out);
                 // Each heard transmitter's ln p(absent) comes from the table (≤ 2e-6 off).
                 for s in 0..2 {
                     assert_relative_eq!(out[s as usize], brute_force(&map, &heard, s), epsilon = 1e-5);
                 }
+                // A state the map has no fingerprint for (there is no state 9).
+                assert_relative_eq!(unheard, brute_force(&map, &heard, 9), epsilon = 1e-9);
             }
         }
     }
@@ -423,7 +430,8 @@ mod tests {
         .unwrap();
         for heard in [vec![(1, -72.0)], vec![(0, -61.0)], vec![(0, -61.0), (1, -72.0)]] {
             let mut out = vec![0.0; 2];
-            map.ln_likelihood(&heard, &mut out);
+            let unheard = map.ln_likelihood(&heard, &mut out);
+            assert_relative_eq!(unheard, brute_force(&map, &heard, 9), epsilon = 1e-9);
             for s in 0..2 {
                 assert_relative_eq!(out[s as usize], brute_force(&map, &heard, s), epsilon = 1e-9);
             }

@@ -139,6 +139,13 @@ pub struct Calibration {
     /// The surveyors' step length model, fitted on the survey walks.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step_length: Option<crate::sensors::StepLengthModel>,
+    /// The least radio fit ([`Position::radio_fit`](crate::Position::radio_fit)) of a scan
+    /// heard on the map, nats per reading: below it the map does not explain the scan (the
+    /// phone is probably beyond the surveyed area), the engine leans on the motion and its
+    /// radii grow with the distance walked. The survey's calibration takes the 5th percentile
+    /// over held-out epochs on the map.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub radio_fit_floor: Option<f64>,
 }
 
 impl Calibration {
@@ -165,6 +172,11 @@ impl Calibration {
                     let path = format!("calibration.rssi_weight_by_scenario.{}", ScenarioScales::key(s));
                     return Err((path, format!("must be in (0, 1], got {g}")));
                 }
+            }
+        }
+        if let Some(f) = self.radio_fit_floor {
+            if !f.is_finite() {
+                return Err(("calibration.radio_fit_floor".into(), format!("must be finite, got {f}")));
             }
         }
         let by_scenario = crate::sensors::MdiScenario::ALL.map(|s| {

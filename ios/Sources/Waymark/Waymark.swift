@@ -2448,6 +2448,12 @@ public struct PositionEstimate: Equatable, Hashable {
      * Steps since the previous epoch.
      */
     public var steps: UInt32
+    /**
+     * Distance walked since the radio last explained a scan, m: 0 while it does. Above 0 the
+     * phone is probably beyond the surveyed area (the site's map does not explain what it
+     * hears), the estimate follows the motion alone and both radii include this distance.
+     */
+    public var beyondRadioM: Double
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -2500,7 +2506,12 @@ public struct PositionEstimate: Equatable, Hashable {
          */scenario: MotionScenario, 
         /**
          * Steps since the previous epoch.
-         */steps: UInt32) {
+         */steps: UInt32, 
+        /**
+         * Distance walked since the radio last explained a scan, m: 0 while it does. Above 0 the
+         * phone is probably beyond the surveyed area (the site's map does not explain what it
+         * hears), the estimate follows the motion alone and both radii include this distance.
+         */beyondRadioM: Double = Double(0.0)) {
         self.timestampNs = timestampNs
         self.x = x
         self.y = y
@@ -2516,6 +2527,7 @@ public struct PositionEstimate: Equatable, Hashable {
         self.motionState = motionState
         self.scenario = scenario
         self.steps = steps
+        self.beyondRadioM = beyondRadioM
     }
 
     
@@ -2548,7 +2560,8 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
                 headingAccuracyDeg: FfiConverterOptionDouble.read(from: &buf), 
                 motionState: FfiConverterTypeMotionState.read(from: &buf), 
                 scenario: FfiConverterTypeMotionScenario.read(from: &buf), 
-                steps: FfiConverterUInt32.read(from: &buf)
+                steps: FfiConverterUInt32.read(from: &buf), 
+                beyondRadioM: FfiConverterDouble.read(from: &buf)
         )
     }
 
@@ -2568,6 +2581,7 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
         FfiConverterTypeMotionState.write(value.motionState, into: &buf)
         FfiConverterTypeMotionScenario.write(value.scenario, into: &buf)
         FfiConverterUInt32.write(value.steps, into: &buf)
+        FfiConverterDouble.write(value.beyondRadioM, into: &buf)
     }
 }
 

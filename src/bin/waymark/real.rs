@@ -308,6 +308,29 @@ fn print_calibration(c: &evaluation::CalibrationReport) {
             curve.join(", ")
         );
     }
+    let bands = |r: &waymark::eval::real::OffMapReport| -> String {
+        let bands: Vec<String> = r
+            .bands
+            .iter()
+            .map(|b| {
+                let range =
+                    if b.to_m == 0.0 { "on the map".into() } else { format!("{}-{} m", b.from_m, b.to_m) };
+                format!(
+                    "{range}: {} epochs, mean {:.2} m, 68% radius holds {:.2}, 95% {:.2}",
+                    b.epochs, b.mean_error_m, b.accuracy_68_hit, b.accuracy_95_hit
+                )
+            })
+            .collect();
+        bands.join("; ")
+    };
+    println!(
+        "radio fit floor {} nats per reading (5th percentile of {} held-out scans on the map); held-out walks replayed as shipped:",
+        c.radio_fit_floor.map_or("-".into(), |f| format!("{f:.2}")),
+        c.radio_fit_scans
+    );
+    println!("  {}", bands(&c.on_map));
+    println!("  beyond the held-out map, by distance beyond it | {}", bands(&c.off_map));
+    println!("  the same without the radio fit floor | {}", bands(&c.off_map_without_floor));
 }
 
 pub fn replay(args: &ReplayArgs) -> ExitCode {

@@ -128,6 +128,8 @@ final class WaymarkTests: XCTestCase {
                 XCTAssertEqual(p.floorName, "office")
                 XCTAssertGreaterThan(p.accuracyM, 0)
                 XCTAssertGreaterThanOrEqual(p.accuracy95M, p.accuracyM)
+                XCTAssertGreaterThanOrEqual(p.beyondRadioM, 0)
+                XCTAssertGreaterThanOrEqual(p.accuracyM, p.beyondRadioM)
                 errors.append(hypot(p.x - epoch.truth[0], p.y - epoch.truth[1]))
             } catch PositioningError.InputRejected {
                 // A scan with no known transmitter: the engine goes on.

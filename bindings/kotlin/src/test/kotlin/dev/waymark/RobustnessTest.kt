@@ -36,8 +36,9 @@ class RobustnessTest {
         }
 
         fun finite(p: PositionEstimate) =
-            listOf(p.x, p.y, p.floorProbability, p.accuracyM, p.accuracy95M).all { it.isFinite() } &&
-                p.accuracyM > 0.0 && (p.headingDeg?.isFinite() ?: true)
+            listOf(p.x, p.y, p.floorProbability, p.accuracyM, p.accuracy95M, p.beyondRadioM).all { it.isFinite() } &&
+                p.accuracyM > 0.0 && p.beyondRadioM >= 0.0 && p.accuracyM >= p.beyondRadioM &&
+                (p.headingDeg?.isFinite() ?: true)
 
         /** The walk's first `n` epochs, as an app pushes them: every accepted position finite. */
         fun replay(engine: PositioningEngine, epochs: List<Epoch>): Int {

@@ -139,6 +139,7 @@ class WaymarkTest {
                 assertEquals("office", p.floorName)
                 assertTrue(p.accuracyM > 0.0)
                 assertTrue(p.accuracy95M >= p.accuracyM)
+                assertTrue(p.beyondRadioM >= 0.0 && p.accuracyM >= p.beyondRadioM)
             }
             assertTrue("most scans are accepted", errors.size > walk.size / 2)
             assertEquals("one position per accepted scan", errors.size, counter.positions.get())
