@@ -19,7 +19,9 @@
 //! `SurveyOptions` one, 5 m; `waymark eval` calibrates it, 8 m on the five floors);
 //! `ESTIMATE_STATES`, `MAX_SPEED`, `MOVEMENT_VAR`, `SPACING`, `MAX_STD` and `AGE_MS` set
 //! `EngineConfig::estimate_states`, `max_speed_mps`, `HoangConfig::movement_variance_m2`,
-//! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms).
+//! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms);
+//! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; `waymark eval`
+//! calibrates it, 3.47 nats per reading on the five competition floors).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -61,6 +63,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         rssi_weight: Some(env_or("GAMMA", 0.03)),
         rssi_weight_without_movement: Some(env_or("GAMMA_WITHOUT", 0.1)),
         step_length: Some(motion.step_length),
+        radio_fit_floor: std::env::var("RADIO_FIT_FLOOR").ok().and_then(|v| v.parse().ok()),
         ..Calibration::default()
     };
     let site = Arc::new(site.with_calibration(calibration)?);
