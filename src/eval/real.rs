@@ -1155,29 +1155,31 @@ pub struct CalibrationReport {
 /// sensors give it at each floor's γ, by how far beyond the map the truth was.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct OffMapReport {
-    /// Per band of distance beyond the map (bands without epochs left out), the radii
-    /// scaled by the chosen factors of the epoch's scenario.
+    /// Per band of distance beyond the map (bands without epochs left out).
     pub bands: Vec<OffMapBand>,
 }
 
 /// One band of [`OffMapReport`].
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct OffMapBand {
-    /// Distance beyond the map, m: from.
+    /// Distance beyond the map, m: from (exclusive; 0 with `to_m` 0: on the map).
     pub from_m: f64,
-    /// To (exclusive).
+    /// To (inclusive; infinite, `null` in JSON, for the last band).
     pub to_m: f64,
     /// Epochs.
     pub epochs: usize,
     /// Mean horizontal error, m (no floor penalty).
     pub mean_error_m: f64,
-    /// Share whose scaled 68% radius holds the truth.
+    /// Share whose 68% radius holds the truth: as the engine reported it in the shipped pass,
+    /// times the chosen factors in the calibration's own replays.
     pub accuracy_68_hit: f64,
-    /// Share whose scaled 95% radius holds the truth.
+    /// The same for the 95% radius.
     pub accuracy_95_hit: f64,
 }
 
-/// Bands of distance beyond the map, m.
+/// Bands of distance beyond the map, m, for the report only: within one grid spacing (2 m,
+/// `SurveyOptions::spacing_m`) of the map's cells, then about 2-5, 5-10 and over 10 s of
+/// walking at HIPE's 1 m/s.
 const OFF_MAP_BANDS: [f64; 5] = [0.0, 2.0, 5.0, 10.0, f64::INFINITY];
 
 /// Quantile of the radio fits of held-out scans on the map taken as the floor below which the
@@ -1189,48 +1191,45 @@ const OFF_MAP_BANDS: [f64; 5] = [0.0, 2.0, 5.0, 10.0, f64::INFINITY];
 const RADIO_FIT_FLOOR_QUANTILE: f64 = 0.05;
 
 impl OffMapReport {
-    /// Epochs on the map as one band from 0 to 0 m.
+    /// Epochs on the map as one band from 0 to 0 m, their radii as reported.
     fn of_on_map(points: &[&Scored]) -> Self {
-        let n = points.len();
-        if n == 0 {
-            return Self::default();
-        }
-        let share = |hit: fn(&Scored) -> bool| points.iter().filter(|p| hit(p)).count() as f64 / n as f64;
-        Self {
-            bands: vec![OffMapBand {
-                from_m: 0.0,
-                to_m: 0.0,
-                epochs: n,
-                mean_error_m: points.iter().map(|p| p.error_m).sum::<f64>() / n as f64,
-                accuracy_68_hit: share(|p| p.error_m <= p.accuracy_m),
-                accuracy_95_hit: share(|p| p.error_m <= p.accuracy_95_m),
-            }],
-        }
+        let points: Vec<(&Scored, [f64; 2])> = points.iter().map(|&p| (p, [1.0, 1.0])).collect();
+        Self { bands: OffMapBand::of(0.0, 0.0, &points).into_iter().collect() }
     }
 
+    /// Epochs beyond the map by band, their radii times `calibration`'s factors for their
+    /// scenario.
     fn of(points: &[(&Scored, f64, MdiScenario)], calibration: &Calibration) -> Self {
         let bands = OFF_MAP_BANDS
             .windows(2)
             .filter_map(|w| {
-                let inside: Vec<_> = points.iter().filter(|p| p.1 > w[0] && p.1 <= w[1]).collect();
-                let n = inside.len();
-                (n > 0).then(|| {
-                    let share = |hit: &dyn Fn(&Scored, [f64; 2]) -> bool| {
-                        inside.iter().filter(|p| hit(p.0, calibration.accuracy_scale_in(p.2))).count() as f64
-                            / n as f64
-                    };
-                    OffMapBand {
-                        from_m: w[0],
-                        to_m: w[1],
-                        epochs: n,
-                        mean_error_m: inside.iter().map(|p| p.0.error_m).sum::<f64>() / n as f64,
-                        accuracy_68_hit: share(&|p, s| p.error_m <= s[0] * p.accuracy_m),
-                        accuracy_95_hit: share(&|p, s| p.error_m <= s[1] * p.accuracy_95_m),
-                    }
-                })
+                let inside: Vec<(&Scored, [f64; 2])> = points
+                    .iter()
+                    .filter(|p| p.1 > w[0] && p.1 <= w[1])
+                    .map(|p| (p.0, calibration.accuracy_scale_in(p.2)))
+                    .collect();
+                OffMapBand::of(w[0], w[1], &inside)
             })
             .collect();
         Self { bands }
+    }
+}
+
+impl OffMapBand {
+    /// The band of `points` (each with its radius factors); `None` without points.
+    fn of(from_m: f64, to_m: f64, points: &[(&Scored, [f64; 2])]) -> Option<Self> {
+        let n = points.len();
+        let share = |hit: fn(&Scored, [f64; 2]) -> bool| {
+            points.iter().filter(|&&(p, s)| hit(p, s)).count() as f64 / n as f64
+        };
+        (n > 0).then(|| OffMapBand {
+            from_m,
+            to_m,
+            epochs: n,
+            mean_error_m: points.iter().map(|p| p.0.error_m).sum::<f64>() / n as f64,
+            accuracy_68_hit: share(|p, s| p.error_m <= s[0] * p.accuracy_m),
+            accuracy_95_hit: share(|p, s| p.error_m <= s[1] * p.accuracy_95_m),
+        })
     }
 }
 
@@ -1489,8 +1488,6 @@ pub fn survey_calibrated(
                         }
                         if m == 0 {
                             fits_on_map.extend(*fit);
-                        }
-                        if m == 0 {
                             at_chosen.push(p);
                         }
                         by_scenario[scenario.index()].push(p);
