@@ -220,7 +220,13 @@ pub struct EngineSnapshot {
 pub struct Engine {
     site: Arc<Site>,
     config: EngineConfig,
-    reach: ReachTable,
+    reach: Arc<ReachTable>,
+    /// The surveyed map's own table ([`ReachTable::build_surveyed`]) when the site has
+    /// unsurveyed states: the prediction's while the radio explains what it hears.
+    map_reach: Option<Arc<ReachTable>>,
+    /// Whether the running epoch predicts over the whole table: it or the one before was
+    /// beyond the map.
+    whole_reach: bool,
     filter: ForwardFilter,
     viterbi: ViterbiWindow,
     tracker: MotionTracker,
@@ -258,6 +264,11 @@ pub struct Engine {
     radio_fit_floor: Option<f64>,
     /// The radio fit of the scan of the running epoch, and whether it is below the floor.
     epoch_radio_fit: Option<(f64, bool)>,
+    /// The site's [`StateKind::Unsurveyed`](crate::site::StateKind::Unsurveyed) states: they
+    /// hold the estimate only from a scan the map does not explain until one it does.
+    unsurveyed: Vec<usize>,
+    /// Scans in a row, up to the latest, that the map did not explain.
+    unexplained_run: u32,
 }
 
 /// What an epoch changes besides the filter and the Viterbi window, which keep their own
@@ -265,6 +276,7 @@ pub struct Engine {
 #[derive(Default)]
 struct Undo {
     last_epoch_ns: Option<u64>,
+    unexplained_run: u32,
     latest: Option<Position>,
     published_track: Vec<TrackPoint>,
     stats: InputStats,
@@ -279,7 +291,7 @@ impl Engine {
         config.validate()?;
         let id_hasher = site.scan_hasher(config.site_salt.as_ref())?;
         let n = site.states().len();
-        let reach = ReachTable::build(&site, config.reach_radius_m);
+        let (reach, map_reach) = site.reach_tables(config.reach_radius_m);
         let rssi_weight = config.floor_rssi_weights(&site);
         let site_rssi_weight = config.rssi_weight_for(&site);
         let scenario_rssi_weight = config.scenario_rssi_weights(&site);
@@ -287,11 +299,17 @@ impl Engine {
         let site_zones = site.zones().len();
         let habits = HabitModel::new(&site);
         let radio_fit_floor = site.calibration().radio_fit_floor.filter(|_| config.site_calibration);
+        let unsurveyed = (site.states().iter().enumerate())
+            .filter(|(_, s)| s.kind == crate::site::StateKind::Unsurveyed)
+            .map(|(i, _)| i)
+            .collect();
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,
             viterbi: ViterbiWindow::new(n, config.track_window_epochs),
             site,
             reach,
+            map_reach,
+            whole_reach: false,
             filter: ForwardFilter::new(n),
             ln_emission: vec![0.0; n],
             scratch: Vec::with_capacity(n),
@@ -312,6 +330,8 @@ impl Engine {
             habit_prior: HabitPrior::default(),
             radio_fit_floor,
             epoch_radio_fit: None,
+            unsurveyed,
+            unexplained_run: 0,
             config,
             undo: Undo::default(),
         })
@@ -731,6 +751,7 @@ impl Engine {
     /// published track and the counters, and a clone of the tracker when it is used.
     fn atomically<T>(&mut self, uses_tracker: bool, epoch: impl FnOnce(&mut Self) -> T) -> T {
         self.undo.last_epoch_ns = self.last_epoch_ns;
+        self.undo.unexplained_run = self.unexplained_run;
         self.undo.latest.clone_from(&self.latest);
         self.undo.published_track.clone_from(&self.published_track);
         self.undo.stats.clone_from(&self.stats);
@@ -748,6 +769,7 @@ impl Engine {
                 self.filter.rollback();
                 self.viterbi.rollback();
                 self.last_epoch_ns = self.undo.last_epoch_ns;
+                self.unexplained_run = self.undo.unexplained_run;
                 std::mem::swap(&mut self.latest, &mut self.undo.latest);
                 std::mem::swap(&mut self.published_track, &mut self.undo.published_track);
                 std::mem::swap(&mut self.stats, &mut self.undo.stats);
@@ -858,6 +880,19 @@ impl Engine {
         let radio = self.epoch_radio_fit.take().filter(|_| input == EpochInput::Scan);
         let beyond_radio_m = self.beyond_radio_m(radio.map(|r| r.1), dt_s, motion);
         let radio_fit = radio.map(|r| r.0);
+        let was_off_map = self.unexplained_run >= UNSURVEYED_AFTER_SCANS;
+        if let Some((_, unexplained)) = radio {
+            self.unexplained_run = if unexplained { self.unexplained_run.saturating_add(1) } else { 0 };
+        }
+        let off_map = self.unexplained_run >= UNSURVEYED_AFTER_SCANS;
+        // Back from beyond the map, the mass out there needs the whole table to come home.
+        self.whole_reach = was_off_map || off_map;
+        if !off_map {
+            // On the map (as far as the radio says): the unsurveyed states around it are out.
+            for &i in &self.unsurveyed {
+                self.ln_emission[i] = f64::NEG_INFINITY;
+            }
+        }
         let evidence = self.forward(timestamp_ns, dt_s, motion);
         self.last_epoch_ns = Some(timestamp_ns);
         let position = self.locate(Position {
@@ -988,10 +1023,11 @@ impl Engine {
     /// Predicts over `dt_s` (none at the first epoch) with the configured model and `motion`,
     /// and updates with `ln_emission`. Returns the log evidence.
     fn forward(&mut self, timestamp_ns: u64, dt_s: Option<f64>, motion: &MotionUpdate) -> f64 {
+        let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
         let Some(dt) = dt_s else {
             self.viterbi.step(
                 timestamp_ns,
-                &UniformReach { table: &self.reach, rho_m: 0.0, ratio: 1.0 },
+                &UniformReach { table, rho_m: 0.0, ratio: 1.0 },
                 &self.ln_emission,
             );
             return self.update(None);
@@ -1008,10 +1044,10 @@ impl Engine {
             return self.bridge_gap(timestamp_ns, speed_reach);
         }
         let ratio_max = config.transition_ratio;
-        let reach = UniformReach { table: &self.reach, rho_m: speed_reach, ratio: ratio_max };
+        let reach = UniformReach { table, rho_m: speed_reach, ratio: ratio_max };
         let hipe = HipeTransition {
             site: &self.site,
-            table: &self.reach,
+            table,
             region: hipe_region,
             // Under Hoang's model the regions only stand in for a missing distance or
             // heading, with the same floor K as its other epochs. HIPE's adaptive K reaches
@@ -1031,7 +1067,7 @@ impl Engine {
         };
         let hoang = HoangTransition {
             site: &self.site,
-            table: &self.reach,
+            table,
             reach_m: speed_reach,
             ratio: ratio_max,
             movement_m: motion.displacement_m,
@@ -1105,13 +1141,10 @@ impl Engine {
     /// A reach beyond the walking-distance table: several passes of the speed bound, or a
     /// restart from the uniform prior when even that is too far.
     fn bridge_gap(&mut self, timestamp_ns: u64, speed_reach: f64) -> f64 {
+        let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
         let table_radius = self.reach.radius_m();
         let passes = (speed_reach / table_radius).ceil().max(1.0);
-        let pass = UniformReach {
-            table: &self.reach,
-            rho_m: speed_reach / passes,
-            ratio: self.config.transition_ratio,
-        };
+        let pass = UniformReach { table, rho_m: speed_reach / passes, ratio: self.config.transition_ratio };
         self.viterbi.step(timestamp_ns, &UniformReach { rho_m: table_radius, ..pass }, &self.ln_emission);
         if passes > f64::from(self.config.max_reach_passes) {
             log::debug!("{speed_reach:.0} m of possible walking since the last epoch: restarting");
@@ -1168,6 +1201,21 @@ fn plausible_rssi(rssi_dbm: f64) -> bool {
 }
 
 /// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).
+/// Unexplained scans in a row after which the estimate may leave the surveyed map for its
+/// unsurveyed states. One is not enough: the site's radio fit floor is the 5th percentile of
+/// scans on the map, so one scan in twenty on the map falls below it.
+const UNSURVEYED_AFTER_SCANS: u32 = 2;
+
+/// The walking-distance table an epoch predicts with: the surveyed map's own (`map`) while the
+/// radio explains what it hears, the whole site's (`reach`) beyond the map and on the way back
+/// (`whole`).
+fn prediction_table<'a>(reach: &'a ReachTable, map: Option<&'a ReachTable>, whole: bool) -> &'a ReachTable {
+    match map {
+        Some(map) if !whole => map,
+        _ => reach,
+    }
+}
+
 fn hipe_region(config: &EngineConfig, motion: &MotionUpdate, dt_s: f64) -> HipeRegion {
     let h = &config.hipe;
     let range_m = h.assumed_speed_mps * dt_s;

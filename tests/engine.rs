@@ -287,6 +287,21 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
     assert!(message.contains("calibration.rssi_weight_by_scenario.heading_speed"), "{message}");
 }
 
+/// Second k of a walk: `distance_m` walked in two steps, no heading.
+fn walking(k: u64, distance_m: f64) -> waymark::sensors::MotionUpdate {
+    use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
+    MotionUpdate {
+        start_ns: (k - 1) * SECOND,
+        end_ns: k * SECOND,
+        steps: 2,
+        distance_m: Some(distance_m),
+        distance_sigma_m: 0.1,
+        motion_state: MotionState::Walking,
+        scenario: MdiScenario::Distance,
+        ..MotionUpdate::default()
+    }
+}
+
 /// Beyond the surveyed area. A scan the map does not explain (a radio fit below the site's
 /// floor) leaves the estimate to the motion alone, as an epoch without a scan would, and both
 /// radii grow by the distance walked since the radio last explained a scan, motion-only epochs
@@ -294,18 +309,8 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
 /// an engine told not to take the site's calibration has no floor.
 #[test]
 fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
-    use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
     use waymark::site::Calibration;
-    let walked = |k: u64| MotionUpdate {
-        start_ns: (k - 1) * SECOND,
-        end_ns: k * SECOND,
-        steps: 2,
-        distance_m: Some(1.5),
-        distance_sigma_m: 0.1,
-        motion_state: MotionState::Walking,
-        scenario: MdiScenario::Distance,
-        ..MotionUpdate::default()
-    };
+    let walked = |k: u64| walking(k, 1.5);
     let explained = readings_at(0, 3.0);
     // Floor 0's transmitters all faint, as nowhere on the map: a state that never heard them
     // does about as well as any.
@@ -355,4 +360,110 @@ fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
     plain.push_scan_with_motion(&scan(SECOND, &explained), &walked(1)).unwrap();
     let p = plain.push_scan_with_motion(&scan(2 * SECOND, &unexplained), &walked(2)).unwrap();
     assert_eq!((p.beyond_radio_m, plain.stats().scans_unexplained), (0.0, 0));
+}
+
+/// A corridor surveyed from x = 0 to 12 m that carries on, unsurveyed, to 24 m: while the radio
+/// explains the scans the unsurveyed states hold no mass at all; when it stops explaining them
+/// the walker's measured movement carries the estimate out along the unsurveyed corridor, where
+/// a site without those states pins it to the map's end; an explained scan brings it back.
+#[test]
+fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
+    use common::wifi;
+    use nalgebra::Point2;
+    use waymark::radio::{Reading, Scan};
+    use waymark::sensors::{MdiScenario, MotionUpdate};
+    use waymark::site::{BuildOptions, Calibration, SiteBuilder, StateKind};
+    let level = |t: u8, x: f64| -40.0 - 4.0 * (x - 6.0 * f64::from(t)).abs();
+    let site = |unsurveyed: bool| {
+        let mut b = SiteBuilder::new("corridor");
+        let floor = b.floor("G", 0.0);
+        let mut previous: Option<u32> = None;
+        for k in 0..9 {
+            let x = 3.0 * k as f64;
+            let id = if k <= 4 {
+                let scans = (0..20)
+                    .map(|n| {
+                        let jitter = if n % 2 == 0 { 2.0 } else { -2.0 };
+                        let readings = (0..3)
+                            .map(|t| Reading {
+                                transmitter: wifi(t),
+                                rssi_dbm: level(t, x) + jitter,
+                                age_ns: 0,
+                            })
+                            .collect();
+                        Scan { timestamp_ns: n, readings }
+                    })
+                    .collect();
+                b.state(floor, Point2::new(x, 0.0), scans)
+            } else if unsurveyed {
+                b.unsurveyed_state(floor, Point2::new(x, 0.0))
+            } else {
+                break;
+            };
+            if let Some(p) = previous {
+                b.edge(p, id, None);
+            }
+            previous = Some(id);
+        }
+        let site = b.build(BuildOptions::default()).unwrap();
+        let calibration = Calibration { radio_fit_floor: Some(1.0), ..Calibration::default() };
+        Arc::new(site.with_calibration(calibration).unwrap())
+    };
+    let (open, closed) = (site(true), site(false));
+    assert_eq!(open.states().iter().filter(|s| s.kind == StateKind::Unsurveyed).count(), 4);
+    let walked_east = |k: u64| MotionUpdate {
+        heading_rad: Some(std::f64::consts::FRAC_PI_2),
+        heading_sigma_rad: 0.1,
+        displacement_m: Some([3.0, 0.0]),
+        scenario: MdiScenario::DistanceHeading,
+        ..walking(k, 3.0)
+    };
+    let explained_at = |x: f64| -> Vec<(u8, f64)> { (0..3).map(|t| (t, level(t, x))).collect() };
+    let unexplained: Vec<(u8, f64)> = (0..3).map(|t| (t, -92.0)).collect();
+    let unsurveyed_mass = |engine: &Engine| -> f64 {
+        let states = engine.site().states();
+        engine
+            .posterior()
+            .iter()
+            .zip(states)
+            .filter(|(_, s)| s.kind == StateKind::Unsurveyed)
+            .map(|(p, _)| p)
+            .sum()
+    };
+    let mut engine = Engine::new(Arc::clone(&open), EngineConfig::default()).unwrap();
+    let mut pinned = Engine::new(closed, EngineConfig::default()).unwrap();
+    for (k, x) in [(1, 6.0), (2, 9.0), (3, 12.0)] {
+        let p = engine.push_scan_with_motion(&scan(k * SECOND, &explained_at(x)), &walked_east(k)).unwrap();
+        pinned.push_scan_with_motion(&scan(k * SECOND, &explained_at(x)), &walked_east(k)).unwrap();
+        assert_eq!(unsurveyed_mass(&engine), 0.0, "{p:?}");
+        assert!((p.x - x).abs() < 1.5, "{p:?}");
+    }
+    // Walking on past the map's end, hearing nothing the map explains. One such scan could be
+    // a bad one on the map: the estimate stays on it, moved by the motion alone.
+    let p = engine.push_scan_with_motion(&scan(4 * SECOND, &unexplained), &walked_east(4)).unwrap();
+    pinned.push_scan_with_motion(&scan(4 * SECOND, &unexplained), &walked_east(4)).unwrap();
+    assert_eq!(unsurveyed_mass(&engine), 0.0, "{p:?}");
+    let same =
+        engine.posterior()[..5].iter().zip(&pinned.posterior()[..5]).all(|(a, b)| (a - b).abs() <= 1e-12);
+    assert!(same, "{:?} {:?}", engine.posterior(), pinned.posterior());
+    // From the second in a row the motion carries it off the map, a scan behind the walker.
+    let mut last_x = p.x;
+    for k in 5..=7u64 {
+        let p = engine.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked_east(k)).unwrap();
+        let q = pinned.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked_east(k)).unwrap();
+        let truth = 3.0 * k as f64 + 3.0;
+        // About 2.7 m of each 3 m walked (measured 14.4, 17.1, 19.9 m), behind the truth.
+        assert!(p.x > last_x + 2.0 && p.x < truth, "{truth} {p:?}");
+        assert!(q.x <= 12.0 + 1e-9, "{q:?}");
+        assert!(p.beyond_radio_m > 0.0 && p.accuracy_m > p.beyond_radio_m, "{p:?}");
+        last_x = p.x;
+    }
+    assert!(unsurveyed_mass(&engine) > 0.99);
+    // A motion-only epoch out there moves it on.
+    let p = engine.advance_with_motion(8 * SECOND, &walked_east(8)).unwrap();
+    assert!(p.x > last_x + 2.0, "{p:?}");
+    // The radio explains a scan again: back on the map, the unsurveyed states emptied.
+    let p = engine.push_scan_with_motion(&scan(9 * SECOND, &explained_at(12.0)), &walked_east(9)).unwrap();
+    assert_eq!(unsurveyed_mass(&engine), 0.0);
+    assert!((p.x - 12.0).abs() < 1.5 && p.beyond_radio_m == 0.0, "{p:?}");
 }

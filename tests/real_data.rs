@@ -99,6 +99,11 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert_eq!(epochs(&calibration.off_map), calibration.epochs_off_map, "{calibration:?}");
     assert_eq!(epochs(&calibration.off_map_without_floor), calibration.epochs_off_map);
 
+    // Unsurveyed states around the surveyed ones, on the floor's plan, none with a fingerprint.
+    let kind = |i: u32| site.states()[i as usize].kind;
+    assert!(site.states().iter().any(|s| s.kind == waymark::site::StateKind::Unsurveyed));
+    assert!(site.radio().fingerprints().all(|(i, _, _)| kind(i) != waymark::site::StateKind::Unsurveyed));
+
     // The calibrated site survives its file format.
     let site = Arc::new(Site::from_json(site.to_json().as_bytes()).expect("reloads"));
     assert_eq!(site.calibration().rssi_weight, Some(gamma));

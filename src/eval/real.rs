@@ -11,7 +11,7 @@ use crate::history::EpochRecord;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::Scan;
 use crate::sensors::MdiScenario;
-use crate::site::{Calibration, North, Site};
+use crate::site::{Calibration, North, Site, StateKind};
 use crate::survey::{positioned_scans, survey, PreparedSurvey, SurveyFloor, SurveyOptions, SurveyReport};
 use crate::EngineConfig;
 use nalgebra::Point2;
@@ -553,7 +553,11 @@ fn most_likely_state(site: &Site, scan: &Scan, ln: &mut Vec<f64>) -> Option<usiz
     }
     ln.resize(site.states().len(), 0.0);
     radio.ln_likelihood(&resolved.observations, ln);
-    (0..ln.len()).max_by(|&a, &b| ln[a].total_cmp(&ln[b]))
+    // Among the states with a fingerprint: an unsurveyed one has nothing to match.
+    let states = site.states();
+    (0..ln.len())
+        .filter(|&i| states[i].kind != StateKind::Unsurveyed)
+        .max_by(|&a, &b| ln[a].total_cmp(&ln[b]))
 }
 
 /// One radius of the fingerprint radius's search: (radius m, held-out mean error m, scans).
@@ -914,7 +918,7 @@ pub fn survey_habits(
             engine.history().iter().cloned().collect()
         });
         let sequences: Vec<&[EpochRecord]> = histories.iter().map(Vec::as_slice).collect();
-        let reach = crate::site::ReachTable::build(site, config.reach_radius_m);
+        let (reach, _) = site.reach_tables(config.reach_radius_m);
         let mut model = HabitModel::new(site);
         let report = model.learn(site, &reach, &sequences, &config.habits)?;
         Ok::<_, EvalError>((model, report))
@@ -1187,7 +1191,8 @@ const OFF_MAP_BANDS: [f64; 5] = [0.0, 2.0, 5.0, 10.0, f64::INFINITY];
 /// unexplained. Measured with `waymark eval` (`calibration.off_map` against
 /// `off_map_without_floor`, README "Beyond the surveyed area"): on the five competition floors
 /// it lowered the mean error of held-out epochs 5-10 m beyond the map from 21.1 to 18.0 m and
-/// beyond 10 m from 66 to 49 m, and the test walks' from 4.834 to 4.795 m (`forward-auto`).
+/// beyond 10 m from 66 to 49 m, and the test walks' from 4.834 to 4.795 m (`forward-auto`;
+/// measured before the survey's unsurveyed states, which the floor lets the estimate onto).
 const RADIO_FIT_FLOOR_QUANTILE: f64 = 0.05;
 
 impl OffMapReport {
@@ -1587,8 +1592,12 @@ struct OnMap {
 
 impl OnMap {
     fn new(site: &Site, floor: usize) -> Self {
-        let states =
-            site.states().iter().filter(|s| s.floor == floor).map(|s| (s.position.x, s.position.y)).collect();
+        let states = site
+            .states()
+            .iter()
+            .filter(|s| s.floor == floor && s.kind != StateKind::Unsurveyed)
+            .map(|s| (s.position.x, s.position.y))
+            .collect();
         Self { radius_m: site.spacing_m() * std::f64::consts::FRAC_1_SQRT_2 + 1e-9, states }
     }
 

@@ -127,6 +127,18 @@ impl SiteBuilder {
         id
     }
 
+    /// Adds a state with no fingerprint ([`StateKind::Unsurveyed`]): walkable space nobody
+    /// surveyed, where the estimate may go only while the radio does not explain what the
+    /// phone hears.
+    pub fn unsurveyed_state(&mut self, floor: usize, position: Point2<f64>) -> u32 {
+        let id = self.states.len() as u32;
+        self.states.push((
+            State { id, floor, position, kind: StateKind::Unsurveyed, training_scans: 0 },
+            Vec::new(),
+        ));
+        id
+    }
+
     /// Assembles the site from fingerprints fitted by the caller: (state, index into `ids`,
     /// model), with the same "unheard" model and checks as [`build`](Self::build).
     pub(crate) fn build_fitted(

@@ -20,6 +20,7 @@ pub use zones::{most_likely_zone, Zone, ZoneKind, MAX_ZONES};
 use crate::radio::RadioMap;
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
+use std::sync::{Arc, Mutex};
 
 /// A floor of the site.
 #[derive(Clone, Debug, Default, PartialEq)]
@@ -64,6 +65,11 @@ pub enum StateKind {
     Surveyed,
     /// Fingerprints synthesised from neighbouring surveyed states (Hoang eqs. 12-13).
     Pseudo,
+    /// No fingerprint: walkable space next to the surveyed area that no survey walk reached.
+    /// The radio scores it as a place where no transmitter of the map is modelled, so a scan
+    /// the map explains leaves it almost no mass; when the map does not explain a scan the
+    /// motion alone can carry the estimate onto it.
+    Unsurveyed,
 }
 
 /// A possible user position: one hidden state of the HMM.
@@ -293,7 +299,31 @@ pub struct Site {
     zones: Vec<Zone>,
     /// Each state's zone index, `zones::NO_ZONE` for none; empty when there are no zones.
     zone_of: Vec<u32>,
+    /// Walking-distance tables built so far, shared by every engine on this site (and its
+    /// clones, whose graph is the same).
+    reach_tables: ReachCache,
 }
+
+/// The walking-distance tables of a site, per radius: the whole graph's and the surveyed
+/// map's ([`ReachTable::build_surveyed`]).
+type ReachTables = (Arc<ReachTable>, Option<Arc<ReachTable>>);
+
+/// [`Site::reach_tables`]'s memory: the tables of the latest few radii asked for. Building
+/// them was 30% of `waymark eval`'s time (perf, F2 split) when every replay's engine built
+/// its own.
+#[derive(Clone, Default)]
+struct ReachCache(Arc<Mutex<Vec<(u64, ReachTables)>>>);
+
+impl std::fmt::Debug for ReachCache {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let radii = self.0.lock().map_or(0, |c| c.len());
+        write!(f, "ReachCache({radii} radii)")
+    }
+}
+
+/// Radii [`ReachCache`] keeps tables for: an engine's and a habit pass's (the same radius),
+/// and one more that a caller tries.
+const REACH_CACHE_RADII: usize = 2;
 
 impl Site {
     /// Assembles a site from parts that the caller has checked (indices in range, positive
@@ -339,7 +369,28 @@ impl Site {
             id_hashing: None,
             zones: Vec::new(),
             zone_of: Vec::new(),
+            reach_tables: ReachCache::default(),
         }
+    }
+
+    /// The walking-distance tables within `radius_m`: the whole graph's and, when the site has
+    /// [`StateKind::Unsurveyed`] states, the surveyed map's. Built once per radius and shared.
+    pub fn reach_tables(&self, radius_m: f64) -> (Arc<ReachTable>, Option<Arc<ReachTable>>) {
+        let key = radius_m.to_bits();
+        // A panic while building leaves the cache as it was: recover it.
+        let mut cache = self.reach_tables.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, tables)) = cache.iter().find(|(k, _)| *k == key) {
+            return tables.clone();
+        }
+        let tables = (
+            Arc::new(ReachTable::build(self, radius_m)),
+            ReachTable::build_surveyed(self, radius_m).map(Arc::new),
+        );
+        if cache.len() >= REACH_CACHE_RADII {
+            cache.remove(0);
+        }
+        cache.push((key, tables.clone()));
+        tables
     }
 
     /// The site's name.

@@ -56,6 +56,11 @@ pub struct SurveyArgs {
     /// The site's name.
     #[arg(long, default_value = "site")]
     name: String,
+    /// Unsurveyed states (no fingerprint) fill walkable space this far beyond the surveyed
+    /// states, m, for the estimate to follow the motion off the map (0: none; the site then
+    /// loads in builds before unsurveyed states).
+    #[arg(long, default_value_t = waymark::survey::UNSURVEYED_MARGIN_M)]
+    unsurveyed_margin_m: f64,
     #[command(flatten)]
     salt: SaltArgs,
 }
@@ -153,6 +158,10 @@ pub struct EvalArgs {
     /// survey's cross-validation, `FINGERPRINT_RADIUS_GRID`).
     #[arg(long)]
     fingerprint_radius_m: Option<f64>,
+    /// Unsurveyed states (no fingerprint) fill walkable space this far beyond the surveyed
+    /// states, m, for the estimate to follow the motion off the map (default 10; 0: none).
+    #[arg(long)]
+    unsurveyed_margin_m: Option<f64>,
     /// Readings older than this before their scan count as not heard, ms (default 2000).
     #[arg(long)]
     max_age_ms: Option<u64>,
@@ -213,7 +222,8 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
             f
         })
         .collect();
-    let options = EvalOptions::default();
+    let mut options = EvalOptions::default();
+    options.survey.unsurveyed_margin_m = args.unsurveyed_margin_m;
     let bar = progress_bar(
         false,
         evaluation::calibration_steps(&floors, &options) as u64,
@@ -240,8 +250,8 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
     }
     for f in &report.floors {
         println!(
-            "{:>4}: {} walks, {} scans → {} states, {} edges ({} through walls the plan has, walked)",
-            f.name, f.walks, f.scans, f.states, f.edges, f.walked_edges
+            "{:>4}: {} walks, {} scans → {} states and {} unsurveyed around them, {} edges ({} through walls the plan has, walked)",
+            f.name, f.walks, f.scans, f.states, f.unsurveyed_states, f.edges, f.walked_edges
         );
     }
     print_calibration(&calibration);
@@ -514,6 +524,9 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     if let Some(s) = args.spacing_m {
         options.survey.spacing_m = s;
         options.survey.coverage_m = s;
+    }
+    if let Some(m) = args.unsurveyed_margin_m {
+        options.survey.unsurveyed_margin_m = m;
     }
     if let Some(r) = args.fingerprint_radius_m {
         options.survey.fingerprint_radius_m = r;
