@@ -285,7 +285,9 @@ struct Undo {
 }
 
 impl Engine {
-    /// A session on `site`. Precomputes the walking-distance table: all allocation happens here.
+    /// A session on `site`. Takes the site's walking-distance tables ([`Site::reach_tables`]:
+    /// built by the first engine at this radius, shared by the rest): all allocation happens
+    /// here.
     /// A site whose transmitter ids are hashed needs its salt in `config.site_salt`.
     pub fn new(site: Arc<Site>, config: EngineConfig) -> Result<Self, Error> {
         config.validate()?;
