@@ -75,10 +75,10 @@ impl ReachTable {
                 }
             };
             // Between surveyed states the walking distance stays on the surveyed graph:
-            // nobody walked the unsurveyed space, so it shortens no known route.
-            let blocked = |u: u32, v: u32| {
-                (surveyed_only || !unsurveyed[source]) && unsurveyed[u as usize] && !unsurveyed[v as usize]
-            };
+            // nobody walked the unsurveyed space, so it shortens no known route. (The surveyed
+            // map's table never enters it at all: `skip`.)
+            let blocked =
+                |u: u32, v: u32| !unsurveyed[source] && unsurveyed[u as usize] && !unsurveyed[v as usize];
             let skip = |v: u32| surveyed_only && unsurveyed[v as usize];
             dist[source] = 0.0;
             touched.push(source as u32);

@@ -94,11 +94,13 @@ impl Default for SurveyOptions {
 /// epochs were within 10 m of it on the five competition floors (1 790 of 1 880:
 /// `calibration.off_map` bands of `waymark eval target/ilc/site1/{B1,F1,F2,F3,F4}`). With it,
 /// held-out error 5-10 m beyond the map went from 14.38 to 13.74 m and beyond 10 m from 20.46
-/// to 13.40 m on F2, at the same test-walk error (`forward-auto` 5.248 → 5.239 m), for 2.7 times
-/// the states and 15% more time (README, "Beyond the surveyed area").
+/// to 13.40 m on F2, at the same test-walk error (`forward-auto` 5.248 → 5.239 m), for 2.6-2.7
+/// times the states and 11-15% more `eval` time (F1 106 → 118 s, F2 33 → 38 s; README, "Beyond
+/// the surveyed area").
 pub const UNSURVEYED_MARGIN_M: f64 = 10.0;
 
-/// The largest margin a survey takes, m: its states grow with the square of it.
+/// The largest margin a survey takes, m: a bound on bad input, not a tuned value (ten times
+/// the default; the unsurveyed states grow with the square of the margin).
 pub const MAX_UNSURVEYED_MARGIN_M: f64 = 100.0;
 
 /// The σ cap of survey fits, dB: the spread of one access point's RSSI at a fixed place
@@ -424,8 +426,7 @@ impl<'a> PreparedSurvey<'a> {
             }
             if let Some(plan) = floor.plan {
                 for (&c, candidate) in cells.iter_mut() {
-                    candidate.room =
-                        plan.room_at(centre(c)).filter(|&r| !plan.rooms[r].name.trim().is_empty());
+                    candidate.room = named_room(plan, centre(c));
                 }
             }
             out.push(PreparedFloor {
@@ -643,9 +644,7 @@ impl<'a> PreparedSurvey<'a> {
                     }
                     let room = match floor.cells.get(&c) {
                         Some(candidate) => candidate.room,
-                        None => floor.plan.and_then(|plan| plan.room_at(centre(c))).filter(|&r| {
-                            floor.plan.is_some_and(|plan| !plan.rooms[r].name.trim().is_empty())
-                        }),
+                        None => floor.plan.and_then(|plan| named_room(plan, centre(c))),
                     };
                     ids_of.insert(c, builder.unsurveyed_state(index, centre(c)));
                     rooms_of.insert(c, room);
@@ -718,6 +717,11 @@ impl<'a> PreparedSurvey<'a> {
         let transmitters = site.radio().transmitters().len();
         Ok((site, SurveyReport { floors: reports, transmitters }))
     }
+}
+
+/// The smallest named polygon of `plan` holding `p`: the room a state there belongs to.
+fn named_room(plan: &FloorPlan, p: Point2<f64>) -> Option<usize> {
+    plan.room_at(p).filter(|&r| !plan.rooms[r].name.trim().is_empty())
 }
 
 /// Zones from a floor plan's named polygons: each state (its smallest named polygon, index)
