@@ -5,7 +5,7 @@
 use crate::engine::{Engine, Position, TrackPoint};
 use crate::io::ilc::{Event, EventOptions};
 use crate::io::Trace;
-use crate::sensors::{MdiScenario, MotionTracker, MotionUpdate};
+use crate::sensors::{MdiScenario, MotionState, MotionTracker, MotionUpdate};
 use serde::{Deserialize, Serialize};
 
 /// Which motion information the engine may use (HIPE Table 1), forced by withholding it.
@@ -20,15 +20,21 @@ pub enum MotionMask {
     DistanceHeading,
     /// Steps only: the heading is withheld.
     Distance,
-    /// Heading only: the step distance is withheld.
+    /// Heading only: the step distance is withheld, and with it everything the step detector
+    /// told (HIPE Table 1: a compass, no accelerometer-based motion): the heading is where the
+    /// compass points at the epoch's end, not the direction of the epoch's steps, and the
+    /// motion state is unknown.
     HeadingSpeed,
-    /// Neither: the assumed speed only.
+    /// Neither: the assumed speed only (no step detector either: the motion state is unknown).
     Speed,
 }
 
 impl MotionMask {
     /// `update` with what this mask withholds removed, and the scenario set to what is left.
-    pub fn apply(self, mut update: MotionUpdate) -> MotionUpdate {
+    /// `compass` is the tracker's trusted heading where the phone points at the update's end
+    /// and its σ (`MotionTracker::heading_estimate`), rad: the heading a phone without step
+    /// detection has, which [`MotionMask::HeadingSpeed`] uses instead of the steps' direction.
+    pub fn apply(self, mut update: MotionUpdate, compass: Option<(f64, f64)>) -> MotionUpdate {
         let scenario = match self {
             MotionMask::Auto => return update,
             MotionMask::DistanceHeading => MdiScenario::DistanceHeading,
@@ -40,7 +46,20 @@ impl MotionMask {
             update.heading_rad = None;
         }
         if matches!(scenario, MdiScenario::HeadingSpeed | MdiScenario::Speed) {
+            // Without step detection there is no distance, no walking or standing still, and no
+            // direction of travel from the steps: the tracker's heading of an epoch with steps
+            // is their length-weighted mean direction, withheld when they turned too much,
+            // which only a step detector knows. Measured: with the steps' direction,
+            // forward-heading-speed beat forward-distance on the five competition floors
+            // (README "HIPE's scenarios").
             update.distance_m = None;
+            update.motion_state = MotionState::Unknown;
+            if scenario == MdiScenario::HeadingSpeed {
+                (update.heading_rad, update.heading_sigma_rad) = match compass {
+                    Some((h, sigma)) => (Some(h), sigma),
+                    None => (None, std::f64::consts::PI),
+                };
+            }
         }
         // The tracker's displacement sums its steps' own headings; it stands only while
         // neither distance nor heading was withheld.
@@ -170,7 +189,7 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
                     last_scan = Some(t);
                     let r = match tracker.as_mut() {
                         Some(k) if !last_epoch.is_some_and(|l| t <= l) => {
-                            let motion = options.mask.apply(k.update(t));
+                            let motion = masked(options.mask, k, t);
                             engine.push_scan_with_motion(&scan, &motion)
                         }
                         _ => engine.push_scan(&scan),
@@ -186,7 +205,7 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
             let due = options.timer_ns.is_some_and(|gap| last_epoch.is_some_and(|l| t >= l + gap));
             due.then(|| match tracker.as_mut() {
                 Some(k) => {
-                    let motion = options.mask.apply(k.update(t));
+                    let motion = masked(options.mask, k, t);
                     engine.advance_with_motion(t, &motion)
                 }
                 None => engine.advance(t),
@@ -202,14 +221,27 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
     out
 }
 
+/// The motion `tracker` measured up to `t`, with what `mask` withholds removed.
+fn masked(mask: MotionMask, tracker: &mut MotionTracker, t: u64) -> MotionUpdate {
+    let update = tracker.update(t);
+    let h = tracker.heading_estimate();
+    let compass = h.heading_rad.filter(|_| h.trusted).map(|heading| (heading, h.sigma_rad));
+    mask.apply(update, compass)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Where the compass points at the end of the update, and its σ, rad.
+    const COMPASS: Option<(f64, f64)> = Some((0.9, 0.2));
 
     fn walking() -> MotionUpdate {
         MotionUpdate {
             distance_m: Some(2.0),
             heading_rad: Some(0.5),
+            heading_sigma_rad: 0.1,
+            motion_state: MotionState::Walking,
             displacement_m: Some([0.9, 1.8]),
             scenario: MdiScenario::DistanceHeading,
             ..MotionUpdate::default()
@@ -218,24 +250,32 @@ mod tests {
 
     #[test]
     fn masks_withhold_what_they_name_and_keep_the_rest() {
-        assert_eq!(MotionMask::Auto.apply(walking()), walking());
+        assert_eq!(MotionMask::Auto.apply(walking(), COMPASS), walking());
         assert_eq!(
-            MotionMask::DistanceHeading.apply(walking()),
+            MotionMask::DistanceHeading.apply(walking(), COMPASS),
             walking(),
             "the tracker's displacement stays"
         );
-        let d = MotionMask::Distance.apply(walking());
+        let d = MotionMask::Distance.apply(walking(), COMPASS);
         assert_eq!(
             (d.distance_m, d.heading_rad, d.displacement_m, d.scenario),
             (Some(2.0), None, None, MdiScenario::Distance)
         );
-        let h = MotionMask::HeadingSpeed.apply(walking());
+        // Heading only: where the compass points, not the steps' direction, and no motion
+        // state; without a trusted compass heading that is the assumed speed alone.
+        let h = MotionMask::HeadingSpeed.apply(walking(), COMPASS);
         assert_eq!(
-            (h.distance_m, h.heading_rad, h.displacement_m, h.scenario),
-            (None, Some(0.5), None, MdiScenario::HeadingSpeed)
+            (h.distance_m, h.heading_rad, h.heading_sigma_rad, h.displacement_m, h.scenario),
+            (None, Some(0.9), 0.2, None, MdiScenario::HeadingSpeed)
         );
-        let s = MotionMask::Speed.apply(walking());
+        assert_eq!(h.motion_state, MotionState::Unknown);
+        let blind = MotionMask::HeadingSpeed.apply(walking(), None);
+        assert_eq!((blind.heading_rad, blind.scenario), (None, MdiScenario::Speed));
+        let s = MotionMask::Speed.apply(walking(), COMPASS);
         assert_eq!((s.distance_m, s.heading_rad, s.scenario), (None, None, MdiScenario::Speed));
+        assert_eq!(s.motion_state, MotionState::Unknown);
+        // With steps, the motion state stays.
+        assert_eq!(MotionMask::Distance.apply(walking(), COMPASS).motion_state, MotionState::Walking);
         // Forcing distance-heading cannot invent a heading the tracker did not trust.
         let no_heading = MotionUpdate {
             heading_rad: None,
@@ -243,6 +283,6 @@ mod tests {
             scenario: MdiScenario::Distance,
             ..walking()
         };
-        assert_eq!(MotionMask::DistanceHeading.apply(no_heading).scenario, MdiScenario::Distance);
+        assert_eq!(MotionMask::DistanceHeading.apply(no_heading, COMPASS).scenario, MdiScenario::Distance);
     }
 }
