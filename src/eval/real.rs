@@ -1661,6 +1661,45 @@ fn live_estimates(positions: &[crate::Position]) -> Vec<Estimate> {
 #[cfg(test)]
 mod tests {
 
+    /// HIPE's single-scan MLE answers with a state that has a fingerprint: a scan barely heard
+    /// is explained best by an unsurveyed state (which heard nothing), but that would be a
+    /// guess from silence, not a match.
+    #[test]
+    fn single_scan_mle_matches_only_states_with_a_fingerprint() {
+        use crate::radio::{Reading, TransmitterId};
+        use crate::site::{BuildOptions, SiteBuilder};
+        let ap = |k: u8| TransmitterId::wifi(&format!("02:00:00:00:00:{k:02x}")).unwrap();
+        let scan = |timestamp_ns: u64, heard: &[(u8, f64)]| Scan {
+            timestamp_ns,
+            readings: heard
+                .iter()
+                .map(|&(k, rssi_dbm)| Reading { transmitter: ap(k), rssi_dbm, age_ns: 0 })
+                .collect(),
+        };
+        let mut b = SiteBuilder::new("mle");
+        let f = b.floor("G", 0.0);
+        let surveyed: Vec<u32> = [(0.0, -45.0), (3.0, -60.0)]
+            .iter()
+            .map(|&(x, level)| {
+                let scans =
+                    (0..10).map(|n| scan(n, &[(1, level + if n % 2 == 0 { 2.0 } else { -2.0 })])).collect();
+                b.state(f, Point2::new(x, 0.0), scans)
+            })
+            .collect();
+        let unsurveyed = b.unsurveyed_state(f, Point2::new(6.0, 0.0));
+        b.edge(surveyed[0], surveyed[1], None);
+        b.edge(surveyed[1], unsurveyed, None);
+        let site = b.build(BuildOptions::default()).unwrap();
+        let faint = scan(100, &[(1, -94.0)]);
+        let mut ln = Vec::new();
+        assert_eq!(most_likely_state(&site, &faint, &mut ln), Some(surveyed[1] as usize));
+        // Without the rule the unsurveyed state would have won.
+        assert!(ln[unsurveyed as usize] > ln[surveyed[1] as usize], "{ln:?}");
+        assert_eq!(most_likely_state(&site, &scan(101, &[(1, -44.0)]), &mut ln), Some(surveyed[0] as usize));
+        // Nothing the site knows: no answer.
+        assert_eq!(most_likely_state(&site, &scan(102, &[(9, -50.0)]), &mut ln), None);
+    }
+
     /// A strength is applied only when it makes every decoder better by more than one standard
     /// error; among those, the one whose worst decoder gains most.
     #[test]
