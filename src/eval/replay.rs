@@ -49,9 +49,9 @@ impl MotionMask {
             // Without step detection there is no distance, no walking or standing still, and no
             // direction of travel from the steps: the tracker's heading of an epoch with steps
             // is their length-weighted mean direction, withheld when they turned too much,
-            // which only a step detector knows. Measured: with the steps' direction,
-            // forward-heading-speed beat forward-distance on the five competition floors
-            // (README "HIPE's scenarios").
+            // which only a step detector knows. Measured with `walk_diag` on the five
+            // competition floors (README "Real smartphone data"): forward-heading-speed 5.013 m
+            // with the steps' direction, 5.008 m with the compass's.
             update.distance_m = None;
             update.motion_state = MotionState::Unknown;
             if scenario == MdiScenario::HeadingSpeed {
