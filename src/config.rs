@@ -277,6 +277,20 @@ impl EngineConfig {
         })
     }
 
+    /// The site's calibration for sparse scans ([`SparseScans`](crate::site::SparseScans)),
+    /// without its γ when `rssi_weight` is given (an explicit γ overrides every calibrated
+    /// one); none without `site_calibration`.
+    pub fn sparse_scans_for(&self, site: &crate::Site) -> crate::site::SparseScans {
+        if !self.site_calibration {
+            return crate::site::SparseScans::default();
+        }
+        let mut sparse = site.calibration().sparse_scans;
+        if self.rssi_weight.is_some() {
+            sparse.rssi_weight = None;
+        }
+        sparse
+    }
+
     /// The site's γ per motion scenario for epochs without a movement likelihood
     /// ([`Calibration::rssi_weight_by_scenario`](crate::site::Calibration)), in
     /// [`MdiScenario::ALL`](crate::sensors::MdiScenario::ALL) order. `None` for every scenario

@@ -18,7 +18,7 @@ use crate::radio::{Scan, ScanHasher};
 use crate::sensors::{
     BatchReport, MdiScenario, MotionState, MotionStats, MotionTracker, MotionUpdate, SensorSample,
 };
-use crate::site::{most_likely_zone, ReachTable, Site};
+use crate::site::{most_likely_zone, ReachTable, Site, SparseScans, SPARSE_SCAN_GAP_S};
 use std::sync::Arc;
 
 /// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
@@ -269,6 +269,40 @@ pub struct Engine {
     unsurveyed: Vec<usize>,
     /// Scans in a row, up to the latest, that the map did not explain.
     unexplained_run: u32,
+    /// The site's calibration for scans far apart.
+    sparse_scans: SparseScans,
+    /// When the latest accepted scan came, and how long after the one before.
+    scan_timing: ScanTiming,
+}
+
+/// When the latest scan an engine accepted came and how long after the one before it: whether
+/// the engine is in the sparse regime ([`SPARSE_SCAN_GAP_S`]) and how long since its scan.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ScanTiming {
+    /// The latest scan's time, ns.
+    pub last_ns: Option<u64>,
+    /// Its gap to the scan before it, ns.
+    pub gap_ns: Option<u64>,
+}
+
+impl ScanTiming {
+    /// The timing once a scan at `timestamp_ns` is accepted.
+    pub fn after_scan(self, timestamp_ns: u64) -> ScanTiming {
+        ScanTiming {
+            last_ns: Some(timestamp_ns),
+            gap_ns: self.last_ns.map(|l| timestamp_ns.saturating_sub(l)),
+        }
+    }
+
+    /// At `timestamp_ns`, the band of time since the latest scan
+    /// ([`SparseScans::band`]) when that scan was sparse (the first scan is: its posterior
+    /// holds one scan, as after a sparse one); `None` in a steady stream of scans or before
+    /// any scan.
+    pub fn sparse_band(&self, timestamp_ns: u64) -> Option<usize> {
+        let last = self.last_ns?;
+        let sparse = self.gap_ns.map_or(true, |gap| gap as f64 * 1e-9 > SPARSE_SCAN_GAP_S);
+        sparse.then(|| SparseScans::band(timestamp_ns.saturating_sub(last) as f64 * 1e-9))
+    }
 }
 
 /// What an epoch changes besides the filter and the Viterbi window, which keep their own
@@ -277,6 +311,7 @@ pub struct Engine {
 struct Undo {
     last_epoch_ns: Option<u64>,
     unexplained_run: u32,
+    scan_timing: ScanTiming,
     latest: Option<Position>,
     published_track: Vec<TrackPoint>,
     stats: InputStats,
@@ -298,6 +333,7 @@ impl Engine {
         let site_rssi_weight = config.rssi_weight_for(&site);
         let scenario_rssi_weight = config.scenario_rssi_weights(&site);
         let accuracy_scale = config.accuracy_scales_for(&site);
+        let sparse_scans = config.sparse_scans_for(&site);
         let site_zones = site.zones().len();
         let habits = HabitModel::new(&site);
         let radio_fit_floor = site.calibration().radio_fit_floor.filter(|_| config.site_calibration);
@@ -334,6 +370,8 @@ impl Engine {
             epoch_radio_fit: None,
             unsurveyed,
             unexplained_run: 0,
+            sparse_scans,
+            scan_timing: ScanTiming::default(),
             config,
             undo: Undo::default(),
         })
@@ -399,7 +437,10 @@ impl Engine {
             published_track: self.published_track.clone(),
             stats: self.stats.clone(),
             subscriptions: (self.listeners.iter().map(|(id, _)| *id).collect(), self.next_subscription),
-            internals: format!("{:?}\n{:?}\n{:?}", self.filter, self.viterbi, self.tracker),
+            internals: format!(
+                "{:?}\n{:?}\n{:?}\n{:?}",
+                self.filter, self.viterbi, self.tracker, self.scan_timing
+            ),
             history: self.history.records().iter().cloned().collect(),
         }
     }
@@ -754,6 +795,7 @@ impl Engine {
     fn atomically<T>(&mut self, uses_tracker: bool, epoch: impl FnOnce(&mut Self) -> T) -> T {
         self.undo.last_epoch_ns = self.last_epoch_ns;
         self.undo.unexplained_run = self.unexplained_run;
+        self.undo.scan_timing = self.scan_timing;
         self.undo.latest.clone_from(&self.latest);
         self.undo.published_track.clone_from(&self.published_track);
         self.undo.stats.clone_from(&self.stats);
@@ -772,6 +814,7 @@ impl Engine {
                 self.viterbi.rollback();
                 self.last_epoch_ns = self.undo.last_epoch_ns;
                 self.unexplained_run = self.undo.unexplained_run;
+                self.scan_timing = self.undo.scan_timing;
                 std::mem::swap(&mut self.latest, &mut self.undo.latest);
                 std::mem::swap(&mut self.published_track, &mut self.undo.published_track);
                 std::mem::swap(&mut self.stats, &mut self.undo.stats);
@@ -849,6 +892,7 @@ impl Engine {
         // Accepted from here on: the state changes.
         Ok(self.atomically(motion.is_none(), |engine| {
             let motion = engine.motion_until(scan.timestamp_ns, motion);
+            engine.scan_timing = engine.scan_timing.after_scan(scan.timestamp_ns);
             if let Some(gamma) = engine.epoch_rssi_weight(scan.timestamp_ns, &motion) {
                 for e in engine.ln_emission.iter_mut() {
                     *e *= gamma;
@@ -938,7 +982,10 @@ impl Engine {
             self.config.accuracy_mass,
             &mut self.scratch,
         );
-        let scale = self.accuracy_scale[position.scenario.index()];
+        let sparse = self.scan_timing.sparse_band(position.timestamp_ns);
+        let scale = sparse
+            .and_then(|band| self.sparse_scans.accuracy_scale_by_since[band])
+            .unwrap_or(self.accuracy_scale[position.scenario.index()]);
         let (zone, zone_probability) = if self.site.zones().is_empty() {
             (None, 1.0)
         } else {
@@ -1121,7 +1168,8 @@ impl Engine {
             return without;
         }
         if self.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some() {
-            with_movement
+            let sparse = self.scan_timing.sparse_band(timestamp_ns).and(self.sparse_scans.rssi_weight);
+            sparse.or(with_movement)
         } else {
             self.scenario_rssi_weight[motion.scenario.index()].or(without)
         }
@@ -1273,4 +1321,36 @@ fn hipe_ratio(config: &EngineConfig, motion: &MotionUpdate, previous: Option<&Po
     let r = r_motion * r_estimate;
     let (lo, hi) = (h.transition_ratio_min.ln(), config.transition_ratio.ln());
     (lo + r * (hi - lo)).exp()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ScanTiming;
+
+    const SECOND: u64 = 1_000_000_000;
+
+    /// The first scan counts as sparse (its posterior holds one scan); a scan 2 s after the
+    /// one before is in a steady stream, one 30 s after is sparse, and the band follows the
+    /// time since it.
+    #[test]
+    fn the_sparse_regime_and_its_band() {
+        let none = ScanTiming::default();
+        assert_eq!(none.sparse_band(5 * SECOND), None, "no scan yet");
+        let first = none.after_scan(10 * SECOND);
+        assert_eq!(first.gap_ns, None);
+        assert_eq!(first.sparse_band(10 * SECOND), Some(0));
+        assert_eq!(first.sparse_band(13 * SECOND), Some(1));
+        let steady = first.after_scan(12 * SECOND);
+        assert_eq!(steady.gap_ns, Some(2 * SECOND));
+        assert_eq!(steady.sparse_band(12 * SECOND), None);
+        assert_eq!(steady.sparse_band(40 * SECOND), None, "the regime is the latest scan's");
+        let sparse = steady.after_scan(42 * SECOND);
+        assert_eq!(
+            [42, 44, 47, 55, 70].map(|s| sparse.sparse_band(s * SECOND)),
+            [Some(0), Some(1), Some(2), Some(3), Some(4)]
+        );
+        // Exactly the gap is not beyond it.
+        let edge = steady.after_scan(22 * SECOND);
+        assert_eq!(edge.sparse_band(22 * SECOND), None);
+    }
 }

@@ -467,3 +467,83 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
     assert_eq!(unsurveyed_mass(&engine), 0.0);
     assert!((p.x - 12.0).abs() < 1.5 && p.beyond_radio_m == 0.0, "{p:?}");
 }
+
+/// Scans far apart, as under Android 9+'s throttling (`SparseScans`): after a sparse scan the
+/// radii take the factors of the band of time since it, and the epochs with a movement
+/// likelihood its γ; in a steady stream of scans (2 s apart) neither applies, except after
+/// the first scan, whose posterior holds one scan as after a sparse one.
+#[test]
+fn sparse_scans_take_their_own_radius_factors_and_gamma() {
+    use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
+    use waymark::site::{Calibration, SparseScans, SINCE_SPARSE_SCAN_BANDS_S};
+    let mut accuracy_scale_by_since = [None; SINCE_SPARSE_SCAN_BANDS_S.len() + 1];
+    accuracy_scale_by_since[0] = Some([3.0, 4.0]);
+    accuracy_scale_by_since[1] = Some([5.0, 6.0]);
+    let base = Calibration { rssi_weight: Some(0.3), ..Calibration::default() };
+    let site = |sparse_scans: SparseScans| {
+        Arc::new(two_floor_site().with_calibration(Calibration { sparse_scans, ..base }).unwrap())
+    };
+    let (plain, scales, gamma) = (
+        site(SparseScans::default()),
+        site(SparseScans { rssi_weight: None, accuracy_scale_by_since }),
+        site(SparseScans { rssi_weight: Some(0.05), ..SparseScans::default() }),
+    );
+    // An epoch every 2 s from 1 s to 41 s, 0.3 m east each with steps and heading measured;
+    // a scan where `scan_at` says, else a timer epoch.
+    let run = |site: &Arc<Site>, config: EngineConfig, scan_at: &dyn Fn(u64) -> bool| {
+        let mut engine = Engine::new(Arc::clone(site), config).unwrap();
+        (0..21u64)
+            .map(|k| {
+                let t = (1 + 2 * k) * SECOND;
+                let x = 3.0 + 0.3 * k as f64;
+                let motion = MotionUpdate {
+                    start_ns: t.saturating_sub(2 * SECOND),
+                    end_ns: t,
+                    steps: 1,
+                    distance_m: Some(0.3),
+                    distance_sigma_m: 0.1,
+                    heading_rad: Some(std::f64::consts::FRAC_PI_2),
+                    heading_sigma_rad: 0.1,
+                    displacement_m: Some([0.3, 0.0]),
+                    motion_state: MotionState::Walking,
+                    scenario: MdiScenario::DistanceHeading,
+                    ..MotionUpdate::default()
+                };
+                let p = if scan_at(t / SECOND) {
+                    engine.push_scan_with_motion(&scan(t, &readings_at(0, x)), &motion)
+                } else {
+                    engine.advance_with_motion(t, &motion)
+                };
+                (p.unwrap(), engine.posterior().to_vec())
+            })
+            .collect::<Vec<_>>()
+    };
+    let throttled = |s: u64| s == 1 || s == 31;
+    let steady = |_: u64| true;
+    let default = EngineConfig::default;
+    // Radii: the band's factors where it has some, else the scenario's (none here: 1).
+    let (a, b) = (run(&plain, default(), &throttled), run(&scales, default(), &throttled));
+    let ratios: Vec<f64> = a.iter().zip(&b).map(|(a, b)| b.0.accuracy_m / a.0.accuracy_m).collect();
+    let expected = |s: u64| match s {
+        1 | 31 => 3.0,
+        3 | 5 | 33 | 35 => 5.0,
+        _ => 1.0,
+    };
+    for (k, ratio) in ratios.iter().enumerate() {
+        assert!((ratio - expected(1 + 2 * k as u64)).abs() < 1e-9, "epoch {k}: {ratios:?}");
+        assert_eq!(a[k].1, b[k].1, "the factors change the radii only");
+    }
+    let (a, b) = (run(&plain, default(), &steady), run(&scales, default(), &steady));
+    assert!((b[0].0.accuracy_m / a[0].0.accuracy_m - 3.0).abs() < 1e-9, "the first scan is sparse");
+    assert!(a.iter().zip(&b).skip(1).all(|(a, b)| a.0 == b.0), "a steady stream keeps the site's factors");
+    // γ: the first epoch has no movement likelihood; from the second on, the sparse γ.
+    let (a, b) = (run(&plain, default(), &throttled), run(&gamma, default(), &throttled));
+    assert_eq!(a[0].1, b[0].1);
+    assert_ne!(a[1].1, b[1].1);
+    let (a, b) = (run(&plain, default(), &steady), run(&gamma, default(), &steady));
+    assert!(a.iter().zip(&b).all(|(a, b)| a.1 == b.1), "no sparse scan, no sparse γ");
+    // An explicit γ overrides the sparse one.
+    let explicit = || EngineConfig { rssi_weight: Some(0.3), ..default() };
+    let (a, b) = (run(&plain, explicit(), &throttled), run(&gamma, explicit(), &throttled));
+    assert!(a.iter().zip(&b).all(|(a, b)| a.1 == b.1));
+}

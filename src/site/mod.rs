@@ -152,6 +152,62 @@ pub struct Calibration {
     /// over held-out epochs on the map.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radio_fit_floor: Option<f64>,
+    /// γ and radius factors for scans far apart, as under Android 9+'s throttling.
+    #[serde(default, skip_serializing_if = "SparseScans::is_empty")]
+    pub sparse_scans: SparseScans,
+}
+
+/// A scan that comes longer than this after the one before it, s, is a sparse scan, and the
+/// epochs until the next scan are in the sparse regime ([`SparseScans`]). 10 s lies between
+/// the scan intervals of an unthrottled phone (99th percentile 2.1-3.8 s on the five
+/// competition floors' survey walks, `waymark eval ... --json`,
+/// `survey.floors[].scan_interval_p99_s`) and Android 9+'s throttling of a foreground app to
+/// 4 scans in 2 minutes (30 s apart on average).
+pub const SPARSE_SCAN_GAP_S: f64 = 10.0;
+
+/// Upper ends of the bands of time since a sparse scan, s, each with its own radius factors
+/// ([`SparseScans::accuracy_scale_by_since`]); the last band is open. After a sparse scan the
+/// posterior's own radii first hold too little of the truth, then enough: on the five
+/// competition floors' held-out survey walks replayed with one scan every 30 s, the 68%
+/// factor fitted 1.95 within 2 s of the scan, 1.62 at 2-5 s, 1.30 at 5-10 s, 1.09 at 10-20 s
+/// and 1.02 beyond, where one factor for every epoch with steps and heading is 1.57
+/// (`waymark eval target/ilc/site1/{B1,F1,F2,F3,F4} --throttle --json`,
+/// `calibration.sparse_scans`). Narrow bands where the factor changes fast, none shorter than
+/// the replay's 2 s timer epoch.
+pub const SINCE_SPARSE_SCAN_BANDS_S: [f64; 4] = [2.0, 5.0, 10.0, 20.0];
+
+/// What differs when scans are far apart ([`SPARSE_SCAN_GAP_S`]): the motion has carried
+/// the estimate alone for a long while, so the scan that ends it weighs differently against
+/// the motion than one of a steady stream, and the posterior after it is not spread as after
+/// a stream's. Fitted by the survey's calibration on the held-out walks replayed under
+/// throttling (one scan every 30 s reaching the engine).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SparseScans {
+    /// γ of a sparse scan's epoch with a movement likelihood (in place of
+    /// [`Calibration::rssi_weight`] and the floor's).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub rssi_weight: Option<f64>,
+    /// Factors on the 68% and 95% radii in the sparse regime, by band of time since the
+    /// sparse scan ([`SINCE_SPARSE_SCAN_BANDS_S`]), in place of the scenario's.
+    #[serde(default, skip_serializing_if = "no_scales")]
+    pub accuracy_scale_by_since: [Option<[f64; 2]>; SINCE_SPARSE_SCAN_BANDS_S.len() + 1],
+}
+
+fn no_scales(scales: &[Option<[f64; 2]>; SINCE_SPARSE_SCAN_BANDS_S.len() + 1]) -> bool {
+    scales.iter().all(Option::is_none)
+}
+
+impl SparseScans {
+    /// Whether nothing is calibrated.
+    pub fn is_empty(&self) -> bool {
+        *self == SparseScans::default()
+    }
+
+    /// The band of `since_s` seconds after a sparse scan.
+    pub fn band(since_s: f64) -> usize {
+        SINCE_SPARSE_SCAN_BANDS_S.iter().take_while(|&&edge| since_s >= edge).count()
+    }
 }
 
 impl Calibration {
@@ -180,6 +236,14 @@ impl Calibration {
                 }
             }
         }
+        if let Some(g) = self.sparse_scans.rssi_weight {
+            if !(g > 0.0 && g <= 1.0) {
+                return Err((
+                    "calibration.sparse_scans.rssi_weight".into(),
+                    format!("must be in (0, 1], got {g}"),
+                ));
+            }
+        }
         if let Some(f) = self.radio_fit_floor {
             if !f.is_finite() {
                 return Err(("calibration.radio_fit_floor".into(), format!("must be finite, got {f}")));
@@ -191,8 +255,12 @@ impl Calibration {
                 self.accuracy_scale_by_scenario.get(s),
             )
         });
+        let by_since = self.sparse_scans.accuracy_scale_by_since.iter().enumerate().map(|(band, &scale)| {
+            (format!("calibration.sparse_scans.accuracy_scale_by_since[{band}]"), scale)
+        });
         for (path, scale) in std::iter::once(("calibration.accuracy_scale".to_string(), self.accuracy_scale))
             .chain(by_scenario)
+            .chain(by_since)
         {
             if let Some(scale) = scale {
                 if !scale.iter().all(|s| s.is_finite() && *s > 0.0) {
@@ -487,4 +555,56 @@ fn median_edge_length(edges: &[Edge]) -> f64 {
     let mut lengths: Vec<f64> = edges.iter().map(|e| e.length_m).collect();
     lengths.sort_by(f64::total_cmp);
     lengths[lengths.len() / 2]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sparse_bands_start_at_their_edges() {
+        assert_eq!(
+            [0.0, 1.99, 2.0, 4.9, 5.0, 9.9, 10.0, 19.9, 20.0, 1e6].map(SparseScans::band),
+            [0, 0, 1, 1, 2, 2, 3, 3, 4, 4]
+        );
+    }
+
+    /// The site file carries the sparse calibration, and nothing of it when there is none.
+    #[test]
+    fn sparse_calibration_round_trips() {
+        let mut accuracy_scale_by_since = [None; SINCE_SPARSE_SCAN_BANDS_S.len() + 1];
+        accuracy_scale_by_since[1] = Some([1.5, 1.25]);
+        let calibration = Calibration {
+            sparse_scans: SparseScans { rssi_weight: Some(0.1), accuracy_scale_by_since },
+            ..Calibration::default()
+        };
+        let json = serde_json::to_string(&calibration).unwrap();
+        assert_eq!(serde_json::from_str::<Calibration>(&json).unwrap(), calibration, "{json}");
+        let empty = serde_json::to_string(&Calibration::default()).unwrap();
+        assert!(!empty.contains("sparse"), "{empty}");
+        let scales_only = Calibration {
+            sparse_scans: SparseScans { rssi_weight: None, ..calibration.sparse_scans },
+            ..Calibration::default()
+        };
+        let json = serde_json::to_string(&scales_only).unwrap();
+        assert!(json.contains("\"accuracy_scale_by_since\":[null,[1.5,1.25],null,null,null]"), "{json}");
+    }
+
+    /// A sparse γ out of (0, 1] or a bad factor is refused with its path.
+    #[test]
+    fn sparse_calibration_is_checked() {
+        let gamma = Calibration {
+            sparse_scans: SparseScans { rssi_weight: Some(1.5), ..SparseScans::default() },
+            ..Calibration::default()
+        };
+        assert_eq!(gamma.check().unwrap_err().0, "calibration.sparse_scans.rssi_weight");
+        let mut accuracy_scale_by_since = [None; SINCE_SPARSE_SCAN_BANDS_S.len() + 1];
+        accuracy_scale_by_since[2] = Some([1.0, -1.0]);
+        let scale = Calibration {
+            sparse_scans: SparseScans { accuracy_scale_by_since, ..SparseScans::default() },
+            ..Calibration::default()
+        };
+        assert_eq!(scale.check().unwrap_err().0, "calibration.sparse_scans.accuracy_scale_by_since[2]");
+        assert!(Calibration::default().check().is_ok());
+    }
 }
