@@ -99,6 +99,22 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert_eq!(epochs(&calibration.off_map), calibration.epochs_off_map, "{calibration:?}");
     assert_eq!(epochs(&calibration.off_map_without_floor), calibration.epochs_off_map);
 
+    // Sparse scans: the held-out walks replayed throttled at every γ, their own γ only when it
+    // beats the site-wide one beyond its standard error, and a band's radius factors where it
+    // has enough epochs on the map.
+    let sparse = &calibration.sparse_scans;
+    assert_eq!(sparse.gamma.len(), real::GAMMA_GRID.len(), "{sparse:?}");
+    assert!(sparse.epochs_by_since.iter().sum::<usize>() > 0, "{sparse:?}");
+    for (band, &n) in sparse.epochs_by_since.iter().enumerate() {
+        let own = sparse.calibration.accuracy_scale_by_since[band];
+        assert_eq!(own.is_some(), n >= real::MIN_SCENARIO_EPOCHS, "{sparse:?}");
+    }
+    if let Some(g) = sparse.calibration.rssi_weight {
+        let at = |g: f64| sparse.gamma.iter().find(|p| p.gamma == g).unwrap();
+        assert!(at(gamma).mean_error_m - at(g).mean_error_m > at(g).jackknife_se_m, "{sparse:?}");
+    }
+    assert_eq!(site.calibration().sparse_scans, sparse.calibration);
+
     // Unsurveyed states around the surveyed ones, on the floor's plan, none with a fingerprint.
     let kind = |i: u32| site.states()[i as usize].kind;
     assert!(site.states().iter().any(|s| s.kind == waymark::site::StateKind::Unsurveyed));
@@ -109,6 +125,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert_eq!(site.calibration().rssi_weight, Some(gamma));
     assert_eq!(site.calibration().accuracy_scale_by_scenario, calibration.accuracy_scale_by_scenario);
     assert_eq!(site.calibration().radio_fit_floor, floor_fit);
+    assert_eq!(site.calibration().sparse_scans, sparse.calibration);
     assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
 
     let (reports, walks) = real::evaluate_on(&site, &floors, &options, &|| {}).expect("replays");

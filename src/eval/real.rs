@@ -5,13 +5,13 @@
 //! No configuration reads a test walk's waypoints except to score it.
 
 use super::replay::{replay, MotionMask, ReplayOptions, WaypointFeedback};
-use crate::engine::Engine;
+use crate::engine::{Engine, ScanTiming};
 use crate::habits::{clustered_ratio, HabitModel, HabitReport};
 use crate::history::EpochRecord;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::Scan;
 use crate::sensors::MdiScenario;
-use crate::site::{Calibration, North, Site, StateKind};
+use crate::site::{Calibration, North, Site, StateKind, SINCE_SPARSE_SCAN_BANDS_S};
 use crate::survey::{positioned_scans, survey, PreparedSurvey, SurveyFloor, SurveyOptions, SurveyReport};
 use crate::EngineConfig;
 use nalgebra::Point2;
@@ -468,6 +468,14 @@ impl EvalOptions {
         }
     }
 
+    /// How the survey's calibration replays its held-out walks: as `replay`, but with every
+    /// scan (`--throttle` throttles the test walks only: the site a phone gets was surveyed
+    /// from unthrottled walks, and its calibration replays them both ways, see
+    /// [`SparseScans`](crate::site::SparseScans)).
+    pub fn calibration_replay(&self) -> ReplayOptions {
+        ReplayOptions { min_scan_interval_ns: None, ..self.replay }
+    }
+
     /// These options with the survey as [`survey_calibrated`] made the site: its fingerprint
     /// radius, no longer searched. What surveys the same site again from some of its walks
     /// ([`survey_habits`]) must use them, or it would fit its held-out sites at another radius.
@@ -499,6 +507,10 @@ pub struct EvalReport {
     /// Every configuration again with habits learned from the survey walks (`--habits`).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub habits: Option<HabitsComparison>,
+    /// Every configuration again with the test walks' scans throttled as Android 9+ throttles
+    /// a foreground app (`--throttle`), on the same site.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub throttled: Option<BTreeMap<String, ConfigurationReport>>,
 }
 
 /// The configurations run with habits learned from the survey walks ([`survey_habits`]).
@@ -621,7 +633,7 @@ fn calibrate_fingerprint_radius(
                 GAMMA_GRID.map(|gamma| {
                     let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine_config() };
                     let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else { return (0.0, 0) };
-                    let r = replay(&mut engine, trace, &options.replay);
+                    let r = replay(&mut engine, trace, &options.calibration_replay());
                     let scored = score_scans(trace, f, &live_estimates(&r.positions), None).0;
                     (scored.iter().map(Scored::penalised_m).sum::<f64>(), scored.len())
                 })
@@ -1153,6 +1165,22 @@ pub struct CalibrationReport {
     /// best γ: (radius m, mean error m at the WiFi scans with the floor penalty, scans); empty
     /// when the radius was given.
     pub fingerprint_radius_mean_error_m: Vec<RadiusPoint>,
+    /// The held-out walks replayed with throttled scans, and what they calibrated.
+    pub sparse_scans: SparseScansReport,
+}
+
+/// The calibration for sparse scans ([`SparseScans`](crate::site::SparseScans)): every
+/// held-out walk replayed again at each γ with one scan every 30 s reaching the engine.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SparseScansReport {
+    /// All floors pooled: held-out error per γ, every epoch of those replays.
+    pub gamma: Vec<GammaPoint>,
+    /// Held-out epochs on the map in the sparse regime at the γ they get, per band of time
+    /// since the sparse scan (`SINCE_SPARSE_SCAN_BANDS_S`): the radius factors of a band with
+    /// fewer than [`MIN_SCENARIO_EPOCHS`] are not fitted.
+    pub epochs_by_since: [usize; SINCE_SPARSE_SCAN_BANDS_S.len() + 1],
+    /// What was chosen.
+    pub calibration: crate::site::SparseScans,
 }
 
 /// The held-out epochs whose truth was off the held-out site's map, with the motion as the
@@ -1267,25 +1295,50 @@ pub fn calibrate(
     Ok((*site.calibration(), site.north(), report))
 }
 
-/// Per walk, per γ, per motion mask (`survey_calibrated`'s `masks`): the held-out epochs.
-type HeldOut = Vec<[Vec<Scored>; 4]>;
+/// Per walk, per γ, per run of the calibration (`survey_calibrated`'s `masks`, then
+/// [`THROTTLED`]): the held-out epochs.
+type HeldOut = Vec<[Vec<Scored>; RUNS]>;
 
-/// Per motion mask of the calibration: each held-out epoch (`Tag`).
-type Tagged = [Vec<Tag>; 4];
+/// Per run of the calibration: each held-out epoch (`Tag`).
+type Tagged = [Vec<Tag>; RUNS];
+
+/// Runs of each held-out walk at each γ: the four motion masks, then the sensors' motion with
+/// throttled scans.
+const RUNS: usize = 5;
+
+/// The run of the held-out walks with the scans throttled as Android 9+ throttles a foreground
+/// app ([`ANDROID_THROTTLE_NS`](super::replay::ANDROID_THROTTLE_NS)).
+const THROTTLED: usize = 4;
 
 /// A held-out epoch: its score, how far its truth was beyond the held-out site's map (0 on it,
-/// `OnMap`), the scenario the engine positioned it in and the radio fit of its scan.
-type Tag = (Scored, f64, MdiScenario, Option<f64>);
+/// `OnMap`), the scenario the engine positioned it in, the radio fit of its scan and, in the
+/// sparse regime, its band of time since the sparse scan ([`ScanTiming::sparse_band`]).
+type Tag = (Scored, f64, MdiScenario, Option<f64>, Option<usize>);
 
 /// The live positions of a replay of `trace` (on floor `floor`), scored and tagged.
 fn tag(trace: &Trace, floor: usize, mapped: &OnMap, positions: &[crate::Position]) -> Vec<Tag> {
     let scored = score(trace, floor, &live_estimates(positions)).0;
     // The positions `score` scored, in its order, with the truth's place.
-    let scored_positions = positions.iter().filter_map(|p| trace.position_at(p.timestamp_ns).map(|t| (p, t)));
+    // The sparse band of each position, as the engine saw it (its scans are the epochs with
+    // radio evidence).
+    let mut timing = ScanTiming::default();
+    let bands: Vec<Option<usize>> = positions
+        .iter()
+        .map(|p| {
+            if p.radio_log_evidence.is_some() {
+                timing = timing.after_scan(p.timestamp_ns);
+            }
+            timing.sparse_band(p.timestamp_ns)
+        })
+        .collect();
+    let scored_positions = positions
+        .iter()
+        .zip(bands)
+        .filter_map(|(p, band)| trace.position_at(p.timestamp_ns).map(|t| (p, band, t)));
     scored
         .into_iter()
         .zip(scored_positions)
-        .map(|(s, (p, truth))| (s, mapped.beyond_m(truth), p.scenario, p.radio_fit))
+        .map(|(s, (p, band, truth))| (s, mapped.beyond_m(truth), p.scenario, p.radio_fit, band))
         .collect()
 }
 
@@ -1406,15 +1459,22 @@ pub fn survey_calibrated(
                 let per_gamma: HeldOut = GAMMA_GRID
                     .iter()
                     .map(|&gamma| {
-                        let runs = masks.map(|mask| {
+                        let runs: [Vec<Tag>; RUNS] = std::array::from_fn(|run| {
                             let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine_config() };
                             let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
                                 return Vec::new();
                             };
-                            let r = replay(&mut engine, trace, &ReplayOptions { mask, ..options.replay });
+                            let replay_options = match masks.get(run) {
+                                Some(&mask) => ReplayOptions { mask, ..options.calibration_replay() },
+                                None => ReplayOptions {
+                                    min_scan_interval_ns: Some(super::replay::ANDROID_THROTTLE_NS),
+                                    ..options.calibration_replay()
+                                },
+                            };
+                            let r = replay(&mut engine, trace, &replay_options);
                             tag(trace, f, &mapped, &r.positions)
                         });
-                        let plain = [0, 1, 2, 3].map(|m| runs[m].iter().map(|t| t.0).collect());
+                        let plain = std::array::from_fn(|m| runs[m].iter().map(|t| t.0).collect());
                         tagged.push(runs);
                         plain
                     })
@@ -1482,8 +1542,8 @@ pub fn survey_calibrated(
         for scenario in MdiScenario::ALL {
             let Some(chosen) = chosen[scenario.index()] else { continue };
             for walk in &mine_tagged {
-                for (m, run) in walk[chosen].iter().enumerate() {
-                    for (p, beyond_m, _, fit) in run.iter().filter(|t| t.2 == scenario) {
+                for (m, run) in walk[chosen].iter().take(THROTTLED).enumerate() {
+                    for (p, beyond_m, _, fit, _) in run.iter().filter(|t| t.2 == scenario) {
                         if *beyond_m > 0.0 {
                             if m == 0 {
                                 report.epochs_off_map += 1;
@@ -1535,6 +1595,11 @@ pub fn survey_calibrated(
         calibration.accuracy_scale_by_scenario.set(scenario, scale);
     }
     report.epochs = at_chosen.len();
+    // Sparse scans: their own γ when it beats the site-wide one on the throttled replays by
+    // more than its standard error.
+    let (sparse_curve, sparse_best) = gamma_curve(&walks, THROTTLED);
+    calibration.sparse_scans.rssi_weight = own_gamma(&sparse_curve, sparse_best, calibration.rssi_weight);
+    report.sparse_scans.gamma = sparse_curve;
     fits_on_map.sort_by(f64::total_cmp);
     calibration.radio_fit_floor =
         (fits_on_map.len() >= MIN_SCENARIO_EPOCHS).then(|| quantile(&fits_on_map, RADIO_FIT_FLOOR_QUANTILE));
@@ -1547,24 +1612,54 @@ pub fn survey_calibrated(
     report.accuracy_scale = calibration.accuracy_scale;
     report.accuracy_scale_by_scenario = calibration.accuracy_scale_by_scenario;
     // The held-out walks again with the engine as shipped (every calibrated value, the radio
-    // fit floor included): how it does off the map, and what the floor costs on it.
-    let shipped: Vec<Vec<Tag>> = parallel_map(&jobs, options.threads, |&(f, w)| {
+    // fit floor included): how it does off the map, and what the floor costs on it. And with
+    // throttled scans, every γ as shipped but no radius factor and no radio fit floor: the
+    // posterior's own radii in the sparse regime, each epoch at the γ the engine gives it (the
+    // first scan's without a movement likelihood, which the calibration's runs above, each
+    // at one γ throughout, do not give it), for the sparse radius factors.
+    let unscaled = Calibration {
+        accuracy_scale: None,
+        accuracy_scale_by_scenario: Default::default(),
+        radio_fit_floor: None,
+        ..calibration
+    };
+    let shipped: Vec<(Vec<Tag>, Vec<Tag>)> = parallel_map(&jobs, options.threads, |&(f, w)| {
         let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
         let fits = prepared.fit(&keep, Some(&full), 1);
-        let site = prepared.assemble(&fits).ok().and_then(|(s, _)| {
-            s.with_calibration(calibration).and_then(|s| s.with_floor_rssi_weights(&weights)).ok()
-        });
+        let site = prepared.assemble(&fits).ok().map(|(s, _)| s);
         let tags = site.and_then(|site| {
-            let site = Arc::new(site);
             let trace = &floors[f].survey[w];
-            let mut engine = Engine::new(Arc::clone(&site), options.engine_config()).ok()?;
-            let r = replay(&mut engine, trace, &options.replay);
-            Some(tag(trace, f, &OnMap::new(&site, f), &r.positions))
+            let mapped = OnMap::new(&site, f);
+            let run = |calibration: Calibration, replay_options: &ReplayOptions| -> Option<Vec<Tag>> {
+                let site = site
+                    .clone()
+                    .with_calibration(calibration)
+                    .and_then(|s| s.with_floor_rssi_weights(&weights));
+                let mut engine = Engine::new(Arc::new(site.ok()?), options.engine_config()).ok()?;
+                Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
+            };
+            let throttled = ReplayOptions {
+                min_scan_interval_ns: Some(super::replay::ANDROID_THROTTLE_NS),
+                ..options.calibration_replay()
+            };
+            Some((run(calibration, &options.calibration_replay())?, run(unscaled, &throttled)?))
         });
         progress();
         tags.unwrap_or_default()
     });
-    let tags: Vec<&Tag> = shipped.iter().flatten().collect();
+    let mut by_band: [Vec<&Scored>; SINCE_SPARSE_SCAN_BANDS_S.len() + 1] = Default::default();
+    for (p, beyond_m, _, _, band) in shipped.iter().flat_map(|s| &s.1) {
+        if let (Some(band), true) = (band, *beyond_m == 0.0) {
+            by_band[*band].push(p);
+        }
+    }
+    for (band, points) in by_band.iter().enumerate() {
+        report.sparse_scans.epochs_by_since[band] = points.len();
+        calibration.sparse_scans.accuracy_scale_by_since[band] =
+            if points.len() >= MIN_SCENARIO_EPOCHS { scales(points) } else { None };
+    }
+    report.sparse_scans.calibration = calibration.sparse_scans;
+    let tags: Vec<&Tag> = shipped.iter().flat_map(|s| &s.0).collect();
     let off: Vec<(&Scored, f64, MdiScenario)> =
         tags.iter().filter(|t| t.1 > 0.0).map(|t| (&t.0, t.1, t.2)).collect();
     let on: Vec<&Scored> = tags.iter().filter(|t| t.1 == 0.0).map(|t| &t.0).collect();

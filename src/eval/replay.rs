@@ -77,6 +77,11 @@ impl MotionMask {
     }
 }
 
+/// The least time between two scans that reach a foreground app under Android 9+'s
+/// throttling, ns: 4 scans in 2 minutes, 30 s apart on average (Android developers, "Wi-Fi
+/// scanning overview", throttling).
+pub const ANDROID_THROTTLE_NS: u64 = 30_000_000_000;
+
 /// How a walk is replayed.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct ReplayOptions {
