@@ -475,8 +475,8 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
 #[test]
 fn sparse_scans_take_their_own_radius_factors_and_gamma() {
     use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
-    use waymark::site::{Calibration, SparseScans, SINCE_SPARSE_SCAN_BANDS_S};
-    let mut accuracy_scale_by_since = [None; SINCE_SPARSE_SCAN_BANDS_S.len() + 1];
+    use waymark::site::{Calibration, SparseScans, SPARSE_BANDS};
+    let mut accuracy_scale_by_since = [None; SPARSE_BANDS];
     accuracy_scale_by_since[0] = Some([3.0, 4.0]);
     accuracy_scale_by_since[1] = Some([5.0, 6.0]);
     let base = Calibration { rssi_weight: Some(0.3), ..Calibration::default() };

@@ -11,7 +11,7 @@ use crate::history::EpochRecord;
 use crate::io::{FloorPlan, Trace};
 use crate::radio::Scan;
 use crate::sensors::MdiScenario;
-use crate::site::{Calibration, North, Site, StateKind, SINCE_SPARSE_SCAN_BANDS_S};
+use crate::site::{Calibration, North, Site, StateKind, SPARSE_BANDS};
 use crate::survey::{positioned_scans, survey, PreparedSurvey, SurveyFloor, SurveyOptions, SurveyReport};
 use crate::EngineConfig;
 use nalgebra::Point2;
@@ -474,6 +474,12 @@ impl EvalOptions {
     /// [`SparseScans`](crate::site::SparseScans)).
     pub fn calibration_replay(&self) -> ReplayOptions {
         ReplayOptions { min_scan_interval_ns: None, ..self.replay }
+    }
+
+    /// `replay` with the scans throttled as Android 9+ throttles a foreground app
+    /// ([`ANDROID_THROTTLE_NS`](super::replay::ANDROID_THROTTLE_NS)).
+    pub fn throttled_replay(&self) -> ReplayOptions {
+        ReplayOptions { min_scan_interval_ns: Some(super::replay::ANDROID_THROTTLE_NS), ..self.replay }
     }
 
     /// These options with the survey as [`survey_calibrated`] made the site: its fingerprint
@@ -1178,7 +1184,7 @@ pub struct SparseScansReport {
     /// Held-out epochs on the map in the sparse regime at the γ they get, per band of time
     /// since the sparse scan (`SINCE_SPARSE_SCAN_BANDS_S`): the radius factors of a band with
     /// fewer than [`MIN_SCENARIO_EPOCHS`] are not fitted.
-    pub epochs_by_since: [usize; SINCE_SPARSE_SCAN_BANDS_S.len() + 1],
+    pub epochs_by_since: [usize; SPARSE_BANDS],
     /// What was chosen.
     pub calibration: crate::site::SparseScans,
 }
@@ -1318,7 +1324,6 @@ type Tag = (Scored, f64, MdiScenario, Option<f64>, Option<usize>);
 /// The live positions of a replay of `trace` (on floor `floor`), scored and tagged.
 fn tag(trace: &Trace, floor: usize, mapped: &OnMap, positions: &[crate::Position]) -> Vec<Tag> {
     let scored = score(trace, floor, &live_estimates(positions)).0;
-    // The positions `score` scored, in its order, with the truth's place.
     // The sparse band of each position, as the engine saw it (its scans are the epochs with
     // radio evidence).
     let mut timing = ScanTiming::default();
@@ -1331,6 +1336,7 @@ fn tag(trace: &Trace, floor: usize, mapped: &OnMap, positions: &[crate::Position
             timing.sparse_band(p.timestamp_ns)
         })
         .collect();
+    // The positions `score` scored, in its order, with their band and the truth's place.
     let scored_positions = positions
         .iter()
         .zip(bands)
@@ -1466,10 +1472,7 @@ pub fn survey_calibrated(
                             };
                             let replay_options = match masks.get(run) {
                                 Some(&mask) => ReplayOptions { mask, ..options.calibration_replay() },
-                                None => ReplayOptions {
-                                    min_scan_interval_ns: Some(super::replay::ANDROID_THROTTLE_NS),
-                                    ..options.calibration_replay()
-                                },
+                                None => options.throttled_replay(),
                             };
                             let r = replay(&mut engine, trace, &replay_options);
                             tag(trace, f, &mapped, &r.positions)
@@ -1638,16 +1641,15 @@ pub fn survey_calibrated(
                 let mut engine = Engine::new(Arc::new(site.ok()?), options.engine_config()).ok()?;
                 Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
             };
-            let throttled = ReplayOptions {
-                min_scan_interval_ns: Some(super::replay::ANDROID_THROTTLE_NS),
-                ..options.calibration_replay()
-            };
-            Some((run(calibration, &options.calibration_replay())?, run(unscaled, &throttled)?))
+            Some((
+                run(calibration, &options.calibration_replay())?,
+                run(unscaled, &options.throttled_replay())?,
+            ))
         });
         progress();
         tags.unwrap_or_default()
     });
-    let mut by_band: [Vec<&Scored>; SINCE_SPARSE_SCAN_BANDS_S.len() + 1] = Default::default();
+    let mut by_band: [Vec<&Scored>; SPARSE_BANDS] = Default::default();
     for (p, beyond_m, _, _, band) in shipped.iter().flat_map(|s| &s.1) {
         if let (Some(band), true) = (band, *beyond_m == 0.0) {
             by_band[*band].push(p);

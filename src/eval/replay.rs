@@ -77,9 +77,9 @@ impl MotionMask {
     }
 }
 
-/// The least time between two scans that reach a foreground app under Android 9+'s
-/// throttling, ns: 4 scans in 2 minutes, 30 s apart on average (Android developers, "Wi-Fi
-/// scanning overview", throttling).
+/// Time between the scans a throttled replay lets through, ns: Android 9+ lets a foreground
+/// app scan 4 times in 2 minutes (Android developers, "Wi-Fi scanning overview",
+/// throttling), one scan every 30 s at the steady rate.
 pub const ANDROID_THROTTLE_NS: u64 = 30_000_000_000;
 
 /// How a walk is replayed.

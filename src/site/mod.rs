@@ -184,17 +184,23 @@ pub const SINCE_SPARSE_SCAN_BANDS_S: [f64; 4] = [2.0, 5.0, 10.0, 20.0];
 #[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SparseScans {
-    /// γ of a sparse scan's epoch with a movement likelihood (in place of
+    /// γ of every epoch in the sparse regime that has a movement likelihood (in place of
     /// [`Calibration::rssi_weight`] and the floor's).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub rssi_weight: Option<f64>,
     /// Factors on the 68% and 95% radii in the sparse regime, by band of time since the
     /// sparse scan ([`SINCE_SPARSE_SCAN_BANDS_S`]), in place of the scenario's.
     #[serde(default, skip_serializing_if = "no_scales")]
-    pub accuracy_scale_by_since: [Option<[f64; 2]>; SINCE_SPARSE_SCAN_BANDS_S.len() + 1],
+    pub accuracy_scale_by_since: BandScales,
 }
 
-fn no_scales(scales: &[Option<[f64; 2]>; SINCE_SPARSE_SCAN_BANDS_S.len() + 1]) -> bool {
+/// Radius factors (68%, 95%) per band of time since a sparse scan; `None`: not fitted.
+pub type BandScales = [Option<[f64; 2]>; SPARSE_BANDS];
+
+/// Bands of time since a sparse scan ([`SINCE_SPARSE_SCAN_BANDS_S`], the last one open).
+pub const SPARSE_BANDS: usize = SINCE_SPARSE_SCAN_BANDS_S.len() + 1;
+
+fn no_scales(scales: &BandScales) -> bool {
     scales.iter().all(Option::is_none)
 }
 
@@ -572,7 +578,7 @@ mod tests {
     /// The site file carries the sparse calibration, and nothing of it when there is none.
     #[test]
     fn sparse_calibration_round_trips() {
-        let mut accuracy_scale_by_since = [None; SINCE_SPARSE_SCAN_BANDS_S.len() + 1];
+        let mut accuracy_scale_by_since = [None; SPARSE_BANDS];
         accuracy_scale_by_since[1] = Some([1.5, 1.25]);
         let calibration = Calibration {
             sparse_scans: SparseScans { rssi_weight: Some(0.1), accuracy_scale_by_since },
@@ -598,7 +604,7 @@ mod tests {
             ..Calibration::default()
         };
         assert_eq!(gamma.check().unwrap_err().0, "calibration.sparse_scans.rssi_weight");
-        let mut accuracy_scale_by_since = [None; SINCE_SPARSE_SCAN_BANDS_S.len() + 1];
+        let mut accuracy_scale_by_since = [None; SPARSE_BANDS];
         accuracy_scale_by_since[2] = Some([1.0, -1.0]);
         let scale = Calibration {
             sparse_scans: SparseScans { accuracy_scale_by_since, ..SparseScans::default() },

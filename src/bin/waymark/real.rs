@@ -630,8 +630,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         None
     };
     let throttled = if args.throttle {
-        let mut throttled = options.clone();
-        throttled.replay.min_scan_interval_ns = Some(waymark::eval::replay::ANDROID_THROTTLE_NS);
+        let throttled = EvalOptions { replay: options.throttled_replay(), ..options.clone() };
         let bar = progress_bar(args.json, walks as u64, "replaying test walks with throttled scans");
         let (configurations, _) = match evaluation::evaluate_on(&site, &floors, &throttled, &|| bar.inc(1)) {
             Ok(r) => r,
