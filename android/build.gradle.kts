@@ -23,7 +23,7 @@ val repo = rootDir.parentFile
 val cargoNdk by tasks.registering(Exec::class) {
     workingDir = repo
     commandLine("cargo", "ndk", "-t", "arm64-v8a", "-t", "armeabi-v7a", "-t", "x86_64",
-        "-o", "android/src/main/jniLibs", "build", "--release", "--lib")
+        "-o", "android/src/main/jniLibs", "build", "--release", "-p", "waymark", "--lib")
 }
 
 // Kotlin bindings generated from the host build of the library (glean's approach).
@@ -31,7 +31,7 @@ val generateBindings by tasks.registering(Exec::class) {
     workingDir = repo
     val out = layout.buildDirectory.dir("generated/uniffi").get().asFile
     commandLine("bash", "-c",
-        "cargo build --features bindgen --bin uniffi-bindgen && cargo build --lib && " +
+        "cargo build -p uniffi-bindgen && cargo build -p waymark --lib && " +
         "target/debug/uniffi-bindgen generate --no-format --library target/debug/libwaymark.so " +
         "--language kotlin --out-dir ${out.absolutePath}")
 }

@@ -3,7 +3,7 @@
 //!
 //!     cargo bench --bench engine
 //!
-//! Sites come from `waymark::sim::scale` (an 8-connected 2 m grid, 100 access points heard
+//! Sites come from `waymark_sim::scale` (an 8-connected 2 m grid, 100 access points heard
 //! per scan), the same as `waymark bench` uses.
 
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
@@ -11,11 +11,11 @@ use std::hint::black_box;
 use std::sync::Arc;
 use waymark::hmm::UniformReach;
 use waymark::sensors::{MotionConfig, MotionTracker};
-use waymark::sim::imu::{self, ImuConfig};
-use waymark::sim::scale::{DenseForward, ScaleConfig, ScaleSite, SCALE_EPOCH_NS};
-use waymark::sim::Trajectory;
 use waymark::site::ReachTable;
 use waymark::{Engine, EngineConfig, Site};
+use waymark_sim::imu::{self, ImuConfig};
+use waymark_sim::scale::{DenseForward, ScaleConfig, ScaleSite, SCALE_EPOCH_NS};
+use waymark_sim::Trajectory;
 
 fn scaled(states: usize) -> (ScaleSite, Arc<Site>) {
     let scaled = ScaleSite::generate(&ScaleConfig { states, ..ScaleConfig::default() });

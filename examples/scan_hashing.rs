@@ -11,7 +11,8 @@ use std::hint::black_box;
 use std::sync::Arc;
 use std::time::Instant;
 use waymark::radio::ScanHasher;
-use waymark::{sim, Engine, EngineConfig, Reading, Salt, Scan, Site, TransmitterId};
+use waymark::{Engine, EngineConfig, Reading, Salt, Scan, Site, TransmitterId};
+use waymark_sim as sim;
 
 /// Mean time of `f` in µs over enough calls to take about a second.
 fn time<T>(what: &str, mut f: impl FnMut() -> T) -> f64 {

@@ -9,8 +9,8 @@
 #   ios/build-xcframework.sh             # from anywhere
 #
 # The Swift in Sources/Waymark/ is committed and must match the library; bindings/swift/test.sh
-# fails when it is stale. The bindgen feature is never enabled here, so the shipped library
-# does not link uniffi's CLI.
+# fails when it is stale. Only the `waymark` package is built here, so the shipped library
+# never links uniffi's CLI (that is the separate uniffi-bindgen crate).
 set -euo pipefail
 
 IOS="$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)"
@@ -27,8 +27,8 @@ for tool in cargo lipo xcodebuild; do
 done
 
 for target in aarch64-apple-ios aarch64-apple-ios-sim x86_64-apple-ios; do
-    echo "== cargo build --release --lib --target $target" >&2
-    cargo build --manifest-path "$REPO/Cargo.toml" --release --lib --target "$target"
+    echo "== cargo build --release -p waymark --lib --target $target" >&2
+    cargo build --manifest-path "$REPO/Cargo.toml" --release -p waymark --lib --target "$target"
 done
 
 rm -rf "$BUILD" "$OUT" "$OUT.zip"

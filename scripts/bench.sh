@@ -9,6 +9,6 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 target=${CARGO_TARGET_DIR:-$PWD/target}
-cargo build --release --locked --features cli --quiet
-cargo build --release --locked --lib --quiet
+cargo build --release --locked -p waymark-cli --quiet
+cargo build --release --locked -p waymark --lib --quiet
 exec "$target/release/waymark" bench --json --cdylib "$target/release/libwaymark.so" "$@"

@@ -27,13 +27,22 @@ step "Formatting (cargo fmt --check)"
 cargo fmt --all -- --check
 
 step "Lints (cargo clippy, warnings denied)"
-cargo clippy --all-targets --all-features --locked -- -D warnings
+cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
+
+step "The shipped library as apps build it: no features, no tool crates"
+cargo build -p waymark --lib --locked
+
+step "API docs of the whole workspace, warnings denied"
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --locked --quiet
 
 step "Rust tests (unit, integration, property, doc)"
-run cargo test --all-features --locked
+run cargo test --workspace --all-features --locked
+
+step "The library on the declared MSRV and the mobile targets (checked: no NDK or Xcode here)"
+./scripts/check-targets.sh
 
 step "The README's main command, as a smoke test (waymark demo --json)"
-cargo run --release --features cli --locked --quiet -- demo --json --walks 20
+cargo run --release -p waymark-cli --locked --quiet -- demo --json --walks 20
 
 step "C ABI: header freshness, shared and static library under valgrind"
 run bash bindings/c/test.sh

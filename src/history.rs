@@ -55,11 +55,6 @@ impl History {
         Self { capacity, records: VecDeque::new() }
     }
 
-    /// The most epochs kept.
-    pub fn capacity(&self) -> usize {
-        self.capacity
-    }
-
     /// Epochs held, oldest first.
     pub fn records(&self) -> &VecDeque<EpochRecord> {
         &self.records

@@ -2,26 +2,32 @@
 #![deny(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
-pub mod config;
-pub mod engine;
-pub mod error;
-pub mod eval;
+// The engine and what an app hands it and gets back: private modules, their types re-exported
+// below.
+mod config;
+mod engine;
+mod error;
+mod fix;
+mod history;
+
+// The building blocks under the engine, public for Rust apps and for the tools that build site
+// files: the site model and its file formats, radio fingerprints, the motion pipeline, the HMM,
+// habit models, and the binding surface Kotlin, Swift and C see.
 pub mod ffi;
-pub mod fix;
 pub mod habits;
-pub mod history;
 pub mod hmm;
-pub mod io;
 pub mod radio;
 pub mod sensors;
-pub mod sim;
 pub mod site;
-pub mod survey;
 
-pub use config::EngineConfig;
-pub use engine::{Engine, InputStats, Position, PositionListener, StatusEvent, SubscriptionId, TrackPoint};
+pub use config::{EngineConfig, HipeConfig, HoangConfig, TransitionModel};
+pub use engine::{
+    Engine, EngineSnapshot, InputStats, Position, PositionListener, ScanTiming, StatusEvent, SubscriptionId,
+    TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,
+};
 pub use error::{Error, InputError};
 pub use fix::PositionFix;
+pub use history::{EpochInput, EpochRecord};
 pub use radio::{Reading, Salt, Scan, TransmitterId};
 pub use site::{Site, SiteError, Zone, ZoneKind};
 

@@ -13,8 +13,8 @@ use waymark::ffi::uniffi::{
     RadioScan, StatusUpdate, Subscription, TrackPoint, WifiReading,
 };
 use waymark::sensors::SensorSample;
-use waymark::sim::{imu, Office, OfficeConfig, EPOCH_NS};
 use waymark::TransmitterId;
+use waymark_sim::{imu, Office, OfficeConfig, EPOCH_NS};
 
 /// How long the hammer runs.
 const HAMMER: Duration = Duration::from_secs(3);

@@ -137,7 +137,7 @@ fn an_rssi_no_receiver_reports_rejects_the_scan() {
     }
     assert_eq!(engine.stats().scans_rssi_too_high, 3);
     assert_eq!(engine.position(), Some(&first));
-    let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark::engine::MAX_RSSI_DBM)])).unwrap();
+    let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark::MAX_RSSI_DBM)])).unwrap();
     assert!(loud.radio_log_evidence.is_some_and(f64::is_finite));
 }
 

@@ -9,7 +9,7 @@ use waymark::ffi::uniffi::{
     PositioningEngine, PositioningError, RadioScan, StatusUpdate, WifiReading,
 };
 use waymark::radio::TransmitterId;
-use waymark::sim::{imu, Office, OfficeConfig};
+use waymark_sim::{imu, Office, OfficeConfig};
 
 #[derive(Default)]
 struct Counter {
@@ -400,7 +400,7 @@ fn habits_are_learned_exported_and_imported_through_the_ffi() {
     let counter = Arc::new(Counter::default());
     let _subscription = Arc::clone(&other).subscribe(counter.clone());
     // Another site (the office with another seed has the same states, so the same key).
-    let elsewhere = waymark::sim::scale::ScaleSite::generate(&waymark::sim::scale::ScaleConfig {
+    let elsewhere = waymark_sim::scale::ScaleSite::generate(&waymark_sim::scale::ScaleConfig {
         states: 200,
         ..Default::default()
     });

@@ -5,8 +5,8 @@ mod common;
 
 use common::{scan, two_floor_site};
 use std::sync::{Arc, Mutex};
-use waymark::config::TransitionModel;
 use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
+use waymark::TransitionModel;
 use waymark::{Engine, EngineConfig, InputError, Position, PositionListener, StatusEvent, TrackPoint};
 
 const SECOND: u64 = 1_000_000_000;

@@ -3,7 +3,7 @@
 //! memory at its bound, every position finite, and the two engines in agreement. The full day
 //! is `waymark simulate --experiment long-run` (README).
 
-use waymark::sim::longrun::{self, LongRunConfig};
+use waymark_sim::longrun::{self, LongRunConfig};
 
 #[test]
 fn a_short_long_run_keeps_memory_bounded_and_positions_finite() {

@@ -10,14 +10,14 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
-use waymark::engine::FAULT_INJECTION_MID_EPOCH_NS as MID;
 use waymark::ffi::uniffi::{
     EngineOptions, MotionSample, PositionEstimate, PositionListener, PositioningEngine, PositioningError,
     RadioScan, StatusUpdate, WifiReading,
 };
 use waymark::sensors::SensorSample;
-use waymark::sim::{imu, Office, OfficeConfig};
+use waymark::FAULT_INJECTION_MID_EPOCH_NS as MID;
 use waymark::{Engine, EngineConfig, Position, Scan, Site, TransmitterId};
+use waymark_sim::{imu, Office, OfficeConfig};
 
 /// One epoch of a walk: the inertial samples since the previous one, then the scan.
 struct Epoch {

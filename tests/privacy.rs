@@ -3,7 +3,8 @@
 
 use std::sync::Arc;
 use waymark::radio::Reading;
-use waymark::{sim, Engine, EngineConfig, Error, Salt, Scan, Site, SiteError, TransmitterId};
+use waymark::{Engine, EngineConfig, Error, Salt, Scan, Site, SiteError, TransmitterId};
+use waymark_sim as sim;
 
 const SALT_HEX: &str = "8c1d6b2a9e4f0a7753b1c0de5a11e7f00d2b6c8e9f1a3b5c7d9e0f1a2b3c4d5e";
 

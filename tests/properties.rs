@@ -14,7 +14,7 @@
 //! - a rejected call (one that returns `Err`) leaves the engine's state as it was;
 //! - reads change nothing, and listeners hear exactly one position per accepted epoch.
 //!
-//! "State" is everything in [`waymark::engine::EngineSnapshot`] except `InputStats`: the
+//! "State" is everything in [`waymark::EngineSnapshot`] except `InputStats`: the
 //! rejection counters are bookkeeping of rejections, so a rejected scan, advance, fix or
 //! feedback must change exactly its own counter by one and nothing else (checked separately),
 //! while every later answer of the engine is decided by the rest (the epoch history included),
@@ -24,19 +24,19 @@ mod common;
 
 use proptest::prelude::*;
 use std::sync::{Arc, LazyLock, Mutex};
-use waymark::config::TransitionModel;
-use waymark::engine::{EngineSnapshot, StatusEvent};
 use waymark::ffi::uniffi::{
     BeaconReading, EngineOptions, MotionSample, PositionEstimate, PositionFix as FfiFix,
     PositionListener as FfiListener, PositioningEngine, PositioningError, RadioScan, StatusUpdate,
     TransitionKind, WifiReading,
 };
 use waymark::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
-use waymark::sim::{imu, Office, OfficeConfig};
+use waymark::TransitionModel;
 use waymark::{
     Engine, EngineConfig, InputError, InputStats, Position, PositionFix, PositionListener, Reading, Scan,
     Site, TrackPoint, TransmitterId, Zone, ZoneKind,
 };
+use waymark::{EngineSnapshot, StatusEvent};
+use waymark_sim::{imu, Office, OfficeConfig};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -219,7 +219,7 @@ fn when() -> impl Strategy<Value = When> {
             Just(u64::MAX),
             Just(u64::MAX - 1),
             Just(waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS),
-            Just(waymark::engine::FAULT_INJECTION_MID_EPOCH_NS),
+            Just(waymark::FAULT_INJECTION_MID_EPOCH_NS),
             any::<u64>(),
         ]
         .prop_map(When::At),
@@ -774,7 +774,7 @@ fn run_core(
                 // The injected panic half-way through an epoch: undone, counters included. The
                 // listener heard the position before the panic; that cannot be taken back.
                 prop_assert!(
-                    cfg!(feature = "fault-injection") && t == waymark::engine::FAULT_INJECTION_MID_EPOCH_NS,
+                    cfg!(feature = "fault-injection") && t == waymark::FAULT_INJECTION_MID_EPOCH_NS,
                     "call {} ({:?} at {}) panicked",
                     n,
                     call,
@@ -1041,7 +1041,7 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                 // epoch (which the engine undoes).
                 let injected = cfg!(feature = "fault-injection")
                     && ((kind == Kind::Scan && t == waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS)
-                        || t == waymark::engine::FAULT_INJECTION_MID_EPOCH_NS);
+                        || t == waymark::FAULT_INJECTION_MID_EPOCH_NS);
                 match &e {
                     PositioningError::InputRejected { .. } => {}
                     PositioningError::Internal { .. } if injected => {}

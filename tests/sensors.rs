@@ -1,4 +1,4 @@
-//! The motion tracker on simulated phones (`waymark::sim::imu`): step detection targets at
+//! The motion tracker on simulated phones (`waymark_sim::imu`): step detection targets at
 //! every rate for both detectors, no steps when the phone lies still or is shaken, fused
 //! heading better than compass-only and gyro-only past steel, the HIPE Table 1 scenario
 //! chosen from what delivered, and bad input never panicking.
@@ -6,9 +6,9 @@
 use waymark::sensors::{
     MdiScenario, MotionConfig, MotionState, MotionTracker, SensorSample, StepDetectorKind,
 };
-use waymark::sim::imu::{shaken_in_place, synthesize, ImuConfig, ImuTrace};
-use waymark::sim::motion_eval::{evaluate, evaluate_with, EvalOptions, MotionReport};
 use waymark::Error;
+use waymark_sim::imu::{shaken_in_place, synthesize, ImuConfig, ImuTrace};
+use waymark_sim::motion_eval::{evaluate, evaluate_with, EvalOptions, MotionReport};
 
 /// Prints the full report: `cargo test --release --test sensors -- --ignored --nocapture`.
 /// Seed and runs from WAYMARK_EVAL_SEED and WAYMARK_EVAL_RUNS (default 1 and 10); a tracker
@@ -104,10 +104,10 @@ fn run_trace(
     (tracker, updates)
 }
 
-fn straight_walk() -> (waymark::sim::Trajectory, ImuTrace, ImuConfig) {
+fn straight_walk() -> (waymark_sim::Trajectory, ImuTrace, ImuConfig) {
     use nalgebra::Point2;
     let points = [Point2::new(0.0, 0.0), Point2::new(30.0, 30.0)];
-    let trajectory = waymark::sim::Trajectory::new(5_000_000_000, 1.2, &points, Vec::new());
+    let trajectory = waymark_sim::Trajectory::new(5_000_000_000, 1.2, &points, Vec::new());
     let imu = ImuConfig { rate_hz: 50.0, site_rotation_rad: 0.5, ..ImuConfig::default() };
     let trace = synthesize(&trajectory, &imu, 4);
     (trajectory, trace, imu)

@@ -2,7 +2,8 @@
 //! must position to within the paper's ballpark.
 
 use waymark::radio::RssiModel;
-use waymark::sim::{self, Experiment, OfficeConfig};
+use waymark_sim as sim;
+use waymark_sim::{Experiment, OfficeConfig};
 
 fn experiment(seed: u64, model: RssiModel) -> Experiment {
     let base = Experiment::rssi_only();
@@ -58,7 +59,7 @@ fn the_simulated_site_survives_its_own_file_format() {
 
 #[test]
 fn both_papers_orderings_hold_on_a_few_walks() {
-    use waymark::sim::{run_papers, PaperExperiment};
+    use waymark_sim::{run_papers, PaperExperiment};
     // Seed 21 is used nowhere else; 10 walks keep the debug-build test short.
     let report = run_papers(&PaperExperiment { seed: 21, runs: 10, ..PaperExperiment::default() }).unwrap();
     let t = &report.hoang_table1;

@@ -8,9 +8,9 @@ mod common;
 use common::{scan, two_floor_site};
 use nalgebra::Point2;
 use std::sync::Arc;
-use waymark::history::EpochInput;
-use waymark::sim::{Office, OfficeConfig};
+use waymark::EpochInput;
 use waymark::{Engine, EngineConfig, InputError, PositionFix, Site, Zone, ZoneKind};
+use waymark_sim::{Office, OfficeConfig};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -152,7 +152,7 @@ fn bad_feedback_is_rejected_counted_and_changes_nothing() {
     }
     let after = engine.snapshot();
     assert_eq!(after.stats.feedback_rejected, 8);
-    let reset = |mut s: waymark::engine::EngineSnapshot| {
+    let reset = |mut s: waymark::EngineSnapshot| {
         s.stats = Default::default();
         s
     };
@@ -267,7 +267,7 @@ fn bad_fixes_are_rejected_counted_and_change_nothing() {
     let after = engine.snapshot();
     assert_eq!(after.stats.fixes_rejected, bad.len() as u64 + 1);
     assert_eq!(after.stats.fixes_accepted, 0);
-    let reset = |mut s: waymark::engine::EngineSnapshot| {
+    let reset = |mut s: waymark::EngineSnapshot| {
         s.stats = Default::default();
         s
     };
@@ -312,8 +312,8 @@ fn the_simulated_office_has_its_rooms_as_zones() {
 
 #[test]
 fn room_level_accuracy_on_simulated_walks() {
-    let experiment = waymark::sim::Experiment { walks: 5, ..waymark::sim::Experiment::default() };
-    let report = waymark::sim::run(&experiment).unwrap();
+    let experiment = waymark_sim::Experiment { walks: 5, ..waymark_sim::Experiment::default() };
+    let report = waymark_sim::run(&experiment).unwrap();
     let hit = report.summary.zone_hit.unwrap();
     assert!(hit > 0.8, "the right room in {:.1}% of epochs", 100.0 * hit);
 }

@@ -31,17 +31,17 @@ if ! grep -q "#define WAYMARK_VERSION \"$crate_version\"" bindings/c/waymark.h; 
 fi
 
 echo "-- build"
-# The CLI first: building it with --features cli rebuilds the library with that feature; the
+# The CLI first: building it rebuilds the library without fault injection; the
 # `--lib` build after it leaves the library the test links against.
-cargo run --features cli --locked --quiet -- sim-export --walk-length-m 40 --out "$work"
+cargo run -p waymark-cli --locked --quiet -- sim-export --walk-length-m 40 --out "$work"
 # The same site with its transmitter ids hashed, under a fixed test salt.
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$work/salt.hex"
-cargo run --features cli --locked --quiet -- site hash --salt-file "$work/salt.hex" \
+cargo run -p waymark-cli --locked --quiet -- site hash --salt-file "$work/salt.hex" \
     "$work/site.json" "$work/site-hashed.json" >/dev/null
 # The same site in the binary encoding an app ships.
-cargo run --features cli --locked --quiet -- site pack "$work/site.json" "$work/site.wmsite" >/dev/null
+cargo run -p waymark-cli --locked --quiet -- site pack "$work/site.json" "$work/site.wmsite" >/dev/null
 # A test build: a scan at UINT64_MAX - 7 panics inside the engine (feature fault-injection).
-cargo build --lib --locked --quiet --features fault-injection
+cargo build -p waymark --lib --locked --quiet --features fault-injection
 python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
 flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -pthread -I bindings/c)
 for test in test robustness threads; do

@@ -68,22 +68,22 @@ done
 
 # --- Build, generate, export ---------------------------------------------------------------------
 cd "$REPO"
-step "cargo build --features bindgen --bin uniffi-bindgen"
-cargo build --features bindgen --bin uniffi-bindgen
+step "cargo build -p uniffi-bindgen"
+cargo build -p uniffi-bindgen
 # The simulated site and walk. Built and run before the lean library below, because a build
-# with --features cli rewrites target/debug/libwaymark.so too.
+# of the CLI rewrites target/debug/libwaymark.so too (without fault injection).
 step "waymark sim-export --out $SIM"
-cargo build --features cli --bin waymark
+cargo build -p waymark-cli
 "$TARGET/debug/waymark" sim-export --out "$SIM"
 # The same site with its transmitter ids hashed, under a fixed test salt.
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$SIM/salt.hex"
 "$TARGET/debug/waymark" site hash --salt-file "$SIM/salt.hex" "$SIM/site.json" "$SIM/site-hashed.json" >&2
 # The same site in the binary encoding an app ships.
 "$TARGET/debug/waymark" site pack "$SIM/site.json" "$SIM/site.wmsite" >&2
-# The shipped library, without the bindgen (or cli) feature: the one the JVM loads.
+# The shipped library (plus the test-only fault injection): the one the JVM loads.
 step "cargo build --lib"
 # A test build: a scan at ULong.MAX - 7 panics inside the engine (feature fault-injection).
-cargo build --lib --features fault-injection
+cargo build -p waymark --lib --features fault-injection
 LIB=$TARGET/debug/libwaymark.so
 step "uniffi-bindgen generate -> $BINDINGS"
 rm -rf "$BINDINGS"

@@ -38,19 +38,19 @@ fi
 
 # --- 2. The library and the generator, exactly as the release does (bindgen never in the lib).
 log "building"
-cargo build --quiet --features bindgen --bin uniffi-bindgen
-# The simulated site and walk the XCTest replays (building the CLI rebuilds the library with
-# its feature, so the library comes last).
-cargo run --quiet --features cli --bin waymark -- sim-export --out "$TARGET/sim-export" >/dev/null
+cargo build --quiet -p uniffi-bindgen
+# The simulated site and walk the XCTest replays (building the CLI rebuilds the library without
+# fault injection, so the library comes last).
+cargo run --quiet -p waymark-cli -- sim-export --out "$TARGET/sim-export" >/dev/null
 # The same site with its transmitter ids hashed, under a fixed test salt.
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$TARGET/sim-export/salt.hex"
-cargo run --quiet --features cli --bin waymark -- site hash --salt-file "$TARGET/sim-export/salt.hex" \
+cargo run --quiet -p waymark-cli -- site hash --salt-file "$TARGET/sim-export/salt.hex" \
     "$TARGET/sim-export/site.json" "$TARGET/sim-export/site-hashed.json" >/dev/null
 # The same site in the binary encoding an app ships.
-cargo run --quiet --features cli --bin waymark -- site pack "$TARGET/sim-export/site.json" \
+cargo run --quiet -p waymark-cli -- site pack "$TARGET/sim-export/site.json" \
     "$TARGET/sim-export/site.wmsite" >/dev/null
 # A test build: a scan at UInt64.max - 7 panics inside the engine (feature fault-injection).
-cargo build --quiet --lib --features fault-injection
+cargo build --quiet -p waymark --lib --features fault-injection
 LIB="$TARGET/debug/libwaymark.so"
 
 # --- 3. Freshness: the committed Swift must be what the generator makes today.

@@ -12,12 +12,12 @@
 use super::checks;
 use super::cursor::{Cursor, Writer};
 use std::sync::{Arc, OnceLock, Weak};
-use waymark::config::TransitionModel;
 use waymark::ffi::uniffi as ffi;
 use waymark::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
-use waymark::sim::{imu, Office, OfficeConfig};
+use waymark::TransitionModel;
 use waymark::{Engine, EngineConfig, InputError, Position, PositionListener, Reading, Scan, Site};
 use waymark::{SubscriptionId, TrackPoint, TransmitterId};
+use waymark_sim::{imu, Office, OfficeConfig};
 
 /// Calls decoded from one input, at most.
 const MAX_CALLS: usize = 256;
@@ -180,7 +180,7 @@ impl Clock {
 /// `FAULT_INJECTION_TIMESTAMP_NS` panics inside the FFI engine on purpose, and an epoch at
 /// `FAULT_INJECTION_MID_EPOCH_NS` inside either engine: the harness never makes one.
 fn not_fault_injection(t: u64) -> u64 {
-    let mid = waymark::engine::FAULT_INJECTION_MID_EPOCH_NS;
+    let mid = waymark::FAULT_INJECTION_MID_EPOCH_NS;
     if t == ffi::FAULT_INJECTION_TIMESTAMP_NS || t == mid {
         mid - 1
     } else {
@@ -450,7 +450,7 @@ fn rejection(
     } else if scan.readings.iter().any(|r| !(r.rssi_dbm.is_finite() && r.rssi_dbm >= -1000.0)) {
         // NaN, ±inf, or below -1000 dBm, which no receiver reports.
         Some("non-finite")
-    } else if scan.readings.iter().any(|r| r.rssi_dbm > waymark::engine::MAX_RSSI_DBM) {
+    } else if scan.readings.iter().any(|r| r.rssi_dbm > waymark::MAX_RSSI_DBM) {
         Some("rssi too high")
     } else if !scan.readings.iter().any(|r| fixture.knows(&r.transmitter)) {
         Some("no known transmitter")

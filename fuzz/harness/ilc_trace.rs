@@ -1,8 +1,8 @@
 //! `ilc_trace`: any text through the competition-walk reader, then everything a replay asks of
 //! a walk: scans and events under several batching options, ground truth, path length.
 
-use waymark::io::ilc::{Event, EventOptions, Trace};
 use waymark::radio::Scan;
+use waymark_survey::io::ilc::{Event, EventOptions, Trace};
 
 /// Batching options, from the replay's default to the extremes of each field.
 const OPTIONS: [EventOptions; 4] = [
@@ -56,7 +56,7 @@ pub fn run(data: &[u8]) {
         assert!(first <= last);
     }
     let w = &trace.waypoints;
-    let bounds = |f: fn(&waymark::io::ilc::Waypoint) -> f64| {
+    let bounds = |f: fn(&waymark_survey::io::ilc::Waypoint) -> f64| {
         w.iter().map(f).fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), v| (lo.min(v), hi.max(v)))
     };
     let ((x0, x1), (y0, y1)) = (bounds(|p| p.x), bounds(|p| p.y));

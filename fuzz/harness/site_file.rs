@@ -61,7 +61,7 @@ fn exercise(mut engine: Engine) {
             .map(|t| Reading { transmitter: t.clone(), rssi_dbm, age_ns: 0 })
             .collect(),
     };
-    for (k, rssi) in [(1u64, -60.0), (4, -85.0), (5, waymark::engine::MAX_RSSI_DBM)] {
+    for (k, rssi) in [(1u64, -60.0), (4, -85.0), (5, waymark::MAX_RSSI_DBM)] {
         match engine.push_scan(&scan(k * 1_000_000_000, rssi)) {
             Ok(p) => checks::position(&p, floors),
             Err(InputError::EmptyScan) => assert!(transmitters.is_empty()),

@@ -46,8 +46,8 @@ pub struct FitOptions {
     /// Largest standard deviation a fit may return, dB. A transmitter heard once in a handful
     /// of scans has no finite censored ML fit (σ → ∞ explains one reading and many misses
     /// equally well), and real surveys are made of such columns. `INFINITY` (the default) is
-    /// Hoang's unconstrained EM; `waymark survey` caps it (see
-    /// [`SurveyOptions`](crate::survey::SurveyOptions)).
+    /// Hoang's unconstrained EM; a survey of real walks caps it
+    /// (`docs/site-files.md#surveying`).
     pub max_std_db: f64,
     /// EM iterations at most: 500. The EM converges linearly, slowest when most readings are
     /// clipped; the property test `em_recovers_clipped_gaussian` (up to 90% clipped) asserts

@@ -1,22 +1,9 @@
 //! Configuration of the [`MotionTracker`](super::MotionTracker). Every default cites the paper
 //! (and equation or table) it comes from, or the measurement that chose it.
 //!
-//! "Measured" means the tuning sweep: [`crate::sim::motion_eval::evaluate`] (simulated phones
-//! from [`crate::sim::imu`], 150 m walks at 20/50/100/200 Hz, 60 s lying still and 60 s shaken
-//! per walk and rate, 10 walks past steel for heading) on seeds 11, 12 and 13 with 10 runs
-//! each (so 2 h of lying still and 2 h of shaking, each run through both detectors),
-//! changing one field at a time:
-//!
-//! ```text
-//! WAYMARK_EVAL_SEED=11 WAYMARK_EVAL_RUNS=10 WAYMARK_EVAL_CONFIG='{"confirm_steps": 3}' \
-//!     cargo test --release --test sensors -- --ignored --nocapture print_motion_report
-//! ```
-//!
-//! With the defaults the sweep gives: every rate and detector ≥ 99.3 % of steps detected, no
-//! false step, no step lying still nor shaken, heading RMSE 4.0° fused,
-//! 24.7° compass-only, 27.6° gyro-only. Seeds 11-13 are not the ones quoted as results, so
-//! those are not fitted to. The simulator is not a phone: these defaults are a starting point
-//! for real traces.
+//! "Measured" means the tuning sweep on simulated phones (every rate, both detectors, lying
+//! still, shaken, walks past steel), one field changed at a time; the sweep, its command and
+//! its figures are in `docs/tuning.md#motion`.
 
 use crate::error::Error;
 use serde::{Deserialize, Serialize};

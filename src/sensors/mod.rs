@@ -13,9 +13,8 @@
 //! (angle wrapping, a moving average over a duration), `step.rs` (gravity learning, the two
 //! detectors, the gait check that keeps shaking out), `heading.rs` (tilt-compensated compass,
 //! gyro yaw rate, the 1-D Kalman filter, disturbance detection), `tracker.rs`
-//! ([`MotionTracker`]: buffering, time ordering, epochs). The simulator that exercises them
-//! is [`crate::sim::imu`]; their measured accuracy comes from
-//! [`crate::sim::motion_eval::evaluate`].
+//! ([`MotionTracker`]: buffering, time ordering, epochs). Their measured accuracy on simulated
+//! phones is in `docs/tuning.md#motion`.
 
 mod config;
 mod filter;

@@ -120,7 +120,7 @@ impl SiteBuilder {
 
     /// Adds a state whose fingerprints the caller fits itself (see
     /// [`build_fitted`](Self::build_fitted)), trained on `training_scans` scans.
-    pub(crate) fn fitted_state(&mut self, floor: usize, position: Point2<f64>, training_scans: u32) -> u32 {
+    pub fn fitted_state(&mut self, floor: usize, position: Point2<f64>, training_scans: u32) -> u32 {
         let id = self.states.len() as u32;
         self.states
             .push((State { id, floor, position, kind: StateKind::Surveyed, training_scans }, Vec::new()));
@@ -141,7 +141,7 @@ impl SiteBuilder {
 
     /// Assembles the site from fingerprints fitted by the caller: (state, index into `ids`,
     /// model), with the same "unheard" model and checks as [`build`](Self::build).
-    pub(crate) fn build_fitted(
+    pub fn build_fitted(
         self,
         options: BuildOptions,
         ids: Vec<TransmitterId>,
@@ -221,7 +221,7 @@ impl SiteBuilder {
 /// its readings with "not heard" at the clip level `fit.clip_dbm` (the stronger reading when a
 /// scan has two), fitted with `model`. Sorted by transmitter. The fit depends only on the
 /// columns, so a state fitted again from the same scans gets the same models.
-pub(crate) fn fit_columns(
+pub fn fit_columns(
     mut readings: Vec<(u32, u32, f64)>,
     scans: usize,
     model: RssiModel,
@@ -258,7 +258,7 @@ impl BuildOptions {
     /// `fit` as the builder applies it: the radio map stores σ up to
     /// `radio::MAX_STORED_STD_DB`, so a fit wider than that (a transmitter heard once,
     /// unconstrained EM) is capped there.
-    pub(crate) fn stored_fit(&self) -> FitOptions {
+    pub fn stored_fit(&self) -> FitOptions {
         FitOptions { max_std_db: self.fit.max_std_db.min(MAX_STORED_STD_DB), ..self.fit }
     }
 }

@@ -10,7 +10,7 @@ mod reach;
 mod zones;
 
 pub use binary::{LAYOUT_VERSION as BINARY_LAYOUT_VERSION, SIGNATURE as BINARY_SIGNATURE};
-pub(crate) use builder::fit_columns;
+pub use builder::fit_columns;
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
 pub use file::{IdHashing, SiteError, FORMAT_VERSION, MAX_COORDINATE_M};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};

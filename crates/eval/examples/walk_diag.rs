@@ -1,0 +1,120 @@
+//! Per-walk look at `waymark eval`'s configurations on recorded floors, in about 40 s for the
+//! five competition floors (the full `eval` spends most of its 24 minutes choosing the
+//! fingerprint radius and calibrating γ and the radius factors by leave-one-walk-out): the site is surveyed from the survey walks with the
+//! step length and north calibrated on them, but γ is given (`GAMMA`, `GAMMA_WITHOUT`; by
+//! default 0.03 and 0.1, what the five floors calibrate). Prints, per configuration, the mean
+//! error at the WiFi scans and the walks whose first estimate, and whose first scored scan, is
+//! on a wrong floor; the paired
+//! difference of consecutive configurations (in `CONFIGS` order) with its standard error over
+//! walks; and one line per test walk. Errors do not depend on the radius factors, so the means
+//! are those of `waymark eval` at the same γ and fingerprint radius (`FP_RADIUS`).
+//!
+//! ```text
+//! CONFIGS=forward-distance,forward-heading-speed,forward-speed \
+//!   cargo run --release --example walk_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}
+//! ```
+//!
+//! `BEACON_WAIT_MS` replays with another beacon wait (`EventOptions::beacon_wait_ns`).
+//! `FP_RADIUS` surveys with that fingerprint radius, m (default the uncalibrated
+//! `SurveyOptions` one, 5 m; `waymark eval` calibrates it, 8 m on the five floors);
+//! `ESTIMATE_STATES`, `MAX_SPEED`, `MOVEMENT_VAR`, `SPACING`, `MAX_STD` and `AGE_MS` set
+//! `EngineConfig::estimate_states`, `max_speed_mps`, `HoangConfig::movement_variance_m2`,
+//! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms);
+//! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; `waymark eval`
+//! calibrates it, 3.47 nats per reading on the five competition floors).
+
+use std::collections::BTreeMap;
+use std::path::PathBuf;
+use std::sync::Arc;
+use waymark::site::Calibration;
+use waymark_eval::real::{evaluate_on, score_scans, survey_site, EvalOptions, FloorData};
+use waymark_survey::io::ilc::Trace;
+
+fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
+    std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let dirs: Vec<PathBuf> = std::env::args().skip(1).map(PathBuf::from).collect();
+    let floors = dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?;
+    let mut options = EvalOptions::default();
+    options.replay.events.beacon_wait_ns =
+        env_or("BEACON_WAIT_MS", options.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
+    options.engine.estimate_states = env_or("ESTIMATE_STATES", options.engine.estimate_states);
+    options.engine.max_speed_mps = env_or("MAX_SPEED", options.engine.max_speed_mps);
+    options.engine.hoang.movement_variance_m2 =
+        env_or("MOVEMENT_VAR", options.engine.hoang.movement_variance_m2);
+    options.survey.spacing_m = env_or("SPACING", options.survey.spacing_m);
+    options.survey.fingerprint_radius_m = env_or("FP_RADIUS", options.survey.fingerprint_radius_m);
+    options.survey.build.fit.max_std_db = env_or("MAX_STD", options.survey.build.fit.max_std_db);
+    options.survey.max_reading_age_ns =
+        env_or("AGE_MS", options.survey.max_reading_age_ns / 1_000_000) * 1_000_000;
+    let survey: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
+    let motion =
+        waymark_survey::calibrate_motion(&survey, &options.engine.motion).ok_or("no motion calibration")?;
+    options.north = motion.north();
+    let configs: Vec<String> = env_or("CONFIGS", "forward-auto,viterbi-auto,wifi-knn".to_string())
+        .split(',')
+        .map(String::from)
+        .collect();
+    options.configurations = configs.clone();
+    let (site, _) = survey_site(&floors, &options)?;
+    let calibration = Calibration {
+        rssi_weight: Some(env_or("GAMMA", 0.03)),
+        rssi_weight_without_movement: Some(env_or("GAMMA_WITHOUT", 0.1)),
+        step_length: Some(motion.step_length),
+        radio_fit_floor: std::env::var("RADIO_FIT_FLOOR").ok().and_then(|v| v.parse().ok()),
+        ..Calibration::default()
+    };
+    let site = Arc::new(site.with_calibration(calibration)?);
+    let (reports, results) = evaluate_on(&site, &floors, &options, &|| ())?;
+    let tests: Vec<(usize, &Trace)> =
+        floors.iter().enumerate().flat_map(|(f, floor)| floor.test.iter().map(move |t| (f, t))).collect();
+    // Per configuration and walk: (Σ error with the floor penalty, scans, first estimate off
+    // floor, first scored scan off floor).
+    let mut walks: BTreeMap<&str, Vec<(f64, usize, bool, bool)>> = BTreeMap::new();
+    for key in &configs {
+        for (result, &(f, trace)) in results.iter().zip(&tests) {
+            let estimates = result.estimates.get(key).map_or(&[][..], Vec::as_slice);
+            let (scans, _) = score_scans(trace, f, estimates, None);
+            let first_off = estimates.first().is_some_and(|e| e.floor != f);
+            let first_scan_off = scans.first().is_some_and(|s| !s.floor_correct);
+            let sum = scans.iter().map(|s| s.penalised_m()).sum();
+            walks.entry(key).or_default().push((sum, scans.len(), first_off, first_scan_off));
+        }
+    }
+    for key in &configs {
+        let (r, w) = (&reports[key].pooled, &walks[key.as_str()]);
+        let off = w.iter().filter(|x| x.2).count();
+        let scan_off = w.iter().filter(|x| x.3).count();
+        println!(
+            "{key:<26} mean {:.3} m  floor hit {:.4}  scans {}  first estimate on a wrong floor in {off} of {} walks, first scored scan in {scan_off}",
+            r.mean_m,
+            r.floor_hit,
+            r.epochs,
+            w.len()
+        );
+    }
+    for pair in configs.windows(2) {
+        let (a, b) = (&walks[pair[0].as_str()], &walks[pair[1].as_str()]);
+        let n: usize = a.iter().map(|x| x.1).sum();
+        let d: Vec<(f64, f64)> = a.iter().zip(b).map(|(x, y)| (x.0 - y.0, x.1 as f64)).collect();
+        let delta = d.iter().map(|x| x.0).sum::<f64>() / n as f64;
+        // Standard error of a ratio estimate, clustered by walk.
+        let se = d.iter().map(|&(s, k)| (s - k * delta).powi(2)).sum::<f64>().sqrt() / n as f64;
+        println!("{} − {}: {delta:+.3} ± {se:.3} m", pair[0], pair[1]);
+    }
+    for (w, &(f, trace)) in tests.iter().enumerate() {
+        let mut line = format!("{} {:<26} {:5.0} m", floors[f].name, trace.name, trace.path_length_m());
+        for key in &configs {
+            let (sum, n, off, _) = walks[key.as_str()][w];
+            line += &format!(
+                " | {key} {:6.2} m over {n:3}{}",
+                sum / n.max(1) as f64,
+                if off { " first off floor" } else { "" }
+            );
+        }
+        println!("{line}");
+    }
+    Ok(())
+}

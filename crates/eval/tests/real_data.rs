@@ -1,0 +1,185 @@
+//! The recorded-data pipeline on a slice of the competition data in `../shared/data`: read,
+//! survey with calibration, replay, score. Skips, saying so, when the data is not there.
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use waymark::Site;
+use waymark_eval::real::{self, EvalOptions, FloorData};
+
+/// F1 unpacked under `target/`, or `None` (with a message) without the archive or `tar`.
+fn floor_dir() -> Option<PathBuf> {
+    // The workspace root, two levels above this crate.
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let root = root.as_path();
+    let unpacked = root.join("target/ilc/site1/F1");
+    if unpacked.join("path_data_files").is_dir() {
+        return Some(unpacked);
+    }
+    let archive = root.join("../shared/data/ilc20-site1/F1.tar.xz");
+    if !archive.is_file() {
+        eprintln!("skipping: {} not found", archive.display());
+        return None;
+    }
+    let into = root.join("target/ilc");
+    std::fs::create_dir_all(&into).ok()?;
+    let status = std::process::Command::new("tar").arg("-xJf").arg(&archive).arg("-C").arg(&into).status();
+    match status {
+        Ok(s) if s.success() => Some(unpacked),
+        _ => {
+            eprintln!("skipping: could not unpack {}", archive.display());
+            None
+        }
+    }
+}
+
+#[test]
+fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
+    let Some(dir) = floor_dir() else { return };
+    // The first 15 walk files: 12 survey walks, 3 test walks.
+    let floor = FloorData::load(&dir, Some(15)).expect("the floor reads");
+    assert_eq!((floor.survey.len(), floor.test.len()), (12, 3));
+    assert!(floor.plan.is_some(), "F1 has a plan");
+    let cached: usize = floor.survey.iter().map(|t| t.stats.cached_wifi).sum();
+    assert!(cached > 0, "Android re-reports cached access points: the reader keeps their age");
+
+    let options = EvalOptions { configurations: vec![], ..EvalOptions::default() };
+    let floors = vec![floor];
+    let (site, survey, calibration) = real::survey_calibrated(&floors, &options, &|| {}).expect("survey");
+    assert!(survey.floors[0].states > 50, "{survey:?}");
+    let gamma = calibration.rssi_weight.expect("γ calibrated");
+    assert!(real::GAMMA_GRID.contains(&gamma));
+    let scale = calibration.accuracy_scale.expect("radii calibrated");
+    assert!(scale.iter().all(|s| s.is_finite() && *s > 0.0));
+    // Per motion scenario where enough held-out epochs were on the map.
+    assert!(calibration.epochs > 0);
+    for scenario in waymark::sensors::MdiScenario::ALL {
+        let own = calibration.accuracy_scale_by_scenario.get(scenario);
+        let enough = calibration.scenario_epochs[scenario.index()] >= real::MIN_SCENARIO_EPOCHS;
+        assert_eq!(own.is_some(), enough, "{scenario:?}: {calibration:?}");
+        assert!(own.map_or(true, |s| s.iter().all(|s| s.is_finite() && *s > 0.0)));
+    }
+    assert!(calibration
+        .accuracy_scale_by_scenario
+        .get(waymark::sensors::MdiScenario::DistanceHeading)
+        .is_some());
+    assert!(calibration.motion.is_some(), "step length and north fitted");
+    // The fingerprint radius: neighbouring radii of the grid from its middle scored on
+    // held-out walks, the least error chosen and surveyed with, inside what was tried unless
+    // at the grid's end.
+    let curve = &calibration.fingerprint_radius_mean_error_m;
+    let grid = real::FINGERPRINT_RADIUS_GRID;
+    let tried: Vec<usize> = curve.iter().map(|c| grid.iter().position(|&r| r == c.0).unwrap()).collect();
+    assert!(tried.len() >= 3 && tried.windows(2).all(|w| w[1] == w[0] + 1), "{curve:?}");
+    assert!(tried.contains(&(grid.len() / 2)));
+    assert!(curve.iter().all(|c| c.1.is_finite() && c.1 > 0.0 && c.2 > 0), "{curve:?}");
+    let least = (0..curve.len()).min_by(|&a, &b| curve[a].1.total_cmp(&curve[b].1)).unwrap();
+    assert_eq!(calibration.fingerprint_radius_m, curve[least].0);
+    assert!(least > 0 || tried[0] == 0, "the search stops only at a valley: {curve:?}");
+    assert!(least + 1 < curve.len() || tried[least] + 1 == grid.len(), "{curve:?}");
+    // Leave-one-walk-out: every survey walk held out once, γ per floor with its curve.
+    assert_eq!(calibration.sites, 12);
+    let floor = &calibration.floors[0];
+    assert_eq!(floor.gamma.len(), real::GAMMA_GRID.len());
+    assert_eq!(floor.gamma.iter().map(|p| p.walks_preferring).sum::<usize>(), floor.walks);
+    // One floor: its best γ is the site-wide one, so it records none of its own.
+    assert_eq!(floor.best_rssi_weight, Some(gamma));
+    let floor_gamma = floor.rssi_weight;
+    assert_eq!(floor_gamma, None, "{floor:?}");
+    assert!(floor.jackknife_se_m.is_some_and(|se| se.is_finite() && se > 0.0), "{floor:?}");
+    assert!(calibration.refitted_share > 0.0 && calibration.refitted_share < 1.0);
+    assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
+    // The radio fit floor, and the held-out walks replayed as shipped: every epoch of the
+    // calibration's own replays again, on the map or beyond it.
+    let floor_fit = calibration.radio_fit_floor;
+    let enough = calibration.radio_fit_scans >= real::MIN_SCENARIO_EPOCHS;
+    assert_eq!(floor_fit.is_some(), enough, "{calibration:?}");
+    assert!(floor_fit.map_or(true, f64::is_finite));
+    assert!(calibration.radio_fit_scans > 0 && calibration.radio_fit_scans <= calibration.epochs);
+    assert_eq!(site.calibration().radio_fit_floor, floor_fit);
+    let epochs = |r: &real::OffMapReport| r.bands.iter().map(|b| b.epochs).sum::<usize>();
+    assert_eq!(epochs(&calibration.on_map), calibration.epochs, "{calibration:?}");
+    assert_eq!(epochs(&calibration.off_map), calibration.epochs_off_map, "{calibration:?}");
+    assert_eq!(epochs(&calibration.off_map_without_floor), calibration.epochs_off_map);
+
+    // Sparse scans: the held-out walks replayed throttled at every γ, their own γ only when it
+    // beats the site-wide one beyond its standard error, and a band's radius factors where it
+    // has enough epochs on the map.
+    let sparse = &calibration.sparse_scans;
+    assert_eq!(sparse.gamma.len(), real::GAMMA_GRID.len(), "{sparse:?}");
+    assert!(sparse.epochs_by_since.iter().sum::<usize>() > 0, "{sparse:?}");
+    for (band, &n) in sparse.epochs_by_since.iter().enumerate() {
+        let own = sparse.calibration.accuracy_scale_by_since[band];
+        assert_eq!(own.is_some(), n >= real::MIN_SCENARIO_EPOCHS, "{sparse:?}");
+    }
+    if let Some(g) = sparse.calibration.rssi_weight {
+        let at = |g: f64| sparse.gamma.iter().find(|p| p.gamma == g).unwrap();
+        assert!(at(gamma).mean_error_m - at(g).mean_error_m > at(g).jackknife_se_m, "{sparse:?}");
+    }
+    assert_eq!(site.calibration().sparse_scans, sparse.calibration);
+
+    // Unsurveyed states around the surveyed ones, on the floor's plan, none with a fingerprint.
+    let kind = |i: u32| site.states()[i as usize].kind;
+    assert!(site.states().iter().any(|s| s.kind == waymark::site::StateKind::Unsurveyed));
+    assert!(site.radio().fingerprints().all(|(i, _, _)| kind(i) != waymark::site::StateKind::Unsurveyed));
+
+    // The calibrated site survives its file format.
+    let site = Arc::new(Site::from_json(site.to_json().as_bytes()).expect("reloads"));
+    assert_eq!(site.calibration().rssi_weight, Some(gamma));
+    assert_eq!(site.calibration().accuracy_scale_by_scenario, calibration.accuracy_scale_by_scenario);
+    assert_eq!(site.calibration().radio_fit_floor, floor_fit);
+    assert_eq!(site.calibration().sparse_scans, sparse.calibration);
+    assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
+
+    let (reports, walks) = real::evaluate_on(&site, &floors, &options, &|| {}).expect("replays");
+    assert_eq!(walks.len(), 3);
+    for key in real::CONFIGURATIONS {
+        let m = &reports[key].pooled;
+        assert!(m.epochs > 0, "{key} scored nothing");
+        assert!(m.mean_m.is_finite() && m.mean_m < 40.0, "{key}: {m:?}");
+        assert_eq!(m.floor_hit, 1.0, "one floor: {key}");
+    }
+    // The fused engine beats a single scan on average even on this small survey.
+    assert!(reports["forward-auto"].pooled.mean_m < reports["wifi-mle"].pooled.mean_m + 1.0);
+
+    // Habits from the survey walks, their strength chosen on the held-out half of them, on
+    // sites surveyed as the calibrated one was.
+    let options = options.surveyed_with(&calibration);
+    assert_eq!(options.survey.fingerprint_radius_m, calibration.fingerprint_radius_m);
+    assert!(!options.calibrate_fingerprint_radius);
+    let (model, learning, selection) = real::survey_habits(&site, &floors, &options).expect("habits");
+    assert!(learning.epochs > 0 && learning.feedback_epochs > 0, "{learning:?}");
+    assert_eq!(selection.walks, 12, "every survey walk held out once");
+    assert!(selection.epochs > 0);
+    assert_eq!(selection.pass_strength, learning.strength);
+    assert_eq!(selection.strengths.len(), real::HELD_OUT_STRENGTHS.len());
+    for p in &selection.strengths {
+        for d in [p.forward_m, p.fixed_lag_m, p.viterbi_m] {
+            assert!(d[0].is_finite() && d[1].is_finite() && d[1] >= 0.0, "{p:?}");
+        }
+    }
+    assert_eq!(real::choose_held_out_strength(&selection.strengths).is_some(), selection.strength.is_some());
+    assert_eq!(model.strength(), selection.strength);
+}
+
+/// A real floor plan (hundreds of rooms in lon/lat) drawn under a walk: every ring of the plan
+/// and the walk's truth end up in the SVG.
+#[test]
+fn a_real_floor_plan_draws_under_a_walk() {
+    use waymark_eval::plot::{plot_walk, Track};
+    let Some(dir) = floor_dir() else { return };
+    let plan = waymark_survey::io::FloorPlan::read(&dir).expect("F1's plan reads");
+    let rings: usize =
+        plan.outline.iter().chain(plan.rooms.iter().map(|r| &r.polygon)).map(|p| p.rings.len()).sum();
+    assert!(rings > 100, "F1 has over a hundred shop outlines, got {rings}");
+    let out = std::env::temp_dir().join(format!("waymark-real-plan-{}", std::process::id()));
+    std::fs::create_dir_all(&out).unwrap();
+    let file = out.join("walk.svg");
+    let truth = [(plan.width_m * 0.2, plan.height_m * 0.2), (plan.width_m * 0.8, plan.height_m * 0.7)];
+    let estimate = [(plan.width_m * 0.25, plan.height_m * 0.2)];
+    plot_walk(&file, "F1", Some(&plan), &truth, &[Track { label: "estimate", points: &estimate }]).unwrap();
+    let svg = std::fs::read_to_string(&file).unwrap();
+    assert!(svg.starts_with("<svg") && svg.trim_end().ends_with("</svg>"));
+    assert!(svg.matches("<polyline").count() > rings, "every ring and the truth are drawn");
+    assert!(svg.contains("estimate"), "the legend names the track");
+    std::fs::remove_dir_all(out).ok();
+}

@@ -1,0 +1,19 @@
+//! Building a Waymark site from survey walks: reading Indoor Location Competition 2.0 traces
+//! and floor plans ([`io`]), fitting fingerprints and the walkable graph ([`survey`]), the
+//! walkers' step model ([`motion`]), and replaying walks through the engine ([`replay`]) to
+//! score them ([`metrics`]).
+//!
+//! This crate is a tool beside the SDK: it depends on `waymark`, never the reverse, and apps
+//! do not link it.
+
+#![deny(missing_docs)]
+#![deny(rustdoc::broken_intra_doc_links)]
+
+mod build;
+pub mod io;
+pub mod metrics;
+pub mod motion;
+pub mod replay;
+
+pub use build::*;
+pub use motion::{calibrate_motion, MotionCalibration};
