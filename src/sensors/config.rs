@@ -3,7 +3,7 @@
 //!
 //! "Measured" means the tuning sweep on simulated phones (every rate, both detectors, lying
 //! still, shaken, walks past steel), one field changed at a time; the sweep, its command and
-//! its figures are in `docs/tuning.md#motion`.
+//! its figures are in `docs/tuning.md#step-detector` and `#heading-filter`.
 
 use crate::error::Error;
 use serde::{Deserialize, Serialize};

@@ -14,7 +14,7 @@
 //! detectors, the gait check that keeps shaking out), `heading.rs` (tilt-compensated compass,
 //! gyro yaw rate, the 1-D Kalman filter, disturbance detection), `tracker.rs`
 //! ([`MotionTracker`]: buffering, time ordering, epochs). Their measured accuracy on simulated
-//! phones is in `docs/tuning.md#motion`.
+//! phones is in `docs/tuning.md#step-detector` and `#heading-filter`.
 
 mod config;
 mod filter;
