@@ -681,6 +681,92 @@ mod tests {
         assert_eq!(path.len(), 200);
     }
 
+    /// ln Σ exp over a full row, for the dense reference below.
+    fn dense_lse(v: impl Iterator<Item = f64>) -> f64 {
+        let v: Vec<f64> = v.collect();
+        let m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if m == f64::NEG_INFINITY {
+            return m;
+        }
+        m + v.iter().map(|x| (x - m).exp()).sum::<f64>().ln()
+    }
+
+    #[test]
+    #[allow(clippy::needless_range_loop)] // the reference is written with indices, as the equations are
+    fn expected_counts_match_a_dense_log_space_reference_under_peaked_emissions() {
+        // Two groups of three states closed by structural zeros; the group that explains the
+        // sequence best is 900 nats behind the other at epoch 0, so its filtered probability
+        // there is e^-900. The reference: unscaled ln α, ln β over full N × N, then eqs. 8-9.
+        let a: Vec<Vec<f64>> = vec![
+            vec![0.5, 0.5, 0.0, 0.0, 0.0, 0.0],
+            vec![0.0, 0.3, 0.7, 0.0, 0.0, 0.0],
+            vec![0.6, 0.0, 0.4, 0.0, 0.0, 0.0],
+            vec![0.0, 0.0, 0.0, 0.2, 0.8, 0.0],
+            vec![0.0, 0.0, 0.0, 0.0, 0.5, 0.5],
+            vec![0.0, 0.0, 0.0, 0.9, 0.0, 0.1],
+        ];
+        let pi: Vec<f64> = vec![0.2, 0.2, 0.1, 0.2, 0.2, 0.1];
+        let (n, epochs) = (6, 1200);
+        let rows: Vec<Vec<f64>> = (0..epochs)
+            .map(|t| {
+                let (first, second) = if t == 0 { (0.0, -900.0) } else { (-700.0 - (t % 7) as f64, -1.0) };
+                (0..n)
+                    .map(|i| if i < 3 { first } else { second } - 0.5 * ((t * 5 + i * 3) % 4) as f64)
+                    .collect()
+            })
+            .collect();
+        let ln_a = |i: usize, j: usize| a[i][j].ln();
+        let mut la = vec![vec![0.0; n]; epochs];
+        let mut lb = vec![vec![0.0; n]; epochs];
+        for i in 0..n {
+            la[0][i] = pi[i].ln() + rows[0][i];
+        }
+        for t in 1..epochs {
+            for j in 0..n {
+                la[t][j] = dense_lse((0..n).map(|i| la[t - 1][i] + ln_a(i, j))) + rows[t][j];
+            }
+        }
+        for t in (0..epochs - 1).rev() {
+            for i in 0..n {
+                lb[t][i] = dense_lse((0..n).map(|j| ln_a(i, j) + rows[t + 1][j] + lb[t + 1][j]));
+            }
+        }
+        let ll = dense_lse(la[epochs - 1].iter().copied());
+        let c = chain(pi.clone(), &a);
+        let e = EpochMatrix::from_rows(n, &rows).unwrap();
+        let mut smoothed = EpochMatrix::zeros(n, epochs);
+        let counts =
+            expected_counts(&c, &[(e.clone(), vec![])], |_, t, g| smoothed.row_mut(t).copy_from_slice(g))
+                .unwrap();
+        let (_, viterbi_lp) = viterbi(&c, &e).unwrap();
+        assert!(counts.log_likelihood >= viterbi_lp, "{} < {viterbi_lp}", counts.log_likelihood);
+        assert_relative_eq!(counts.log_likelihood, ll, max_relative = 1e-9);
+        let close = |got: f64, want: f64| (got - want).abs() <= 1e-6 * got.abs().max(want.abs()).max(1e-100);
+        for t in 0..epochs {
+            for i in 0..n {
+                let want = (la[t][i] + lb[t][i] - ll).exp();
+                assert!(close(smoothed.row(t)[i], want), "γ_{t}({i}): {} vs {want}", smoothed.row(t)[i]);
+            }
+        }
+        // Group 2 carries the sequence from epoch 0 on.
+        assert!(smoothed.row(0)[3..].iter().sum::<f64>() > 0.999);
+        let transition = c.transition();
+        for i in 0..n {
+            let (to, _) = transition.row(i);
+            for (k, &j) in transition.row_range(i).zip(to) {
+                let j = j as usize;
+                let want: f64 = (0..epochs - 1)
+                    .map(|t| (la[t][i] + ln_a(i, j) + rows[t + 1][j] + lb[t + 1][j] - ll).exp())
+                    .sum();
+                assert!(
+                    close(counts.transitions[k], want),
+                    "ξ({i}, {j}): {} vs {want}",
+                    counts.transitions[k]
+                );
+            }
+        }
+    }
+
     #[test]
     fn pinned_epochs_condition_the_posterior() {
         let initial = vec![1.0 / 3.0; 3];
