@@ -82,8 +82,8 @@ pub struct FitOptions {
     /// Eigenvalues of a re-estimated covariance below this are raised to it, so that no
     /// component can collapse onto a few observations. 0 disables it.
     pub min_variance: f64,
-    /// When the user names a state the model rules out (its predicted probability is below
-    /// 1e-300, so the pinned forward variable of §IV-C would be 0 everywhere), restart the
+    /// When the user names a state the model rules out (its predicted probability is zero,
+    /// so the pinned forward variable of §IV-C would be 0 everywhere), restart the
     /// sequence there from the named states instead of failing: the transition into that
     /// epoch is not counted and the epochs before it end a segment.
     pub restart_on_contradicted_feedback: bool,
@@ -262,7 +262,7 @@ pub fn log_likelihood<const D: usize>(
         let e = model.log_emissions(sequence)?;
         let forward = forward_into(&model.chain, &e, s, &mut scratch, alpha.take(), &[])?;
         total += forward.log_likelihood;
-        alpha = Some(forward.alpha);
+        alpha = Some(forward.log_alpha);
     }
     Ok(total)
 }
@@ -327,7 +327,7 @@ fn expect<const D: usize>(
                 }
             }
         });
-        alpha = Some(forward.alpha);
+        alpha = Some(forward.log_alpha);
     }
     // Mean = μ + d̄ and scatter = Σ γ (o − μ)(o − μ)ᵀ − w d̄ d̄ᵀ, d̄ = Σ γ (o − μ) / w.
     let mut mean = Vec::with_capacity(components.len());

@@ -1,19 +1,9 @@
-//! Exact inference on a [`Chain`] given log-emissions: the scaled forward-backward recursion
-//! (El Gemayel §III-A.1, eqs. 8-9, with the scaling of Rabiner's tutorial §V-A), the smoothed
-//! posteriors, the log-likelihood, and the Viterbi path with its log-probability.
+//! Exact inference on a [`Chain`] given log-emissions: the forward-backward recursion in log
+//! space (El Gemayel §III-A.1, eqs. 8-9, normalised per epoch as in Rabiner's tutorial §V-A),
+//! the smoothed posteriors, the log-likelihood, and the Viterbi path with its log-probability.
 
-use super::chain::Chain;
+use super::chain::{Chain, SparseTransition};
 use super::LearnError;
-
-/// Probabilities below this are set to zero in the forward variables and in the predicted
-/// distribution. It keeps every scaled backward variable below 1/1e-300 (they satisfy
-/// α̂_t(i) β̂_t(i) ≤ 1), so nothing overflows, and it moves at most N · 1e-300 of mass.
-const NEGLIGIBLE: f64 = 1e-300;
-
-/// Below this normaliser an epoch is rescaled in log space: the observation is explained only by
-/// states more than ~460 nats worse than the best-explaining reachable one, and a product of
-/// such small numbers would lose precision in the subnormal range.
-const SMALL_NORMALISER: f64 = 1e-200;
 
 /// A T × N table of numbers, one row per epoch: log-emissions ln p_i(o_t), or posteriors.
 #[derive(Clone, Debug, PartialEq)]
@@ -144,14 +134,75 @@ pub struct Known {
     pub states: Vec<u32>,
 }
 
-/// The scaled forward pass: α̂_t = α_t / p(o_1..t) (filtered posteriors), and per epoch the shift
-/// m_t and the normaliser c_t with which the scaled emission b̃_t(i) = exp(ln p_i(o_t) − m_t)
-/// was used: α̂_t(i) = pred_t(i) · b̃_t(i) / c_t, pred_t = α̂_{t−1} A (π at t = 0).
+/// Below this, a sum taken in linear space is taken again in log space: its terms
+/// exp(ln x − shift) may have lost digits in the subnormal range, or underflowed to zero,
+/// which is at most the number of terms times 1e-307 in all, a relative 1e-100 of a sum above
+/// this bound.
+const SMALL_SUM: f64 = 1e-200;
+
+/// ln Σ exp(x) of the finite and −∞ values given (−∞ for none or all −∞).
+fn log_sum_exp(values: impl Iterator<Item = f64> + Clone) -> f64 {
+    let max = values.clone().fold(f64::NEG_INFINITY, f64::max);
+    if max == f64::NEG_INFINITY {
+        return max;
+    }
+    max + values.map(|v| (v - max).exp()).sum::<f64>().ln()
+}
+
+/// The transition matrix by columns: for each state j, its predecessors i and ln a_ij. The
+/// forward recursion sums over predecessors; only the epochs it has to redo in log space need
+/// them, so they are built on first use.
+struct Predecessors {
+    start: Vec<usize>,
+    from: Vec<u32>,
+    log_probability: Vec<f64>,
+}
+
+impl Predecessors {
+    fn new(transition: &SparseTransition) -> Self {
+        let n = transition.states();
+        let to = transition.destinations();
+        let p = transition.probabilities();
+        let mut start = vec![0usize; n + 1];
+        for &j in to {
+            start[j as usize + 1] += 1;
+        }
+        for j in 0..n {
+            start[j + 1] += start[j];
+        }
+        let mut next = start.clone();
+        let (mut from, mut log_probability) = (vec![0u32; to.len()], vec![0.0; to.len()]);
+        for i in 0..n {
+            for k in transition.row_range(i) {
+                let slot = &mut next[to[k] as usize];
+                from[*slot] = i as u32;
+                log_probability[*slot] = p[k].ln();
+                *slot += 1;
+            }
+        }
+        Self { start, from, log_probability }
+    }
+
+    /// ln Σ_i exp(ln α̂(i)) a_ij over the predecessors i of j.
+    fn log_predicted(&self, j: usize, log_alpha: &[f64]) -> f64 {
+        let range = self.start[j]..self.start[j + 1];
+        log_sum_exp(
+            self.from[range.clone()]
+                .iter()
+                .zip(&self.log_probability[range])
+                .map(|(&i, &ln_a)| log_alpha[i as usize] + ln_a),
+        )
+    }
+}
+
+/// The forward pass in log space, normalised per epoch (Rabiner §V-A's scaling, in logs):
+/// ln α̂_t = ln α_t − ln p(o_1..t), the log filtered posteriors (−∞ where impossible), and
+/// ln c_t = ln p(o_t | o_1..t−1), so that ln α̂_t(j) = ln pred_t(j) + ln p_j(o_t) − ln c_t with
+/// pred_t = α̂_{t−1} A (π at t = 0).
 pub(super) struct Forward {
-    pub alpha: EpochMatrix,
-    pub shift: Vec<f64>,
-    pub normaliser: Vec<f64>,
-    /// ln p(o_1..T) = Σ_t (m_t + ln c_t).
+    pub log_alpha: EpochMatrix,
+    pub log_normaliser: Vec<f64>,
+    /// ln p(o_1..T) = Σ_t ln c_t.
     pub log_likelihood: f64,
     /// Epochs at which the chain was restarted (see [`forward_into`]), ascending.
     pub restarts: Vec<usize>,
@@ -160,112 +211,108 @@ pub(super) struct Forward {
 /// Scratch buffers reused across sequences.
 #[derive(Default)]
 pub(super) struct Scratch {
-    pred: Vec<f64>,
+    linear: Vec<f64>,
+    sum: Vec<f64>,
     beta: Vec<f64>,
     next_beta: Vec<f64>,
     weight: Vec<f64>,
     gamma: Vec<f64>,
 }
 
-/// The forward recursion, `alpha` reused when it has the right shape.
+/// The forward recursion, `log_alpha` reused when it has the right shape.
 ///
-/// An epoch in `restartable` (ascending) that no state reachable with probability ≥ 1e-300 can
-/// explain restarts the chain instead of failing: its prediction becomes uniform over the
-/// states that can emit there, and the transition into it is cut (the backward pass treats
-/// the epoch before as the end of a sequence). Baum-Welch passes the epochs with user
-/// feedback: a state the user names but the model rules out (its probability underflowed)
-/// would otherwise make α_t zero everywhere, and the paper's pinned forward variable 0 / 0.
+/// Each state's forward variable is kept as a logarithm, so none is lost however far its
+/// emissions lie below the others' (a state thousands of nats behind at one epoch may explain
+/// every later one). The prediction α̂_{t−1} A is summed in linear space over the allowed
+/// transitions, with exp(ln α̂_{t−1}) ≤ 1; a state whose sum falls below [`SMALL_SUM`], where
+/// that may have lost digits, is summed again over its predecessors by log-sum-exp.
+///
+/// An epoch in `restartable` (ascending) that no reachable state can explain restarts the
+/// chain instead of failing: its prediction becomes uniform over the states that can emit
+/// there, and the transition into it is cut (the backward pass treats the epoch before as the
+/// end of a sequence). Baum-Welch passes the epochs with user feedback: a state the user names
+/// but the model rules out would otherwise make α_t zero everywhere, and the paper's pinned
+/// forward variable 0 / 0.
 pub(super) fn forward_into(
     chain: &Chain,
     emissions: &EpochMatrix,
     sequence: usize,
     scratch: &mut Scratch,
-    alpha: Option<EpochMatrix>,
+    log_alpha: Option<EpochMatrix>,
     restartable: &[usize],
 ) -> Result<Forward, LearnError> {
     let n = chain.states();
     check_shape(n, emissions)?;
     let epochs = emissions.epochs();
-    let mut alpha = match alpha {
+    let mut log_alpha = match log_alpha {
         Some(a) if a.states == n && a.epochs() == epochs => a,
         _ => EpochMatrix::zeros(n, epochs),
     };
-    let (mut shift, mut normaliser) = (Vec::with_capacity(epochs), Vec::with_capacity(epochs));
+    let mut log_normaliser = Vec::with_capacity(epochs);
     let transition = chain.transition();
-    let pred = &mut scratch.pred;
+    let mut predecessors: Option<Predecessors> = None;
+    let Scratch { linear, sum, .. } = scratch;
     let mut log_likelihood = 0.0;
     let mut restarts = Vec::new();
     for t in 0..epochs {
-        pred.clear();
+        let e = emissions.row(t);
+        // Row t first holds ln pred_t(j) + ln p_j(o_t), the unnormalised ln α̂_t.
         if t == 0 {
-            pred.extend_from_slice(chain.initial());
+            let row = log_alpha.row_mut(0);
+            for ((w, &p), &e) in row.iter_mut().zip(chain.initial()).zip(e) {
+                *w = p.ln() + e;
+            }
         } else {
-            pred.resize(n, 0.0);
-            let previous = alpha.row(t - 1);
-            for (i, &a) in previous.iter().enumerate() {
+            let (before, after) = log_alpha.values.split_at_mut(t * n);
+            let previous = &before[(t - 1) * n..];
+            let row = &mut after[..n];
+            linear.clear();
+            linear.extend(previous.iter().map(|&l| l.exp()));
+            sum.clear();
+            sum.resize(n, 0.0);
+            for (i, &a) in linear.iter().enumerate() {
                 if a == 0.0 {
                     continue;
                 }
                 let (to, p) = transition.row(i);
                 for (&j, &a_ij) in to.iter().zip(p) {
-                    pred[j as usize] += a * a_ij;
+                    sum[j as usize] += a * a_ij;
                 }
             }
-        }
-        for p in pred.iter_mut() {
-            if *p < NEGLIGIBLE {
-                *p = 0.0;
+            for (j, ((w, &s), &e)) in row.iter_mut().zip(sum.iter()).zip(e).enumerate() {
+                *w = if e == f64::NEG_INFINITY {
+                    f64::NEG_INFINITY
+                } else if s >= SMALL_SUM {
+                    s.ln() + e
+                } else {
+                    predecessors
+                        .get_or_insert_with(|| Predecessors::new(transition))
+                        .log_predicted(j, previous)
+                        + e
+                };
             }
         }
-        let e = emissions.row(t);
-        // m_t: the best emission among reachable states, so every b̃ ≤ 1.
-        let best = |pred: &[f64]| {
-            pred.iter().zip(e).filter(|(&p, _)| p > 0.0).map(|(_, &e)| e).fold(f64::NEG_INFINITY, f64::max)
-        };
-        let mut m = best(pred);
-        if m == f64::NEG_INFINITY {
+        let row = log_alpha.row_mut(t);
+        let mut log_c = log_sum_exp(row.iter().copied());
+        if log_c == f64::NEG_INFINITY {
             let possible = e.iter().filter(|&&v| v > f64::NEG_INFINITY).count();
             if t == 0 || possible == 0 || restartable.binary_search(&t).is_err() {
                 return Err(LearnError::Impossible { sequence, epoch: t });
             }
-            for (p, &v) in pred.iter_mut().zip(e) {
-                *p = if v > f64::NEG_INFINITY { 1.0 / possible as f64 } else { 0.0 };
+            let uniform = -(possible as f64).ln();
+            for (w, &e) in row.iter_mut().zip(e) {
+                *w = uniform + e;
             }
-            m = best(pred);
+            log_c = log_sum_exp(row.iter().copied());
             restarts.push(t);
         }
-        let row = alpha.row_mut(t);
-        let mut c = 0.0;
-        for ((w, &p), &e) in row.iter_mut().zip(pred.iter()).zip(e) {
-            *w = if p > 0.0 { p * (e - m).exp() } else { 0.0 };
-            c += *w;
-        }
-        if c < SMALL_NORMALISER {
-            // The best-explaining states are barely reachable: shift by max_i (ln pred_i + e_i)
-            // instead, so that c ≥ 1; b̃ ≤ 1 / pred_i ≤ 1e300 cannot overflow.
-            m = pred
-                .iter()
-                .zip(e)
-                .filter(|(&p, _)| p > 0.0)
-                .map(|(&p, &e)| p.ln() + e)
-                .fold(f64::NEG_INFINITY, f64::max);
-            c = 0.0;
-            for ((w, &p), &e) in row.iter_mut().zip(pred.iter()).zip(e) {
-                *w = if p > 0.0 { p * (e - m).exp() } else { 0.0 };
-                c += *w;
-            }
-        }
         for w in row.iter_mut() {
-            *w /= c;
-            if *w < NEGLIGIBLE {
-                *w = 0.0;
-            }
+            *w -= log_c;
         }
-        shift.push(m);
-        normaliser.push(c);
-        log_likelihood += m + c.ln();
+        log_normaliser.push(log_c);
+        log_likelihood += log_c;
     }
-    Ok(Forward { alpha, shift, normaliser, log_likelihood, restarts })
+    Ok(Forward { log_alpha, log_normaliser, log_likelihood, restarts })
 }
 
 fn check_shape(n: usize, emissions: &EpochMatrix) -> Result<(), LearnError> {
@@ -282,13 +329,16 @@ fn check_shape(n: usize, emissions: &EpochMatrix) -> Result<(), LearnError> {
     Ok(())
 }
 
-/// The scaled backward recursion, from the last epoch to the first. For each epoch t it calls
-/// `on_epoch(t, γ_t)` with the smoothed posterior γ_t(i) = α̂_t(i) β̂_t(i) (eq. 8) and, when
-/// `counts` is given (one slot per allowed transition), adds Σ_t ξ_t(i, j) (eq. 9) to it.
+/// The backward recursion in log space, from the last epoch to the first. For each epoch t it
+/// calls `on_epoch(t, γ_t)` with the smoothed posterior γ_t(i) = α̂_t(i) β̂_t(i) (eq. 8) and,
+/// when `counts` is given (one slot per allowed transition), adds Σ_t ξ_t(i, j) (eq. 9) to it,
+/// ξ_t(i, j) = α̂_t(i) a_ij p_j(o_t+1) β̂_t+1(j) / c_t+1.
 ///
-/// β̂_t(i) = Σ_j a_ij b̃_{t+1}(j) β̂_{t+1}(j) / c_{t+1}, β̂_T = 1, is computed only where
-/// α̂_t(i) > 0: elsewhere γ and ξ vanish, and no state with α̂_t > 0 can lead to a state with
-/// α̂_{t+1} = 0 through a positive transition and emission, so those β̂ are never needed.
+/// ln β̂_t(i) = ln Σ_j a_ij exp(v_j), v_j = ln p_j(o_t+1) + ln β̂_t+1(j) − ln c_t+1, β̂_T = 1.
+/// The sum is taken in linear space with the weights w_j = exp(v_j − max v) ≤ 1 and, for a row
+/// whose sum falls below [`SMALL_SUM`], again by log-sum-exp. It is computed only where
+/// α̂_t(i) > 0: elsewhere γ and ξ vanish, and a state with α̂_t > 0 cannot lead to one with
+/// α̂_t+1 = 0 through a positive transition and emission, so those β̂ are never needed.
 pub(super) fn backward(
     chain: &Chain,
     emissions: &EpochMatrix,
@@ -300,54 +350,74 @@ pub(super) fn backward(
     let n = chain.states();
     let epochs = emissions.epochs();
     let transition = chain.transition();
-    let Scratch { beta, next_beta, weight, gamma, .. } = scratch;
-    let last = forward.alpha.row(epochs - 1);
-    beta.clear();
-    beta.extend(last.iter().map(|&a| if a > 0.0 { 1.0 } else { 0.0 }));
-    on_epoch(epochs - 1, last);
+    let Scratch { linear, beta, next_beta, weight, gamma, .. } = scratch;
+    // A segment's last epoch: β̂ = 1, γ = α̂.
+    let end = |log_alpha: &[f64], beta: &mut Vec<f64>, gamma: &mut Vec<f64>| {
+        beta.clear();
+        beta.extend(log_alpha.iter().map(|&a| if a > f64::NEG_INFINITY { 0.0 } else { f64::NEG_INFINITY }));
+        gamma.clear();
+        gamma.extend(log_alpha.iter().map(|&a| a.exp()));
+    };
+    end(forward.log_alpha.row(epochs - 1), beta, gamma);
+    on_epoch(epochs - 1, gamma);
     let (to_all, p_all) = (transition.destinations(), transition.probabilities());
     for t in (0..epochs - 1).rev() {
+        let log_alpha = forward.log_alpha.row(t);
         if forward.restarts.binary_search(&(t + 1)).is_ok() {
-            // The chain restarted at t + 1: epoch t ends a segment, β̂_t = 1, no ξ_t.
-            let alpha = forward.alpha.row(t);
-            beta.clear();
-            beta.extend(alpha.iter().map(|&a| if a > 0.0 { 1.0 } else { 0.0 }));
-            on_epoch(t, alpha);
+            // The chain restarted at t + 1: epoch t ends a segment, no ξ_t.
+            end(log_alpha, beta, gamma);
+            on_epoch(t, gamma);
             continue;
         }
         std::mem::swap(beta, next_beta);
-        // w_j = b̃_{t+1}(j) β̂_{t+1}(j), zero where α̂_{t+1}(j) = 0.
-        let (m, c) = (forward.shift[t + 1], forward.normaliser[t + 1]);
+        let log_c = forward.log_normaliser[t + 1];
+        // v_j, −∞ where α̂_t+1(j) = 0 (β̂_t+1(j) was not computed there).
         weight.clear();
         weight.extend(
             forward
-                .alpha
+                .log_alpha
                 .row(t + 1)
                 .iter()
                 .zip(emissions.row(t + 1))
                 .zip(next_beta.iter())
-                .map(|((&a, &e), &b)| if a > 0.0 { (e - m).exp() * b } else { 0.0 }),
+                .map(|((&a, &e), &b)| if a > f64::NEG_INFINITY { e + b - log_c } else { f64::NEG_INFINITY }),
         );
-        let alpha = forward.alpha.row(t);
+        let shift = weight.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let shift = if shift > f64::NEG_INFINITY { shift } else { 0.0 };
+        linear.clear();
+        linear.extend(weight.iter().map(|&v| (v - shift).exp()));
         beta.clear();
-        beta.resize(n, 0.0);
+        beta.resize(n, f64::NEG_INFINITY);
         gamma.clear();
         gamma.resize(n, 0.0);
-        for (i, &a) in alpha.iter().enumerate() {
-            if a == 0.0 {
+        for (i, &a) in log_alpha.iter().enumerate() {
+            if a == f64::NEG_INFINITY {
                 continue;
             }
             let range = transition.row_range(i);
             let mut s = 0.0;
             for k in range.clone() {
-                s += p_all[k] * weight[to_all[k] as usize];
+                s += p_all[k] * linear[to_all[k] as usize];
             }
-            beta[i] = s / c;
-            gamma[i] = a * beta[i];
+            let linear_sum = s >= SMALL_SUM;
+            beta[i] = if linear_sum {
+                shift + s.ln()
+            } else {
+                log_sum_exp(range.clone().map(|k| p_all[k].ln() + weight[to_all[k] as usize]))
+            };
+            gamma[i] = (a + beta[i]).exp();
             if let Some(counts) = counts.as_deref_mut() {
-                let f = a / c;
-                for k in range {
-                    counts[k] += f * p_all[k] * weight[to_all[k] as usize];
+                if linear_sum {
+                    // α̂_t(i) e^shift = γ_t(i) / s ≤ 1 / SMALL_SUM is finite, and each ξ below
+                    // is at most γ_t(i).
+                    let f = (a + shift).exp();
+                    for k in range {
+                        counts[k] += f * p_all[k] * linear[to_all[k] as usize];
+                    }
+                } else {
+                    for k in range {
+                        counts[k] += (a + p_all[k].ln() + weight[to_all[k] as usize]).exp();
+                    }
                 }
             }
         }
@@ -369,9 +439,11 @@ pub struct Posterior {
 /// Filtered and smoothed posteriors and the log-likelihood of one sequence. Feedback, if any,
 /// is applied to the emissions first with [`EpochMatrix::pin`].
 ///
-/// Probabilities are scaled per epoch (Rabiner §V-A), in linear space with each epoch's
-/// emissions shifted by their largest reachable value, so nothing underflows however long the
-/// sequence or however far apart the log-emissions; probabilities below 1e-300 are dropped.
+/// Forward and backward variables are kept as logarithms, normalised per epoch (Rabiner
+/// §V-A's scaling, in logs), so no state's probability underflows however long the sequence or
+/// however far apart the log-emissions; only the posteriors returned are exponentiated (those
+/// below ~1e-308 of an epoch's mass come out as 0). A probability is exactly zero only where
+/// the chain or the emissions make it so.
 pub fn forward_backward(chain: &Chain, log_emission: &EpochMatrix) -> Result<Posterior, LearnError> {
     let mut scratch = Scratch::default();
     let forward = forward_into(chain, log_emission, 0, &mut scratch, None, &[])?;
@@ -379,7 +451,11 @@ pub fn forward_backward(chain: &Chain, log_emission: &EpochMatrix) -> Result<Pos
     backward(chain, log_emission, &forward, &mut scratch, None, |t, gamma| {
         smoothed.row_mut(t).copy_from_slice(gamma);
     });
-    Ok(Posterior { log_likelihood: forward.log_likelihood, filtered: forward.alpha, smoothed })
+    let mut filtered = forward.log_alpha;
+    for v in &mut filtered.values {
+        *v = v.exp();
+    }
+    Ok(Posterior { log_likelihood: forward.log_likelihood, filtered, smoothed })
 }
 
 /// What [`expected_counts`] summed over its sequences.
@@ -430,7 +506,7 @@ pub fn expected_counts(
             }
             on_epoch(s, t, gamma);
         });
-        alpha = Some(forward.alpha);
+        alpha = Some(forward.log_alpha);
     }
     Ok(counts)
 }
@@ -603,6 +679,92 @@ mod tests {
         let (path, lp) = viterbi(&chain, &e).unwrap();
         assert!(lp.is_finite());
         assert_eq!(path.len(), 200);
+    }
+
+    /// ln Σ exp over a full row, for the dense reference below.
+    fn dense_lse(v: impl Iterator<Item = f64>) -> f64 {
+        let v: Vec<f64> = v.collect();
+        let m = v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        if m == f64::NEG_INFINITY {
+            return m;
+        }
+        m + v.iter().map(|x| (x - m).exp()).sum::<f64>().ln()
+    }
+
+    #[test]
+    #[allow(clippy::needless_range_loop)] // the reference is written with indices, as the equations are
+    fn expected_counts_match_a_dense_log_space_reference_under_peaked_emissions() {
+        // Two groups of three states closed by structural zeros; the group that explains the
+        // sequence best is 900 nats behind the other at epoch 0, so its filtered probability
+        // there is e^-900. The reference: unscaled ln α, ln β over full N × N, then eqs. 8-9.
+        let a: Vec<Vec<f64>> = vec![
+            vec![0.5, 0.5, 0.0, 0.0, 0.0, 0.0],
+            vec![0.0, 0.3, 0.7, 0.0, 0.0, 0.0],
+            vec![0.6, 0.0, 0.4, 0.0, 0.0, 0.0],
+            vec![0.0, 0.0, 0.0, 0.2, 0.8, 0.0],
+            vec![0.0, 0.0, 0.0, 0.0, 0.5, 0.5],
+            vec![0.0, 0.0, 0.0, 0.9, 0.0, 0.1],
+        ];
+        let pi: Vec<f64> = vec![0.2, 0.2, 0.1, 0.2, 0.2, 0.1];
+        let (n, epochs) = (6, 1200);
+        let rows: Vec<Vec<f64>> = (0..epochs)
+            .map(|t| {
+                let (first, second) = if t == 0 { (0.0, -900.0) } else { (-700.0 - (t % 7) as f64, -1.0) };
+                (0..n)
+                    .map(|i| if i < 3 { first } else { second } - 0.5 * ((t * 5 + i * 3) % 4) as f64)
+                    .collect()
+            })
+            .collect();
+        let ln_a = |i: usize, j: usize| a[i][j].ln();
+        let mut la = vec![vec![0.0; n]; epochs];
+        let mut lb = vec![vec![0.0; n]; epochs];
+        for i in 0..n {
+            la[0][i] = pi[i].ln() + rows[0][i];
+        }
+        for t in 1..epochs {
+            for j in 0..n {
+                la[t][j] = dense_lse((0..n).map(|i| la[t - 1][i] + ln_a(i, j))) + rows[t][j];
+            }
+        }
+        for t in (0..epochs - 1).rev() {
+            for i in 0..n {
+                lb[t][i] = dense_lse((0..n).map(|j| ln_a(i, j) + rows[t + 1][j] + lb[t + 1][j]));
+            }
+        }
+        let ll = dense_lse(la[epochs - 1].iter().copied());
+        let c = chain(pi.clone(), &a);
+        let e = EpochMatrix::from_rows(n, &rows).unwrap();
+        let mut smoothed = EpochMatrix::zeros(n, epochs);
+        let counts =
+            expected_counts(&c, &[(e.clone(), vec![])], |_, t, g| smoothed.row_mut(t).copy_from_slice(g))
+                .unwrap();
+        let (_, viterbi_lp) = viterbi(&c, &e).unwrap();
+        assert!(counts.log_likelihood >= viterbi_lp, "{} < {viterbi_lp}", counts.log_likelihood);
+        assert_relative_eq!(counts.log_likelihood, ll, max_relative = 1e-9);
+        let close = |got: f64, want: f64| (got - want).abs() <= 1e-6 * got.abs().max(want.abs()).max(1e-100);
+        for t in 0..epochs {
+            for i in 0..n {
+                let want = (la[t][i] + lb[t][i] - ll).exp();
+                assert!(close(smoothed.row(t)[i], want), "γ_{t}({i}): {} vs {want}", smoothed.row(t)[i]);
+            }
+        }
+        // Group 2 carries the sequence from epoch 0 on.
+        assert!(smoothed.row(0)[3..].iter().sum::<f64>() > 0.999);
+        let transition = c.transition();
+        for i in 0..n {
+            let (to, _) = transition.row(i);
+            for (k, &j) in transition.row_range(i).zip(to) {
+                let j = j as usize;
+                let want: f64 = (0..epochs - 1)
+                    .map(|t| (la[t][i] + ln_a(i, j) + rows[t + 1][j] + lb[t + 1][j] - ll).exp())
+                    .sum();
+                assert!(
+                    close(counts.transitions[k], want),
+                    "ξ({i}, {j}): {} vs {want}",
+                    counts.transitions[k]
+                );
+            }
+        }
     }
 
     #[test]

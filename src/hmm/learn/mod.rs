@@ -1,4 +1,4 @@
-//! Learning a hidden Markov model from observations: exact inference (scaled forward-backward,
+//! Learning a hidden Markov model from observations: exact inference (log-space forward-backward,
 //! smoothed posteriors, Viterbi) and Baum-Welch re-estimation of the initial distribution, a
 //! sparse transition matrix and Gaussian-mixture emissions, after El Gemayel et al.,
 //! "Improved Indoor Positioning Using the Baum-Welch Algorithm" (`../shared/papers/
@@ -8,7 +8,7 @@
 //!   allowed transitions (the paper's §II-B: "some elements are known to be zero").
 //! - [`EpochMatrix`]: a T × N table, for log-emissions ln p_i(o_t) and for posteriors.
 //! - [`forward_backward`], [`viterbi`], [`decode`]: inference on a chain and log-emissions
-//!   (eqs. 8-9 with Rabiner's scaling); [`Known`] pins epochs to a set of states (§IV-C).
+//!   (eqs. 8-9 in logs, with Rabiner's per-epoch normalisation); [`Known`] pins epochs to a set of states (§IV-C).
 //! - [`GaussianMixtures`]: eq. 7, M_i components per state with fixed weights 1/M_i.
 //! - [`fit`]: Baum-Welch (eqs. 10-13) over several [`Sequence`]s, with [`FitOptions`] for plain
 //!   maximum likelihood or the regularised fit a live engine needs.
@@ -16,14 +16,15 @@
 //!
 //! These recursions are exact: unlike [`predict`](super::predict) and
 //! [`viterbi_step`](super::viterbi_step), which prune rows and paths for the live engine, they
-//! drop only probabilities below 1e-300 (see [`forward_backward`]).
+//! keep every state's forward and backward variable as a logarithm and drop none (see
+//! [`forward_backward`]).
 //!
 //! # Cost
 //!
 //! With N states, E allowed transitions, C = Σ M_i mixture components in D dimensions, and
 //! sequences of T epochs (T_max the longest):
 //!
-//! - inference: time O(T · (E + N)); memory O(T · N) for the scaled forward variables (and
+//! - inference: time O(T · (E + N)); memory O(T · N) for the log forward variables (and
 //!   the posteriors returned), O(N) for the backward pass; Viterbi O(T · (E + N)) time and
 //!   O(T · N) back-pointers (4 bytes each).
 //! - one Baum-Welch iteration: time O(T · (E + C · D²)) per sequence plus O(C · D³) for the
