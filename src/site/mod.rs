@@ -4,22 +4,27 @@
 
 mod binary;
 mod builder;
+mod error;
 mod file;
 mod pseudo;
 mod reach;
+mod schema;
 mod zones;
 
 pub use binary::{LAYOUT_VERSION as BINARY_LAYOUT_VERSION, SIGNATURE as BINARY_SIGNATURE};
 pub use builder::fit_columns;
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
-pub use file::{IdHashing, SiteError, FORMAT_VERSION, MAX_COORDINATE_M};
+pub use error::SiteError;
+pub use file::{IdHashing, MAX_COORDINATE_M};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
 pub use reach::ReachTable;
+pub use schema::FORMAT_VERSION;
 pub use zones::{most_likely_zone, Zone, ZoneKind, MAX_ZONES};
 
 use crate::radio::RadioMap;
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 /// A floor of the site.
@@ -561,6 +566,26 @@ fn median_edge_length(edges: &[Edge]) -> f64 {
     let mut lengths: Vec<f64> = edges.iter().map(|e| e.length_m).collect();
     lengths.sort_by(f64::total_cmp);
     lengths[lengths.len() / 2]
+}
+
+impl Site {
+    /// Loads a site file in either encoding: binary ([`Site::to_binary`]) when the bytes start
+    /// with its signature, JSON otherwise.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Site, SiteError> {
+        if binary::is_binary(bytes) {
+            binary::decode(bytes)
+        } else {
+            Site::from_json(bytes)
+        }
+    }
+
+    /// Loads a site file from disk.
+    pub fn load(path: impl AsRef<Path>) -> Result<Site, SiteError> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path)
+            .map_err(|e| SiteError::Io { path: path.display().to_string(), message: e.to_string() })?;
+        Site::from_bytes(&bytes)
+    }
 }
 
 #[cfg(test)]
