@@ -1,5 +1,6 @@
 //! Why a site file could not be loaded.
 
+use super::schema::OLDEST_FORMAT_VERSION;
 use crate::radio::{ID_HASH_SCHEME, ID_HASH_VERSION};
 
 /// Why a site file could not be loaded.
@@ -31,12 +32,26 @@ pub enum SiteError {
         /// serde_json's description.
         message: String,
     },
-    /// Written by a newer (or unknown) version of the format.
-    #[error("site file has format_version {found}; this build of Waymark reads version {supported}")]
+    /// A `format_version` before the first (0): not a file any build of Waymark wrote.
+    #[error(
+        "site file has format_version {found}; this build of Waymark reads versions {} to {supported}",
+        OLDEST_FORMAT_VERSION
+    )]
     UnsupportedVersion {
         /// The version in the file.
         found: u64,
-        /// The version this build reads.
+        /// The newest version this build reads.
+        supported: u32,
+    },
+    /// Written in a newer format than this build reads: the app needs a newer Waymark, or a
+    /// site file made for the version it has.
+    #[error(
+        "site file is in a newer format (format_version {found}) than this build of Waymark reads ({supported})"
+    )]
+    NewerFormat {
+        /// The version in the file.
+        found: u64,
+        /// The newest version this build reads.
         supported: u32,
     },
     /// Valid JSON, but a field is missing, of the wrong type, or its value is impossible.

@@ -1,4 +1,4 @@
-//! Site file v1: serde JSON with a `format_version`. Loading checks everything an engine relies
+//! Site files: serde JSON with a `format_version` ([`FORMAT_VERSION`]). Loading checks everything an engine relies
 //! on and names what is wrong and where; it never panics.
 //!
 //! A site file may hold salted hashes of its transmitter ids instead of raw MAC addresses and
@@ -435,8 +435,8 @@ mod tests {
     fn errors_say_what_and_where() {
         assert!(matches!(err("{\"format_version\": 1,, }"), SiteError::Syntax { line: 1, .. }));
         assert!(matches!(
-            err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 2")),
-            SiteError::UnsupportedVersion { found: 2, supported: 1 }
+            err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 3")),
+            SiteError::NewerFormat { found: 3, supported: 2 }
         ));
         let cases = [
             (GOOD.replace("\"format_version\": 1,", ""), "format_version"),

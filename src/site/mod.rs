@@ -18,7 +18,7 @@ pub use error::SiteError;
 pub use file::{IdHashing, MAX_COORDINATE_M};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
 pub use reach::ReachTable;
-pub use schema::FORMAT_VERSION;
+pub use schema::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
 pub use zones::{most_likely_zone, Zone, ZoneKind, MAX_ZONES};
 
 use crate::radio::RadioMap;

@@ -7,8 +7,14 @@ use super::{Calibration, North, SiteError, StateKind, ZoneKind};
 use crate::radio::{RssiModel, TransmitterId, LEVEL_STEP_DB};
 use serde::{Deserialize, Serialize};
 
-/// The site-file format this build reads and writes.
-pub const FORMAT_VERSION: u32 = 1;
+/// The site-file format this build writes. It reads this and every version back to
+/// [`OLDEST_FORMAT_VERSION`], and refuses a newer one ([`SiteError::NewerFormat`]). Version 2
+/// holds the optional fields added within version 1 (docs/site-files.md#versioning), so a
+/// version-1 file is a version-2 file.
+pub const FORMAT_VERSION: u32 = 2;
+
+/// The oldest site-file format this build reads.
+pub const OLDEST_FORMAT_VERSION: u32 = 1;
 
 #[derive(Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -118,6 +124,18 @@ pub(super) struct EdgeFile {
     pub(super) length_m: Option<f64>,
 }
 
+/// Why a file of `format_version` `found` cannot be read, if it cannot: a newer format than
+/// this build knows, or a version before the first.
+fn version_error(found: u64) -> Option<SiteError> {
+    if found > u64::from(FORMAT_VERSION) {
+        Some(SiteError::NewerFormat { found, supported: FORMAT_VERSION })
+    } else if found < u64::from(OLDEST_FORMAT_VERSION) {
+        Some(SiteError::UnsupportedVersion { found, supported: FORMAT_VERSION })
+    } else {
+        None
+    }
+}
+
 /// Why a file that does not parse is not a site file of this version, if it is not: a
 /// missing or other `format_version` says more than the first field that fails to parse.
 fn check_version(bytes: &[u8]) -> Result<(), SiteError> {
@@ -129,25 +147,21 @@ fn check_version(bytes: &[u8]) -> Result<(), SiteError> {
     match version.format_version {
         None => Err(invalid("format_version", "missing: is this a Waymark site file?")),
         Some(v) => match v.as_u64() {
-            Some(found) if found == u64::from(FORMAT_VERSION) => Ok(()),
-            Some(found) => Err(SiteError::UnsupportedVersion { found, supported: FORMAT_VERSION }),
+            Some(found) => version_error(found).map_or(Ok(()), Err),
             None => Err(invalid("format_version", format!("expected an integer, found {v}"))),
         },
     }
 }
 
-/// Parses (but does not validate) a JSON site file of this format version.
+/// Parses (but does not validate) a JSON site file of a format version this build reads. A
+/// newer file is refused as such, not by the first field it has that this build does not know.
 pub(super) fn parse_json(bytes: &[u8]) -> Result<SiteFile, SiteError> {
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let parsed: Result<SiteFile, _> = serde_path_to_error::deserialize(&mut de);
     // The version is checked first only when the file does not parse as this version:
     // reading the document twice doubled the load time of a 10 000-state site.
     match parsed {
-        Ok(file) if file.format_version == FORMAT_VERSION => Ok(file),
-        Ok(file) => Err(SiteError::UnsupportedVersion {
-            found: u64::from(file.format_version),
-            supported: FORMAT_VERSION,
-        }),
+        Ok(file) => version_error(u64::from(file.format_version)).map_or(Ok(file), Err),
         Err(e) => {
             check_version(bytes)?;
             let inner = e.inner();
