@@ -117,11 +117,11 @@ impl Engine {
     /// A position from another positioning system (GNSS near an entrance, WiFi RTT, UWB): one
     /// epoch, with the motion the inertial sensors measured since the previous one, whose
     /// observation is the fix, a Gaussian around each state's position (El Gemayel et al.
-    /// §II-C/D, eq. 7; σ from `accuracy_m`, see [`fix::sigma_m`]). A precise fix pulls the
+    /// §II-C/D, eq. 7; σ from `accuracy_m`, see `fix::sigma_m`). A precise fix pulls the
     /// estimate to it; a vague one barely moves it. Rejected, changing nothing but
     /// `fixes_rejected`: a timestamp not after the last epoch, a NaN or infinite coordinate, an
     /// accuracy not > 0, an unknown floor, or a fix farther from every state than its own
-    /// error allows ([`fix::FIX_GATE_MASS`]).
+    /// error allows (`fix::FIX_GATE_MASS`).
     pub fn push_fix(&mut self, fix: &PositionFix) -> Result<Position, InputError> {
         let result = self.fix_epoch(fix);
         if let Err(e) = &result {

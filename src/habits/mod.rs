@@ -1,5 +1,5 @@
 //! A user's habits, learned in the engine a phone runs: Baum-Welch (El Gemayel et al. §III-A,
-//! eqs. 8-10) over the engine's own recorded epochs ([`crate::history`]) with the user's
+//! eqs. 8-10) over the engine's own recorded epochs ([`EpochRecord`](crate::EpochRecord)) with the user's
 //! feedback (§IV-C), re-estimating
 //!
 //! - the **transitions** between the site's states the user actually makes (which corridor
@@ -17,7 +17,7 @@
 //!
 //! As in the paper, the observation of an epoch is a position estimate: the engine's own
 //! estimate after the epoch, a Gaussian around each state with the epoch's 68% radius as its
-//! spread ([`fix::sigma_m`]), or, at a fix epoch, the fix itself, through the current fix-error
+//! spread (`fix::sigma_m`), or, at a fix epoch, the fix itself, through the current fix-error
 //! model. States on another floor than the estimate's cannot explain it. Feedback pins the
 //! posterior to the states the user named.
 //!
