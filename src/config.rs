@@ -1,5 +1,5 @@
 //! Engine configuration. Every default cites the paper (and equation or table) it comes from,
-//! or the measurement that chose it.
+//! or the docs section (docs/tuning.md) holding the measurement that chose it.
 
 use crate::error::Error;
 use crate::sensors::MotionConfig;
@@ -64,16 +64,14 @@ pub struct HoangConfig {
     /// with l_j - l_i, the difference of two cell centres, while the walker is anywhere in
     /// either cell. For cells `s` long (the site's median edge length) each end adds s²/12
     /// per axis, so Σ_v + (s²/6)·I. Hoang's simulated walker stands on the states, where this
-    /// is 0; a real one does not. Default on; `waymark simulate` measures both.
+    /// is 0; a real one does not. Default on (docs/tuning.md#measured-spread).
     pub quantisation_variance: bool,
     /// Whether Σ_v also grows by the tracker's own spreads of the epoch: the distance's
     /// along the movement and distance × heading spread across it (the error propagation of
     /// v = d·(sin θ, cos θ)). Hoang's simulated walker has a fixed 0.25 m²; a phone's step
-    /// count and compass err more on some epochs than on others. Default on: on the
-    /// competition's F1 split (`waymark eval target/ilc/site1/F1 [--fixed-movement-variance]`)
-    /// the forward estimate ties at 5.65 m, the Viterbi track improves from 5.05 to 4.84 m and
-    /// the survey's held-out error from 6.26 to 6.23 m. The paper experiments (`waymark
-    /// simulate`) turn it off to reproduce Table 1.
+    /// count and compass err more on some epochs than on others. Default on: it improves the
+    /// Viterbi track on real walks (docs/tuning.md#measured-spread); off reproduces Hoang's
+    /// Table 1.
     pub measured_spread: bool,
 }
 
@@ -94,10 +92,8 @@ pub struct EngineConfig {
     /// Fastest a person is assumed to move, m/s: bounds the states reachable between two
     /// epochs. Hoang et al. §6.1: "a user cannot move faster than 3 m/s".
     pub max_speed_mps: f64,
-    /// The transition model. Default Hoang's: with full motion on the pseudo-state site,
-    /// `waymark simulate --runs 100 --json --seed S` for S = 1, 2, 3 gives 0.489 / 0.474 / 0.457 m
-    /// mean error against HIPE's 0.639 / 0.636 / 0.599 m (`rssi_step_pseudo` against
-    /// `distance_heading`). To be checked again on real traces.
+    /// The transition model. Default Hoang's movement-vector Gaussian (Hoang eq. 11), which
+    /// beats HIPE's regions with full motion (docs/tuning.md#transition-model).
     pub transition: TransitionModel,
     /// How raw inertial samples become steps, distance and heading. `declination_rad` and
     /// `site_rotation_rad` are taken from the site file's `north` when the engine starts,
@@ -122,12 +118,8 @@ pub struct EngineConfig {
     /// Hoang's 1.5 s epoch, bounding its memory to 64 × 4 bytes per state.
     pub track_window_epochs: usize,
     /// Lag of the fixed-lag estimate ([`Engine::fixed_lag_position`](crate::Engine::fixed_lag_position)),
-    /// epochs: 3 (4.5 s at 1.5 s epochs). Measured with `waymark simulate --runs 100 --json
-    /// --seed S`, S = 1, 2, 3: its mean error falls from the forward estimate's 0.489 / 0.475 /
-    /// 0.457 m at lag 0 to 0.424 / 0.415 / 0.408 m at lag 2 and 0.426 / 0.418 / 0.410 m at lag 3,
-    /// within 5 mm of that at lags 1-6 (the lagged Viterbi state it replaced: 0.435 / 0.428 /
-    /// 0.417 m at lag 3). Lag 3 was chosen on the Viterbi state and kept: the smoothed
-    /// estimate's optimum is flat from 2 to 4.
+    /// epochs: 3 (4.5 s at 1.5 s epochs), where the smoothed error is near its flat optimum
+    /// (docs/tuning.md#fixed-lag).
     pub fixed_lag_epochs: usize,
     /// Ratio K between the high transition probability (reachable states) and the low one
     /// (everything else), HIPE eqs. 5-6. The low one keeps every a_ij > 0 (HIPE eq. 11) so the
@@ -135,12 +127,8 @@ pub struct EngineConfig {
     /// [200, 200 000], i.e. the most trust in the reachability model.
     pub transition_ratio: f64,
     /// M, the number of most likely states averaged into the estimate (Hoang eq. 4; the paper
-    /// gives no value). Default 3. Radio only, `waymark demo --rssi-only --json --top-m M
-    /// --seed S` over seeds 1-5 (not the demo's seed 0): 1.363 / 1.146 / 1.125 / 1.121 /
-    /// 1.121 m for M = 1 / 2 / 3 / 5 / 8. Fused on the pseudo-state grid, `waymark demo --json
-    /// --walks 30 --top-m M --seed S` over seeds 1-3: 0.506 / 0.484 / 0.495 / 0.513 m for
-    /// M = 1 / 3 / 5 / 8; re-measured after Σ_v gained the tracker's spreads
-    /// (`HoangConfig::measured_spread`): 0.505 / 0.479 / 0.489 / 0.505 m.
+    /// gives no value). Default 3, the best fused on the pseudo-state grid and within 4 mm of
+    /// the best radio only (docs/tuning.md#mixture-components-m).
     pub estimate_states: usize,
     /// Radius of the precomputed walking-distance table, m. A larger reach (a long gap between
     /// scans) is covered by several passes of the table. Default: the reach of two of Hoang's
@@ -177,7 +165,7 @@ pub struct EngineConfig {
     pub history_epochs: usize,
     /// How [`Engine::learn_habits`](crate::Engine::learn_habits) learns and how the learned
     /// habits are applied ([`crate::habits`]).
-    pub habits: crate::habits::HabitOptions,
+    pub habits: HabitOptions,
 }
 
 impl Default for EngineConfig {
@@ -202,8 +190,80 @@ impl Default for EngineConfig {
             site_calibration: true,
             site_salt: None,
             history_epochs: 500,
-            habits: crate::habits::HabitOptions::default(),
+            habits: HabitOptions::default(),
         }
+    }
+}
+
+/// How a learning pass runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HabitOptions {
+    /// Dirichlet pseudo-count added to every allowed transition. Default 1 (Laplace's rule of
+    /// succession): a state's habits outweigh the uniform reachability only once it has been
+    /// passed through about as many times as it has reachable neighbours, so a single walk
+    /// barely moves them, and the prior never makes an allowed move impossible.
+    pub pseudocount: f64,
+    /// Pseudo-fixes at zero bias and unit spread factor behind the fix-error estimate. Default
+    /// 5, Waymark's choice, not a paper's or a measurement (no data here has external fixes):
+    /// one fix, or a few, cannot shift every later fix; twenty agreeing fixes carry 80% of the
+    /// weight.
+    pub fix_prior_fixes: f64,
+    /// Most Baum-Welch iterations per pass. Default 10: above the iterations the passes on the
+    /// competition floors' survey walks took to reach the tolerance
+    /// (docs/tuning.md#habit-strength), so it binds only a pass that has not converged.
+    pub max_iterations: usize,
+    /// Stop when an iteration improves ln p(o | θ) by less than this many nats per epoch.
+    /// Default 1e-3, the tolerance of [`FitOptions::default`](crate::hmm::learn::FitOptions).
+    pub tolerance: f64,
+    /// A gap between two epochs longer than this starts a new segment, s. Default 48: the
+    /// longest gap the engine still predicts across rather than restarting
+    /// (`max_reach_passes` 16 × `reach_radius_m` 9 m ÷ `max_speed_mps` 3 m/s).
+    pub max_gap_s: f64,
+    /// Most states one segment may involve; a segment over more is skipped and counted.
+    /// Default 20 000: with 500 epochs, 80 MB for the forward variables in the worst case.
+    pub max_segment_states: usize,
+    /// The strength κ with which the learned moves are applied in the filter
+    /// (the habit prior); `None` (default): chosen by each pass on held-out segments (among
+    /// `habits::STRENGTHS`), so habits that do not predict the user's next moves are not
+    /// applied.
+    pub strength: Option<f64>,
+}
+
+impl Default for HabitOptions {
+    fn default() -> Self {
+        Self {
+            pseudocount: 1.0,
+            fix_prior_fixes: 5.0,
+            max_iterations: 10,
+            tolerance: 1e-3,
+            max_gap_s: 48.0,
+            max_segment_states: 20_000,
+            strength: None,
+        }
+    }
+}
+
+impl HabitOptions {
+    /// The first field out of range, as its path (`options.<field>`) and what is wrong.
+    pub(crate) fn invalid_field(&self) -> Option<(String, String)> {
+        for (name, v) in [
+            ("pseudocount", self.pseudocount),
+            ("fix_prior_fixes", self.fix_prior_fixes),
+            ("tolerance", self.tolerance),
+            ("max_gap_s", self.max_gap_s),
+            ("strength", self.strength.unwrap_or(1.0)),
+        ] {
+            if !(v.is_finite() && v >= 0.0) {
+                return Some((format!("options.{name}"), format!("{v}")));
+            }
+        }
+        if self.pseudocount <= 0.0 || self.strength.is_some_and(|k| k <= 0.0) {
+            return Some((
+                "options.pseudocount / options.strength".into(),
+                "must be > 0, or an unseen move would become impossible".into(),
+            ));
+        }
+        None
     }
 }
 
@@ -311,8 +371,8 @@ impl EngineConfig {
     /// Checks every field; the message names the field and the rule.
     pub fn validate(&self) -> Result<(), Error> {
         let fail = |m: String| Err(Error::InvalidConfig(m));
-        if let Err(e) = self.habits.check() {
-            return fail(e.to_string());
+        if let Some((path, message)) = self.habits.invalid_field() {
+            return fail(format!("{path}: {message}"));
         }
         if !(self.max_speed_mps.is_finite() && self.max_speed_mps > 0.0) {
             return fail(format!("max_speed_mps must be finite and > 0 (got {})", self.max_speed_mps));

@@ -129,9 +129,8 @@ fn mills_ratio(x: f64) -> f64 {
 const TABLE_Z: (f64, f64) = (-40.0, 8.0);
 
 /// Table knots per unit of z: 256. Linear interpolation errs by at most h²/8 · max|f″| with
-/// |f″| ≤ 1 for ln Φ; the test `tabled_ln_cdf_matches_exact` measures 1.9e-6 at most, under a
-/// millionth of what one 1 dBm step of a reading changes. (Cubic Hermite on 32 knots erred by
-/// 5e-10, but its dependent arithmetic made a 10 000-state epoch 30% slower.)
+/// |f″| ≤ 1 for ln Φ, under a millionth of what one 1 dBm step of a reading changes; a cubic
+/// table on fewer knots is more exact but slower (docs/tuning.md#radio-map).
 const TABLE_KNOTS_PER_Z: f64 = 256.0;
 
 /// ln Φ(z) by linear interpolation in a table: several times faster than

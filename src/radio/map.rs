@@ -2,9 +2,8 @@
 //! O(states + fingerprint entries of the transmitters heard), not O(states × transmitters).
 //!
 //! Entries are 8 bytes: the state, the mean in 0.01 dB and an index into the map's table of
-//! distinct standard deviations (also in 0.01 dB). A real five-floor mall has 2.4 million
-//! entries; at 32 bytes (f64 mean and σ, a cached ln p(absent)) they alone took 55 MB of a
-//! 10 000-state site's engine, against issue 7's 30 MB. ln p(absent) is computed when a
+//! distinct standard deviations (also in 0.01 dB), so that a large site's engine keeps within
+//! its memory budget (docs/tuning.md#engine-speed). ln p(absent) is computed when a
 //! transmitter is heard, by [`LnCdfTable`].
 
 use super::{ln_std_normal_pdf, Gaussian, LnCdfTable, RssiModel, Scan, TransmitterId};

@@ -1,9 +1,8 @@
 //! Configuration of the [`MotionTracker`](super::MotionTracker). Every default cites the paper
-//! (and equation or table) it comes from, or the measurement that chose it.
-//!
-//! "Measured" means the tuning sweep on simulated phones (every rate, both detectors, lying
-//! still, shaken, walks past steel), one field changed at a time; the sweep, its command and
-//! its figures are in `docs/tuning.md#step-detector` and `#heading-filter`.
+//! (and equation or table) it comes from, or the docs section holding the measurement that
+//! chose it: the tuning sweep on simulated phones (every rate, both detectors, lying still,
+//! shaken, walks past steel), one field changed at a time, and real walks, in
+//! `docs/tuning.md#step-detector` and `#heading-filter`.
 
 use crate::error::Error;
 use serde::{Deserialize, Serialize};
@@ -73,8 +72,8 @@ pub struct EarthField {
 #[serde(default)]
 pub struct MotionConfig {
     /// Which step detector to run. Default: HIPE's peak + zero crossing, which dates steps at
-    /// the acceleration peak; measured, it detected 99.87 % of steps on average against 99.68 %
-    /// for the threshold detector, both with no false step.
+    /// the acceleration peak, and detected more steps than the threshold detector
+    /// (docs/tuning.md#step-detector).
     pub step_detector: StepDetectorKind,
     /// How long each step is. Default: constant 0.7 m (HIPE §3.1).
     pub step_length: StepLengthModel,
@@ -97,7 +96,7 @@ pub struct MotionConfig {
     /// A block is "still" (gravity is learned from it, and the motion state is stationary)
     /// when the standard deviation of the acceleration norm over it is below this, m/s².
     /// Default 0.3: a walking phone's norm varies by 1-2 m/s² (HIPE Fig. 2), sensor noise and
-    /// a steady hand by under 0.1; measured, 0.1 changed nothing in the sweep.
+    /// a steady hand by under 0.1 (docs/tuning.md#step-detector).
     pub still_std_mps2: f64,
     /// Length of the moving average that smooths the gravity-free norm, s. Default 0.25 s
     /// (HIPE §3.1: nine samples at 35 Hz, "roughly 0.25 s"); set in seconds so any sampling
@@ -106,21 +105,20 @@ pub struct MotionConfig {
     /// Threshold detector: a step when the smoothed signal rises above this, m/s². Default 0.5:
     /// under half of the 1.1 m/s² peak to valley that Zhao et al. (see `min_cadence_hz`)
     /// require of a step on the raw norm, of which a 0.25 s average keeps 57-78 % at
-    /// 1.5-2.2 Hz; measured, 0.3 gave the same counts and 0.8 missed up to 3.8 % of the
-    /// steps.
+    /// 1.5-2.2 Hz (docs/tuning.md#step-detector).
     pub step_threshold_mps2: f64,
     /// Threshold detector: re-armed when the smoothed signal falls below this, m/s² (the
-    /// hysteresis). Default 0, the signal's mean once gravity is removed; measured, 0.2 gave
-    /// the same counts.
+    /// hysteresis). Default 0, the signal's mean once gravity is removed
+    /// (docs/tuning.md#step-detector).
     pub step_rearm_mps2: f64,
     /// Peak detector: the peak between two zero crossings must exceed this, m/s². Default 0.5,
-    /// as `step_threshold_mps2` and measured with it.
+    /// as `step_threshold_mps2` (docs/tuning.md#step-detector).
     pub peak_threshold_mps2: f64,
     /// Both detectors: no two raw detections closer than this, s. Default 0.25 s, the
     /// smoothing window: two detections inside one window are one bump. Kept below the
     /// shortest step (1 / `max_cadence_hz`) so that faster rhythms (shaking) reach the gait
-    /// check and are rejected there rather than decimated into a walking-like rhythm;
-    /// measured, 0.15 s changed nothing.
+    /// check and are rejected there rather than decimated into a walking-like rhythm
+    /// (docs/tuning.md#step-detector).
     pub min_step_interval_s: f64,
     /// Slowest step frequency counted as walking, Hz. Default 1.0: the longest step period of
     /// Zhao et al., "An adaptive step detection algorithm based on the state machine" (China
@@ -137,107 +135,84 @@ pub struct MotionConfig {
     /// Consecutive regular steps needed before any is counted (and the person is walking);
     /// they are then all counted. Default 4: the "count regulation" of Analog Devices'
     /// pedometer reference design (N. Zhao, Analog Dialogue 44-06, 2010) likewise waits for
-    /// several consecutive valid steps. Measured: 2 counted 27 steps in the 2 h of shaking, 3
-    /// and 4 none (4 for margin), 6 detected 0.15 % fewer steps.
+    /// several consecutive valid steps; 4 leaves a margin over the fewest that count no
+    /// shaking (docs/tuning.md#step-detector).
     pub confirm_steps: usize,
     /// While confirming, each step period may differ from the mean period of the run by at
     /// most this fraction. Default 0.3: normal gait varies by a few per cent from step to step
     /// (stride-time CV 2-4 %, Hausdorff et al., J. Appl. Physiol. 78, 1995), and a step dated
-    /// one sample off at 20 Hz moves a 0.45 s period by 11 %; measured, 1.0 (no check) still
-    /// counted no shaking, so this is a margin, not the main defence.
+    /// one sample off at 20 Hz moves a 0.45 s period by 11 %. A margin, not the main defence
+    /// against shaking (docs/tuning.md#step-detector).
     pub max_interval_change: f64,
     /// A step whose gravity-free acceleration norm exceeds this anywhere between it and the
     /// previous step is rejected as handling, m/s². Default 25 (≈ 2.5 g). Real phones held
     /// flat show sharp heel-strike spikes that the simulator (and HIPE Fig. 2's ±5 m/s²)
-    /// lack. Measured on the survey walks (file index i % 5 ≠ 4) of Indoor Location
-    /// Competition 2.0 site 1, floors B1-F4 (one OPPO PBCM10 at 50 Hz, 459 walks), with
-    /// `examples/pdr_real.rs` and `WAYMARK_MOTION_CONFIG`: the Weinberg step length fitted
-    /// there errs by 14.3 % per walk (leave-one-walk-out mean) at the former 12 with roughness
-    /// 3, 9.4 % at 25 with roughness 3, 8.8 % at 25 with roughness 4 (the constant length:
-    /// 15.9 %, 10.7 %, 10.5 %). A one-off instrumented run over the same walks (both checks
-    /// off, raw detections inside walking bouts logged from `GaitValidator::offer`) found
-    /// 8.0 % of 22 841 detections above 12 m/s², 0.67 % above 20, 0.14 % above 25. Vigorous
-    /// shaking reaches 10-30 m/s²; the cadence, regularity and roughness checks reject it:
-    /// in the simulator sweep (seed 11, 3 runs) 25 still counted no step shaken, and
-    /// `tests/sensors.rs` still passes.
+    /// lack; 25 keeps nearly all of them on real walks, where a lower cap broke runs of real
+    /// steps (docs/tuning.md#step-detector). Vigorous shaking reaches 10-30 m/s²; the cadence,
+    /// regularity and roughness checks reject it.
     pub max_step_acceleration_mps2: f64,
     /// A run of steps is confirmed only if, for each, the peak-to-peak of the raw
     /// gravity-free norm is at most this many times that of the smoothed one ("roughness"):
     /// the 0.25 s average passes a walking rhythm (ratio 1.3-2) and removes the 3-6 Hz of
-    /// hand shaking. Not applied to steps within a confirmed run. Default 3: measured with
-    /// the detectors instrumented, 99 % of walking steps were below 2.0-2.3 at 20-200 Hz and
-    /// half of the raw detections while shaking above 2.9-3.3; in the sweep, without this
-    /// check 12 steps were counted in the 2 h of shaking, with 2.5 none but 0.07 % fewer
-    /// walking steps. Default raised from 3 to 4 by real walks: in the instrumented run of
-    /// `max_step_acceleration_mps2`, 7.4 % of the raw detections inside walking bouts had a
-    /// roughness above 3 at 50 Hz (the heel-strike spikes), 2.4 % above 4, so 3 broke runs
-    /// of real steps before they could be confirmed; the per-walk step length error went from
-    /// 9.4 % to 8.8 % (see there). With 4 the simulator sweep (seed 11, 3 runs) still
-    /// counted no step shaken.
+    /// hand shaking. Not applied to steps within a confirmed run. Default 4: between simulated
+    /// walking and shaking, and above the heel-strike spikes of real walks, which broke runs of
+    /// real steps at 3 (docs/tuning.md#step-detector).
     pub max_step_roughness: f64,
     /// Time constant of the low-pass filter that takes gravity's direction from the
     /// accelerometer (turned by the gyroscope between samples when there is one), s. Default
-    /// 1 s: measured, heading RMSE fused / compass-only 4.09° / 27.8° at 0.5 s, 4.03° / 24.7°
-    /// at 1 s, 4.33° / 24.8° at 2 s.
+    /// 1 s (docs/tuning.md#heading-filter).
     pub gravity_lowpass_s: f64,
     /// One standard deviation of the tilt-compensated compass heading in a clean field, rad.
     /// Default 10°: HIPE Table 2, stationary RMSE 9.5° and 12.2°.
     pub compass_sigma_rad: f64,
     /// Correlation time of compass errors, s: successive compass samples closer than this are
     /// not independent, so each sample's variance is scaled by `correlation / dt` and the
-    /// filter's trust in the compass does not depend on the sampling rate. Default 1 s:
-    /// measured, fused RMSE 4.12° at 0.3 s, 4.03° at 1 s, 4.25° at 3 s.
+    /// filter's trust in the compass does not depend on the sampling rate. Default 1 s
+    /// (docs/tuning.md#heading-filter).
     pub compass_correlation_s: f64,
     /// Growth of the heading variance while integrating the gyroscope, rad/√s: gyro noise,
-    /// uncorrected bias and the phone turning in the hand, as a random walk. Default 3°/√s:
-    /// measured, fused RMSE 7.24° at 0.5, 5.03° at 1, 4.03° at 3, 4.14° at 6°/√s (the
-    /// simulated gyro has a 0.3°/s bias per axis, which only the compass corrects).
+    /// uncorrected bias and the phone turning in the hand, as a random walk. Default 3°/√s
+    /// (docs/tuning.md#heading-filter).
     pub gyro_heading_noise: f64,
     /// Growth of the heading variance without a gyroscope (compass-only mode), rad/√s: how fast
-    /// a walker may turn unobserved. Default 30°/√s: measured, compass-only RMSE 28.1° at 10,
-    /// 24.7° at 30, 23.5° at 60°/√s, but at 60 a fifth of the epochs lose their heading (σ
-    /// above 55°) against a tenth at 30.
+    /// a walker may turn unobserved. Default 30°/√s: a larger one errs little less but loses
+    /// the heading in more epochs (docs/tuning.md#heading-filter).
     pub free_heading_noise: f64,
     /// Added in quadrature to the filter's heading sigma: the phone is not exactly aligned
     /// with the direction of walking (the simulator holds it up to 4° off), and the compass
-    /// has biases the filter cannot see, rad. Default 3°. Measured, the reported fused sigma
-    /// averaged 7.05° against an RMSE of 4.03° (6.36° with no floor): conservative.
+    /// has biases the filter cannot see, rad. Default 3°, which leaves the reported sigma
+    /// conservative (docs/tuning.md#heading-filter).
     pub heading_sigma_floor_rad: f64,
     /// Headings less certain than this are not reported (the epoch has no measured heading),
     /// rad. Default 55°: HIPE Table 4, tolerated heading error.
     pub max_heading_sigma_rad: f64,
     /// The compass is disturbed when the field's magnitude differs from the Earth's by more
-    /// than this, µT. Default 5 µT, about 10 % of the Earth's 22-67 µT. Measured, fused RMSE
-    /// 3.69° at 3, 4.03° at 5, 4.47° at 8 µT; 5 rather than 3 because a real magnetometer's
-    /// calibration leaves a few µT of magnitude error as the phone turns, which the
-    /// simulator does not model.
+    /// than this, µT. Default 5 µT, about 10 % of the Earth's 22-67 µT; not less, because a
+    /// real magnetometer's calibration leaves a few µT of magnitude error as the phone turns,
+    /// which the simulator does not model (docs/tuning.md#heading-filter).
     pub field_tolerance_ut: f64,
     /// The compass is disturbed when the field's dip differs from the Earth's by more than
-    /// this, rad. Default 5°: measured, fused / compass-only RMSE 3.77° / 52.4° at 3° (the
-    /// compass-only dip, without a gyroscope to steady gravity, then trips it half the time),
-    /// 4.03° / 24.7° at 5°, 6.22° / 21.0° at 8°.
+    /// this, rad. Default 5°: a tighter one trips on the dip of a compass without a gyroscope
+    /// to steady gravity (docs/tuning.md#heading-filter).
     pub dip_tolerance_rad: f64,
     /// The compass is disturbed when, over one second, its heading changes by this much more
-    /// or less than the gyroscope says the phone turned, rad. Default 10°: measured, fused
-    /// RMSE 4.19° at 6°, 4.03° at 10°, 4.00° at 15° (15° flags less; 10° kept as the margin
-    /// for compass errors the other tests miss).
+    /// or less than the gyroscope says the phone turned, rad. Default 10°: a margin for
+    /// compass errors the other tests miss (docs/tuning.md#heading-filter).
     pub disagreement_rad: f64,
     /// A disturbance is held for this long after the last sample that showed it, s. Default
-    /// 2 s, about two metres of walking (steel disturbs the field over a few metres):
-    /// measured, fused / compass-only RMSE 4.11° / 21.7° at 1 s, 4.03° / 24.7° at 2 s,
-    /// 3.96° / 33.2° at 4 s.
+    /// 2 s, about two metres of walking (steel disturbs the field over a few metres)
+    /// (docs/tuning.md#heading-filter).
     pub disturbance_hold_s: f64,
     /// A disturbed compass sample's variance is multiplied by this. Default 10 000 (σ × 100):
     /// the sample is all but ignored, yet the filter still starts from a disturbed compass
-    /// rather than having no heading at all. Measured, 100 gave 4.14° fused RMSE against
-    /// 4.03°.
+    /// rather than having no heading at all (docs/tuning.md#heading-filter).
     pub disturbed_variance_factor: f64,
     /// Relative standard deviation of the distance walked. Default 0.08: HIPE §5.2 / Table 3,
     /// a generic step length errs by about ±8 % for a specific pedestrian.
     pub distance_sigma_fraction: f64,
     /// A stream gap longer than this resets the filters that depend on continuity and does
     /// not count as covered, s. Default 0.5 s: ten periods of a 20 Hz stream, half the longest
-    /// step (1 / `min_cadence_hz`); measured, 0.25 s changed nothing. (A gap longer than the
+    /// step (1 / `min_cadence_hz`) (docs/tuning.md#step-detector). (A gap longer than the
     /// smoothing window restarts the step detector in any case.)
     pub max_gap_s: f64,
     /// A stream buffered for longer than this without `update` loses its oldest samples

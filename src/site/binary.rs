@@ -1,7 +1,7 @@
 //! The binary site encoding: what an app ships and loads. JSON stays the interchange form
 //! (`waymark survey` writes it, people read and diff it); `waymark site pack` turns it into
-//! this, which loads a 10 000-state site in a fraction of the time and without the JSON
-//! parser's garbage (issue 7: 396 ms and 113 MB resident from JSON).
+//! this, which loads a large site in a fraction of the time and memory the JSON parser needs
+//! (docs/tuning.md#engine-speed).
 //!
 //! Layout, all integers little-endian:
 //!
@@ -22,7 +22,7 @@
 //! the same error paths (`states[12].fingerprint[3]`). The levels are those the radio map
 //! stores anyway, so JSON → binary → JSON is exact.
 
-use super::file::{parse_json, Fingerprints};
+use super::schema::{parse_json, Columns, Fingerprints};
 use super::{Site, SiteError};
 use crate::radio::LEVEL_STEP_DB;
 
@@ -39,40 +39,6 @@ pub(super) fn is_binary(bytes: &[u8]) -> bool {
 
 fn damaged(message: impl Into<String>) -> SiteError {
     SiteError::Damaged { message: message.into() }
-}
-
-/// The fingerprint columns of a binary site file, read in place.
-pub(super) struct Columns<'a> {
-    counts: &'a [u8],
-    tx: &'a [u8],
-    mean: &'a [u8],
-    std: &'a [u8],
-}
-
-impl Columns<'_> {
-    /// Number of entries.
-    pub(super) fn len(&self) -> usize {
-        self.tx.len() / 4
-    }
-
-    /// Entries of state `i`.
-    pub(super) fn count(&self, i: usize) -> usize {
-        u32_at(self.counts, i) as usize
-    }
-
-    /// Entry `k` as (transmitter, mean dBm, σ dB).
-    pub(super) fn entry(&self, k: usize) -> (usize, f64, f64) {
-        let mean = i16::from_le_bytes([self.mean[2 * k], self.mean[2 * k + 1]]);
-        let std = u16::from_le_bytes([self.std[2 * k], self.std[2 * k + 1]]);
-        // Division, not multiplication by LEVEL_STEP_DB: the nearest double to the level, so
-        // that it prints as written (-67.31, not -67.31000000000001).
-        let step = 1.0 / LEVEL_STEP_DB;
-        (u32_at(self.tx, k) as usize, f64::from(mean) / step, f64::from(std) / step)
-    }
-}
-
-fn u32_at(bytes: &[u8], i: usize) -> u32 {
-    u32::from_le_bytes([bytes[4 * i], bytes[4 * i + 1], bytes[4 * i + 2], bytes[4 * i + 3]])
 }
 
 /// Reads a binary site file front to back, naming what is missing when it ends early.

@@ -1,4 +1,4 @@
-//! Site file v1: serde JSON with a `format_version`. Loading checks everything an engine relies
+//! Site files: serde JSON with a `format_version` ([`FORMAT_VERSION`]). Loading checks everything an engine relies
 //! on and names what is wrong and where; it never panics.
 //!
 //! A site file may hold salted hashes of its transmitter ids instead of raw MAC addresses and
@@ -10,172 +10,18 @@
 //! `{"name": "kitchen", "kind": "room", "states": [state ids]}`, each state in at most one
 //! zone. Files without `zones` are read, and written, exactly as before.
 
-use super::{Calibration, Edge, Floor, North, Site, State, StateKind, ZoneKind};
+use super::error::invalid;
+use super::schema::{
+    parse_json, EdgeFile, FingerprintFile, Fingerprints, FloorFile, GaussianFile, IdHashFile, RadioFile,
+    SiteFile, StateFile, ZoneFile, FORMAT_VERSION,
+};
+use super::{Edge, Floor, Site, SiteError, State};
 use crate::radio::{
-    Gaussian, RadioMap, RssiModel, Salt, ScanHasher, TransmitterId, HASH_HEX_DIGITS, ID_HASH_SCHEME,
-    ID_HASH_VERSION, MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB,
+    Gaussian, RadioMap, Salt, ScanHasher, HASH_HEX_DIGITS, ID_HASH_SCHEME, ID_HASH_VERSION,
+    MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB,
 };
 use nalgebra::Point2;
-use serde::{Deserialize, Serialize};
 use std::collections::HashMap;
-use std::path::Path;
-
-/// The site-file format this build reads and writes.
-pub const FORMAT_VERSION: u32 = 1;
-
-/// Why a site file could not be loaded.
-#[derive(Clone, Debug, PartialEq, thiserror::Error)]
-pub enum SiteError {
-    /// The file could not be read.
-    #[error("cannot read site file {path}: {message}")]
-    Io {
-        /// The path given.
-        path: String,
-        /// The operating system's reason.
-        message: String,
-    },
-    /// The JSON ends early: a truncated download or copy.
-    #[error("site file is truncated (JSON ends at line {line}, column {column})")]
-    Truncated {
-        /// 1-based line.
-        line: usize,
-        /// 1-based column.
-        column: usize,
-    },
-    /// Not JSON at all at some point.
-    #[error("site file is not valid JSON at line {line}, column {column}: {message}")]
-    Syntax {
-        /// 1-based line.
-        line: usize,
-        /// 1-based column.
-        column: usize,
-        /// serde_json's description.
-        message: String,
-    },
-    /// Written by a newer (or unknown) version of the format.
-    #[error("site file has format_version {found}; this build of Waymark reads version {supported}")]
-    UnsupportedVersion {
-        /// The version in the file.
-        found: u64,
-        /// The version this build reads.
-        supported: u32,
-    },
-    /// Valid JSON, but a field is missing, of the wrong type, or its value is impossible.
-    #[error("site file: {path}: {message}")]
-    Invalid {
-        /// Where, as a JSON path (`states[12].fingerprint[3].std_db`).
-        path: String,
-        /// What is wrong.
-        message: String,
-    },
-    /// A binary site file that was cut short or changed after it was written (its checksum
-    /// differs), or whose parts do not fit together.
-    #[error("binary site file is damaged: {message}")]
-    Damaged {
-        /// What is wrong, and where.
-        message: String,
-    },
-    /// A binary site file in a newer (or unknown) layout.
-    #[error(
-        "binary site file has layout version {found}; this build of Waymark reads layout version {supported}"
-    )]
-    UnsupportedLayout {
-        /// The layout version in the file.
-        found: u32,
-        /// The layout version this build reads.
-        supported: u32,
-    },
-    /// The transmitter ids are hashed with a scheme this build does not know (a newer one).
-    #[error(
-        "site file hashes its transmitter ids with {scheme} version {version}; this build knows {} version {}",
-        ID_HASH_SCHEME,
-        ID_HASH_VERSION
-    )]
-    UnsupportedIdHash {
-        /// The scheme in the file.
-        scheme: String,
-        /// Its version.
-        version: u32,
-    },
-    /// The site's transmitter ids are salted hashes and no salt was given, so no scan could
-    /// match.
-    #[error("the site's transmitter ids are hashed ({ID_HASH_SCHEME} version {ID_HASH_VERSION}): the engine needs the site's salt")]
-    SaltRequired,
-    /// The salt given is not the one the site's ids were hashed with (its salt check differs),
-    /// so no scan could match.
-    #[error(
-        "the salt given is not the one this site's transmitter ids were hashed with (the salt check differs)"
-    )]
-    WrongSalt,
-}
-
-fn invalid(path: impl Into<String>, message: impl Into<String>) -> SiteError {
-    SiteError::Invalid { path: path.into(), message: message.into() }
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct SiteFile {
-    format_version: u32,
-    name: String,
-    #[serde(default)]
-    north: North,
-    floors: Vec<FloorFile>,
-    radio: RadioFile,
-    pub(super) states: Vec<StateFile>,
-    #[serde(default)]
-    edges: Vec<EdgeFile>,
-    #[serde(default, skip_serializing_if = "Calibration::is_empty")]
-    calibration: Calibration,
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    zones: Vec<ZoneFile>,
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct ZoneFile {
-    name: String,
-    #[serde(default)]
-    kind: ZoneKind,
-    /// State ids.
-    states: Vec<u32>,
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct FloorFile {
-    name: String,
-    #[serde(default)]
-    elevation_m: f64,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    rssi_weight: Option<f64>,
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    rssi_weight_without_movement: Option<f64>,
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct RadioFile {
-    #[serde(default)]
-    model: RssiModel,
-    clip_dbm: f64,
-    unheard: GaussianFile,
-    /// Present when `transmitters` are salted hashes.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    id_hash: Option<IdHashFile>,
-    transmitters: Vec<TransmitterId>,
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct IdHashFile {
-    /// `hmac-sha256-128`.
-    scheme: String,
-    /// 1.
-    version: u32,
-    /// HMAC-SHA256(salt, "waymark salt check"), 128 bits as hex.
-    salt_check: String,
-}
 
 /// How a site's transmitter ids are hashed: [`ID_HASH_SCHEME`] version [`ID_HASH_VERSION`]
 /// (the only one this build reads), and the salt check that tells the right salt.
@@ -188,58 +34,6 @@ impl IdHashing {
     /// HMAC-SHA256(salt, `waymark salt check`), 128 bits as 32 lower-case hex digits.
     pub fn salt_check(&self) -> &str {
         &self.salt_check
-    }
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct GaussianFile {
-    mean_dbm: f64,
-    std_db: f64,
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct StateFile {
-    id: u32,
-    floor: usize,
-    x: f64,
-    y: f64,
-    #[serde(default)]
-    kind: StateKind,
-    #[serde(default)]
-    training_scans: u32,
-    /// Empty in the header of a binary site file, whose fingerprints follow in columns.
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
-    pub(super) fingerprint: Vec<FingerprintFile>,
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-pub(super) struct FingerprintFile {
-    /// Index into `radio.transmitters`.
-    tx: usize,
-    mean_dbm: f64,
-    std_db: f64,
-}
-
-#[derive(Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
-struct EdgeFile {
-    /// State id.
-    from: u32,
-    /// State id.
-    to: u32,
-    /// Walking length; required between floors, else the straight-line distance.
-    #[serde(default, skip_serializing_if = "Option::is_none")]
-    length_m: Option<f64>,
-}
-
-fn json_error(e: &serde_json::Error) -> SiteError {
-    let (line, column) = (e.line(), e.column());
-    match e.classify() {
-        serde_json::error::Category::Eof => SiteError::Truncated { line, column },
-        _ => SiteError::Syntax { line, column, message: e.to_string() },
     }
 }
 
@@ -267,77 +61,10 @@ fn gaussian(path: impl FnOnce() -> String, g: &GaussianFile) -> Result<Gaussian,
         })
 }
 
-/// Why a file that does not parse is not a site file of this version, if it is not: a
-/// missing or other `format_version` says more than the first field that fails to parse.
-fn check_version(bytes: &[u8]) -> Result<(), SiteError> {
-    #[derive(Deserialize)]
-    struct Version {
-        format_version: Option<serde_json::Value>,
-    }
-    let version: Version = serde_json::from_slice(bytes).map_err(|e| json_error(&e))?;
-    match version.format_version {
-        None => Err(invalid("format_version", "missing: is this a Waymark site file?")),
-        Some(v) => match v.as_u64() {
-            Some(found) if found == u64::from(FORMAT_VERSION) => Ok(()),
-            Some(found) => Err(SiteError::UnsupportedVersion { found, supported: FORMAT_VERSION }),
-            None => Err(invalid("format_version", format!("expected an integer, found {v}"))),
-        },
-    }
-}
-
-/// Parses (but does not validate) a JSON site file of this format version.
-pub(super) fn parse_json(bytes: &[u8]) -> Result<SiteFile, SiteError> {
-    let mut de = serde_json::Deserializer::from_slice(bytes);
-    let parsed: Result<SiteFile, _> = serde_path_to_error::deserialize(&mut de);
-    // The version is checked first only when the file does not parse as this version:
-    // reading the document twice doubled the load time of a 10 000-state site.
-    match parsed {
-        Ok(file) if file.format_version == FORMAT_VERSION => Ok(file),
-        Ok(file) => Err(SiteError::UnsupportedVersion {
-            found: u64::from(file.format_version),
-            supported: FORMAT_VERSION,
-        }),
-        Err(e) => {
-            check_version(bytes)?;
-            let inner = e.inner();
-            Err(match inner.classify() {
-                serde_json::error::Category::Data => invalid(e.path().to_string(), inner.to_string()),
-                _ => json_error(inner),
-            })
-        }
-    }
-}
-
-/// Where a site file keeps its fingerprints.
-pub(super) enum Fingerprints<'a> {
-    /// In each state's `fingerprint` array (JSON).
-    Nested,
-    /// In columns after the header, state by state (binary); every state's array is empty.
-    Columns(&'a super::binary::Columns<'a>),
-}
-
 impl Site {
     /// Loads a site file from JSON bytes.
     pub fn from_json(bytes: &[u8]) -> Result<Site, SiteError> {
         Site::from_file(parse_json(bytes)?, Fingerprints::Nested)
-    }
-
-    /// Loads a site file in either encoding: binary ([`Site::to_binary`]) when the bytes start
-    /// with its signature, JSON otherwise.
-    pub fn from_bytes(bytes: &[u8]) -> Result<Site, SiteError> {
-        if super::binary::is_binary(bytes) {
-            super::binary::decode(bytes)
-        } else {
-            Site::from_json(bytes)
-        }
-    }
-
-    /// Loads a site file from disk.
-    pub fn load(path: impl AsRef<Path>) -> Result<Site, SiteError> {
-        let path = path.as_ref();
-        let bytes = std::fs::read(path)
-            .map_err(|e| SiteError::Io { path: path.display().to_string(), message: e.to_string() })?;
-        Site::from_bytes(&bytes)
     }
 
     /// The site as site-file JSON (current format version).
@@ -650,6 +377,8 @@ fn id_hashing(radio: &RadioFile) -> Result<Option<IdHashing>, SiteError> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::radio::TransmitterId;
+    use crate::site::ZoneKind;
 
     const GOOD: &str = r#"{
       "format_version": 1,
@@ -706,8 +435,8 @@ mod tests {
     fn errors_say_what_and_where() {
         assert!(matches!(err("{\"format_version\": 1,, }"), SiteError::Syntax { line: 1, .. }));
         assert!(matches!(
-            err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 2")),
-            SiteError::UnsupportedVersion { found: 2, supported: 1 }
+            err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 3")),
+            SiteError::NewerFormat { found: 3, supported: 2 }
         ));
         let cases = [
             (GOOD.replace("\"format_version\": 1,", ""), "format_version"),

@@ -4,22 +4,27 @@
 
 mod binary;
 mod builder;
+mod error;
 mod file;
 mod pseudo;
 mod reach;
+mod schema;
 mod zones;
 
 pub use binary::{LAYOUT_VERSION as BINARY_LAYOUT_VERSION, SIGNATURE as BINARY_SIGNATURE};
 pub use builder::fit_columns;
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
-pub use file::{IdHashing, SiteError, FORMAT_VERSION, MAX_COORDINATE_M};
+pub use error::SiteError;
+pub use file::{IdHashing, MAX_COORDINATE_M};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
 pub use reach::ReachTable;
+pub use schema::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
 pub use zones::{most_likely_zone, Zone, ZoneKind, MAX_ZONES};
 
 use crate::radio::RadioMap;
 use nalgebra::Point2;
 use serde::{Deserialize, Serialize};
+use std::path::Path;
 use std::sync::{Arc, Mutex};
 
 /// A floor of the site.
@@ -159,21 +164,15 @@ pub struct Calibration {
 
 /// A scan that comes longer than this after the one before it, s, is a sparse scan, and the
 /// epochs until the next scan are in the sparse regime ([`SparseScans`]). 10 s lies between
-/// the scan intervals of an unthrottled phone (99th percentile 2.1-3.8 s on the five
-/// competition floors' survey walks, `waymark eval ... --json`,
-/// `survey.floors[].scan_interval_p99_s`) and Android 9+'s throttling of a foreground app to
-/// 4 scans in 2 minutes (30 s apart on average).
+/// an unthrottled phone's scan intervals and Android 9+'s throttling of a foreground app to 4
+/// scans in 2 minutes (30 s apart on average) (docs/tuning.md#sparse-scans).
 pub const SPARSE_SCAN_GAP_S: f64 = 10.0;
 
 /// Upper ends of the bands of time since a sparse scan, s, each with its own radius factors
 /// ([`SparseScans::accuracy_scale_by_since`]); the last band is open. After a sparse scan the
-/// posterior's own radii first hold too little of the truth, then enough: on the five
-/// competition floors' held-out survey walks replayed with one scan every 30 s, the 68%
-/// factor fitted 1.95 within 2 s of the scan, 1.62 at 2-5 s, 1.30 at 5-10 s, 1.09 at 10-20 s
-/// and 1.02 beyond, where one factor for every epoch with steps and heading is 1.57
-/// (`waymark eval target/ilc/site1/{B1,F1,F2,F3,F4} --throttle --json`,
-/// `calibration.sparse_scans`). Narrow bands where the factor changes fast, none shorter than
-/// the replay's 2 s timer epoch.
+/// posterior's own radii first hold too little of the truth, then enough, so the bands are
+/// narrow where the fitted factor changes fast, none shorter than the replay's 2 s timer
+/// epoch (docs/tuning.md#sparse-scans).
 pub const SINCE_SPARSE_SCAN_BANDS_S: [f64; 4] = [2.0, 5.0, 10.0, 20.0];
 
 /// What differs when scans are far apart ([`SPARSE_SCAN_GAP_S`]): the motion has carried
@@ -382,9 +381,8 @@ pub struct Site {
 /// map's ([`ReachTable::build_surveyed`]).
 type ReachTables = (Arc<ReachTable>, Option<Arc<ReachTable>>);
 
-/// [`Site::reach_tables`]'s memory: the tables of the latest few radii asked for. Building
-/// them was 30% of `waymark eval`'s time (perf, F2 split) when every replay's engine built
-/// its own.
+/// [`Site::reach_tables`]'s memory: the tables of the latest few radii asked for, shared by
+/// every engine on the site, since building them is costly (docs/tuning.md#unsurveyed-states).
 #[derive(Clone, Default)]
 struct ReachCache(Arc<Mutex<Vec<(u64, ReachTables)>>>);
 
@@ -561,6 +559,26 @@ fn median_edge_length(edges: &[Edge]) -> f64 {
     let mut lengths: Vec<f64> = edges.iter().map(|e| e.length_m).collect();
     lengths.sort_by(f64::total_cmp);
     lengths[lengths.len() / 2]
+}
+
+impl Site {
+    /// Loads a site file in either encoding: binary ([`Site::to_binary`]) when the bytes start
+    /// with its signature, JSON otherwise.
+    pub fn from_bytes(bytes: &[u8]) -> Result<Site, SiteError> {
+        if binary::is_binary(bytes) {
+            binary::decode(bytes)
+        } else {
+            Site::from_json(bytes)
+        }
+    }
+
+    /// Loads a site file from disk.
+    pub fn load(path: impl AsRef<Path>) -> Result<Site, SiteError> {
+        let path = path.as_ref();
+        let bytes = std::fs::read(path)
+            .map_err(|e| SiteError::Io { path: path.display().to_string(), message: e.to_string() })?;
+        Site::from_bytes(&bytes)
+    }
 }
 
 #[cfg(test)]

@@ -46,8 +46,7 @@ impl ReachTable {
     /// [`StateKind::Unsurveyed`] states (`None` without): paths and targets keep to the other
     /// states, and an unsurveyed state reaches only itself. The engine predicts with it while
     /// the radio explains what it hears, so that the states at the map's edge do not leak mass
-    /// into space the radio has ruled out (measured on the F2 split before this table:
-    /// held-out error on the map 5.144 → 5.26 m with a 10 m margin of unsurveyed states).
+    /// into space the radio has ruled out (docs/tuning.md#unsurveyed-states).
     pub fn build_surveyed(site: &Site, radius_m: f64) -> Option<Self> {
         site.states()
             .iter()

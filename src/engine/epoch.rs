@@ -1,0 +1,244 @@
+//! One epoch: the scan's emissions, the filter step, the estimate and its publication.
+
+use super::input::check_motion;
+use super::{Engine, Position, StatusEvent, TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM};
+use crate::error::InputError;
+use crate::history::{EpochInput, EpochRecord, History};
+use crate::hmm::estimate;
+use crate::radio::Scan;
+use crate::sensors::MotionUpdate;
+use crate::site::most_likely_zone;
+
+impl Engine {
+    pub(super) fn scan_epoch(
+        &mut self,
+        scan: &Scan,
+        motion: Option<&MotionUpdate>,
+    ) -> Result<Position, InputError> {
+        self.check_time(scan.timestamp_ns)?;
+        motion.map_or(Ok(()), check_motion)?;
+        if scan.readings.is_empty() {
+            return Err(InputError::EmptyScan);
+        }
+        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !plausible_rssi(r.rssi_dbm))
+        {
+            return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
+        }
+        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| r.rssi_dbm > MAX_RSSI_DBM) {
+            let transmitter = r.transmitter.to_string();
+            return Err(InputError::RssiTooHigh { index, transmitter, rssi_dbm: r.rssi_dbm });
+        }
+        let max_age_ns = self.config.max_reading_age_ns;
+        let resolved = match &mut self.id_hasher {
+            Some(hasher) => self.site.radio().resolve(hasher.hash_scan(scan), max_age_ns),
+            None => self.site.radio().resolve(scan, max_age_ns),
+        };
+        if resolved.observations.is_empty() {
+            return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
+        }
+        let ln_unheard = self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
+        let best = self.ln_emission.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        let radio_fit = (best - ln_unheard) / resolved.observations.len() as f64;
+        // Only with an estimate to carry on from: the first scan, unexplained or not, is all
+        // there is to go on.
+        let unexplained =
+            self.latest.is_some() && self.radio_fit_floor.is_some_and(|floor| radio_fit < floor);
+        let dropped = [resolved.unknown, resolved.duplicates, resolved.stale].map(|n| n as u64);
+        // Accepted from here on: the state changes.
+        Ok(self.atomically(motion.is_none(), |engine| {
+            let motion = engine.motion_until(scan.timestamp_ns, motion);
+            engine.scan_timing = engine.scan_timing.after_scan(scan.timestamp_ns);
+            if let Some(gamma) = engine.epoch_rssi_weight(scan.timestamp_ns, &motion) {
+                for e in engine.ln_emission.iter_mut() {
+                    *e *= gamma;
+                }
+            }
+            engine.stats.scans_accepted += 1;
+            engine.stats.readings_unknown += dropped[0];
+            engine.stats.readings_duplicate += dropped[1];
+            engine.stats.readings_stale += dropped[2];
+            if unexplained {
+                // Beyond the map the fingerprints would pull the estimate to whichever states
+                // sound least unlike the scan: the motion alone moves it.
+                engine.ln_emission.fill(0.0);
+                engine.stats.scans_unexplained += 1;
+            }
+            engine.epoch_radio_fit = radio_fit.is_finite().then_some((radio_fit, unexplained));
+            engine.run_epoch(scan.timestamp_ns, EpochInput::Scan, None, &motion)
+        }))
+    }
+
+    /// Prediction, update, estimate, publication, history. `ln_emission` holds the observation
+    /// (zeros for motion alone); `allowed` is the user's feedback at this epoch.
+    pub(super) fn run_epoch(
+        &mut self,
+        timestamp_ns: u64,
+        input: EpochInput,
+        allowed: Option<Vec<u32>>,
+        motion: &MotionUpdate,
+    ) -> Position {
+        let dt_s = self.last_epoch_ns.map(|last| (timestamp_ns - last) as f64 * 1e-9);
+        let radio = self.epoch_radio_fit.take().filter(|_| input == EpochInput::Scan);
+        let beyond_radio_m = self.beyond_radio_m(radio.map(|r| r.1), dt_s, motion);
+        let radio_fit = radio.map(|r| r.0);
+        let was_off_map = self.unexplained_run >= UNSURVEYED_AFTER_SCANS;
+        if let Some((_, unexplained)) = radio {
+            self.unexplained_run = if unexplained { self.unexplained_run.saturating_add(1) } else { 0 };
+        }
+        let off_map = self.unexplained_run >= UNSURVEYED_AFTER_SCANS;
+        // Back from beyond the map, the mass out there needs the whole table to come home.
+        self.whole_reach = was_off_map || off_map;
+        if !off_map {
+            // On the map (as far as the radio says): the unsurveyed states around it are out.
+            for &i in &self.unsurveyed {
+                self.ln_emission[i] = f64::NEG_INFINITY;
+            }
+        }
+        let evidence = self.forward(timestamp_ns, dt_s, motion);
+        self.last_epoch_ns = Some(timestamp_ns);
+        let position = self.locate(Position {
+            timestamp_ns,
+            floor: 0,
+            floor_probability: 0.0,
+            zone: None,
+            zone_probability: 0.0,
+            x: 0.0,
+            y: 0.0,
+            accuracy_m: 0.0,
+            accuracy_95_m: 0.0,
+            heading_rad: motion.heading_rad,
+            heading_accuracy_rad: motion.heading_rad.map(|_| motion.heading_sigma_rad),
+            motion_state: motion.motion_state,
+            scenario: motion.scenario,
+            steps: motion.steps,
+            radio_log_evidence: (input == EpochInput::Scan).then_some(evidence),
+            radio_fit,
+            beyond_radio_m,
+        });
+        self.conclude(position, |history, p| {
+            history.push(EpochRecord {
+                timestamp_ns,
+                input,
+                floor: p.floor,
+                x: p.x,
+                y: p.y,
+                accuracy_m: p.accuracy_m,
+                allowed,
+            })
+        })
+    }
+
+    /// `position` with the estimate from the current posterior: floor, (x, y), radii, zone.
+    pub(super) fn locate(&mut self, position: Position) -> Position {
+        let e = estimate(
+            &self.site,
+            self.filter.posterior(),
+            self.config.estimate_states,
+            self.config.accuracy_mass,
+            &mut self.scratch,
+        );
+        let sparse = self.scan_timing.sparse_band(position.timestamp_ns);
+        let scale = sparse
+            .and_then(|band| self.sparse_scans.accuracy_scale_by_since[band])
+            .unwrap_or(self.accuracy_scale[position.scenario.index()]);
+        let (zone, zone_probability) = if self.site.zones().is_empty() {
+            (None, 1.0)
+        } else {
+            let outside = self.site.zone_mass(self.filter.posterior(), &mut self.zone_mass);
+            most_likely_zone(&self.zone_mass, outside)
+        };
+        Position {
+            floor: e.floor,
+            floor_probability: e.floor_probability,
+            zone,
+            zone_probability,
+            x: e.position.x,
+            y: e.position.y,
+            accuracy_m: e.accuracy_m * scale[0] + position.beyond_radio_m,
+            accuracy_95_m: (e.accuracy_95_m * scale[1]).max(e.accuracy_m * scale[0])
+                + position.beyond_radio_m,
+            ..position
+        }
+    }
+
+    /// Publishes `position`, makes it the latest and records it in the history, last: nothing
+    /// after a possible panic, so the history needs no undo.
+    pub(super) fn conclude(
+        &mut self,
+        position: Position,
+        record: impl FnOnce(&mut History, &Position),
+    ) -> Position {
+        self.publish(&position);
+        if cfg!(feature = "fault-injection") && position.timestamp_ns == FAULT_INJECTION_MID_EPOCH_NS {
+            panic!("fault injected in the middle of the epoch at {}", position.timestamp_ns);
+        }
+        self.latest = Some(position.clone());
+        record(&mut self.history, &position);
+        position
+    }
+
+    pub(super) fn publish(&mut self, position: &Position) {
+        let mut events = Vec::new();
+        if let Some(previous) = &self.latest {
+            if previous.scenario != position.scenario {
+                events.push(StatusEvent::ScenarioChanged {
+                    timestamp_ns: position.timestamp_ns,
+                    from: previous.scenario,
+                    to: position.scenario,
+                });
+            }
+            if previous.motion_state != position.motion_state {
+                events.push(StatusEvent::MotionStateChanged {
+                    timestamp_ns: position.timestamp_ns,
+                    from: previous.motion_state,
+                    to: position.motion_state,
+                });
+            }
+        }
+        let revised = self.revise_track();
+        for (_, listener) in &mut self.listeners {
+            for event in &events {
+                listener.on_status(event);
+            }
+            if !revised.is_empty() {
+                listener.on_track_revised(&revised);
+            }
+            listener.on_position(position);
+        }
+    }
+
+    /// The points of the Viterbi path, before the newest epoch, that differ from what was last
+    /// published.
+    pub(super) fn revise_track(&mut self) -> Vec<TrackPoint> {
+        let track = self.track();
+        let revised: Vec<TrackPoint> = match track.split_last() {
+            Some((_, earlier)) => earlier
+                .iter()
+                .filter(|p| {
+                    self.published_track
+                        .iter()
+                        .find(|q| q.timestamp_ns == p.timestamp_ns)
+                        .is_some_and(|q| q.state != p.state)
+                })
+                .cloned()
+                .collect(),
+            None => Vec::new(),
+        };
+        self.published_track = track;
+        revised
+    }
+}
+
+/// Unexplained scans in a row after which the estimate may leave the surveyed map for its
+/// unsurveyed states. One is not enough: the site's radio fit floor is the 5th percentile of
+/// scans on the map, so one scan in twenty on the map falls below it
+/// (docs/tuning.md#unsurveyed-states).
+const UNSURVEYED_AFTER_SCANS: u32 = 2;
+
+/// Whether an RSSI can be a measurement, as far as its lower end goes: finite and not below
+/// -1000 dBm (receivers report about -120 to +20). Below that it is a corrupt producer, as NaN
+/// is, and near -1e154 the squared deviation of every fingerprint overflows, so no state could
+/// explain the scan. Above [`MAX_RSSI_DBM`] is `RssiTooHigh`.
+fn plausible_rssi(rssi_dbm: f64) -> bool {
+    rssi_dbm.is_finite() && rssi_dbm >= -1000.0
+}

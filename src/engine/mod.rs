@@ -1,0 +1,348 @@
+//! The positioning session: takes inertial batches and scans in time order, runs one HMM epoch
+//! per scan (or per [`Engine::advance`] without radio), and publishes positions, status
+//! changes and track revisions to whoever polls or listens.
+//!
+//! The engine is single-threaded and deterministic, so a replay is exact; the FFI layer puts
+//! it behind a lock.
+
+mod epoch;
+mod input;
+mod transition;
+mod types;
+
+use crate::config::EngineConfig;
+use crate::error::Error;
+use crate::habits::{FixError, HabitError, HabitModel, HabitPrior, HabitReport};
+use crate::history::{EpochRecord, History};
+use crate::hmm::{estimate, ForwardFilter, ViterbiWindow};
+use crate::radio::ScanHasher;
+use crate::sensors::{MotionStats, MotionTracker};
+use crate::site::{ReachTable, Site, SparseScans};
+use std::sync::Arc;
+
+pub use types::{
+    EngineSnapshot, InputStats, Position, PositionListener, ScanTiming, StatusEvent, SubscriptionId,
+    TrackPoint,
+};
+
+/// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
+/// BLE transmit at most +36 dBm EIRP. A higher value is a corrupt producer, and one far higher
+/// (found by fuzzing, `engine_calls`: `f64::MAX` dBm) makes every state's log-likelihood
+/// -∞, so no state explains the scan. Values at or below the clip level are fine: they read as
+/// "not heard".
+pub const MAX_RSSI_DBM: f64 = 100.0;
+
+/// With the `fault-injection` feature (test builds only), an epoch (a scan or an advance) at
+/// this time panics after it has stepped the filter and the track, moved the clock, raised the
+/// counters and told the listeners, just before it stores the position: as half-done as an
+/// epoch gets. The engine must come out of it exactly as it was before the call.
+pub const FAULT_INJECTION_MID_EPOCH_NS: u64 = u64::MAX - 8;
+
+/// A positioning session on one site.
+pub struct Engine {
+    site: Arc<Site>,
+    config: EngineConfig,
+    reach: Arc<ReachTable>,
+    /// The surveyed map's own table ([`ReachTable::build_surveyed`]) when the site has
+    /// unsurveyed states: the prediction's while the radio explains what it hears.
+    map_reach: Option<Arc<ReachTable>>,
+    /// Whether the running epoch predicts over the whole table: it or the one before was
+    /// beyond the map.
+    whole_reach: bool,
+    filter: ForwardFilter,
+    viterbi: ViterbiWindow,
+    tracker: MotionTracker,
+    ln_emission: Vec<f64>,
+    scratch: Vec<(f64, f64)>,
+    last_epoch_ns: Option<u64>,
+    latest: Option<Position>,
+    published_track: Vec<TrackPoint>,
+    listeners: Vec<(SubscriptionId, Box<dyn PositionListener>)>,
+    next_subscription: u64,
+    stats: InputStats,
+    /// γ in effect per floor (the configuration's, else the floor's, else the site's) in
+    /// epochs with and without a movement likelihood.
+    rssi_weight: Vec<[Option<f64>; 2]>,
+    /// γ before the engine has a floor: the configuration's, else the site-wide one.
+    site_rssi_weight: [Option<f64>; 2],
+    /// γ per motion scenario in epochs without a movement likelihood (the site's calibration),
+    /// before the floor's.
+    scenario_rssi_weight: [Option<f64>; 4],
+    /// Factors on the 68% and 95% radii (the site's calibration), per motion scenario.
+    accuracy_scale: [[f64; 2]; 4],
+    /// Hashes scans' ids with the site's salt when the site's ids are hashed.
+    id_hasher: Option<ScanHasher>,
+    /// What the running epoch may change, as it was before (see [`Engine::atomically`]).
+    undo: Undo,
+    /// Posterior mass per zone, recomputed at each epoch.
+    zone_mass: Vec<f64>,
+    /// Recent epochs and the user's feedback, for a later learning pass.
+    history: History,
+    /// What the user's walks taught ([`Engine::learn_habits`]), and its transition multipliers.
+    habits: HabitModel,
+    habit_prior: HabitPrior,
+    /// The site's [`radio_fit_floor`](crate::site::Calibration::radio_fit_floor), when the
+    /// configuration takes the site's calibration.
+    radio_fit_floor: Option<f64>,
+    /// The radio fit of the scan of the running epoch, and whether it is below the floor.
+    epoch_radio_fit: Option<(f64, bool)>,
+    /// The site's [`StateKind::Unsurveyed`](crate::site::StateKind::Unsurveyed) states: they
+    /// hold the estimate only from a scan the map does not explain until one it does.
+    unsurveyed: Vec<usize>,
+    /// Scans in a row, up to the latest, that the map did not explain.
+    unexplained_run: u32,
+    /// The site's calibration for scans far apart.
+    sparse_scans: SparseScans,
+    /// When the latest accepted scan came, and how long after the one before.
+    scan_timing: ScanTiming,
+}
+
+/// What an epoch changes besides the filter and the Viterbi window, which keep their own
+/// checkpoints: saved before it, so that a panic inside can be undone.
+#[derive(Default)]
+struct Undo {
+    last_epoch_ns: Option<u64>,
+    unexplained_run: u32,
+    scan_timing: ScanTiming,
+    latest: Option<Position>,
+    published_track: Vec<TrackPoint>,
+    stats: InputStats,
+    /// Only for an epoch that takes its motion from the tracker.
+    tracker: Option<MotionTracker>,
+}
+
+impl Engine {
+    /// A session on `site`. Takes the site's walking-distance tables ([`Site::reach_tables`]:
+    /// built by the first engine at this radius, shared by the rest): all allocation happens
+    /// here.
+    /// A site whose transmitter ids are hashed needs its salt in `config.site_salt`.
+    pub fn new(site: Arc<Site>, config: EngineConfig) -> Result<Self, Error> {
+        config.validate()?;
+        let id_hasher = site.scan_hasher(config.site_salt.as_ref())?;
+        let n = site.states().len();
+        let (reach, map_reach) = site.reach_tables(config.reach_radius_m);
+        let rssi_weight = config.floor_rssi_weights(&site);
+        let site_rssi_weight = config.rssi_weight_for(&site);
+        let scenario_rssi_weight = config.scenario_rssi_weights(&site);
+        let accuracy_scale = config.accuracy_scales_for(&site);
+        let sparse_scans = config.sparse_scans_for(&site);
+        let site_zones = site.zones().len();
+        let habits = HabitModel::new(&site);
+        let radio_fit_floor = site.calibration().radio_fit_floor.filter(|_| config.site_calibration);
+        let unsurveyed = (site.states().iter().enumerate())
+            .filter(|(_, s)| s.kind == crate::site::StateKind::Unsurveyed)
+            .map(|(i, _)| i)
+            .collect();
+        Ok(Self {
+            tracker: MotionTracker::new(config.motion_for(&site))?,
+            viterbi: ViterbiWindow::new(n, config.track_window_epochs),
+            site,
+            reach,
+            map_reach,
+            whole_reach: false,
+            filter: ForwardFilter::new(n),
+            ln_emission: vec![0.0; n],
+            scratch: Vec::with_capacity(n),
+            last_epoch_ns: None,
+            latest: None,
+            published_track: Vec::new(),
+            listeners: Vec::new(),
+            next_subscription: 0,
+            stats: InputStats::default(),
+            rssi_weight,
+            site_rssi_weight,
+            scenario_rssi_weight,
+            accuracy_scale,
+            id_hasher,
+            zone_mass: vec![0.0; site_zones],
+            history: History::new(config.history_epochs),
+            habits,
+            habit_prior: HabitPrior::default(),
+            radio_fit_floor,
+            epoch_radio_fit: None,
+            unsurveyed,
+            unexplained_run: 0,
+            sparse_scans,
+            scan_timing: ScanTiming::default(),
+            config,
+            undo: Undo::default(),
+        })
+    }
+
+    /// The site.
+    pub fn site(&self) -> &Arc<Site> {
+        &self.site
+    }
+
+    /// The configuration.
+    pub fn config(&self) -> &EngineConfig {
+        &self.config
+    }
+
+    /// The latest position, if any epoch has run.
+    pub fn position(&self) -> Option<&Position> {
+        self.latest.as_ref()
+    }
+
+    /// The posterior over the site's states.
+    pub fn posterior(&self) -> &[f64] {
+        self.filter.posterior()
+    }
+
+    /// Posterior probability of each of the site's zones (the sum of the state posterior over
+    /// its states), by zone index; empty for a site without zones. The rest of the mass,
+    /// 1 − the sum, is outside every zone.
+    pub fn zone_posterior(&self) -> Vec<f64> {
+        let mut out = vec![0.0; self.site.zones().len()];
+        self.site.zone_mass(self.filter.posterior(), &mut out);
+        out
+    }
+
+    /// The last epochs (at most `history_epochs`), oldest first, each with the states the user
+    /// confirmed at it, if any: input for a later learning pass.
+    pub fn history(&self) -> &std::collections::VecDeque<EpochRecord> {
+        self.history.records()
+    }
+
+    /// Counts of accepted and dropped input.
+    pub fn stats(&self) -> &InputStats {
+        &self.stats
+    }
+
+    /// Counts of inertial samples taken and dropped, and steps.
+    pub fn motion_stats(&self) -> &MotionStats {
+        self.tracker.stats()
+    }
+
+    /// Bytes held by the Viterbi window (bounded by `track_window_epochs`).
+    pub fn track_memory_bytes(&self) -> usize {
+        self.viterbi.memory_bytes()
+    }
+
+    /// The engine's state, for tests (see [`EngineSnapshot`]).
+    #[doc(hidden)]
+    pub fn snapshot(&self) -> EngineSnapshot {
+        EngineSnapshot {
+            last_epoch_ns: self.last_epoch_ns,
+            position: self.latest.clone(),
+            posterior: self.filter.posterior().to_vec(),
+            published_track: self.published_track.clone(),
+            stats: self.stats.clone(),
+            subscriptions: (self.listeners.iter().map(|(id, _)| *id).collect(), self.next_subscription),
+            internals: format!(
+                "{:?}\n{:?}\n{:?}\n{:?}",
+                self.filter, self.viterbi, self.tracker, self.scan_timing
+            ),
+            history: self.history.records().iter().cloned().collect(),
+        }
+    }
+
+    /// Calls `listener` with everything published until [`unsubscribe`](Self::unsubscribe).
+    pub fn subscribe(&mut self, listener: Box<dyn PositionListener>) -> SubscriptionId {
+        let id = SubscriptionId(self.next_subscription);
+        self.next_subscription += 1;
+        self.listeners.push((id, listener));
+        id
+    }
+
+    /// Stops a subscription; `false` if it was not active.
+    pub fn unsubscribe(&mut self, id: SubscriptionId) -> bool {
+        let before = self.listeners.len();
+        self.listeners.retain(|(l, _)| *l != id);
+        self.listeners.len() != before
+    }
+
+    /// The most likely path over the last `track_window_epochs` epochs (HIPE §4.1: Viterbi for
+    /// tracking), oldest first.
+    pub fn track(&self) -> Vec<TrackPoint> {
+        self.viterbi.path().into_iter().map(|(t, s)| self.track_point(t, s)).collect()
+    }
+
+    /// The position `fixed_lag_epochs` epochs ago, smoothed by what came after: the current
+    /// posterior carried back along the Viterbi back-pointers (each state's mass to the state
+    /// its best path passed through then), and Hoang eq. 4 over that, as the live estimate is
+    /// over the posterior. The exact fixed-lag smoother sums over every path into each state
+    /// rather than following the best; this keeps to what the Viterbi window already holds, in
+    /// O(lag × N). `state` is the state holding the most carried mass. Its error against the
+    /// lagged Viterbi state and the live estimate: `docs/tuning.md#fixed-lag`.
+    pub fn fixed_lag_position(&self) -> Option<TrackPoint> {
+        self.smoothed_position(self.config.fixed_lag_epochs.min(self.viterbi.len().saturating_sub(1)))
+    }
+
+    /// [`fixed_lag_position`](Self::fixed_lag_position) at another lag, epochs; `None` when
+    /// the track holds fewer than `lag` + 1 epochs.
+    pub fn smoothed_position(&self, lag: usize) -> Option<TrackPoint> {
+        let (mut carried, mut scratch) = (Vec::new(), Vec::new());
+        let timestamp_ns =
+            self.viterbi.ancestors(lag, self.filter.posterior(), &mut carried, &mut scratch)?;
+        let e = estimate(
+            &self.site,
+            &carried,
+            self.config.estimate_states,
+            self.config.accuracy_mass,
+            &mut Vec::new(),
+        );
+        let state = (0..carried.len()).max_by(|&a, &b| carried[a].total_cmp(&carried[b]))? as u32;
+        Some(TrackPoint { timestamp_ns, state, floor: e.floor, x: e.position.x, y: e.position.y })
+    }
+
+    fn track_point(&self, timestamp_ns: u64, state: u32) -> TrackPoint {
+        let s = &self.site.states()[state as usize];
+        TrackPoint { timestamp_ns, state, floor: s.floor, x: s.position.x, y: s.position.y }
+    }
+
+    /// Learns the user's habits from the [`history`](Self::history) epochs not learned from
+    /// yet (Baum-Welch with the feedback they hold, [`crate::habits`]), adds them to the
+    /// engine's model and applies it from the next epoch on. Bounded: at most
+    /// `history_epochs` epochs, a segment at a time. On an error nothing changes.
+    pub fn learn_habits(&mut self) -> Result<HabitReport, HabitError> {
+        let records: Vec<EpochRecord> = self.history.records().iter().cloned().collect();
+        let mut model = self.habits.clone();
+        let report = model.learn(&self.site, &self.reach, &[&records], &self.config.habits)?;
+        self.set_habits(model);
+        Ok(report)
+    }
+
+    /// Learns from epochs recorded elsewhere (other sessions' histories, survey walks), as
+    /// [`learn_habits`](Self::learn_habits) does from this engine's own.
+    pub fn learn_habits_from(&mut self, sequences: &[&[EpochRecord]]) -> Result<HabitReport, HabitError> {
+        let mut model = self.habits.clone();
+        let report = model.learn(&self.site, &self.reach, sequences, &self.config.habits)?;
+        self.set_habits(model);
+        Ok(report)
+    }
+
+    /// The learned habits.
+    pub fn habits(&self) -> &HabitModel {
+        &self.habits
+    }
+
+    /// The fix error learned so far (zero bias, unit spread before any fix was learned from).
+    pub fn fix_error(&self) -> FixError {
+        self.habits.fix_error(&self.config.habits)
+    }
+
+    /// The learned habits as JSON, to keep per user ([`HabitModel::to_json`]).
+    pub fn export_habits(&self) -> String {
+        self.habits.to_json()
+    }
+
+    /// Replaces the habits by a model exported on this site; refused (nothing changes) when it
+    /// does not parse, is of a newer layout, or was learned on another site.
+    pub fn import_habits(&mut self, json: &str) -> Result<(), HabitError> {
+        let model = HabitModel::from_json(json, &self.site)?;
+        self.set_habits(model);
+        Ok(())
+    }
+
+    /// Replaces the habits by `model`, which must be of this site.
+    pub fn set_habits(&mut self, model: HabitModel) {
+        self.habit_prior = HabitPrior::new(&model, &self.reach, self.site.spacing_m());
+        self.habits = model;
+    }
+
+    /// Forgets every habit.
+    pub fn clear_habits(&mut self) {
+        self.set_habits(HabitModel::new(&self.site));
+    }
+}

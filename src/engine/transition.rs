@@ -1,0 +1,226 @@
+//! The prediction of an epoch: the configured transition model, HIPE's regions and adaptive
+//! K, and γ (Hoang eq. 14), the weight of the radio against the motion.
+
+use super::{Engine, Position};
+use crate::config::{EngineConfig, TransitionModel};
+use crate::habits::Habitual;
+use crate::hmm::{HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach};
+use crate::sensors::{MdiScenario, MotionState, MotionUpdate};
+use crate::site::ReachTable;
+
+impl Engine {
+    /// Predicts over `dt_s` (none at the first epoch) with the configured model and `motion`,
+    /// and updates with `ln_emission`. Returns the log evidence.
+    pub(super) fn forward(&mut self, timestamp_ns: u64, dt_s: Option<f64>, motion: &MotionUpdate) -> f64 {
+        let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
+        let Some(dt) = dt_s else {
+            self.viterbi.step(
+                timestamp_ns,
+                &UniformReach { table, rho_m: 0.0, ratio: 1.0 },
+                &self.ln_emission,
+            );
+            return self.update(None);
+        };
+        let config = &self.config;
+        let speed_reach = config.max_speed_mps * dt;
+        let table_radius = self.reach.radius_m();
+        let hipe_region = hipe_region(config, motion, dt);
+        let needed = match config.transition {
+            TransitionModel::Reach | TransitionModel::Hoang => speed_reach,
+            TransitionModel::Hipe => hipe_region.outer_radius_m(),
+        };
+        if needed > table_radius {
+            return self.bridge_gap(timestamp_ns, speed_reach);
+        }
+        let ratio_max = config.transition_ratio;
+        let reach = UniformReach { table, rho_m: speed_reach, ratio: ratio_max };
+        let hipe = HipeTransition {
+            site: &self.site,
+            table,
+            region: hipe_region,
+            // Under Hoang's model the regions only stand in for a missing distance or
+            // heading, with the same floor K as its other epochs: HIPE's adaptive K, down to
+            // 200, leaks most of the mass of a large multi-floor site each epoch
+            // (docs/tuning.md#adaptive-k).
+            ratio: match config.transition {
+                TransitionModel::Hoang => ratio_max,
+                _ => hipe_ratio(config, motion, self.latest.as_ref()),
+            },
+        };
+        let base_variance = config.hoang.movement_variance_m2
+            + if config.hoang.quantisation_variance { self.site.spacing_m().powi(2) / 6.0 } else { 0.0 };
+        let spread = match (config.hoang.measured_spread, motion.distance_m) {
+            (true, Some(d)) => (motion.distance_sigma_m.powi(2), (d * motion.heading_sigma_rad).powi(2)),
+            _ => (0.0, 0.0),
+        };
+        let hoang = HoangTransition {
+            site: &self.site,
+            table,
+            reach_m: speed_reach,
+            ratio: ratio_max,
+            movement_m: motion.displacement_m,
+            walked_m: motion.distance_m.filter(|_| motion.scenario == MdiScenario::Distance),
+            variance_m2: base_variance + spread.0,
+            across_variance_m2: base_variance + spread.1,
+            mahalanobis_cap: config.hoang.mahalanobis_cap,
+            exponent: self.epoch_rssi_weight(timestamp_ns, motion).map_or(1.0, |g| 1.0 - g),
+        };
+        let transition: &dyn Transition = match config.transition {
+            TransitionModel::Reach => &reach,
+            TransitionModel::Hipe => &hipe,
+            // Hoang's Gaussian needs a measured distance (the movement vector, or the distance
+            // alone); with only a heading, HIPE's sector still uses what was measured (HIPE
+            // Table 1).
+            TransitionModel::Hoang
+                if motion.displacement_m.is_none() && motion.scenario == MdiScenario::HeadingSpeed =>
+            {
+                &hipe
+            }
+            TransitionModel::Hoang => &hoang,
+        };
+        // Learned habits: a prior multiplied into the motion-based transition of each epoch.
+        let habitual = Habitual { inner: transition, prior: &self.habit_prior };
+        let transition: &dyn Transition = if self.habit_prior.is_empty() { transition } else { &habitual };
+        self.viterbi.step(timestamp_ns, transition, &self.ln_emission);
+        let result = self.filter.step(Some(transition), &self.ln_emission);
+        result.unwrap_or_else(|_| self.restart())
+    }
+
+    /// Hoang eq. 14's γ for an epoch at `timestamp_ns` with `motion`, of the floor the engine
+    /// is on: that of an epoch with the movement vector's likelihood when its transition has
+    /// one, else the γ of the epoch's scenario when the site has one (the distance-only
+    /// likelihood, HIPE's sector and the reach alone are different priors to weigh the radio
+    /// against), else that of an epoch without a movement likelihood. The first epoch has no
+    /// transition at all and a gap longer than the walking-distance table is bridged by the
+    /// speed bound alone: both weigh the radio as without a movement likelihood, since the γ
+    /// with movement leaves the first posterior too flat to choose the floor
+    /// (docs/tuning.md#gamma).
+    pub(super) fn epoch_rssi_weight(&self, timestamp_ns: u64, motion: &MotionUpdate) -> Option<f64> {
+        let [with_movement, without] = self.rssi_weight_now();
+        let Some(last) = self.last_epoch_ns else { return without };
+        let dt_s = timestamp_ns.saturating_sub(last) as f64 * 1e-9;
+        if self.config.max_speed_mps * dt_s > self.reach.radius_m() {
+            return without;
+        }
+        if self.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some() {
+            let sparse = self.scan_timing.sparse_band(timestamp_ns).and(self.sparse_scans.rssi_weight);
+            sparse.or(with_movement)
+        } else {
+            self.scenario_rssi_weight[motion.scenario.index()].or(without)
+        }
+    }
+
+    /// γ (with, without a movement likelihood) for the coming epoch: that of the floor of the
+    /// latest estimate, else the site-wide one. One γ for every state of an epoch: ln p(o | s)
+    /// is compared across states, and raising one floor's states to a smaller power than
+    /// another's favours that floor whatever was heard (docs/tuning.md#gamma).
+    pub(super) fn rssi_weight_now(&self) -> [Option<f64>; 2] {
+        self.latest
+            .as_ref()
+            .and_then(|p| self.rssi_weight.get(p.floor))
+            .copied()
+            .unwrap_or(self.site_rssi_weight)
+    }
+
+    /// A reach beyond the walking-distance table: several passes of the speed bound, or a
+    /// restart from the uniform prior when even that is too far.
+    pub(super) fn bridge_gap(&mut self, timestamp_ns: u64, speed_reach: f64) -> f64 {
+        let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
+        let table_radius = self.reach.radius_m();
+        let passes = (speed_reach / table_radius).ceil().max(1.0);
+        let pass = UniformReach { table, rho_m: speed_reach / passes, ratio: self.config.transition_ratio };
+        self.viterbi.step(timestamp_ns, &UniformReach { rho_m: table_radius, ..pass }, &self.ln_emission);
+        if passes > f64::from(self.config.max_reach_passes) {
+            log::debug!("{speed_reach:.0} m of possible walking since the last epoch: restarting");
+            self.filter.reset();
+            self.stats.filter_restarts += 1;
+            return self.update(None);
+        }
+        for _ in 1..passes as u32 {
+            self.filter.predict(&pass);
+        }
+        let result = self.filter.step(Some(&pass), &self.ln_emission);
+        result.unwrap_or_else(|_| self.restart())
+    }
+
+    pub(super) fn update(&mut self, transition: Option<&dyn Transition>) -> f64 {
+        match self.filter.step(transition, &self.ln_emission) {
+            Ok(evidence) => evidence,
+            Err(_) => self.restart(),
+        }
+    }
+
+    /// The map explains this observation nowhere the motion model allows: start again from the
+    /// observation alone.
+    pub(super) fn restart(&mut self) -> f64 {
+        self.stats.filter_restarts += 1;
+        self.filter.reset();
+        self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
+    }
+}
+
+/// The walking-distance table an epoch predicts with: the surveyed map's own (`map`) while the
+/// radio explains what it hears, the whole site's (`reach`) beyond the map and on the way back
+/// (`whole`).
+pub(super) fn prediction_table<'a>(
+    reach: &'a ReachTable,
+    map: Option<&'a ReachTable>,
+    whole: bool,
+) -> &'a ReachTable {
+    match map {
+        Some(map) if !whole => map,
+        _ => reach,
+    }
+}
+
+/// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).
+pub(super) fn hipe_region(config: &EngineConfig, motion: &MotionUpdate, dt_s: f64) -> HipeRegion {
+    let h = &config.hipe;
+    let range_m = h.assumed_speed_mps * dt_s;
+    let tolerance = |d: f64| (h.distance_tolerance_fraction * d).max(h.distance_tolerance_min_m);
+    match (motion.scenario, motion.distance_m, motion.heading_rad) {
+        (MdiScenario::DistanceHeading, Some(d), Some(heading_rad)) if d > 0.0 => HipeRegion::RingSector {
+            distance_m: d,
+            tolerance_m: tolerance(d),
+            heading_rad,
+            tolerance_rad: h.heading_tolerance_rad,
+        },
+        // Standing still, or distance without heading: the ring (a disc of the tolerance when
+        // d = 0).
+        (MdiScenario::DistanceHeading | MdiScenario::Distance, Some(d), _) => {
+            HipeRegion::Ring { distance_m: d, tolerance_m: tolerance(d) }
+        }
+        (MdiScenario::HeadingSpeed, _, Some(heading_rad)) => {
+            HipeRegion::Sector { range_m, heading_rad, tolerance_rad: h.heading_tolerance_rad }
+        }
+        _ => HipeRegion::Disc { range_m },
+    }
+}
+
+/// HIPE's adaptive K: log-linear between `hipe.transition_ratio_min` and `transition_ratio`
+/// with a reliability r = r_motion · r_estimate in [0, 1]. r_motion is 1 when stationary,
+/// else how far the measured spreads stay inside HIPE's tolerances, counting an assumed
+/// quantity as unreliable: 0 for assumed speed only, and half the heading's reliability for
+/// heading & assumed speed, whose region is measured in angle but assumed in range
+/// (docs/tuning.md#adaptive-k). r_estimate is how far the previous 68% radius is within the
+/// least distance tolerance (1.5 m).
+pub(super) fn hipe_ratio(config: &EngineConfig, motion: &MotionUpdate, previous: Option<&Position>) -> f64 {
+    let h = &config.hipe;
+    let within = |spread: f64, tolerance: f64| (1.0 - spread / tolerance).clamp(0.0, 1.0);
+    let distance_tolerance = motion.distance_m.map_or(h.distance_tolerance_min_m, |d| {
+        (h.distance_tolerance_fraction * d).max(h.distance_tolerance_min_m)
+    });
+    let r_distance = within(motion.distance_sigma_m, distance_tolerance);
+    let r_heading = within(motion.heading_sigma_rad, h.heading_tolerance_rad);
+    let r_motion = match motion.scenario {
+        _ if motion.motion_state == MotionState::Stationary => 1.0,
+        MdiScenario::DistanceHeading => r_distance * r_heading,
+        MdiScenario::Distance => r_distance,
+        MdiScenario::HeadingSpeed => 0.5 * r_heading,
+        MdiScenario::Speed => 0.0,
+    };
+    let r_estimate = previous.map_or(0.0, |p| (h.distance_tolerance_min_m / p.accuracy_m).min(1.0));
+    let r = r_motion * r_estimate;
+    let (lo, hi) = (h.transition_ratio_min.ln(), config.transition_ratio.ln());
+    (lo + r * (hi - lo)).exp()
+}

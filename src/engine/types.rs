@@ -1,0 +1,252 @@
+//! What an engine publishes and reports: positions, track points, status events, listeners,
+//! input counts and snapshots, and the scan timing of the sparse regime.
+
+#[allow(unused_imports)] // doc links
+use super::{Engine, MAX_RSSI_DBM};
+use crate::history::EpochRecord;
+use crate::sensors::{MdiScenario, MotionState};
+use crate::site::{SparseScans, SPARSE_SCAN_GAP_S};
+
+/// Where the phone is, after one epoch.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Position {
+    /// Time of the epoch (the scan's timestamp), ns.
+    pub timestamp_ns: u64,
+    /// Floor index into the site's floors.
+    pub floor: usize,
+    /// Posterior probability of that floor.
+    pub floor_probability: f64,
+    /// The most likely zone, an index into the site's zones: the zone holding the most
+    /// posterior mass, or `None` when the site has no zones or more mass lies outside every
+    /// zone than in any one of them.
+    pub zone: Option<usize>,
+    /// Posterior probability of `zone` (of being in no zone when it is `None`).
+    pub zone_probability: f64,
+    /// East-ish coordinate in the site's metric frame, m.
+    pub x: f64,
+    /// North-ish coordinate in the site's metric frame, m.
+    pub y: f64,
+    /// Radius of the circle around (x, y) that holds the true position with probability 0.68
+    /// (the configured `accuracy_mass`), m. Always > 0.
+    pub accuracy_m: f64,
+    /// Radius of the circle holding the true position with probability 0.95, m; ≥ `accuracy_m`.
+    pub accuracy_95_m: f64,
+    /// Direction of travel, radians clockwise from the site's +y axis, when the sensors gave a
+    /// trustworthy absolute heading this epoch.
+    pub heading_rad: Option<f64>,
+    /// One standard deviation of `heading_rad`, rad.
+    pub heading_accuracy_rad: Option<f64>,
+    /// Walking, stationary, or unknown (no accelerometer).
+    pub motion_state: MotionState,
+    /// The motion information this epoch had (HIPE Table 1).
+    pub scenario: MdiScenario,
+    /// Steps detected since the previous epoch.
+    pub steps: u32,
+    /// ln p(scan | earlier input): how well the radio map explains this scan; `None` for an
+    /// epoch without a scan. Very low values mean the phone hears what the map does not expect.
+    pub radio_log_evidence: Option<f64>,
+    /// How much better, per reading, the state that best explains this scan does than a state
+    /// with no fingerprint, nats; `None` for an epoch without a scan. Below the site's
+    /// [`radio_fit_floor`](crate::site::Calibration::radio_fit_floor) the map does not explain
+    /// the scan and the engine positions by the motion alone.
+    pub radio_fit: Option<f64>,
+    /// Distance walked since the radio last explained a scan, m (0 while it does): the phone is
+    /// probably beyond the surveyed area, up to this far from the states the estimate stands
+    /// on, and both radii include it. The steps' length when measured, else HIPE's assumed
+    /// speed (1 m/s) over the time walking or of unknown motion.
+    pub beyond_radio_m: f64,
+}
+
+/// One point of the smoothed track.
+#[derive(Clone, Debug, PartialEq)]
+pub struct TrackPoint {
+    /// Epoch time, ns.
+    pub timestamp_ns: u64,
+    /// Index of the state on the most likely path ([`Engine::track`]), or holding the most
+    /// smoothed mass ([`Engine::fixed_lag_position`]).
+    pub state: u32,
+    /// The floor.
+    pub floor: usize,
+    /// x, m: the state's on the track, the smoothed estimate's for the fixed-lag position.
+    pub x: f64,
+    /// y, m, likewise.
+    pub y: f64,
+}
+
+/// Something about the session changed.
+#[derive(Clone, Debug, PartialEq)]
+pub enum StatusEvent {
+    /// The motion information available changed (a sensor stopped, the compass became
+    /// disturbed, ...).
+    ScenarioChanged {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// Before.
+        from: MdiScenario,
+        /// Now.
+        to: MdiScenario,
+    },
+    /// The person started or stopped walking.
+    MotionStateChanged {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// Before.
+        from: MotionState,
+        /// Now.
+        to: MotionState,
+    },
+}
+
+/// Receives what the engine publishes. Only `on_position` is required.
+pub trait PositionListener: Send {
+    /// Called after each epoch, on the thread that pushed the input.
+    fn on_position(&mut self, position: &Position);
+    /// Called when the motion scenario or state changes.
+    fn on_status(&mut self, _status: &StatusEvent) {}
+    /// Called when the most likely track changed for epochs before the latest one (a later
+    /// observation showed an earlier position was wrong): the revised points, oldest first.
+    fn on_track_revised(&mut self, _revised: &[TrackPoint]) {}
+}
+
+impl<F: FnMut(&Position) + Send> PositionListener for F {
+    fn on_position(&mut self, position: &Position) {
+        self(position)
+    }
+}
+
+/// Identifies a subscription for [`Engine::unsubscribe`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub struct SubscriptionId(pub(super) u64);
+
+/// What the engine took and what it dropped, by reason.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct InputStats {
+    /// Scans that made an epoch.
+    pub scans_accepted: u64,
+    /// Scans rejected because their timestamp was not after the last epoch.
+    pub scans_out_of_order: u64,
+    /// Scans rejected for having no readings.
+    pub scans_empty: u64,
+    /// Scans rejected for a NaN, infinite or impossible (below -1000 dBm) RSSI.
+    pub scans_non_finite: u64,
+    /// Scans rejected for an RSSI above [`MAX_RSSI_DBM`].
+    pub scans_rssi_too_high: u64,
+    /// Scans rejected because no reading was of a known transmitter.
+    pub scans_no_known_transmitter: u64,
+    /// Scans rejected because the motion given with them was invalid
+    /// ([`Engine::push_scan_with_motion`]).
+    pub scans_invalid_motion: u64,
+    /// Readings of transmitters not in the site (in accepted scans).
+    pub readings_unknown: u64,
+    /// Repeated readings of one transmitter within a scan (in accepted scans).
+    pub readings_duplicate: u64,
+    /// Readings older than `max_reading_age_ns` (in accepted scans).
+    pub readings_stale: u64,
+    /// Epochs without a scan ([`Engine::advance`]).
+    pub motion_epochs: u64,
+    /// Epochs without a scan rejected: a timestamp not after the last epoch, or invalid motion
+    /// given with it ([`Engine::advance_with_motion`]).
+    pub advances_rejected: u64,
+    /// Times the filter restarted from the uniform prior: after a gap too long to bridge, or
+    /// when no state could explain a scan.
+    pub filter_restarts: u64,
+    /// Accepted scans the map did not explain (a radio fit below the site's floor): their
+    /// epochs moved by the motion alone.
+    pub scans_unexplained: u64,
+    /// Position fixes that made an epoch ([`Engine::push_fix`]).
+    pub fixes_accepted: u64,
+    /// Position fixes rejected: a timestamp not after the last epoch, a NaN or infinite
+    /// coordinate, an accuracy not > 0, an unknown floor, or too far from every state.
+    pub fixes_rejected: u64,
+    /// User feedback taken ([`Engine::confirm_zone`], [`Engine::confirm_position`]).
+    pub feedback_accepted: u64,
+    /// User feedback rejected: a timestamp before the last epoch, an unknown zone or floor, a
+    /// NaN or infinite coordinate, a radius not > 0, or no state within the radius.
+    pub feedback_rejected: u64,
+}
+
+/// Everything an engine holds that decides its later answers, for tests that check a call
+/// changed nothing (a rejected scan must leave the engine as it was). Not a stable API: the
+/// internals are compared through their `Debug` renderings, which show every field.
+#[doc(hidden)]
+#[derive(Clone, Debug, PartialEq)]
+pub struct EngineSnapshot {
+    /// Time of the last epoch.
+    pub last_epoch_ns: Option<u64>,
+    /// The latest position.
+    pub position: Option<Position>,
+    /// The posterior over the site's states.
+    pub posterior: Vec<f64>,
+    /// The track as last published to listeners.
+    pub published_track: Vec<TrackPoint>,
+    /// Counts of accepted and dropped input (a test decides whether these count as state).
+    pub stats: InputStats,
+    /// The active subscriptions, and the next id.
+    pub subscriptions: (Vec<SubscriptionId>, u64),
+    /// `Debug` of the forward filter, the Viterbi window and the motion tracker.
+    pub internals: String,
+    /// The epoch history with its feedback.
+    pub history: Vec<EpochRecord>,
+}
+
+/// When the latest scan an engine accepted came and how long after the one before it: whether
+/// the engine is in the sparse regime ([`SPARSE_SCAN_GAP_S`]) and how long since its scan.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct ScanTiming {
+    /// The latest scan's time, ns.
+    pub last_ns: Option<u64>,
+    /// Its gap to the scan before it, ns.
+    pub gap_ns: Option<u64>,
+}
+
+impl ScanTiming {
+    /// The timing once a scan at `timestamp_ns` is accepted.
+    pub fn after_scan(self, timestamp_ns: u64) -> ScanTiming {
+        ScanTiming {
+            last_ns: Some(timestamp_ns),
+            gap_ns: self.last_ns.map(|l| timestamp_ns.saturating_sub(l)),
+        }
+    }
+
+    /// At `timestamp_ns`, the band of time since the latest scan
+    /// ([`SparseScans::band`]) when that scan was sparse (the first scan is: its posterior
+    /// holds one scan, as after a sparse one); `None` in a steady stream of scans or before
+    /// any scan.
+    pub fn sparse_band(&self, timestamp_ns: u64) -> Option<usize> {
+        let last = self.last_ns?;
+        let sparse = self.gap_ns.map_or(true, |gap| gap as f64 * 1e-9 > SPARSE_SCAN_GAP_S);
+        sparse.then(|| SparseScans::band(timestamp_ns.saturating_sub(last) as f64 * 1e-9))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ScanTiming;
+
+    const SECOND: u64 = 1_000_000_000;
+
+    /// The first scan counts as sparse (its posterior holds one scan); a scan 2 s after the
+    /// one before is in a steady stream, one 30 s after is sparse, and the band follows the
+    /// time since it.
+    #[test]
+    fn the_sparse_regime_and_its_band() {
+        let none = ScanTiming::default();
+        assert_eq!(none.sparse_band(5 * SECOND), None, "no scan yet");
+        let first = none.after_scan(10 * SECOND);
+        assert_eq!(first.gap_ns, None);
+        assert_eq!(first.sparse_band(10 * SECOND), Some(0));
+        assert_eq!(first.sparse_band(13 * SECOND), Some(1));
+        let steady = first.after_scan(12 * SECOND);
+        assert_eq!(steady.gap_ns, Some(2 * SECOND));
+        assert_eq!(steady.sparse_band(12 * SECOND), None);
+        assert_eq!(steady.sparse_band(40 * SECOND), None, "the regime is the latest scan's");
+        let sparse = steady.after_scan(42 * SECOND);
+        assert_eq!(
+            [42, 44, 47, 55, 70].map(|s| sparse.sparse_band(s * SECOND)),
+            [Some(0), Some(1), Some(2), Some(3), Some(4)]
+        );
+        // Exactly the gap is not beyond it.
+        let edge = steady.after_scan(22 * SECOND);
+        assert_eq!(edge.sparse_band(22 * SECOND), None);
+    }
+}

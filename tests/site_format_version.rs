@@ -1,0 +1,101 @@
+//! Site-file format versions: a file of a newer format than this build reads is refused as
+//! "newer format", in JSON and in the binary encoding, before any field it has that this build
+//! does not know; a version-1 file (the older schema, a subset of the current) still loads.
+
+use waymark::site::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
+use waymark::{Site, SiteError};
+
+/// A version-1 file with a field added within version 1 (`zones`).
+const VERSION_1: &str = r#"{
+  "format_version": 1,
+  "name": "tiny",
+  "floors": [{"name": "G"}],
+  "radio": {"clip_dbm": -100, "unheard": {"mean_dbm": -115, "std_db": 5},
+            "transmitters": [{"wifi": {"bssid": "00:11:22:33:44:55"}}]},
+  "states": [
+    {"id": 7, "floor": 0, "x": 0, "y": 0, "training_scans": 10,
+     "fingerprint": [{"tx": 0, "mean_dbm": -60, "std_db": 4}]},
+    {"id": 9, "floor": 0, "x": 3, "y": 4}
+  ],
+  "edges": [{"from": 7, "to": 9}],
+  "zones": [{"name": "kitchen", "kind": "room", "states": [7]}]
+}"#;
+
+fn with_version(json: &str, version: u64) -> String {
+    json.replacen("\"format_version\": 1", &format!("\"format_version\": {version}"), 1)
+}
+
+/// The binary file `binary` with its header's `format_version` set to `version` (one digit)
+/// and its checksum made right again, so only the version differs.
+fn binary_with_version(binary: &[u8], version: u32) -> Vec<u8> {
+    let (from, to) =
+        (format!("\"format_version\":{FORMAT_VERSION}"), format!("\"format_version\":{version}"));
+    assert_eq!(from.len(), to.len());
+    let at = binary.windows(from.len()).position(|w| w == from.as_bytes()).expect("the header's version");
+    let mut out = binary.to_vec();
+    out[at..at + to.len()].copy_from_slice(to.as_bytes());
+    let body = out.len() - 4;
+    let crc = crc32fast::hash(&out[..body]);
+    out[body..].copy_from_slice(&crc.to_le_bytes());
+    out
+}
+
+#[test]
+fn the_current_version_is_2_and_reads_back_to_1() {
+    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 2));
+}
+
+#[test]
+fn a_version_1_file_still_loads_and_is_written_as_the_current_version() {
+    let site = Site::from_json(VERSION_1.as_bytes()).unwrap();
+    assert_eq!(site.states().len(), 2);
+    assert_eq!(site.zones().len(), 1);
+    let written = site.to_json();
+    assert!(written.contains(&format!("\"format_version\":{FORMAT_VERSION}")), "{written}");
+    assert_eq!(Site::from_json(written.as_bytes()).unwrap().to_json(), written);
+    let current = Site::from_json(with_version(VERSION_1, u64::from(FORMAT_VERSION)).as_bytes()).unwrap();
+    assert_eq!(current.to_json(), written);
+}
+
+#[test]
+fn a_newer_json_file_is_refused_as_newer_format() {
+    let newer = u64::from(FORMAT_VERSION) + 1;
+    let expected = SiteError::NewerFormat { found: newer, supported: FORMAT_VERSION };
+    assert_eq!(Site::from_json(with_version(VERSION_1, newer).as_bytes()).err(), Some(expected.clone()));
+    // A field this build does not know: the version is named, not the field.
+    let end = VERSION_1.rfind('}').unwrap();
+    let unknown = format!("{}, \"levels\": {{\"elevator\": [7, 9]}}}}", &VERSION_1[..end]);
+    assert_eq!(Site::from_json(with_version(&unknown, newer).as_bytes()).err(), Some(expected.clone()));
+    let at_1 = Site::from_json(unknown.as_bytes()).unwrap_err();
+    assert!(matches!(at_1, SiteError::Invalid { .. }) && at_1.to_string().contains("levels"), "{at_1}");
+    // Far newer than a u32: still newer, through `Site::from_bytes` too.
+    let far = with_version(&unknown, 1 << 40);
+    assert_eq!(
+        Site::from_bytes(far.as_bytes()).err(),
+        Some(SiteError::NewerFormat { found: 1 << 40, supported: FORMAT_VERSION })
+    );
+    let message = expected.to_string();
+    assert!(message.contains("newer format"), "{message}");
+}
+
+#[test]
+fn a_version_before_the_first_is_unsupported() {
+    assert_eq!(
+        Site::from_json(with_version(VERSION_1, 0).as_bytes()).err(),
+        Some(SiteError::UnsupportedVersion { found: 0, supported: FORMAT_VERSION })
+    );
+}
+
+#[test]
+fn a_newer_binary_file_is_refused_as_newer_format_and_a_version_1_one_loads() {
+    let site = Site::from_json(VERSION_1.as_bytes()).unwrap();
+    let binary = site.to_binary();
+    assert_eq!(Site::from_bytes(&binary).unwrap().to_json(), site.to_json());
+    let newer = binary_with_version(&binary, FORMAT_VERSION + 1);
+    assert_eq!(
+        Site::from_bytes(&newer).err(),
+        Some(SiteError::NewerFormat { found: u64::from(FORMAT_VERSION) + 1, supported: FORMAT_VERSION })
+    );
+    let version_1 = binary_with_version(&binary, 1);
+    assert_eq!(Site::from_bytes(&version_1).unwrap().to_json(), site.to_json());
+}
