@@ -283,8 +283,8 @@ mod fuzz {
                         pushed -= samples.len() as u64;
                         let u = m.update(until);
                         prop_assert!(u.start_ns <= u.end_ns);
-                        prop_assert!(u.heading_rad.map_or(true, |h| h.is_finite()));
-                        prop_assert!(u.distance_m.map_or(true, |d| d.is_finite() && d >= 0.0));
+                        prop_assert!(u.heading_rad.is_none_or(|h| h.is_finite()));
+                        prop_assert!(u.distance_m.is_none_or(|d| d.is_finite() && d >= 0.0));
                     }
                 }
             }

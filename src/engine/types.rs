@@ -214,7 +214,7 @@ impl ScanTiming {
     /// any scan.
     pub fn sparse_band(&self, timestamp_ns: u64) -> Option<usize> {
         let last = self.last_ns?;
-        let sparse = self.gap_ns.map_or(true, |gap| gap as f64 * 1e-9 > SPARSE_SCAN_GAP_S);
+        let sparse = self.gap_ns.is_none_or(|gap| gap as f64 * 1e-9 > SPARSE_SCAN_GAP_S);
         sparse.then(|| SparseScans::band(timestamp_ns.saturating_sub(last) as f64 * 1e-9))
     }
 }

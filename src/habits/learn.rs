@@ -33,7 +33,7 @@ impl HabitModel {
         let mut segments: Vec<Segment> = Vec::new();
         for records in sequences {
             let fresh: Vec<&EpochRecord> =
-                records.iter().filter(|r| after.map_or(true, |a| r.timestamp_ns > a)).collect();
+                records.iter().filter(|r| after.is_none_or(|a| r.timestamp_ns > a)).collect();
             for run in split(&fresh, options.max_gap_s) {
                 if run.len() < 2 {
                     report.segments_skipped += 1;
@@ -271,7 +271,7 @@ impl Segment {
             // A fix's σ may be widened by the learned spread: take its candidates generously.
             let reach_m = CANDIDATE_SIGMAS * o.sigma * if o.fix.is_some() { 2.0 } else { 1.0 };
             for (i, s) in site.states().iter().enumerate() {
-                if o.floor.map_or(true, |f| f == s.floor)
+                if o.floor.is_none_or(|f| f == s.floor)
                     && (s.position.x - o.x).hypot(s.position.y - o.y) <= reach_m
                 {
                     wanted[i] = true;

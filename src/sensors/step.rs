@@ -228,7 +228,7 @@ impl StepDetector {
         let tc = self.smooth.center_ns();
         let min_interval_ns = self.min_interval_ns;
         let spaced =
-            |at: u64, last: Option<u64>| last.map_or(true, |l| at.saturating_sub(l) >= min_interval_ns);
+            |at: u64, last: Option<u64>| last.is_none_or(|l| at.saturating_sub(l) >= min_interval_ns);
         let previous = self.previous.replace((tc, s));
         let fired = match self.kind {
             StepDetectorKind::Threshold => {

@@ -191,8 +191,8 @@ impl MotionTracker {
                 report.non_finite += 1;
                 continue;
             }
-            let after_previous = self.last_pushed_ns[stream].map_or(true, |p| s.timestamp_ns > p);
-            let after_processed = self.processed_until_ns.map_or(true, |p| s.timestamp_ns > p);
+            let after_previous = self.last_pushed_ns[stream].is_none_or(|p| s.timestamp_ns > p);
+            let after_processed = self.processed_until_ns.is_none_or(|p| s.timestamp_ns > p);
             if !(after_previous && after_processed) {
                 report.out_of_order += 1;
                 continue;
@@ -305,7 +305,7 @@ impl MotionTracker {
             let mut best: Option<(usize, u64)> = None;
             for (k, buffer) in self.buffers.iter().enumerate() {
                 if let Some(s) = buffer.front() {
-                    if s.timestamp_ns <= until && best.map_or(true, |(_, t)| s.timestamp_ns < t) {
+                    if s.timestamp_ns <= until && best.is_none_or(|(_, t)| s.timestamp_ns < t) {
                         best = Some((k, s.timestamp_ns));
                     }
                 }
@@ -464,7 +464,7 @@ trait Staleness {
 
 impl Staleness for Option<u64> {
     fn is_none_or_stale(&self, now: u64, limit: u64) -> bool {
-        self.map_or(true, |t| now.saturating_sub(t) > limit)
+        self.is_none_or(|t| now.saturating_sub(t) > limit)
     }
 }
 

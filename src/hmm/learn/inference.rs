@@ -35,7 +35,7 @@ impl EpochMatrix {
         if states == 0 {
             return Err(LearnError::Empty("states".into()));
         }
-        if values.len() % states != 0 {
+        if !values.len().is_multiple_of(states) {
             return Err(LearnError::Dimension {
                 what: "log-emission table".into(),
                 expected: values.len().div_ceil(states) * states,
