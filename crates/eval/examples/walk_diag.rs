@@ -27,8 +27,10 @@ use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use waymark::site::Calibration;
-use waymark_eval::real::{evaluate_on, score_scans, survey_site, EvalOptions, FloorData};
+use waymark_eval::real::{evaluate_on, survey_site, EvalOptions};
+use waymark_survey::calibrate::FloorData;
 use waymark_survey::io::ilc::Trace;
+use waymark_survey::scoring::score_scans;
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
@@ -38,21 +40,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dirs: Vec<PathBuf> = std::env::args().skip(1).map(PathBuf::from).collect();
     let floors = dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?;
     let mut options = EvalOptions::default();
-    options.replay.events.beacon_wait_ns =
-        env_or("BEACON_WAIT_MS", options.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
-    options.engine.estimate_states = env_or("ESTIMATE_STATES", options.engine.estimate_states);
-    options.engine.max_speed_mps = env_or("MAX_SPEED", options.engine.max_speed_mps);
-    options.engine.hoang.movement_variance_m2 =
-        env_or("MOVEMENT_VAR", options.engine.hoang.movement_variance_m2);
-    options.survey.spacing_m = env_or("SPACING", options.survey.spacing_m);
-    options.survey.fingerprint_radius_m = env_or("FP_RADIUS", options.survey.fingerprint_radius_m);
-    options.survey.build.fit.max_std_db = env_or("MAX_STD", options.survey.build.fit.max_std_db);
-    options.survey.max_reading_age_ns =
-        env_or("AGE_MS", options.survey.max_reading_age_ns / 1_000_000) * 1_000_000;
+    options.calibration.replay.events.beacon_wait_ns =
+        env_or("BEACON_WAIT_MS", options.calibration.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
+    options.calibration.engine.estimate_states =
+        env_or("ESTIMATE_STATES", options.calibration.engine.estimate_states);
+    options.calibration.engine.max_speed_mps = env_or("MAX_SPEED", options.calibration.engine.max_speed_mps);
+    options.calibration.engine.hoang.movement_variance_m2 =
+        env_or("MOVEMENT_VAR", options.calibration.engine.hoang.movement_variance_m2);
+    options.calibration.survey.spacing_m = env_or("SPACING", options.calibration.survey.spacing_m);
+    options.calibration.survey.fingerprint_radius_m =
+        env_or("FP_RADIUS", options.calibration.survey.fingerprint_radius_m);
+    options.calibration.survey.build.fit.max_std_db =
+        env_or("MAX_STD", options.calibration.survey.build.fit.max_std_db);
+    options.calibration.survey.max_reading_age_ns =
+        env_or("AGE_MS", options.calibration.survey.max_reading_age_ns / 1_000_000) * 1_000_000;
     let survey: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
-    let motion =
-        waymark_survey::calibrate_motion(&survey, &options.engine.motion).ok_or("no motion calibration")?;
-    options.north = motion.north();
+    let motion = waymark_survey::calibrate_motion(&survey, &options.calibration.engine.motion)
+        .ok_or("no motion calibration")?;
+    options.calibration.north = motion.north();
     let configs: Vec<String> = env_or("CONFIGS", "forward-auto,viterbi-auto,wifi-knn".to_string())
         .split(',')
         .map(String::from)

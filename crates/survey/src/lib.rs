@@ -10,10 +10,12 @@
 #![deny(rustdoc::broken_intra_doc_links)]
 
 mod build;
+pub mod calibrate;
 pub mod io;
 pub mod metrics;
 pub mod motion;
 pub mod replay;
+pub mod scoring;
 
 pub use build::*;
 pub use motion::{calibrate_motion, MotionCalibration};
