@@ -1,8 +1,8 @@
-//! Per-walk look at `waymark eval`'s configurations on recorded floors, in about 40 s for the
-//! five competition floors (the full `eval` spends most of its 24 minutes choosing the
-//! fingerprint radius and calibrating γ and the radius factors by leave-one-walk-out): the site is surveyed from the survey walks with the
-//! step length and north calibrated on them, but γ is given (`GAMMA`, `GAMMA_WITHOUT`; by
-//! default 0.03 and 0.1, what the five floors calibrate). Prints, per configuration, the mean
+//! Per-walk look at `waymark eval`'s configurations on recorded floors, much faster than the
+//! full `eval`, which spends most of its time choosing the fingerprint radius and calibrating
+//! γ and the radius factors by leave-one-walk-out: the site is surveyed from the survey walks
+//! with the step length and north calibrated on them, but γ is given (`GAMMA`,
+//! `GAMMA_WITHOUT`; by default 0.03 and 0.1, `docs/results.md#five-floors`). Prints, per configuration, the mean
 //! error at the WiFi scans and the walks whose first estimate, and whose first scored scan, is
 //! on a wrong floor; the paired
 //! difference of consecutive configurations (in `CONFIGS` order) with its standard error over
@@ -11,17 +11,17 @@
 //!
 //! ```text
 //! CONFIGS=forward-distance,forward-heading-speed,forward-speed \
-//!   cargo run --release --example walk_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}
+//!   cargo run --release -p waymark-eval --example walk_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}
 //! ```
 //!
 //! `BEACON_WAIT_MS` replays with another beacon wait (`EventOptions::beacon_wait_ns`).
 //! `FP_RADIUS` surveys with that fingerprint radius, m (default the uncalibrated
-//! `SurveyOptions` one, 5 m; `waymark eval` calibrates it, 8 m on the five floors);
+//! `SurveyOptions` one; `waymark eval` calibrates it);
 //! `ESTIMATE_STATES`, `MAX_SPEED`, `MOVEMENT_VAR`, `SPACING`, `MAX_STD` and `AGE_MS` set
 //! `EngineConfig::estimate_states`, `max_speed_mps`, `HoangConfig::movement_variance_m2`,
 //! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms);
 //! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; `waymark eval`
-//! calibrates it, 3.47 nats per reading on the five competition floors).
+//! calibrates it).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;

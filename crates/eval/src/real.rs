@@ -67,10 +67,10 @@ pub struct ConfigurationReport {
     pub waypoints: Metrics,
 }
 
-/// Weighted k-NN on raw survey scans (k = 5 as the issue specifies, weights 1/(d + 1 dB) —
-/// the 1 dB, one RSSI reporting step, only keeps an exact match finite — and a missing
-/// reading counts as the clip level): the classic fingerprinting baseline, one scan at a
-/// time. On F1 it gives 6.78 m, the 6.7 m of the issue's independent Python baseline.
+/// Weighted k-NN on raw survey scans (k = 5, weights 1/(d + 1 dB) — the 1 dB, one RSSI
+/// reporting step, only keeps an exact match finite — and a missing reading counts as the
+/// clip level): the classic fingerprinting baseline, one scan at a time
+/// (`docs/tuning.md#knn-baseline`).
 pub struct Knn {
     k: usize,
     clip_dbm: f64,
@@ -396,8 +396,8 @@ pub const WAYPOINT_FEEDBACK_SPACINGS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// The strengths `waymark eval --habits` tries on held-out survey walks: every other value of
 /// the pass's grid ([`STRENGTHS`](waymark::habits::STRENGTHS)) up to 100, where the habits no
-/// longer change any configuration (measured: F1 with `--habit-strength 100` moved every mean
-/// by at most 2 mm, `--habit-strength 1000` by at most 1 mm). Four replays per survey walk.
+/// longer change any configuration (`docs/tuning.md#habit-strength`). Four replays per survey
+/// walk.
 pub const HELD_OUT_STRENGTHS: [f64; 3] = [1.0, 10.0, 100.0];
 
 /// How one strength did on held-out survey walks: per decoder, the mean error with the other
@@ -454,7 +454,7 @@ pub fn choose_held_out_strength(points: &[HeldOutStrength]) -> Option<f64> {
         .map(|p| p.strength)
 }
 
-/// Habits learned from the survey walks (issue 6, El Gemayel §III-A and §IV-C): each survey
+/// Habits learned from the survey walks (El Gemayel §III-A and §IV-C): each survey
 /// walk replayed through the engine as shipped, its waypoints given as the surveyor's
 /// feedback, then one Baum-Welch pass over all of them. Test walks are never read.
 ///
@@ -464,12 +464,12 @@ pub fn choose_held_out_strength(points: &[HeldOutStrength]) -> Option<f64> {
 /// on it without feedback, at each of [`HELD_OUT_STRENGTHS`] and without habits; then the
 /// halves swapped. The learning pass alone chooses by move prediction, as the engine on a
 /// phone must (it has no truth); here the survey's waypoints are the truth, and predicting the
-/// surveyors' moves slightly better made the Viterbi track worse (F1, κ = 1: 4.84 → 5.13 m,
-/// two test walks taking other corridors). Held out in the radio too, since a walk replayed
-/// on a site surveyed from itself is explained by the radio alone (measured on F1: the
-/// Viterbi track then changed by under 1 mm at κ = 10).
+/// surveyors' moves slightly better can make the track worse. Held out in the radio too,
+/// since a walk replayed on a site surveyed from itself is explained by the radio alone
+/// (`docs/tuning.md#habit-strength`).
 ///
-/// `options` are those `site` was surveyed with: after [`survey_calibrated`], its
+/// `options` are those `site` was surveyed with: after
+/// [`survey_calibrated`](waymark_survey::calibrate::survey_calibrated), its
 /// [`EvalOptions::surveyed_with`].
 pub fn survey_habits(
     site: &Arc<Site>,
@@ -633,7 +633,7 @@ mod tests {
             fixed_lag_m: l,
             viterbi_m: v,
         };
-        // F1's figures (`waymark eval target/ilc/site1/F1 --habits`): nothing applied.
+        // F1's held-out figures (`docs/tuning.md#habit-strength`): nothing applied.
         let f1 = [
             point(1.0, [0.011, 0.019], [-0.029, 0.022], [0.010, 0.025]),
             point(10.0, [0.002, 0.005], [0.005, 0.004], [-0.001, 0.001]),

@@ -168,10 +168,10 @@ pub fn score(trace: &Trace, floor: usize, estimates: &[Estimate]) -> (Vec<Scored
     (epochs, score_waypoints(trace, estimates, &scored))
 }
 
-/// What `waymark eval` reports for a walk: the latest estimate at or before each of the walk's
+/// A walk scored as evaluations report it: the latest estimate at or before each of the walk's
 /// WiFi scans within the waypoints' span (truth interpolated), and at or before each waypoint,
 /// by zone against `zones` when given. Returns (scans, waypoints). Every configuration is
-/// scored at the same instants, the "every scan time": scoring each estimate at its
+/// scored at the same instants, every scan time: scoring each estimate at its
 /// own time would weigh an engine with more epochs (motion-only timer epochs, beacon-only
 /// scans) on other points than k-NN's one estimate a scan.
 pub fn score_scans(

@@ -26,10 +26,9 @@ pub use prepare::{PreparedSurvey, SurveyFits};
 /// How a site is built from survey walks.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SurveyOptions {
-    /// Distance between neighbouring grid states, m. 2 m: the issue's 2-3 m range, at its fine
-    /// end because WiFi fingerprints of a mall change over a few metres (the survey scans are
-    /// 2 s ≈ 2-3 m apart along a walk, see `scan_interval_median_s`, so a finer grid would
-    /// have states with no scan of their own).
+    /// Distance between neighbouring grid states, m. 2 m: WiFi fingerprints of a mall change
+    /// over a few metres, and survey scans are 2-3 m apart along a walk
+    /// (`scan_interval_median_s`), so a finer grid would have states with no scan of their own.
     pub spacing_m: f64,
     /// A grid point becomes a state when a survey walk passed within this distance, m. One
     /// spacing: the grid then covers a corridor two to three states wide around each walk.
@@ -39,29 +38,22 @@ pub struct SurveyOptions {
     /// fingerprint, joined to the grid: where a walker leaves the surveyed area, the motion
     /// can carry the estimate there instead of pinning it to the map's edge. 0: none.
     pub unsurveyed_margin_m: f64,
-    /// A survey scan trains every state within this distance of where it was taken, m.
-    /// `waymark survey` and `waymark eval` choose it per site by cross-validation on the
-    /// survey walks ([`waymark_eval::real::FINGERPRINT_RADIUS_GRID`]; 8 m on the five
-    /// competition floors pooled and on F1 alone); this is the radius used without that
-    /// calibration. 5 m: a state then sees about two walking seconds of scans either side of
-    /// it, 20-30 scans where a corridor was walked a few times. Measured on the F1 split
-    /// (`waymark eval target/ilc/site1/F1 --fingerprint-radius-m R`): single-scan MLE 8.17 /
-    /// 6.58 m mean and the fused engine 7.83 / 6.28 m for R = 3 / 5 m.
+    /// A survey scan trains every state within this distance of where it was taken, m. The
+    /// calibration chooses it per site by cross-validation on the survey walks
+    /// ([`FINGERPRINT_RADIUS_GRID`](crate::calibrate::FINGERPRINT_RADIUS_GRID)); this is the
+    /// radius without that calibration. 5 m: a state then sees about two walking seconds of
+    /// scans either side of it (`docs/tuning.md#fingerprint-radius`).
     pub fingerprint_radius_m: f64,
     /// Whether the floor plan's polygons cut the walkable graph (except where a survey walk
     /// crossed them). Off by default: on the competition's plans, shop and "auxiliary area"
-    /// outlines are not where walls are — with them, `waymark eval target/ilc/site1/F1` gave
-    /// 6.28 m for the fused engine, without them 5.70 m, and with the true motion fed in,
-    /// 7.4 m against 5.4 m. The graph then comes from where people walked (surveyed states
-    /// exist only near survey walks, unsurveyed ones around them). Turn on for plans whose
-    /// polygons are real walls.
+    /// outlines are not where walls are (`docs/tuning.md#walls`). The graph then comes from
+    /// where people walked (surveyed states exist only near survey walks, unsurveyed ones
+    /// around them). Turn on for plans whose polygons are real walls.
     pub walls: bool,
     /// Readings older than this, ns, were not heard in the scan's own sweep: in training they
     /// count as "not heard" (Android re-reports cached access points for ~30 s). 2 s: one
-    /// scan interval, so an entry not refreshed by the latest sweep is out. Measured: the
-    /// median gap between consecutive WiFi scans of the 459 survey walks is 1.9-2.3 s across
-    /// the five floors (`waymark eval target/ilc/site1/{B1,F1,F2,F3,F4} --json`,
-    /// `survey.floors[].scan_interval_median_s`).
+    /// scan interval, so an entry not refreshed by the latest sweep is out
+    /// (`docs/tuning.md#reading-age`).
     pub max_reading_age_ns: u64,
     /// Censored EM or naive fit, clip level, σ floor and cap.
     pub build: BuildOptions,
@@ -93,14 +85,9 @@ impl Default for SurveyOptions {
     }
 }
 
-/// [`SurveyOptions::unsurveyed_margin_m`]'s default, m. Where held-out survey walks went
-/// beyond the map the other walks make (the leave-one-walk-out of `waymark eval`), 95% of their
-/// epochs were within 10 m of it on the five competition floors (1 790 of 1 880:
-/// `calibration.off_map` bands of `waymark eval target/ilc/site1/{B1,F1,F2,F3,F4}`). With it,
-/// held-out error 5-10 m beyond the map went from 14.38 to 13.74 m and beyond 10 m from 20.46
-/// to 13.40 m on F2, at the same test-walk error (`forward-auto` 5.248 → 5.239 m), for 2.6-2.7
-/// times the states and 11-15% more `eval` time (F1 106 → 118 s, F2 33 → 38 s; README, "Beyond
-/// the surveyed area").
+/// [`SurveyOptions::unsurveyed_margin_m`]'s default, m: where held-out survey walks went
+/// beyond the map the other walks make, nearly all their epochs were within 10 m of it
+/// (`docs/tuning.md#unsurveyed-states`).
 pub const UNSURVEYED_MARGIN_M: f64 = 10.0;
 
 /// The largest margin a survey takes, m: a bound on bad input, not a tuned value (ten times
@@ -109,7 +96,7 @@ pub const MAX_UNSURVEYED_MARGIN_M: f64 = 100.0;
 
 /// The σ cap of survey fits, dB: the spread of one access point's RSSI at a fixed place
 /// over time is a few dB (Hoang §6.1 simulates σ_L = 5 dB); a column of mostly "not heard"
-/// scans otherwise fits σ of 20-60 dB (seen on the competition data before the cap).
+/// scans otherwise fits σ of 20-60 dB (`docs/tuning.md#radio-map`).
 pub const MAX_STD_DB: f64 = 8.0;
 
 /// One floor's survey material.

@@ -57,10 +57,8 @@ pub(super) fn gamma_curve(walks: &[&HeldOut], mask: usize) -> (Vec<GammaPoint>, 
 /// A floor's own γ, only when on that floor's held-out walks it beats the site-wide γ by more
 /// than its jackknife standard error: the one-standard-error rule of cross-validation
 /// (Breiman et al. 1984, §3.4.3; Hastie, Tibshirani & Friedman, *Elements of Statistical
-/// Learning* §7.10) preferring the simpler model, one γ for the whole site. Measured: choosing
-/// each floor's argmin outright made `waymark eval` on the five competition floors worse
-/// (forward-auto 6.34 → 6.45 m, viterbi-auto 5.74 → 6.26 m), every floor's gain being inside
-/// its standard error. `None`: the floor uses the site-wide γ.
+/// Learning* §7.10) preferring the simpler model, one γ for the whole site: each floor's argmin
+/// taken outright did worse (`docs/tuning.md#gamma`). `None`: the floor uses the site-wide γ.
 pub(super) fn own_gamma(curve: &[GammaPoint], best: Option<usize>, site_wide: Option<f64>) -> Option<f64> {
     let own = curve.get(best?)?;
     let Some(shared) = site_wide.and_then(|g| curve.iter().find(|p| p.gamma == g)) else {

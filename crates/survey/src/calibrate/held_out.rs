@@ -66,8 +66,8 @@ pub const MIN_SCENARIO_EPOCHS: usize = 200;
 /// The radius factors are fitted on held-out epochs on the map only. Leaving one walk out
 /// takes its stretch of map away where no other walk covered it, so its epochs there are
 /// positioned off the map, which the site the engine ships (surveyed from every walk) never
-/// asks of the places it was surveyed at. Measured on the five competition floors: fitting on
-/// every held-out epoch gave radii that held the truth at 74.3% of test epochs, not 68%.
+/// asks of the places it was surveyed at; fitted on every held-out epoch, the radii were too
+/// wide (`docs/tuning.md#radius-factors`).
 pub(super) struct OnMap {
     radius_m: f64,
     states: Vec<(f64, f64)>,

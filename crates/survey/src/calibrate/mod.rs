@@ -157,11 +157,7 @@ pub fn calibration_steps(floors: &[FloorData], options: &CalibrationOptions) -> 
 
 /// Quantile of the radio fits of held-out scans on the map taken as the floor below which the
 /// map does not explain a scan: a one-sided test at 5%, one scan on the map in twenty called
-/// unexplained. Measured with `waymark eval` (`calibration.off_map` against
-/// `off_map_without_floor`, README "Beyond the surveyed area"): on the five competition floors
-/// it lowered the mean error of held-out epochs 5-10 m beyond the map from 21.1 to 18.0 m and
-/// beyond 10 m from 66 to 49 m, and the test walks' from 4.834 to 4.795 m (`forward-auto`;
-/// measured before the survey's unsurveyed states, which the floor lets the estimate onto).
+/// unexplained (`docs/tuning.md#radio-fit-floor`).
 const RADIO_FIT_FLOOR_QUANTILE: f64 = 0.05;
 
 /// Calibrates a site from its survey walks: the walkers' step length and the site's north

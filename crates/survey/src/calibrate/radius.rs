@@ -17,15 +17,15 @@ pub type RadiusPoint = (f64, f64, usize);
 /// in spread either side of 8 m. A radius trades the noise of fits from few scans (small)
 /// against smearing fingerprints over places that sound different (large); where the balance
 /// lies depends on how densely a site was walked, which varies between sites, so it is
-/// measured per site rather than fixed (`waymark eval ... --json`,
-/// `calibration.fingerprint_radius_mean_error_m`).
+/// measured per site rather than fixed ([`CalibrationReport::fingerprint_radius_mean_error_m`](super::CalibrationReport::fingerprint_radius_mean_error_m),
+/// `docs/tuning.md#fingerprint-radius`).
 pub const FINGERPRINT_RADIUS_GRID: [f64; 5] = [4.0, 5.657, 8.0, 11.314, 16.0];
 
 /// Folds of the fingerprint radius's cross-validation: each floor's survey walks go to fold
 /// `walk % 5`. Five, not one per walk, because every radius refits nearly every state of each
 /// fold's site; with a fifth of the walks held out, each held-out walk is judged by a site a
 /// little sparser than the whole survey, so the choice leans, if anything, to a wider radius.
-/// A cost bound, not a tuned figure: with it the search takes about 80 s of F1's 118 s `eval`.
+/// A cost bound, not a tuned figure (`docs/tuning.md#fingerprint-radius`).
 pub const FINGERPRINT_RADIUS_FOLDS: usize = 5;
 
 /// The fingerprint radius of least held-out error of the engine as shipped: for each radius of
@@ -33,10 +33,9 @@ pub const FINGERPRINT_RADIUS_FOLDS: usize = 5;
 /// survey's step length, `calibration`) replays each of the fold's walks at every γ of
 /// [`GAMMA_GRID`], scored at its WiFi scans (floor penalty included); a radius scores its
 /// best γ, since γ is calibrated afterwards on the chosen radius. The fingerprints are judged
-/// by what uses them: measured on the five competition floors, the single-scan MLE's held-out
-/// error was flat between 4 and 8 m (9.42 / 9.16 / 9.28 m) while the engine's test error fell
-/// by 0.2 m from 5.7 to 8 m (`forward-auto` 5.034 → 4.834 m). Radii are tried from the grid's middle outward (a local
-/// search). Returns the radius and the curve over the radii tried (radius, mean error m,
+/// by what uses them, the engine, not the single-scan MLE, whose error is flat over radii
+/// that change the engine's (`docs/tuning.md#fingerprint-radius`). Radii are tried from the
+/// grid's middle outward (a local search). Returns the radius and the curve over the radii tried (radius, mean error m,
 /// scans); `None` when no held-out scan was scored.
 pub(super) fn calibrate_fingerprint_radius(
     floors: &[FloorData],
