@@ -17,8 +17,7 @@ use waymark::sensors::SensorSample;
 
 /// What a session is made of. These describe the scenario, not the engine: they were chosen so
 /// that a day exercises walking, standing and lying still in comparable shares, not tuned to
-/// any result. Measured over 24 h (`waymark simulate --experiment long-run --json`, seed 0,
-/// `walking_share` and `table_share`): 32% of epochs walking, 31% on a table, 37% standing.
+/// any result (`docs/tuning.md#long-run-session`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SessionConfig {
     /// Length of each walk, m, drawn uniformly: 30-250 m (Hoang §6.1's walks are ~200 m; an
