@@ -53,7 +53,7 @@ pub struct BenchArgs {
     rss_probe: Option<PathBuf>,
 }
 
-/// Size of the site whose load time and engine memory are measured (the figure).
+/// Size of the site whose load time and engine memory are measured.
 const REFERENCE_STATES: usize = 10_000;
 
 pub fn bench(args: &BenchArgs) -> ExitCode {

@@ -16,6 +16,8 @@ pub struct HmmArgs {
     verb: HmmVerb,
 }
 
+// The doc comments are `--help` text: JSON shapes in brackets, not intra-doc links.
+#[allow(rustdoc::broken_intra_doc_links)]
 #[derive(clap::Subcommand)]
 enum HmmVerb {
     /// Forward-backward and Viterbi. Reads {"initial": [N], "transition": [[N×N]],

@@ -92,7 +92,7 @@ struct SimulateArgs {
     /// Which experiment.
     #[arg(long, value_enum, default_value_t = SimExperiment::Papers)]
     experiment: SimExperiment,
-    /// long-run: simulated hours (issue 7: 24).
+    /// long-run: simulated hours (24: a day).
     #[arg(long, default_value_t = 24.0)]
     hours: f64,
     /// long-run: a report every this many simulated seconds.

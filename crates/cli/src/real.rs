@@ -7,7 +7,8 @@ use std::sync::Arc;
 use std::time::Instant;
 use waymark::sensors::MdiScenario;
 use waymark::{Engine, EngineConfig, Salt, Site};
-use waymark_eval::real::{self as evaluation, EvalOptions, FloorData, CONFIGURATIONS};
+use waymark_eval::real::{self as evaluation, EvalOptions, CONFIGURATIONS};
+use waymark_survey::calibrate::{self, CalibrationError, CalibrationOptions, FloorData};
 use waymark_survey::io::Trace;
 use waymark_survey::replay::{self as replaying, ReplayOptions};
 
@@ -206,7 +207,7 @@ fn fail(verb: &str, e: impl std::fmt::Display) -> ExitCode {
     ExitCode::FAILURE
 }
 
-fn load_floors(dirs: &[PathBuf], max_walks: Option<usize>) -> Result<Vec<FloorData>, evaluation::EvalError> {
+fn load_floors(dirs: &[PathBuf], max_walks: Option<usize>) -> Result<Vec<FloorData>, CalibrationError> {
     dirs.iter().map(|d| FloorData::load(d, max_walks)).collect()
 }
 
@@ -223,14 +224,14 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
             f
         })
         .collect();
-    let mut options = EvalOptions::default();
+    let mut options = CalibrationOptions::default();
     options.survey.unsurveyed_margin_m = args.unsurveyed_margin_m;
     let bar = progress_bar(
         false,
-        evaluation::calibration_steps(&floors, &options) as u64,
+        calibrate::calibration_steps(&floors, &options) as u64,
         "calibrating (leave one walk out)",
     );
-    let (site, report, calibration) = match evaluation::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
+    let (site, report, calibration) = match calibrate::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
         Ok(s) => s,
         Err(e) => return fail("survey", e),
     };
@@ -262,7 +263,7 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
 
 /// The calibration: site-wide figures, then per floor the γ chosen by leave-one-walk-out, its
 /// jackknife standard error, and the error curve over γ with how many walks prefer each γ.
-fn print_calibration(c: &evaluation::CalibrationReport) {
+fn print_calibration(c: &calibrate::CalibrationReport) {
     println!(
         "calibrated: γ {:?} site-wide (without movement {:?}), accuracy scales {:?}, step length {:?}, heading offset {:.1}°",
         c.rssi_weight,
@@ -319,7 +320,7 @@ fn print_calibration(c: &evaluation::CalibrationReport) {
             curve.join(", ")
         );
     }
-    let bands = |r: &waymark_eval::real::OffMapReport| -> String {
+    let bands = |r: &calibrate::OffMapReport| -> String {
         let bands: Vec<String> = r
             .bands
             .iter()
@@ -381,7 +382,7 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
     };
     // The engine as `eval` runs it: stale readings dropped at the survey's age limit.
     let config =
-        EngineConfig { rssi_weight: args.gamma, site_salt, ..EvalOptions::default().engine_config() };
+        EngineConfig { rssi_weight: args.gamma, site_salt, ..CalibrationOptions::default().engine_config() };
     let mut engine = match Engine::new(Arc::clone(&site), config) {
         Ok(e) => e,
         Err(e) => return fail("replay", e),
@@ -543,56 +544,57 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             format!("unknown configuration `{unknown}`; known: {}", CONFIGURATIONS.join(", ")),
         );
     }
-    options.engine.rssi_weight = args.gamma;
+    options.calibration.engine.rssi_weight = args.gamma;
     if let Some(s) = args.spacing_m {
-        options.survey.spacing_m = s;
-        options.survey.coverage_m = s;
+        options.calibration.survey.spacing_m = s;
+        options.calibration.survey.coverage_m = s;
     }
     if let Some(m) = args.unsurveyed_margin_m {
-        options.survey.unsurveyed_margin_m = m;
+        options.calibration.survey.unsurveyed_margin_m = m;
     }
     if let Some(r) = args.fingerprint_radius_m {
-        options.survey.fingerprint_radius_m = r;
-        options.calibrate_fingerprint_radius = false;
+        options.calibration.survey.fingerprint_radius_m = r;
+        options.calibration.calibrate_fingerprint_radius = false;
     }
     if let Some(v) = args.min_std_db {
-        options.survey.build.fit.min_std_db = v;
+        options.calibration.survey.build.fit.min_std_db = v;
     }
     if args.fixed_movement_variance {
-        options.engine.hoang.measured_spread = false;
+        options.calibration.engine.hoang.measured_spread = false;
     }
     if let Some(m) = args.top_m {
-        options.engine.estimate_states = m;
+        options.calibration.engine.estimate_states = m;
     }
     if let Some(lag) = args.fixed_lag {
-        options.engine.fixed_lag_epochs = lag;
+        options.calibration.engine.fixed_lag_epochs = lag;
     }
     if args.no_beacons {
-        options.survey.events.beacons = false;
-        options.replay.events.beacons = false;
+        options.calibration.survey.events.beacons = false;
+        options.calibration.replay.events.beacons = false;
     }
     if let Some(v) = args.max_std_db {
-        options.survey.build.fit.max_std_db = v;
+        options.calibration.survey.build.fit.max_std_db = v;
     }
     if let Some(ms) = args.max_age_ms {
-        options.survey.max_reading_age_ns = ms * 1_000_000;
+        options.calibration.survey.max_reading_age_ns = ms * 1_000_000;
     }
     if let Some(t) = args.threads {
-        options.threads = t;
+        options.calibration.threads = t;
     }
     if let Some(k) = args.habit_strength {
-        options.engine.habits.strength = Some(k);
+        options.calibration.engine.habits.strength = Some(k);
     }
     let loaded_s = started.elapsed().as_secs_f64();
     let bar = progress_bar(
         args.json,
-        evaluation::calibration_steps(&floors, &options) as u64,
+        calibrate::calibration_steps(&floors, &options.calibration) as u64,
         "calibrating (leave one walk out)",
     );
-    let (site, survey, calibration) = match evaluation::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
-        Ok(s) => s,
-        Err(e) => return fail("eval", e),
-    };
+    let (site, survey, calibration) =
+        match calibrate::survey_calibrated(&floors, &options.calibration, &|| bar.inc(1)) {
+            Ok(s) => s,
+            Err(e) => return fail("eval", e),
+        };
     bar.finish_and_clear();
     let options = options.surveyed_with(&calibration);
     let surveyed_s = started.elapsed().as_secs_f64();
@@ -630,7 +632,8 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         None
     };
     let throttled = if args.throttle {
-        let throttled = EvalOptions { replay: options.throttled_replay(), ..options.clone() };
+        let mut throttled = options.clone();
+        throttled.calibration.replay = options.calibration.throttled_replay();
         let bar = progress_bar(args.json, walks as u64, "replaying test walks with throttled scans");
         let (configurations, _) = match evaluation::evaluate_on(&site, &floors, &throttled, &|| bar.inc(1)) {
             Ok(r) => r,
@@ -642,7 +645,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         None
     };
     let test: Vec<&Trace> = floors.iter().flat_map(|f| &f.test).collect();
-    let pdr = waymark_eval::pdr::evaluate_pdr(&test, &options.engine.motion_for(&site));
+    let pdr = waymark_eval::pdr::evaluate_pdr(&test, &options.calibration.engine.motion_for(&site));
     let report = evaluation::EvalReport {
         configurations,
         survey,
@@ -809,7 +812,7 @@ fn plot(
         let path = dir.join(format!("{}-{}.svg", floors[f].name, trace.name));
         plot_walk(&path, &title, floors[f].plan.as_ref(), &truth, &tracks).map_err(|e| e.to_string())?;
         for (key, estimates) in &result.estimates {
-            let (epochs, _) = evaluation::score_scans(trace, f, estimates, None);
+            let (epochs, _) = waymark_survey::scoring::score_scans(trace, f, estimates, None);
             errors.entry(key).or_default().extend(epochs.iter().map(|s| s.penalised_m()));
         }
     }

@@ -18,7 +18,7 @@
 //! Fit cases in which maximum likelihood collapses a component onto one observation have no
 //! maximum to agree on and are redrawn ([`well_posed_case`]); the count is printed.
 //!
-//! `cargo test --features cli --test hmm_reference -- --nocapture` prints the largest
+//! `cargo test -p waymark-cli --test hmm_reference -- --nocapture` prints the largest
 //! relative difference of each test.
 
 // The reference is written with indices, as the equations are.

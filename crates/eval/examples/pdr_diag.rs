@@ -4,7 +4,7 @@
 //! "pooled" line.
 //!
 //! ```text
-//! cargo run --release --example pdr_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}/path_data_files > /tmp/diag.tsv
+//! cargo run --release -p waymark-eval --example pdr_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}/path_data_files > /tmp/diag.tsv
 //! python3 examples/pdr_diag.py /tmp/diag.tsv
 //! ```
 //!

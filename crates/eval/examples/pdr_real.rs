@@ -3,18 +3,10 @@
 //! file name, index i with i % 5 ≠ 4) and scores the TEST walks (i % 5 == 4).
 //!
 //! ```text
-//! cargo run --release --example pdr_real -- site1/B1/path_data_files site1/F1/path_data_files ...
+//! cargo run --release -p waymark-eval --example pdr_real -- site1/B1/path_data_files site1/F1/path_data_files ...
 //! ```
 //!
-//! On ILC 2.0 site 1 (`/work/main/target/ilc/site1/{B1,F1,F2,F3,F4}/path_data_files`, one
-//! OPPO PBCM10 at 50 Hz) with the default `MotionConfig`, calibrated
-//! on all 459 survey walks and scored on the 112 test walks: distance error mean 10.8 %,
-//! median 6.8 %, pooled 0.5 %; heading RMSE 18.4°, median |error| 10.7° over 5 767 steps.
-//! Per floor (each calibrated on its own survey walks), mean / pooled distance error and
-//! heading RMSE: B1 13.4 % / 1.5 % / 18.7°, F1 6.3 % / 0.5 % / 17.5°, F2 12.6 % / 1.4 % /
-//! 19.1°, F3 10.7 % / 0.8 % / 16.8°, F4 8.9 % / 1.6 % / 19.6°. The chosen step length model
-//! is Weinberg (k ≈ 0.367) everywhere: its leave-one-walk-out error on survey walks is
-//! 8.8 % pooled, against 10.5 % for a constant length and 10.4 % linear in frequency.
+//! The figures on the competition's site 1: `docs/results.md#pdr-on-real-walks`.
 //!
 //! `WAYMARK_MOTION_CONFIG` may hold a `MotionConfig` as JSON (missing fields at their
 //! defaults) to try other tracker settings.

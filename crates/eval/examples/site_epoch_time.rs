@@ -7,7 +7,7 @@
 //!
 //! ```text
 //! waymark survey target/ilc/site1/{B1,F1,F2,F3,F4} --out mall.wmsite
-//! cargo run --release --example site_epoch_time -- mall.wmsite target/ilc/site1/F1/path_data_files/*.txt
+//! cargo run --release -p waymark-eval --example site_epoch_time -- mall.wmsite target/ilc/site1/F1/path_data_files/*.txt
 //! ```
 
 use std::path::Path;

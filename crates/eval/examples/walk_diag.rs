@@ -1,8 +1,8 @@
-//! Per-walk look at `waymark eval`'s configurations on recorded floors, in about 40 s for the
-//! five competition floors (the full `eval` spends most of its 24 minutes choosing the
-//! fingerprint radius and calibrating γ and the radius factors by leave-one-walk-out): the site is surveyed from the survey walks with the
-//! step length and north calibrated on them, but γ is given (`GAMMA`, `GAMMA_WITHOUT`; by
-//! default 0.03 and 0.1, what the five floors calibrate). Prints, per configuration, the mean
+//! Per-walk look at `waymark eval`'s configurations on recorded floors, much faster than the
+//! full `eval`, which spends most of its time choosing the fingerprint radius and calibrating
+//! γ and the radius factors by leave-one-walk-out: the site is surveyed from the survey walks
+//! with the step length and north calibrated on them, but γ is given (`GAMMA`,
+//! `GAMMA_WITHOUT`; by default 0.03 and 0.1, `docs/results.md#five-floors`). Prints, per configuration, the mean
 //! error at the WiFi scans and the walks whose first estimate, and whose first scored scan, is
 //! on a wrong floor; the paired
 //! difference of consecutive configurations (in `CONFIGS` order) with its standard error over
@@ -11,24 +11,26 @@
 //!
 //! ```text
 //! CONFIGS=forward-distance,forward-heading-speed,forward-speed \
-//!   cargo run --release --example walk_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}
+//!   cargo run --release -p waymark-eval --example walk_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}
 //! ```
 //!
 //! `BEACON_WAIT_MS` replays with another beacon wait (`EventOptions::beacon_wait_ns`).
 //! `FP_RADIUS` surveys with that fingerprint radius, m (default the uncalibrated
-//! `SurveyOptions` one, 5 m; `waymark eval` calibrates it, 8 m on the five floors);
+//! `SurveyOptions` one; `waymark eval` calibrates it);
 //! `ESTIMATE_STATES`, `MAX_SPEED`, `MOVEMENT_VAR`, `SPACING`, `MAX_STD` and `AGE_MS` set
 //! `EngineConfig::estimate_states`, `max_speed_mps`, `HoangConfig::movement_variance_m2`,
 //! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms);
 //! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; `waymark eval`
-//! calibrates it, 3.47 nats per reading on the five competition floors).
+//! calibrates it).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use waymark::site::Calibration;
-use waymark_eval::real::{evaluate_on, score_scans, survey_site, EvalOptions, FloorData};
+use waymark_eval::real::{evaluate_on, survey_site, EvalOptions};
+use waymark_survey::calibrate::FloorData;
 use waymark_survey::io::ilc::Trace;
+use waymark_survey::scoring::score_scans;
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
@@ -38,21 +40,24 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dirs: Vec<PathBuf> = std::env::args().skip(1).map(PathBuf::from).collect();
     let floors = dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?;
     let mut options = EvalOptions::default();
-    options.replay.events.beacon_wait_ns =
-        env_or("BEACON_WAIT_MS", options.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
-    options.engine.estimate_states = env_or("ESTIMATE_STATES", options.engine.estimate_states);
-    options.engine.max_speed_mps = env_or("MAX_SPEED", options.engine.max_speed_mps);
-    options.engine.hoang.movement_variance_m2 =
-        env_or("MOVEMENT_VAR", options.engine.hoang.movement_variance_m2);
-    options.survey.spacing_m = env_or("SPACING", options.survey.spacing_m);
-    options.survey.fingerprint_radius_m = env_or("FP_RADIUS", options.survey.fingerprint_radius_m);
-    options.survey.build.fit.max_std_db = env_or("MAX_STD", options.survey.build.fit.max_std_db);
-    options.survey.max_reading_age_ns =
-        env_or("AGE_MS", options.survey.max_reading_age_ns / 1_000_000) * 1_000_000;
+    options.calibration.replay.events.beacon_wait_ns =
+        env_or("BEACON_WAIT_MS", options.calibration.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
+    options.calibration.engine.estimate_states =
+        env_or("ESTIMATE_STATES", options.calibration.engine.estimate_states);
+    options.calibration.engine.max_speed_mps = env_or("MAX_SPEED", options.calibration.engine.max_speed_mps);
+    options.calibration.engine.hoang.movement_variance_m2 =
+        env_or("MOVEMENT_VAR", options.calibration.engine.hoang.movement_variance_m2);
+    options.calibration.survey.spacing_m = env_or("SPACING", options.calibration.survey.spacing_m);
+    options.calibration.survey.fingerprint_radius_m =
+        env_or("FP_RADIUS", options.calibration.survey.fingerprint_radius_m);
+    options.calibration.survey.build.fit.max_std_db =
+        env_or("MAX_STD", options.calibration.survey.build.fit.max_std_db);
+    options.calibration.survey.max_reading_age_ns =
+        env_or("AGE_MS", options.calibration.survey.max_reading_age_ns / 1_000_000) * 1_000_000;
     let survey: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
-    let motion =
-        waymark_survey::calibrate_motion(&survey, &options.engine.motion).ok_or("no motion calibration")?;
-    options.north = motion.north();
+    let motion = waymark_survey::calibrate_motion(&survey, &options.calibration.engine.motion)
+        .ok_or("no motion calibration")?;
+    options.calibration.north = motion.north();
     let configs: Vec<String> = env_or("CONFIGS", "forward-auto,viterbi-auto,wifi-knn".to_string())
         .split(',')
         .map(String::from)

@@ -4,7 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use waymark::Site;
-use waymark_eval::real::{self, EvalOptions, FloorData};
+use waymark_eval::real::{self, EvalOptions};
+use waymark_survey::calibrate::{self, FloorData};
 
 /// F1 unpacked under `target/`, or `None` (with a message) without the archive or `tar`.
 fn floor_dir() -> Option<PathBuf> {
@@ -44,17 +45,18 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
 
     let options = EvalOptions { configurations: vec![], ..EvalOptions::default() };
     let floors = vec![floor];
-    let (site, survey, calibration) = real::survey_calibrated(&floors, &options, &|| {}).expect("survey");
+    let (site, survey, calibration) =
+        calibrate::survey_calibrated(&floors, &options.calibration, &|| {}).expect("survey");
     assert!(survey.floors[0].states > 50, "{survey:?}");
     let gamma = calibration.rssi_weight.expect("γ calibrated");
-    assert!(real::GAMMA_GRID.contains(&gamma));
+    assert!(calibrate::GAMMA_GRID.contains(&gamma));
     let scale = calibration.accuracy_scale.expect("radii calibrated");
     assert!(scale.iter().all(|s| s.is_finite() && *s > 0.0));
     // Per motion scenario where enough held-out epochs were on the map.
     assert!(calibration.epochs > 0);
     for scenario in waymark::sensors::MdiScenario::ALL {
         let own = calibration.accuracy_scale_by_scenario.get(scenario);
-        let enough = calibration.scenario_epochs[scenario.index()] >= real::MIN_SCENARIO_EPOCHS;
+        let enough = calibration.scenario_epochs[scenario.index()] >= calibrate::MIN_SCENARIO_EPOCHS;
         assert_eq!(own.is_some(), enough, "{scenario:?}: {calibration:?}");
         assert!(own.map_or(true, |s| s.iter().all(|s| s.is_finite() && *s > 0.0)));
     }
@@ -67,7 +69,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // held-out walks, the least error chosen and surveyed with, inside what was tried unless
     // at the grid's end.
     let curve = &calibration.fingerprint_radius_mean_error_m;
-    let grid = real::FINGERPRINT_RADIUS_GRID;
+    let grid = calibrate::FINGERPRINT_RADIUS_GRID;
     let tried: Vec<usize> = curve.iter().map(|c| grid.iter().position(|&r| r == c.0).unwrap()).collect();
     assert!(tried.len() >= 3 && tried.windows(2).all(|w| w[1] == w[0] + 1), "{curve:?}");
     assert!(tried.contains(&(grid.len() / 2)));
@@ -79,7 +81,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // Leave-one-walk-out: every survey walk held out once, γ per floor with its curve.
     assert_eq!(calibration.sites, 12);
     let floor = &calibration.floors[0];
-    assert_eq!(floor.gamma.len(), real::GAMMA_GRID.len());
+    assert_eq!(floor.gamma.len(), calibrate::GAMMA_GRID.len());
     assert_eq!(floor.gamma.iter().map(|p| p.walks_preferring).sum::<usize>(), floor.walks);
     // One floor: its best γ is the site-wide one, so it records none of its own.
     assert_eq!(floor.best_rssi_weight, Some(gamma));
@@ -91,12 +93,12 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // The radio fit floor, and the held-out walks replayed as shipped: every epoch of the
     // calibration's own replays again, on the map or beyond it.
     let floor_fit = calibration.radio_fit_floor;
-    let enough = calibration.radio_fit_scans >= real::MIN_SCENARIO_EPOCHS;
+    let enough = calibration.radio_fit_scans >= calibrate::MIN_SCENARIO_EPOCHS;
     assert_eq!(floor_fit.is_some(), enough, "{calibration:?}");
     assert!(floor_fit.map_or(true, f64::is_finite));
     assert!(calibration.radio_fit_scans > 0 && calibration.radio_fit_scans <= calibration.epochs);
     assert_eq!(site.calibration().radio_fit_floor, floor_fit);
-    let epochs = |r: &real::OffMapReport| r.bands.iter().map(|b| b.epochs).sum::<usize>();
+    let epochs = |r: &calibrate::OffMapReport| r.bands.iter().map(|b| b.epochs).sum::<usize>();
     assert_eq!(epochs(&calibration.on_map), calibration.epochs, "{calibration:?}");
     assert_eq!(epochs(&calibration.off_map), calibration.epochs_off_map, "{calibration:?}");
     assert_eq!(epochs(&calibration.off_map_without_floor), calibration.epochs_off_map);
@@ -105,11 +107,11 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // beats the site-wide one beyond its standard error, and a band's radius factors where it
     // has enough epochs on the map.
     let sparse = &calibration.sparse_scans;
-    assert_eq!(sparse.gamma.len(), real::GAMMA_GRID.len(), "{sparse:?}");
+    assert_eq!(sparse.gamma.len(), calibrate::GAMMA_GRID.len(), "{sparse:?}");
     assert!(sparse.epochs_by_since.iter().sum::<usize>() > 0, "{sparse:?}");
     for (band, &n) in sparse.epochs_by_since.iter().enumerate() {
         let own = sparse.calibration.accuracy_scale_by_since[band];
-        assert_eq!(own.is_some(), n >= real::MIN_SCENARIO_EPOCHS, "{sparse:?}");
+        assert_eq!(own.is_some(), n >= calibrate::MIN_SCENARIO_EPOCHS, "{sparse:?}");
     }
     if let Some(g) = sparse.calibration.rssi_weight {
         let at = |g: f64| sparse.gamma.iter().find(|p| p.gamma == g).unwrap();
@@ -144,8 +146,8 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // Habits from the survey walks, their strength chosen on the held-out half of them, on
     // sites surveyed as the calibrated one was.
     let options = options.surveyed_with(&calibration);
-    assert_eq!(options.survey.fingerprint_radius_m, calibration.fingerprint_radius_m);
-    assert!(!options.calibrate_fingerprint_radius);
+    assert_eq!(options.calibration.survey.fingerprint_radius_m, calibration.fingerprint_radius_m);
+    assert!(!options.calibration.calibrate_fingerprint_radius);
     let (model, learning, selection) = real::survey_habits(&site, &floors, &options).expect("habits");
     assert!(learning.epochs > 0 && learning.feedback_epochs > 0, "{learning:?}");
     assert_eq!(selection.walks, 12, "every survey walk held out once");

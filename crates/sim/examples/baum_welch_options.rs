@@ -4,8 +4,8 @@
 //! run and the CPU-bound wall time.
 //!
 //! ```sh
-//! cargo run --release --example baum_welch_options            # seeds 1 2 3
-//! cargo run --release --example baum_welch_options -- 4 5     # other seeds
+//! cargo run --release -p waymark-sim --example baum_welch_options            # seeds 1 2 3
+//! cargo run --release -p waymark-sim --example baum_welch_options -- 4 5     # other seeds
 //! ```
 
 use std::time::Instant;

@@ -16,8 +16,7 @@
 //!   entered ten times as often as the others. The entrance section is left with 0.9, as eq.
 //!   1's state 1. Every walk starts at the entrance (§II-A: where the person enters is known).
 //!   The paper: "the further away we are from uniform probabilities ..., the better the
-//!   results" (§IV-A). With the same draws but no dominant move, feedback 0.1 ended ten runs
-//!   4.5, 6.8, 7.6 and 20 points below the true parameters (seeds 0-3).
+//!   results" (§IV-A; `docs/tuning.md#baum-welch-experiment`).
 //! - **Observations** (§II-C, §IV): the true position is uniform in its state; the range
 //!   differences to anchors 2-4 (anchor 1 the reference; the anchors `ANCHOR_MARGIN_M`
 //!   outside the building's corners) get the fixed bias of the 1 m × 1 m
@@ -36,35 +35,14 @@
 //!   run chosen at random (§IV-C: "25 out of 500" for 0.05). Fig. 4's curve keeps the true
 //!   transitions and learns the emissions only, on the same runs (the paper's were 200 epochs).
 //!
-//!   Learning on the new walk alone forgets: 324 components with a mean and a covariance each
-//!   are more than 500 positions pin down, and with feedback 0.1 the room accuracy wandered
-//!   between 35% and 57% over ten runs. Carrying the earlier walks' expected counts as a prior
-//!   instead (Neal & Hinton's incremental EM, which never revisits them) levelled off at 77%
-//!   by run 10 and 78% at run 20, where refitting on all walks reached 84% and 88% (true
-//!   parameters: 87%). Seed 0, measured before the habits had their dominant move.
-//!
-//!   Eq. 15's Σ = 2500 I is far wider than this floor's few-metre errors, so the first E-step's
-//!   posteriors barely tell the states apart, and eq. 11 alone moved every component of every
-//!   state to within ~1 m of the same point, the training walk's mean (after one iteration,
-//!   seed 0, transitions known: all 27 states' means at (4, 3) ± 1 m). The states had lost
-//!   their place on the floor and Baum-Welch converged to permuted states: with the transitions
-//!   known, 67% before learning and 20% after (12% on its own training walk, whose
-//!   log-likelihood it raised to −2099 against the true parameters' −3525), and 0.7% without
-//!   feedback, below chance. Started from the true parameters instead, the same fit stayed near
-//!   them (91% against 94%): the data has a good maximum, §IV's initialisation did not lead to
-//!   it. With [`FitOptions::mean_prior_weight`] a component that a run's posteriors hardly touch
-//!   (a cell of a state the walks rarely enter) keeps its mean near its cell; the transitions
-//!   known then learn 91% after one run and 94% after four (seed 0; printed with temporary
-//!   diagnostics: learned against true means, per-state confusion, log-likelihoods).
+//!   Refitting on all walks, not the new one alone, keeps what earlier runs learned; the
+//!   mean prior keeps a component the posteriors hardly touch near its cell, since eq. 15's
+//!   Σ = 2500 I otherwise lets eq. 11 pull every state's means to the same point
+//!   (`docs/tuning.md#baum-welch-experiment`, `docs/tuning.md#baum-welch-options`).
 //! - **Score**: the forward algorithm's room accuracy (the most probable state of the filtered
 //!   posterior, §III-B) on held-out walks, the same for every row and curve.
 //!
-//! What it shows (README, "The HMM learning core"), on seeds 0-3 and 17-22, run 10 minus the
-//! true parameters' accuracy, median: the transitions known (Fig. 4) −0.7 points (−7 after one
-//! run); decaying feedback from 0.2 −3.3; feedback 0.1 −5; no feedback −36, a poor local
-//! maximum, and decaying feedback is ahead of it after the first run on every seed. Which
-//! maximum a seed reaches varies: seed 2's true parameters score only 42% (per-cell moments of
-//! a room with heavy-tailed estimates), which every curve with feedback beats.
+//! What it shows: `docs/results.md#baum-welch-experiment`.
 
 use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 use rand::rngs::ChaCha8Rng;
@@ -95,12 +73,8 @@ const DEPTH_M: f64 = 2.0 * ROOM_DEPTH_M + CORRIDOR_M;
 /// room's depth. §IV: "four anchors were placed on four corners around the building"; the
 /// paper gives no distance. On the building's own corners the reference anchor stood in the
 /// corner of a room, where range differences biased by up to b_max have no consistent
-/// position: least squares put 7.9% of the estimates (seed 0; 16.1% on seed 2) more than
-/// 30 m from their state, some kilometres away, and a room with such tails is one no Gaussian
-/// mixture from §IV's initialisation learned (the transitions known, seed 0: 12% after ten
-/// runs, true parameters 87%). 5 m: 0.0% and 1.7%; 2 m: 4.0% and 9.2%; 10 m: 0.0% and 0.1%,
-/// but there seed 2's room with the transitions known fell to 2% (measured with
-/// `waymark simulate --experiment baum-welch`, anchors moved by hand).
+/// position, and least squares threw estimates far from their state
+/// (`docs/tuning.md#baum-welch-experiment`).
 const ANCHOR_MARGIN_M: f64 = 5.0;
 
 /// How the per-cell range-difference biases are drawn (§II-C).
@@ -123,9 +97,8 @@ pub enum Bias {
 pub struct BaumWelchExperiment {
     /// Seed of the habits, the biases, the walks and the feedback epochs.
     pub seed: u64,
-    /// Baum-Welch runs, each on a new walk: 10 (the paper's run counts are plotted only; on
-    /// seed 0 the feedback curves move by at most 3.1 points over runs 8-10, and ten runs take 11 s
-    /// in release).
+    /// Baum-Welch runs, each on a new walk: 10 (the paper's run counts are plotted only; by
+    /// then the feedback curves have levelled off, `docs/tuning.md#baum-welch-experiment`).
     pub runs: usize,
     /// Epochs per run: 500 (§IV-C, learning all parameters).
     pub run_length: usize,
@@ -133,9 +106,9 @@ pub struct BaumWelchExperiment {
     /// standard error of at most 1.1 points per accuracy.
     pub test_walks: usize,
     /// Range-difference bias per cell: U(0, 4 m). The paper gives no b_max (Fig. 4's values
-    /// are plotted); with 4 m and σ_n = 1 m the estimates alone are in the true 3 m-wide state
-    /// 32-43% of the time while the forward algorithm with the true parameters reaches 42-94%
-    /// (seeds 0-3 and 17-22), the regime in which the paper's HMM matters (Fig. 3).
+    /// are plotted); with 4 m and σ_n = 1 m the estimates alone often miss the true state
+    /// while the forward algorithm with the true parameters mostly finds it, the regime in
+    /// which the paper's HMM matters (Fig. 3; `docs/tuning.md#baum-welch-experiment`).
     pub bias: Bias,
     /// σ_n, the white noise on each range difference, m: 1 (see `bias`; the paper sweeps
     /// 0-35 m in Fig. 3).

@@ -39,8 +39,8 @@ pub struct PathLoss {
     /// Path-loss exponent. 4: the low end of the "obstructed in building" range 4-6
     /// (Rappaport, Wireless Communications, Table 4.2), for an office of walled rooms. With it
     /// a quarter of the (state, access point) pairs are clipped 50-99% of the time, so the
-    /// censoring model matters as in Hoang's experiments; at 3.5 almost none are, and
-    /// `waymark simulate` then finds the censored and naive fits within 1% of each other.
+    /// censoring model matters as in Hoang's experiments; at 3.5 almost none are
+    /// (`docs/tuning.md#simulated-office`).
     pub exponent: f64,
 }
 

@@ -1,4 +1,4 @@
-//! The long run (issue 7): a simulated day on the office at 100 Hz, in accelerated time,
+//! The long run: a simulated day on the office at 100 Hz, in accelerated time,
 //! through the engine an app holds. Checks that memory stays flat and positions finite.
 //!
 //! A [`SessionGenerator`] makes the day one activity at a time (walks with stops, the phone on
@@ -27,9 +27,9 @@ use waymark::Engine;
 use waymark::EngineConfig;
 use waymark::Error;
 
-/// One scan every 2 s: an unthrottled Android phone (the competition walks' median scan
-/// intervals are 1.9-2.3 s by floor, `waymark survey`'s `scan_interval_median_s`), the same
-/// as the replay's timer (`eval::replay::ReplayOptions::timer_ns`).
+/// One scan every 2 s: an unthrottled Android phone, the same as the replay's timer
+/// ([`ReplayOptions::timer_ns`](waymark_survey::replay::ReplayOptions::timer_ns),
+/// `docs/tuning.md#replay-timer`).
 pub const SCAN_INTERVAL_NS: u64 = 2_000_000_000;
 
 /// Samples per sensor batch: 50, half a second at 100 Hz, as the replay batches
@@ -39,7 +39,7 @@ pub const BATCH_SAMPLES: usize = 50;
 /// What `waymark simulate --experiment long-run` runs.
 #[derive(Clone, Debug)]
 pub struct LongRunConfig {
-    /// Simulated length, hours (issue 7: 24).
+    /// Simulated length, hours (24: a day).
     pub hours: f64,
     /// Seed of the building and the session.
     pub seed: u64,

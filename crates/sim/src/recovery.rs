@@ -1,4 +1,4 @@
-//! Recovery (issue 7): how many epochs of good data the engine needs to return to its normal
+//! Recovery: how many epochs of good data the engine needs to return to its normal
 //! error after (a) being "kidnapped" — the person is carried to the far end of the building
 //! and walks on there — or (b) ten minutes of walking without radio.
 //!
@@ -20,7 +20,7 @@
 //! **Normal error** is the twins' error in their steady state (every epoch after the first
 //! [`WARMUP_EPOCHS`]), pooled over all runs of the scenario: its median and 90th percentile.
 //! (The twins' error over just the epochs after the disturbance is the same kind of walk but a
-//! tenth of the data; pooled over 2 runs, as in the tests, its p90 moved by 0.2 m.)
+//! tenth of the data.)
 //! **Tolerance** is max(1.5 × normal median, normal p90).
 //!
 //! A run has **recovered after r epochs** when r is the first epoch of good data (counting
@@ -31,27 +31,16 @@
 //! Why the reference: recovering is getting back to what the undisturbed engine does, and on a
 //! given stretch of walk that is not a constant. Where the radio is ambiguous (two spots 3 m
 //! apart at a stop, the first steps of a walk, which the step detector confirms one epoch
-//! late) the undisturbed engine has excursions of 2-5 m. The first rule, the tolerance alone
-//! for [`HOLD_EPOCHS`] epochs, counted them as not yet recovered: over seeds 0-49 it scored the
-//! outage's twins, never disturbed, over 10 epochs in 10% of runs (up to 23), and the five
-//! outage runs it scored over 10 (seeds 9, 21, 23, 28, 47) are exactly those whose twins it
-//! scores the same (12, 23, 11, 16, 17 epochs). Of the kidnapped runs it scored over 10, the
-//! reference has the same excursions or larger in seeds 4 and 44 (seed 4: 3.2, 3.5, 2.8,
-//! 2.5 m at epochs 3, 7, 8, 10, where the kidnapped engine has 2.4, 1.2, 1.9, 1.9 m); seed 40
-//! is slow for real (README). An epoch at which the disturbed engine is no farther from the
-//! truth than the undisturbed engine given the same input is not one it is still recovering
-//! in: that error is the engine's anyway. The margin is [`SAME_PLACE_M`], the agreement of
-//! engines that have forgotten their differences; with none, estimates that agree up to
-//! rounding fail on the rounding (seeds 0-49: outage at most 14 epochs with a margin of 0, 5
-//! with 0.1 m, 4 with 0.2 m; the kidnap at most 20 with all three). The tolerance stays, so
+//! late) the undisturbed engine has excursions of a few metres, and the tolerance alone counted
+//! them as not yet recovered, scoring never-disturbed twins as slow. An epoch at which the
+//! disturbed engine is no farther from the truth than the undisturbed engine given the same
+//! input is not one it is still recovering in: that error is the engine's anyway. The margin
+//! is [`SAME_PLACE_M`], the agreement of engines that have forgotten their differences; with
+//! none, estimates that agree up to rounding fail on the rounding. The tolerance stays, so
 //! that a reference better than the normal error at some epoch does not hold back a run that
-//! is within it.
-//!
-//! The rule's own noise: a reference is one undisturbed history among many. The rule applied
-//! to the kidnap's twin against its own reference (a table where the twin's first walk
-//! ended, then the twin's walk) compares two engines neither of which was disturbed, and
-//! still takes up to 7 epochs (seeds 0-49: median 1, p90 6). The outage's reference is the
-//! same run with radio, so there the comparison is exact.
+//! is within it. The rule's own noise: a reference is one undisturbed history among many; the
+//! outage's reference is the same run with radio, so there the comparison is exact. Figures:
+//! `docs/tuning.md#recovery-rule`, `docs/results.md#recovery`.
 //!
 //! The first rule's figures on the disturbed runs, the references, the twins and the fresh
 //! engines are reported alongside (`tolerance_recovery` and the like).
@@ -76,8 +65,9 @@ use super::longrun::{BATCH_SAMPLES, SCAN_INTERVAL_NS};
 /// value.
 pub const HOLD_EPOCHS: usize = 5;
 
-/// Two engines report "the same place" within 0.1 m: a fifth of the normal median error on
-/// the simulated office (0.41 m) and of the pseudo-state spacing (0.75 m, Hoang §5). A
+/// Two engines report "the same place" within 0.1 m: a fraction of the normal median error on
+/// the simulated office (`docs/tuning.md#recovery-rule`) and of the pseudo-state spacing
+/// (0.75 m, Hoang §5). A
 /// definition, not a tuned value: engines that have forgotten their differences agree to
 /// within rounding. Also the margin by which a recovered run's error may exceed its
 /// reference's: a run reporting the reference's place, to within this, has an error within
@@ -85,12 +75,11 @@ pub const HOLD_EPOCHS: usize = 5;
 pub const SAME_PLACE_M: f64 = 0.1;
 
 /// Epochs a twin is given to converge from its cold start before its errors count as normal:
-/// 10, the 90th percentile of a fresh engine's epochs to recover by the first rule on the
-/// simulated office (8 after an outage, 10 after a kidnap, 20 seeds: `waymark simulate
-/// --experiment recovery`, "fresh" under "first rule").
+/// 10, about the 90th percentile of a fresh engine's epochs to recover by the first rule on
+/// the simulated office (`docs/tuning.md#recovery-rule`).
 pub const WARMUP_EPOCHS: usize = 10;
 
-/// The issue's target: back to normal within 10 epochs of good data.
+/// The target: back to normal within 10 epochs of good data.
 pub const TARGET_EPOCHS: usize = 10;
 
 /// What `waymark simulate --experiment recovery` runs.
@@ -104,7 +93,7 @@ pub struct RecoveryConfig {
     pub after_epochs: usize,
     /// Epochs with radio before the outage: 60 (2 minutes).
     pub before_outage_epochs: usize,
-    /// Length of the outage, s: 600 (issue 7: "10 minutes without radio").
+    /// Length of the outage, s: 600 ("10 minutes without radio").
     pub outage_s: f64,
     /// Whether each run also has the passes that put its result in context: a cold start (a
     /// fresh engine from the first epoch of good data) and, for the kidnap, the twin's own

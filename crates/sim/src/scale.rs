@@ -34,7 +34,7 @@ pub struct ScaleConfig {
     /// A state models an access point whose mean RSSI there is above `clip - k·σ_L`. 1: heard
     /// at least 16% of the time.
     pub model_below_clip_sigmas: f64,
-    /// Readings per scan: the strongest this many. 100, the figure.
+    /// Readings per scan: the strongest this many. 100, a dense mall's.
     pub heard: usize,
 }
 
@@ -181,8 +181,7 @@ pub struct ScaleEpoch {
     pub truth: Point2<f64>,
 }
 
-/// Time between epochs, ns: the 2 s scan interval measured on the competition's phones
-/// (`survey::SurveyOptions`, 1.9-2.3 s by floor).
+/// Time between epochs, ns: one unthrottled scan interval (`docs/tuning.md#replay-timer`).
 pub const SCALE_EPOCH_NS: u64 = 2_000_000_000;
 
 impl ScaleSite {

@@ -17,8 +17,7 @@ use waymark::sensors::SensorSample;
 
 /// What a session is made of. These describe the scenario, not the engine: they were chosen so
 /// that a day exercises walking, standing and lying still in comparable shares, not tuned to
-/// any result. Measured over 24 h (`waymark simulate --experiment long-run --json`, seed 0,
-/// `walking_share` and `table_share`): 32% of epochs walking, 31% on a table, 37% standing.
+/// any result (`docs/tuning.md#long-run-session`).
 #[derive(Clone, Debug, PartialEq)]
 pub struct SessionConfig {
     /// Length of each walk, m, drawn uniformly: 30-250 m (Hoang §6.1's walks are ~200 m; an
@@ -32,9 +31,7 @@ pub struct SessionConfig {
     /// Chance that the phone is put down on a table after a walk: 0.4.
     pub table_chance: f64,
     /// How long it lies there, s, uniform: 1-10 min. Each stretch or walk is one segment in
-    /// memory: 10 min of three 100 Hz streams is 5.8 MB; the largest segment of the 24 h runs
-    /// (a long walk with stops) was 8.8 MiB for seed 0, 9.7 MiB for seed 1
-    /// (`generator_peak_bytes`).
+    /// memory, so this bounds the generator's peak (`docs/tuning.md#long-run-session`).
     pub table_s: (f64, f64),
     /// The phone's inertial sensors (the demo's defaults).
     pub imu: ImuConfig,

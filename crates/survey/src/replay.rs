@@ -49,9 +49,7 @@ impl MotionMask {
             // Without step detection there is no distance, no walking or standing still, and no
             // direction of travel from the steps: the tracker's heading of an epoch with steps
             // is their length-weighted mean direction, withheld when they turned too much,
-            // which only a step detector knows. Measured with `walk_diag` on the five
-            // competition floors (README "Real smartphone data"): forward-heading-speed 5.013 m
-            // with the steps' direction, 5.008 m with the compass's.
+            // which only a step detector knows (`docs/tuning.md#heading-speed-mask`).
             update.distance_m = None;
             update.motion_state = MotionState::Unknown;
             if scenario == MdiScenario::HeadingSpeed {
@@ -91,11 +89,8 @@ pub struct ReplayOptions {
     /// 2 s: one scan interval of an unthrottled Android phone (the competition walks'
     /// medians are 1.9-2.3 s by floor, `SurveyReport`'s `scan_interval_median_s`), so epochs
     /// keep coming at a scan's pace when scans stop (Android 9+ throttles to 4 scans in 2
-    /// minutes). Measured (`waymark eval target/ilc/site1/{B1,F1,F2,F3,F4}`, scored at scan
-    /// times): a 4 s timer, together with beacons waiting 4 s, left the live estimate as it
-    /// was (5.640 → 5.647 m) and made the Viterbi track worse (5.439 → 5.613 m): a gap beyond
-    /// the walking-distance table's reach (3 s at 3 m/s) is bridged by the speed bound alone,
-    /// without the motion.
+    /// minutes). Not longer: a gap beyond the walking-distance table's reach is bridged by the
+    /// speed bound alone, without the motion (`docs/tuning.md#replay-timer`).
     pub timer_ns: Option<u64>,
     /// Scans closer than this to the previous one kept are dropped, ns: `Some(30 s)` replays
     /// a foreground app under Android 9+'s throttling.

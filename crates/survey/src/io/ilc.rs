@@ -121,15 +121,10 @@ pub struct EventOptions {
     /// before a scan are pushed before it (which [`Trace::events`] guarantees).
     pub batch_ns: u64,
     /// How long beacon readings wait for a WiFi scan to ride on before they form a scan of
-    /// their own, ns. 4 s: longer than 99% of the gaps between a walk's WiFi scans on every
-    /// floor of the competition data (`waymark eval target/ilc/site1/{B1,F1,F2,F3,F4} --json`,
-    /// `survey.floors[].scan_interval_p99_s`: 2.1-3.8 s; medians 1.9-2.3 s), so a beacon
-    /// rides on the next scan unless scans have stopped. At 2 s, under the median gap, a scan
-    /// that came a little late left one or two beacons to make a scan of their own, and a walk's
-    /// first such lone-beacon epoch left the floor to chance: measured on the five floors' 112
-    /// test walks, the first estimate was on a wrong floor in 15 walks at 2 s and in 1 at 4 s
-    /// (the means at the WiFi scans, where the next scan has corrected it, are within noise:
-    /// `forward-auto` 5.19 m at 2 s, 5.23 m at 4 s).
+    /// their own, ns. 4 s: longer than nearly every gap between a walk's WiFi scans
+    /// (`scan_interval_p99_s`), so a beacon rides on the next scan unless scans have stopped;
+    /// a shorter wait leaves late scans' beacons to make lone-beacon epochs, which leave the
+    /// floor to chance (`docs/tuning.md#beacon-wait`).
     pub beacon_wait_ns: u64,
     /// Whether beacon readings are used at all.
     pub beacons: bool,

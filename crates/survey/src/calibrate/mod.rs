@@ -1,0 +1,437 @@
+//! Per-site calibration from the survey walks alone: the walkers' step length and the site's
+//! north, the fingerprint radius, γ per floor and per motion scenario, the radius factors,
+//! the sparse-scan calibration and the radio fit floor, all chosen on held-out survey walks.
+//! Test walks are never read.
+
+mod floors;
+mod gamma;
+mod held_out;
+mod radius;
+mod report;
+
+pub use floors::{survey_inputs, FloorData};
+pub use gamma::GAMMA_GRID;
+pub use held_out::MIN_SCENARIO_EPOCHS;
+pub use radius::{RadiusPoint, FINGERPRINT_RADIUS_FOLDS, FINGERPRINT_RADIUS_GRID};
+pub use report::{
+    CalibrationReport, FloorCalibrationReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport,
+    SparseScansReport,
+};
+
+use crate::io::Trace;
+use crate::replay::{replay, MotionMask, ReplayOptions};
+use crate::scoring::{quantile, Scored};
+use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
+use gamma::{gamma_curve, own_gamma};
+use held_out::{tag, HeldOut, OnMap, Tag, Tagged, RUNS, THROTTLED};
+use radius::calibrate_fingerprint_radius;
+use std::sync::Arc;
+use waymark::sensors::MdiScenario;
+use waymark::site::{Calibration, North, Site, SPARSE_BANDS};
+use waymark::{Engine, EngineConfig};
+
+/// Why a site could not be read or calibrated.
+#[derive(Debug, thiserror::Error)]
+pub enum CalibrationError {
+    /// A folder could not be listed.
+    #[error("cannot list {path}: {source}")]
+    Io {
+        /// The folder.
+        path: String,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// A walk could not be read.
+    #[error(transparent)]
+    Trace(#[from] crate::io::TraceError),
+    /// The survey could not build a site.
+    #[error(transparent)]
+    Site(#[from] waymark::site::SiteError),
+}
+
+/// How a site is surveyed and calibrated, and its walks replayed.
+#[derive(Clone, Debug)]
+pub struct CalibrationOptions {
+    /// How the site is surveyed.
+    pub survey: SurveyOptions,
+    /// The engine as shipped (γ, models...).
+    pub engine: EngineConfig,
+    /// How walks are replayed.
+    pub replay: ReplayOptions,
+    /// The site's north, when not estimated from the survey.
+    pub north: North,
+    /// Worker threads for replays.
+    pub threads: usize,
+    /// Whether the calibration chooses the fingerprint radius ([`FINGERPRINT_RADIUS_GRID`]);
+    /// off: `survey.fingerprint_radius_m` as given.
+    pub calibrate_fingerprint_radius: bool,
+}
+
+impl Default for CalibrationOptions {
+    fn default() -> Self {
+        Self {
+            survey: SurveyOptions::default(),
+            engine: EngineConfig::default(),
+            replay: ReplayOptions::default(),
+            north: North::default(),
+            threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
+            calibrate_fingerprint_radius: true,
+        }
+    }
+}
+
+impl CalibrationOptions {
+    /// The engine's configuration: `engine`, with the survey's reading-age limit unless it
+    /// sets its own, so stale readings mean the same at survey and replay time.
+    pub fn engine_config(&self) -> EngineConfig {
+        EngineConfig {
+            max_reading_age_ns: self.engine.max_reading_age_ns.or(Some(self.survey.max_reading_age_ns)),
+            ..self.engine.clone()
+        }
+    }
+
+    /// How the calibration replays its held-out walks: as `replay`, but with every scan (the
+    /// site a phone gets is surveyed from unthrottled walks, and its calibration replays them
+    /// both ways, see [`SparseScans`](waymark::site::SparseScans)).
+    pub fn calibration_replay(&self) -> ReplayOptions {
+        ReplayOptions { min_scan_interval_ns: None, ..self.replay }
+    }
+
+    /// `replay` with the scans throttled as Android 9+ throttles a foreground app
+    /// ([`ANDROID_THROTTLE_NS`](crate::replay::ANDROID_THROTTLE_NS)).
+    pub fn throttled_replay(&self) -> ReplayOptions {
+        ReplayOptions { min_scan_interval_ns: Some(crate::replay::ANDROID_THROTTLE_NS), ..self.replay }
+    }
+
+    /// These options with the survey as [`survey_calibrated`] made the site: its fingerprint
+    /// radius, no longer searched. What surveys the same site again from some of its walks
+    /// must use them, or it would fit its held-out sites at another radius.
+    pub fn surveyed_with(&self, calibration: &CalibrationReport) -> CalibrationOptions {
+        let mut options = self.clone();
+        options.survey.fingerprint_radius_m = calibration.fingerprint_radius_m;
+        options.calibrate_fingerprint_radius = false;
+        options
+    }
+}
+
+/// `f` over `items` on `threads` worker threads, results in input order.
+pub fn parallel_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let threads = threads.max(1).min(items.len().max(1));
+    if threads == 1 {
+        return items.iter().map(f).collect();
+    }
+    let next = std::sync::atomic::AtomicUsize::new(0);
+    let mut done: Vec<(usize, R)> = std::thread::scope(|scope| {
+        let workers: Vec<_> = (0..threads)
+            .map(|_| {
+                scope.spawn(|| {
+                    let mut mine = Vec::new();
+                    loop {
+                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(item) = items.get(k) else { break };
+                        mine.push((k, f(item)));
+                    }
+                    mine
+                })
+            })
+            .collect();
+        // A worker that panicked loses its share; the caller sees fewer results.
+        workers.into_iter().flat_map(|w| w.join().unwrap_or_default()).collect()
+    });
+    done.sort_by_key(|(k, _)| *k);
+    done.into_iter().map(|(_, r)| r).collect()
+}
+
+/// Steps of the survey's calibration, for progress: one per survey walk (each is held out
+/// once) and one per fold and radius of the fingerprint radius's cross-validation: at most,
+/// since its search usually stops after three or four radii (the bar then ends early).
+pub fn calibration_steps(floors: &[FloorData], options: &CalibrationOptions) -> usize {
+    let radius = if options.calibrate_fingerprint_radius {
+        FINGERPRINT_RADIUS_GRID.len() * FINGERPRINT_RADIUS_FOLDS
+    } else {
+        0
+    };
+    // The leave-one-walk-out pass, then the shipped engine's pass.
+    2 * floors.iter().map(|f| f.survey.len()).sum::<usize>() + radius
+}
+
+/// Quantile of the radio fits of held-out scans on the map taken as the floor below which the
+/// map does not explain a scan: a one-sided test at 5%, one scan on the map in twenty called
+/// unexplained (`docs/tuning.md#radio-fit-floor`).
+const RADIO_FIT_FLOOR_QUANTILE: f64 = 0.05;
+
+/// Calibrates a site from its survey walks: the walkers' step length and the site's north
+/// (from waypoints and steps, [`crate::calibrate_motion`]), then γ per floor by
+/// leave-one-walk-out, Hoang §6.2's jackknife with a walk as the unit: each survey walk is
+/// replayed, at each γ of [`GAMMA_GRID`] with the motion and with it withheld, on the site
+/// surveyed from every other walk (all floors), and each floor takes the γ of least mean
+/// held-out error over its walks. The pooled curve gives the site-wide γ. The radius factors
+/// are the 68th and 95th percentiles of error ÷ radius over every held-out epoch at its
+/// floor's γ: pooled, because a percentile needs many epochs and the engine applies one
+/// factor whatever floor it believes. Test walks are never read.
+pub fn calibrate(
+    floors: &[FloorData],
+    options: &CalibrationOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(Calibration, North, CalibrationReport), CalibrationError> {
+    let (site, _, report) = survey_calibrated(floors, options, progress)?;
+    Ok((*site.calibration(), site.north(), report))
+}
+
+/// [`calibrate`], then the site from all survey walks with that calibration and north, each
+/// floor with its γ.
+pub fn survey_calibrated(
+    floors: &[FloorData],
+    options: &CalibrationOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(Site, SurveyReport, CalibrationReport), CalibrationError> {
+    let mut report = CalibrationReport::default();
+    let all: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
+    let motion = crate::calibrate_motion(&all, &options.engine.motion);
+    let north = motion.as_ref().map_or(options.north, |m| m.north());
+    let mut calibration =
+        Calibration { step_length: motion.as_ref().map(|m| m.step_length), ..Calibration::default() };
+    report.motion = motion.as_ref().map(|m| MotionSummary {
+        step_length: m.step_length,
+        heading_offset_deg: m.heading_offset_rad.to_degrees(),
+        walks: m.walks,
+    });
+    let mut survey_options = options.survey.clone();
+    if options.calibrate_fingerprint_radius {
+        let (radius, curve) = calibrate_fingerprint_radius(floors, north, calibration, options, progress)?;
+        report.fingerprint_radius_mean_error_m = curve;
+        survey_options.fingerprint_radius_m = radius.unwrap_or(survey_options.fingerprint_radius_m);
+    }
+    report.fingerprint_radius_m = survey_options.fingerprint_radius_m;
+    let inputs = survey_inputs(floors);
+    let prepared = PreparedSurvey::new("eval", &inputs, north, &survey_options)?;
+    let full = prepared.fit(&|_, _| true, None, options.threads);
+    let (site, survey) = prepared.assemble(&full)?;
+    // Every survey walk held out once, replayed at each γ with the motion as the sensors give
+    // it and with the motion withheld.
+    // Each picks the γ of its scenario; all four fit the radius factors of every scenario.
+    let masks = [MotionMask::Auto, MotionMask::Speed, MotionMask::Distance, MotionMask::HeadingSpeed];
+    let jobs: Vec<(usize, usize)> = floors
+        .iter()
+        .enumerate()
+        .flat_map(|(f, floor)| (0..floor.survey.len()).map(move |w| (f, w)))
+        .collect();
+    let held_out: Vec<Option<(HeldOut, usize, Vec<Tagged>)>> =
+        parallel_map(&jobs, options.threads, |&(f, w)| {
+            let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
+            let fits = prepared.fit(&keep, Some(&full), 1);
+            let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
+            let result = site.map(|site| {
+                let site = Arc::new(site);
+                let trace = &floors[f].survey[w];
+                let mapped = OnMap::new(&site, f);
+                let mut tagged = Vec::with_capacity(GAMMA_GRID.len());
+                let per_gamma: HeldOut = GAMMA_GRID
+                    .iter()
+                    .map(|&gamma| {
+                        let runs: [Vec<Tag>; RUNS] = std::array::from_fn(|run| {
+                            let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine_config() };
+                            let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
+                                return Vec::new();
+                            };
+                            let replay_options = match masks.get(run) {
+                                Some(&mask) => ReplayOptions { mask, ..options.calibration_replay() },
+                                None => options.throttled_replay(),
+                            };
+                            let r = replay(&mut engine, trace, &replay_options);
+                            tag(trace, f, &mapped, &r.positions)
+                        });
+                        let plain = std::array::from_fn(|m| runs[m].iter().map(|t| t.0).collect());
+                        tagged.push(runs);
+                        plain
+                    })
+                    .collect();
+                (per_gamma, fits.refitted(), tagged)
+            });
+            progress();
+            result
+        });
+    report.sites = held_out.iter().flatten().count();
+    report.refitted_share = held_out.iter().flatten().map(|h| h.1 as f64).sum::<f64>()
+        / (report.sites.max(1) * site.states().len().max(1)) as f64;
+    // Pooled over every floor's walks.
+    let walks: Vec<&HeldOut> = held_out.iter().flatten().map(|h| &h.0).collect();
+    let (pooled, best) = gamma_curve(&walks, 0);
+    let (pooled_still, best_still) = gamma_curve(&walks, 1);
+    report.gamma_mean_error_m = pooled.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
+    report.gamma_without_movement_mean_error_m =
+        pooled_still.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
+    calibration.rssi_weight = best.map(|k| pooled[k].gamma);
+    calibration.rssi_weight_without_movement = best_still.map(|k| pooled_still[k].gamma);
+    // Distance only and heading only: their own γ when it beats the γ without movement on
+    // their own held-out curve by more than its standard error (`own_gamma`).
+    for (mask, scenario) in [(2, MdiScenario::Distance), (3, MdiScenario::HeadingSpeed)] {
+        let (curve, best) = gamma_curve(&walks, mask);
+        let own = own_gamma(&curve, best, calibration.rssi_weight_without_movement);
+        calibration.rssi_weight_by_scenario.set(scenario, own);
+        report.gamma_by_scenario.set(scenario, Some(curve));
+    }
+    // Per floor.
+    let mut weights = Vec::with_capacity(floors.len());
+    let mut at_chosen: Vec<&Scored> = Vec::new();
+    let mut by_scenario: [Vec<&Scored>; 4] = Default::default();
+    let mut off_map: Vec<(&Scored, f64, MdiScenario)> = Vec::new();
+    let mut fits_on_map: Vec<f64> = Vec::new();
+    for (f, floor) in floors.iter().enumerate() {
+        let mine: Vec<&HeldOut> = jobs
+            .iter()
+            .zip(&held_out)
+            .filter(|((ff, _), _)| *ff == f)
+            .filter_map(|(_, h)| h.as_ref().map(|h| &h.0))
+            .collect();
+        let mine_tagged: Vec<&Vec<Tagged>> = jobs
+            .iter()
+            .zip(&held_out)
+            .filter(|((ff, _), _)| *ff == f)
+            .filter_map(|(_, h)| h.as_ref().map(|h| &h.2))
+            .collect();
+        let (curve, best) = gamma_curve(&mine, 0);
+        let (curve_still, best_still) = gamma_curve(&mine, 1);
+        let gamma = own_gamma(&curve, best, calibration.rssi_weight);
+        let g = gamma.or(calibration.rssi_weight).and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
+        let gamma_still = own_gamma(&curve_still, best_still, calibration.rssi_weight_without_movement);
+        let g_still = gamma_still.or(calibration.rssi_weight_without_movement);
+        let g_still = g_still.and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
+        // Each epoch at the γ the engine gives it: only distance-and-heading epochs have
+        // Hoang's movement likelihood (eq. 11); distance only and heading only (HIPE's ring
+        // and sector) run at their scenario's γ if the site has one, and they and speed only
+        // otherwise at the γ chosen without one.
+        let at = |g: Option<f64>| g.and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
+        let chosen = MdiScenario::ALL.map(|sc| match sc {
+            MdiScenario::DistanceHeading => g,
+            _ => at(calibration.rssi_weight_by_scenario.get(sc)).or(g_still),
+        });
+        for scenario in MdiScenario::ALL {
+            let Some(chosen) = chosen[scenario.index()] else { continue };
+            for walk in &mine_tagged {
+                for (m, run) in walk[chosen].iter().take(THROTTLED).enumerate() {
+                    for (p, beyond_m, _, fit, _) in run.iter().filter(|t| t.2 == scenario) {
+                        if *beyond_m > 0.0 {
+                            if m == 0 {
+                                report.epochs_off_map += 1;
+                                off_map.push((p, *beyond_m, scenario));
+                            }
+                            continue;
+                        }
+                        if m == 0 {
+                            fits_on_map.extend(*fit);
+                            at_chosen.push(p);
+                        }
+                        by_scenario[scenario.index()].push(p);
+                    }
+                }
+            }
+        }
+        let floor_report = FloorCalibrationReport {
+            name: floor.name.clone(),
+            walks: mine.iter().filter(|w| w.iter().any(|m| !m[0].is_empty())).count(),
+            epochs: g.map_or(0, |g| mine.iter().map(|w| w[g][0].len()).sum()),
+            rssi_weight: gamma,
+            rssi_weight_without_movement: own_gamma(
+                &curve_still,
+                best_still,
+                calibration.rssi_weight_without_movement,
+            ),
+            best_rssi_weight: best.map(|k| curve[k].gamma),
+            jackknife_se_m: best.map(|k| curve[k].jackknife_se_m),
+            gamma: curve,
+            gamma_without_movement: curve_still,
+        };
+        weights.push([floor_report.rssi_weight, floor_report.rssi_weight_without_movement]);
+        report.floors.push(floor_report);
+    }
+    let scales = |points: &[&Scored]| -> Option<[f64; 2]> {
+        let ratio = |q: f64, radius: fn(&Scored) -> f64| {
+            let mut r: Vec<f64> = points.iter().map(|p| p.error_m / radius(p).max(1e-9)).collect();
+            r.sort_by(f64::total_cmp);
+            quantile(&r, q)
+        };
+        let scale = [ratio(0.68, |p| p.accuracy_m), ratio(0.95, |p| p.accuracy_95_m)];
+        scale.iter().all(|s| s.is_finite() && *s > 0.0).then_some(scale)
+    };
+    calibration.accuracy_scale = scales(&at_chosen);
+    for scenario in MdiScenario::ALL {
+        let points = &by_scenario[scenario.index()];
+        report.scenario_epochs[scenario.index()] = points.len();
+        let scale = if points.len() >= MIN_SCENARIO_EPOCHS { scales(points) } else { None };
+        calibration.accuracy_scale_by_scenario.set(scenario, scale);
+    }
+    report.epochs = at_chosen.len();
+    // Sparse scans: their own γ when it beats the site-wide one on the throttled replays by
+    // more than its standard error.
+    let (sparse_curve, sparse_best) = gamma_curve(&walks, THROTTLED);
+    calibration.sparse_scans.rssi_weight = own_gamma(&sparse_curve, sparse_best, calibration.rssi_weight);
+    report.sparse_scans.gamma = sparse_curve;
+    fits_on_map.sort_by(f64::total_cmp);
+    calibration.radio_fit_floor =
+        (fits_on_map.len() >= MIN_SCENARIO_EPOCHS).then(|| quantile(&fits_on_map, RADIO_FIT_FLOOR_QUANTILE));
+    report.radio_fit_floor = calibration.radio_fit_floor;
+    report.radio_fit_scans = fits_on_map.len();
+    report.off_map_without_floor = OffMapReport::of(&off_map, &calibration);
+    report.rssi_weight = calibration.rssi_weight;
+    report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
+    report.rssi_weight_by_scenario = calibration.rssi_weight_by_scenario;
+    report.accuracy_scale = calibration.accuracy_scale;
+    report.accuracy_scale_by_scenario = calibration.accuracy_scale_by_scenario;
+    // The held-out walks again with the engine as shipped (every calibrated value, the radio
+    // fit floor included): how it does off the map, and what the floor costs on it. And with
+    // throttled scans, every γ as shipped but no radius factor and no radio fit floor: the
+    // posterior's own radii in the sparse regime, each epoch at the γ the engine gives it (the
+    // first scan's without a movement likelihood, which the calibration's runs above, each
+    // at one γ throughout, do not give it), for the sparse radius factors.
+    let unscaled = Calibration {
+        accuracy_scale: None,
+        accuracy_scale_by_scenario: Default::default(),
+        radio_fit_floor: None,
+        ..calibration
+    };
+    let shipped: Vec<(Vec<Tag>, Vec<Tag>)> = parallel_map(&jobs, options.threads, |&(f, w)| {
+        let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
+        let fits = prepared.fit(&keep, Some(&full), 1);
+        let site = prepared.assemble(&fits).ok().map(|(s, _)| s);
+        let tags = site.and_then(|site| {
+            let trace = &floors[f].survey[w];
+            let mapped = OnMap::new(&site, f);
+            let run = |calibration: Calibration, replay_options: &ReplayOptions| -> Option<Vec<Tag>> {
+                let site = site
+                    .clone()
+                    .with_calibration(calibration)
+                    .and_then(|s| s.with_floor_rssi_weights(&weights));
+                let mut engine = Engine::new(Arc::new(site.ok()?), options.engine_config()).ok()?;
+                Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
+            };
+            Some((
+                run(calibration, &options.calibration_replay())?,
+                run(unscaled, &options.throttled_replay())?,
+            ))
+        });
+        progress();
+        tags.unwrap_or_default()
+    });
+    let mut by_band: [Vec<&Scored>; SPARSE_BANDS] = Default::default();
+    for (p, beyond_m, _, _, band) in shipped.iter().flat_map(|s| &s.1) {
+        if let (Some(band), true) = (band, *beyond_m == 0.0) {
+            by_band[*band].push(p);
+        }
+    }
+    for (band, points) in by_band.iter().enumerate() {
+        report.sparse_scans.epochs_by_since[band] = points.len();
+        calibration.sparse_scans.accuracy_scale_by_since[band] =
+            if points.len() >= MIN_SCENARIO_EPOCHS { scales(points) } else { None };
+    }
+    report.sparse_scans.calibration = calibration.sparse_scans;
+    let tags: Vec<&Tag> = shipped.iter().flat_map(|s| &s.0).collect();
+    let off: Vec<(&Scored, f64, MdiScenario)> =
+        tags.iter().filter(|t| t.1 > 0.0).map(|t| (&t.0, t.1, t.2)).collect();
+    let on: Vec<&Scored> = tags.iter().filter(|t| t.1 == 0.0).map(|t| &t.0).collect();
+    // Radii as the engine reported them: the factors are already in.
+    report.off_map = OffMapReport::of(&off, &Calibration::default());
+    report.on_map = OffMapReport::of_on_map(&on);
+    let site = site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?;
+    Ok((site, survey, report))
+}

@@ -1,0 +1,213 @@
+//! What the survey's calibration measured.
+
+use super::radius::RadiusPoint;
+use crate::scoring::Scored;
+use serde::Serialize;
+use waymark::sensors::MdiScenario;
+use waymark::site::{Calibration, SPARSE_BANDS};
+
+/// One γ of [`GAMMA_GRID`](super::GAMMA_GRID) on one floor's held-out walks.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct GammaPoint {
+    /// γ.
+    pub gamma: f64,
+    /// Mean held-out error over the floor's epochs, m (floor penalty included).
+    pub mean_error_m: f64,
+    /// Delete-one-walk jackknife standard error of that mean, m: with S_w and n_w the error
+    /// sum and epochs of walk w, θ₋w = (S − S_w) / (N − n_w) and
+    /// SE = √((k − 1)/k · Σ (θ₋w − θ̄)²) over the k walks (Efron & Tibshirani 1993, eq. 11.5).
+    pub jackknife_se_m: f64,
+    /// Walks whose own mean error is least at this γ.
+    pub walks_preferring: usize,
+}
+
+/// Leave-one-walk-out on one floor: each survey walk replayed on a site surveyed without it.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FloorCalibrationReport {
+    /// Floor name.
+    pub name: String,
+    /// Survey walks held out that scored at least one epoch.
+    pub walks: usize,
+    /// Held-out epochs scored (with the motion, at each γ).
+    pub epochs: usize,
+    /// The error curve over γ with the motion as the sensors give it.
+    pub gamma: Vec<GammaPoint>,
+    /// The same with the motion withheld.
+    pub gamma_without_movement: Vec<GammaPoint>,
+    /// The floor's own γ, recorded in the site file: its least mean held-out error, kept only
+    /// when it beats the site-wide γ by more than its standard error (`own_gamma`); `None`: the
+    /// floor runs at the site-wide γ.
+    pub rssi_weight: Option<f64>,
+    /// The same for epochs without a movement likelihood.
+    pub rssi_weight_without_movement: Option<f64>,
+    /// The γ of least mean held-out error on this floor, whether kept or not.
+    pub best_rssi_weight: Option<f64>,
+    /// Jackknife standard error of the mean error at that γ, m.
+    pub jackknife_se_m: Option<f64>,
+}
+
+/// What the survey's calibration measured.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct CalibrationReport {
+    /// All floors pooled: mean held-out error at each γ of [`GAMMA_GRID`](super::GAMMA_GRID), m (floor penalty
+    /// included).
+    pub gamma_mean_error_m: Vec<(f64, f64)>,
+    /// The same with the motion withheld.
+    pub gamma_without_movement_mean_error_m: Vec<(f64, f64)>,
+    /// The γ of least pooled error: the site-wide γ, for floors without their own.
+    pub rssi_weight: Option<f64>,
+    /// The same for epochs without a movement likelihood.
+    pub rssi_weight_without_movement: Option<f64>,
+    /// All floors pooled, with only the distance and with only the heading: the curve each
+    /// scenario's own γ is chosen on (`rssi_weight_by_scenario`).
+    pub gamma_by_scenario: waymark::site::PerScenario<Vec<GammaPoint>>,
+    /// The γ of those scenarios, when their own beat `rssi_weight_without_movement` on their
+    /// curve by more than its standard error.
+    pub rssi_weight_by_scenario: waymark::site::PerScenario<f64>,
+    /// Per floor, in site order: the γ each floor gets.
+    pub floors: Vec<FloorCalibrationReport>,
+    /// The radius factors chosen (68%, 95%), over the held-out epochs on the map (`OnMap`)
+    /// with the motion as the sensors give it, each at the γ the engine gives it on its floor:
+    /// the fallback for a scenario without its own.
+    pub accuracy_scale: Option<[f64; 2]>,
+    /// The factors per motion scenario: over the held-out epochs (on the map) the engine
+    /// positioned in that scenario, with the motion as the sensors give it, withheld, distance
+    /// only and heading only, at each floor's γ; a scenario with fewer than
+    /// [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) has none.
+    pub accuracy_scale_by_scenario: waymark::site::ScenarioScales,
+    /// Those epochs per scenario ([`MdiScenario::ALL`](waymark::sensors::MdiScenario::ALL) order).
+    pub scenario_epochs: [usize; 4],
+    /// Held-out epochs the radius factors were fitted on.
+    pub epochs: usize,
+    /// Held-out epochs left out of the radius factors: their truth was off the held-out
+    /// site's map (`OnMap`).
+    pub epochs_off_map: usize,
+    /// How the engine did on those epochs as shipped (every calibrated value, the radio fit
+    /// floor included): what a walk that leaves the surveyed area gets.
+    pub off_map: OffMapReport,
+    /// The same from the calibration's own replays, without the radio fit floor (radii scaled
+    /// by the chosen factors).
+    pub off_map_without_floor: OffMapReport,
+    /// The held-out epochs on the map, replayed with the engine as shipped, as one band.
+    pub on_map: OffMapReport,
+    /// The radio fit floor chosen ([`Calibration::radio_fit_floor`]), nats per reading: none
+    /// from fewer than [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) scans (a 5% percentile then rests on ten below).
+    pub radio_fit_floor: Option<f64>,
+    /// Held-out scans on the map the floor was chosen from.
+    pub radio_fit_scans: usize,
+    /// Sites surveyed for the leave-one-walk-out (one per survey walk).
+    pub sites: usize,
+    /// Mean share of states whose fingerprints those sites fitted afresh (the rest were
+    /// reused from the site of all walks, their training scans being the same).
+    pub refitted_share: f64,
+    /// The step length and north fitted on the survey walks.
+    pub motion: Option<MotionSummary>,
+    /// The fingerprint radius the site was surveyed with, m: the calibrated one, or the
+    /// survey options' when not calibrated.
+    pub fingerprint_radius_m: f64,
+    /// Held-out error of the engine per radius of [`FINGERPRINT_RADIUS_GRID`](super::FINGERPRINT_RADIUS_GRID) tried, at its
+    /// best γ: (radius m, mean error m at the WiFi scans with the floor penalty, scans); empty
+    /// when the radius was given.
+    pub fingerprint_radius_mean_error_m: Vec<RadiusPoint>,
+    /// The held-out walks replayed with throttled scans, and what they calibrated.
+    pub sparse_scans: SparseScansReport,
+}
+
+/// The calibration for sparse scans ([`SparseScans`](waymark::site::SparseScans)): every
+/// held-out walk replayed again at each γ with one scan every 30 s reaching the engine.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SparseScansReport {
+    /// All floors pooled: held-out error per γ, every epoch of those replays.
+    pub gamma: Vec<GammaPoint>,
+    /// Held-out epochs on the map in the sparse regime at the γ they get, per band of time
+    /// since the sparse scan (`SINCE_SPARSE_SCAN_BANDS_S`): the radius factors of a band with
+    /// fewer than [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) are not fitted.
+    pub epochs_by_since: [usize; SPARSE_BANDS],
+    /// What was chosen.
+    pub calibration: waymark::site::SparseScans,
+}
+
+/// The held-out epochs whose truth was off the held-out site's map, with the motion as the
+/// sensors give it at each floor's γ, by how far beyond the map the truth was.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct OffMapReport {
+    /// Per band of distance beyond the map (bands without epochs left out).
+    pub bands: Vec<OffMapBand>,
+}
+
+/// One band of [`OffMapReport`].
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct OffMapBand {
+    /// Distance beyond the map, m: from (exclusive; 0 with `to_m` 0: on the map).
+    pub from_m: f64,
+    /// To (inclusive; infinite, `null` in JSON, for the last band).
+    pub to_m: f64,
+    /// Epochs.
+    pub epochs: usize,
+    /// Mean horizontal error, m (no floor penalty).
+    pub mean_error_m: f64,
+    /// Share whose 68% radius holds the truth: as the engine reported it in the shipped pass,
+    /// times the chosen factors in the calibration's own replays.
+    pub accuracy_68_hit: f64,
+    /// The same for the 95% radius.
+    pub accuracy_95_hit: f64,
+}
+
+/// Bands of distance beyond the map, m, for the report only: within one grid spacing (2 m,
+/// `SurveyOptions::spacing_m`) of the map's cells, then about 2-5, 5-10 and over 10 s of
+/// walking at HIPE's 1 m/s.
+const OFF_MAP_BANDS: [f64; 5] = [0.0, 2.0, 5.0, 10.0, f64::INFINITY];
+
+impl OffMapReport {
+    /// Epochs on the map as one band from 0 to 0 m, their radii as reported.
+    pub(super) fn of_on_map(points: &[&Scored]) -> Self {
+        let points: Vec<(&Scored, [f64; 2])> = points.iter().map(|&p| (p, [1.0, 1.0])).collect();
+        Self { bands: OffMapBand::of(0.0, 0.0, &points).into_iter().collect() }
+    }
+
+    /// Epochs beyond the map by band, their radii times `calibration`'s factors for their
+    /// scenario.
+    pub(super) fn of(points: &[(&Scored, f64, MdiScenario)], calibration: &Calibration) -> Self {
+        let bands = OFF_MAP_BANDS
+            .windows(2)
+            .filter_map(|w| {
+                let inside: Vec<(&Scored, [f64; 2])> = points
+                    .iter()
+                    .filter(|p| p.1 > w[0] && p.1 <= w[1])
+                    .map(|p| (p.0, calibration.accuracy_scale_in(p.2)))
+                    .collect();
+                OffMapBand::of(w[0], w[1], &inside)
+            })
+            .collect();
+        Self { bands }
+    }
+}
+
+impl OffMapBand {
+    /// The band of `points` (each with its radius factors); `None` without points.
+    fn of(from_m: f64, to_m: f64, points: &[(&Scored, [f64; 2])]) -> Option<Self> {
+        let n = points.len();
+        let share = |hit: fn(&Scored, [f64; 2]) -> bool| {
+            points.iter().filter(|&&(p, s)| hit(p, s)).count() as f64 / n as f64
+        };
+        (n > 0).then(|| OffMapBand {
+            from_m,
+            to_m,
+            epochs: n,
+            mean_error_m: points.iter().map(|p| p.0.error_m).sum::<f64>() / n as f64,
+            accuracy_68_hit: share(|p, s| p.error_m <= s[0] * p.accuracy_m),
+            accuracy_95_hit: share(|p, s| p.error_m <= s[1] * p.accuracy_95_m),
+        })
+    }
+}
+
+/// The motion calibration, for reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct MotionSummary {
+    /// The chosen step length model.
+    pub step_length: waymark::sensors::StepLengthModel,
+    /// Site heading = magnetic azimuth + this, degrees.
+    pub heading_offset_deg: f64,
+    /// Walks used.
+    pub walks: usize,
+}

@@ -1,0 +1,273 @@
+//! Scoring a replay against a walk's truth: the errors of its estimates at the walk's WiFi
+//! scans and waypoints (truth interpolated between waypoints), with the floor penalty of the
+//! Indoor Location Competition 2.0, and the figures over many of them.
+
+use crate::io::Trace;
+use nalgebra::Point2;
+use serde::Serialize;
+use std::collections::HashMap;
+use waymark::Site;
+
+/// A wrong floor adds this to the epoch's error, m: the public competition's metric (Indoor
+/// Location Competition 2.0 adds 15 × the floor difference).
+pub const FLOOR_PENALTY_M: f64 = 15.0;
+
+/// Error figures of one configuration over a set of scored points.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Metrics {
+    /// Mean error, m (a wrong floor adds [`FLOOR_PENALTY_M`]).
+    pub mean_m: f64,
+    /// Root mean square error, m.
+    pub rmse_m: f64,
+    /// Median error, m.
+    pub p50_m: f64,
+    /// 90th percentile, m.
+    pub p90_m: f64,
+    /// Largest error, m.
+    pub max_m: f64,
+    /// Share of points whose horizontal error is within the reported 68% radius.
+    pub accuracy_68_hit: f64,
+    /// Share within the reported 95% radius.
+    pub accuracy_95_hit: f64,
+    /// Median reported 68% radius, m.
+    pub accuracy_68_median_m: f64,
+    /// Share of points on the right floor.
+    pub floor_hit: f64,
+    /// Room-level accuracy (El Gemayel et al. §II-B): the share of points whose most likely
+    /// zone was the true zone, the zone of the state nearest the true position; only for sites
+    /// with zones.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub zone_hit: Option<f64>,
+    /// Share of points whose true position is in a zone (the rest are in none, and a most
+    /// likely zone of none is right there): the base rate `zone_hit` should be read against.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub in_zone: Option<f64>,
+    /// Points scored.
+    pub epochs: usize,
+}
+
+/// One scored estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Scored {
+    /// Horizontal error, m, without the floor penalty.
+    pub error_m: f64,
+    /// Reported 68% radius, m.
+    pub accuracy_m: f64,
+    /// Reported 95% radius, m.
+    pub accuracy_95_m: f64,
+    /// Whether the floor was right.
+    pub floor_correct: bool,
+    /// Whether the zone was right; `None` when not scored by zone.
+    pub zone_correct: Option<bool>,
+    /// Whether the true position was in a zone; `None` when not scored by zone.
+    pub in_zone: Option<bool>,
+}
+
+impl Scored {
+    /// The error with the floor penalty.
+    pub fn penalised_m(&self) -> f64 {
+        self.error_m + if self.floor_correct { 0.0 } else { FLOOR_PENALTY_M }
+    }
+}
+
+/// Nearest-rank quantile of sorted values.
+pub(crate) fn quantile(sorted: &[f64], q: f64) -> f64 {
+    if sorted.is_empty() {
+        return f64::NAN;
+    }
+    let rank = (q * sorted.len() as f64).ceil().max(1.0) as usize;
+    sorted[rank.min(sorted.len()) - 1]
+}
+
+impl Metrics {
+    /// Figures over `points`.
+    pub fn new(points: &[Scored]) -> Metrics {
+        let n = points.len();
+        if n == 0 {
+            return Metrics::default();
+        }
+        let mut errors: Vec<f64> = points.iter().map(Scored::penalised_m).collect();
+        errors.sort_by(f64::total_cmp);
+        let share = |f: &dyn Fn(&Scored) -> bool| points.iter().filter(|p| f(p)).count() as f64 / n as f64;
+        let mut radii: Vec<f64> = points.iter().map(|p| p.accuracy_m).collect();
+        radii.sort_by(f64::total_cmp);
+        Metrics {
+            mean_m: errors.iter().sum::<f64>() / n as f64,
+            rmse_m: (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt(),
+            p50_m: quantile(&errors, 0.5),
+            p90_m: quantile(&errors, 0.9),
+            max_m: errors[n - 1],
+            accuracy_68_hit: share(&|p| p.error_m <= p.accuracy_m),
+            accuracy_95_hit: share(&|p| p.error_m <= p.accuracy_95_m),
+            accuracy_68_median_m: quantile(&radii, 0.5),
+            floor_hit: share(&|p| p.floor_correct),
+            zone_hit: crate::metrics::zone_hit(points.iter().map(|p| p.zone_correct)),
+            in_zone: crate::metrics::zone_hit(points.iter().map(|p| p.in_zone)),
+            epochs: n,
+        }
+    }
+}
+
+/// An estimate in time, for scoring.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Estimate {
+    /// When, ns.
+    pub timestamp_ns: u64,
+    /// Floor index in the site.
+    pub floor: usize,
+    /// Position, m.
+    pub x: f64,
+    /// Position, m.
+    pub y: f64,
+    /// 68% radius, m.
+    pub accuracy_m: f64,
+    /// 95% radius, m.
+    pub accuracy_95_m: f64,
+    /// The most likely zone, by index into the site's zones.
+    pub zone: Option<usize>,
+}
+
+/// The true zone of a position: the zone of the site's state nearest to it on its floor (a
+/// zone is a set of states, each standing for the cell around it).
+pub struct ZoneTruth {
+    /// Per floor: (position, zone) of its states.
+    floors: Vec<Vec<(Point2<f64>, Option<usize>)>>,
+}
+
+impl ZoneTruth {
+    /// For `site`; `None` when it has no zones.
+    pub fn new(site: &Site) -> Option<ZoneTruth> {
+        if site.zones().is_empty() {
+            return None;
+        }
+        let mut floors = vec![Vec::new(); site.floors().len()];
+        for (i, s) in site.states().iter().enumerate() {
+            floors[s.floor].push((s.position, site.zone_of(i)));
+        }
+        Some(ZoneTruth { floors })
+    }
+
+    /// The zone of the state nearest (x, y) on `floor`.
+    pub fn zone_at(&self, floor: usize, x: f64, y: f64) -> Option<usize> {
+        let at = Point2::new(x, y);
+        self.floors
+            .get(floor)?
+            .iter()
+            .min_by(|a, b| nalgebra::distance(&a.0, &at).total_cmp(&nalgebra::distance(&b.0, &at)))
+            .and_then(|s| s.1)
+    }
+}
+
+/// Scores a walk's estimates at each estimate's own time (within the waypoints' span), and
+/// at each waypoint with the latest estimate at or before it. Returns (epochs, waypoints).
+/// Calibration uses the epochs: every position the engine reports is one a radius must hold.
+pub fn score(trace: &Trace, floor: usize, estimates: &[Estimate]) -> (Vec<Scored>, Vec<Scored>) {
+    let scored = scorer(floor, None);
+    let epochs =
+        estimates.iter().filter_map(|e| trace.position_at(e.timestamp_ns).map(|p| scored(e, p))).collect();
+    (epochs, score_waypoints(trace, estimates, &scored))
+}
+
+/// A walk scored as evaluations report it: the latest estimate at or before each of the walk's
+/// WiFi scans within the waypoints' span (truth interpolated), and at or before each waypoint,
+/// by zone against `zones` when given. Returns (scans, waypoints). Every configuration is
+/// scored at the same instants, every scan time: scoring each estimate at its
+/// own time would weigh an engine with more epochs (motion-only timer epochs, beacon-only
+/// scans) on other points than k-NN's one estimate a scan.
+pub fn score_scans(
+    trace: &Trace,
+    floor: usize,
+    estimates: &[Estimate],
+    zones: Option<&ZoneTruth>,
+) -> (Vec<Scored>, Vec<Scored>) {
+    let scored = scorer(floor, zones);
+    let scans = trace
+        .wifi_scans
+        .iter()
+        .filter_map(|s| {
+            Some(scored(latest_at(estimates, s.timestamp_ns)?, trace.position_at(s.timestamp_ns)?))
+        })
+        .collect();
+    (scans, score_waypoints(trace, estimates, &scored))
+}
+
+/// The latest of `estimates` (in time order) at or before `timestamp_ns`.
+fn latest_at(estimates: &[Estimate], timestamp_ns: u64) -> Option<&Estimate> {
+    let k = estimates.partition_point(|e| e.timestamp_ns <= timestamp_ns);
+    k.checked_sub(1).map(|k| &estimates[k])
+}
+
+fn score_waypoints(
+    trace: &Trace,
+    estimates: &[Estimate],
+    scored: &impl Fn(&Estimate, (f64, f64)) -> Scored,
+) -> Vec<Scored> {
+    trace
+        .waypoints
+        .iter()
+        .filter_map(|w| latest_at(estimates, w.timestamp_ns).map(|e| scored(e, (w.x, w.y))))
+        .collect()
+}
+
+/// An estimate against the truth (x, y) on `floor`.
+fn scorer(floor: usize, zones: Option<&ZoneTruth>) -> impl Fn(&Estimate, (f64, f64)) -> Scored + '_ {
+    move |e: &Estimate, (x, y): (f64, f64)| {
+        let truth = zones.map(|z| z.zone_at(floor, x, y));
+        Scored {
+            error_m: (e.x - x).hypot(e.y - y),
+            accuracy_m: e.accuracy_m,
+            accuracy_95_m: e.accuracy_95_m,
+            floor_correct: e.floor == floor,
+            zone_correct: truth.map(|t| e.floor == floor && e.zone == t),
+            in_zone: truth.map(|t| t.is_some()),
+        }
+    }
+}
+
+/// A replay's three estimates: the live positions, the fixed-lag estimates and the Viterbi
+/// track (the last two need a track window as long as the walk). Smoothed points carry the
+/// live radius of their epoch; the last `lag` epochs get their fixed-lag estimate when the walk
+/// ends, from the final track, as an app flushing at the end of a session would.
+pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
+    let live = live_estimates(&r.positions);
+    let radius: HashMap<u64, (f64, f64)> =
+        live.iter().map(|e| (e.timestamp_ns, (e.accuracy_m, e.accuracy_95_m))).collect();
+    let smoothed = |points: &mut dyn Iterator<Item = &waymark::TrackPoint>| -> Vec<Estimate> {
+        points
+            .map(|p| {
+                let (a68, a95) = radius.get(&p.timestamp_ns).copied().unwrap_or((f64::NAN, f64::NAN));
+                Estimate {
+                    timestamp_ns: p.timestamp_ns,
+                    floor: p.floor,
+                    x: p.x,
+                    y: p.y,
+                    accuracy_m: a68,
+                    accuracy_95_m: a95,
+                    zone: site.zone_of(p.state as usize),
+                }
+            })
+            .collect()
+    };
+    let mut lagged = smoothed(&mut r.fixed_lag.iter());
+    let last = lagged.last().map(|e| e.timestamp_ns);
+    lagged.extend(smoothed(&mut r.track.iter().filter(|p| !last.is_some_and(|l| p.timestamp_ns <= l))));
+    lagged.dedup_by_key(|e| e.timestamp_ns);
+    let viterbi = smoothed(&mut r.track.iter());
+    [live, lagged, viterbi]
+}
+
+/// The engine's live positions as estimates.
+pub fn live_estimates(positions: &[waymark::Position]) -> Vec<Estimate> {
+    positions
+        .iter()
+        .map(|p| Estimate {
+            timestamp_ns: p.timestamp_ns,
+            floor: p.floor,
+            x: p.x,
+            y: p.y,
+            accuracy_m: p.accuracy_m,
+            accuracy_95_m: p.accuracy_95_m,
+            zone: p.zone,
+        })
+        .collect()
+}
