@@ -58,7 +58,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
         let own = calibration.accuracy_scale_by_scenario.get(scenario);
         let enough = calibration.scenario_epochs[scenario.index()] >= calibrate::MIN_SCENARIO_EPOCHS;
         assert_eq!(own.is_some(), enough, "{scenario:?}: {calibration:?}");
-        assert!(own.map_or(true, |s| s.iter().all(|s| s.is_finite() && *s > 0.0)));
+        assert!(own.is_none_or(|s| s.iter().all(|s| s.is_finite() && *s > 0.0)));
     }
     assert!(calibration
         .accuracy_scale_by_scenario
@@ -95,7 +95,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     let floor_fit = calibration.radio_fit_floor;
     let enough = calibration.radio_fit_scans >= calibrate::MIN_SCENARIO_EPOCHS;
     assert_eq!(floor_fit.is_some(), enough, "{calibration:?}");
-    assert!(floor_fit.map_or(true, f64::is_finite));
+    assert!(floor_fit.is_none_or(f64::is_finite));
     assert!(calibration.radio_fit_scans > 0 && calibration.radio_fit_scans <= calibration.epochs);
     assert_eq!(site.calibration().radio_fit_floor, floor_fit);
     let epochs = |r: &calibrate::OffMapReport| r.bands.iter().map(|b| b.epochs).sum::<usize>();

@@ -369,7 +369,7 @@ impl Motion for Walk<'_> {
         }
         self.next = self.step(self.now);
         let t_ns = self.t0_ns.saturating_add((t_s * 1e9).round() as u64);
-        if self.heading.last().map_or(true, |h| t_ns >= h.0 + 10_000_000) {
+        if self.heading.last().is_none_or(|h| t_ns >= h.0 + 10_000_000) {
             self.heading.push((t_ns, self.now.yaw));
         }
     }

@@ -347,7 +347,7 @@ mod tests {
     impl Collect {
         fn take(&mut self, k: usize, batch: &[SensorSample]) {
             for s in batch {
-                assert!(self.last[k].map_or(true, |l| s.timestamp_ns > l), "stream {k} not increasing");
+                assert!(self.last[k].is_none_or(|l| s.timestamp_ns > l), "stream {k} not increasing");
                 self.last[k] = Some(s.timestamp_ns);
             }
             self.counts[k] += batch.len();

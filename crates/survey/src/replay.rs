@@ -188,7 +188,7 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
                 } else {
                     last_scan = Some(t);
                     let r = match tracker.as_mut() {
-                        Some(k) if !last_epoch.is_some_and(|l| t <= l) => {
+                        Some(k) if last_epoch.is_none_or(|l| t > l) => {
                             let motion = masked(options.mask, k, t);
                             engine.push_scan_with_motion(&scan, &motion)
                         }

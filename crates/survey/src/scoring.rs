@@ -250,7 +250,7 @@ pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
     };
     let mut lagged = smoothed(&mut r.fixed_lag.iter());
     let last = lagged.last().map(|e| e.timestamp_ns);
-    lagged.extend(smoothed(&mut r.track.iter().filter(|p| !last.is_some_and(|l| p.timestamp_ns <= l))));
+    lagged.extend(smoothed(&mut r.track.iter().filter(|p| last.is_none_or(|l| p.timestamp_ns > l))));
     lagged.dedup_by_key(|e| e.timestamp_ns);
     let viterbi = smoothed(&mut r.track.iter());
     [live, lagged, viterbi]
