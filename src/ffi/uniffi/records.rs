@@ -78,7 +78,7 @@ impl Default for EngineOptions {
 impl EngineOptions {
     /// The options both FFIs share.
     pub(crate) fn to_options(&self) -> Options {
-        let options = Options {
+        Options {
             transition: self.transition.map(|t| match t {
                 TransitionKind::Reach => TransitionModel::Reach,
                 TransitionKind::Hipe => TransitionModel::Hipe,
@@ -89,8 +89,7 @@ impl EngineOptions {
             site_rotation_deg: self.site_rotation_deg,
             site_salt: self.site_salt.clone(),
             step_length_m: Some(self.step_length_m),
-        };
-        options
+        }
     }
 }
 
