@@ -1,8 +1,8 @@
 //! The C ABI, in rustls-ffi's conventions: one `waymark_` prefix, opaque handles, a
 //! `waymark_result` code from every call, out-parameters last, NULL checks, every body behind
 //! a panic boundary, a thread-local last-error message, `_free` for what Waymark allocates.
-//! The engine is the same [`Handle`] Kotlin and Swift use; this file only converts C
-//! arguments and results ([`types`]). The header `bindings/c/waymark.h` is generated from
+//! The engine is the same `Handle` (`handle.rs`) Kotlin and Swift use; this file only converts C
+//! arguments and results (`types`). The header `bindings/c/waymark.h` is generated from
 //! these two files by cbindgen.
 #![deny(clippy::undocumented_unsafe_blocks)]
 #![allow(non_camel_case_types)]

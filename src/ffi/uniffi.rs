@@ -1,6 +1,6 @@
 //! The Kotlin and Swift API, through uniffi proc-macros: the engine object, its listeners and
-//! the shared site. The records it takes and returns are in [`records`]; the engine itself is
-//! the [`Handle`] the C API wraps too. A change in this module is a possible breaking change
+//! the shared site. The records it takes and returns are in `records`; the engine itself is
+//! the `Handle` (`handle.rs`) the C API wraps too. A change in this module is a possible breaking change
 //! for apps (CHANGELOG, "Breaking changes").
 
 mod records;
