@@ -212,48 +212,6 @@ typedef uint32_t waymark_log_level;
 typedef struct waymark_engine waymark_engine;
 
 /**
- * Engine settings for `waymark_engine_new_with_options`. Fill it with
- * `waymark_engine_options_default`, then change the fields you need: a later version may add
- * fields, which the defaults function sets.
- */
-typedef struct {
-  /**
-   * A `waymark_transition` value.
-   */
-  uint32_t transition;
-  /**
-   * How many epochs behind the newest the fixed-lag estimate is.
-   */
-  uint32_t fixed_lag_epochs;
-  /**
-   * The user's step length, m, used on a site file without a surveyed step length; a site
-   * surveyed with `waymark survey` carries its surveyors' step length model, which the
-   * engine uses instead: on such a site this field has no effect.
-   */
-  double step_length_m;
-  /**
-   * Magnetic declination at the site, degrees east; NaN: the site file's.
-   */
-  double declination_deg;
-  /**
-   * True azimuth of the site's +y axis, degrees; NaN: the site file's.
-   */
-  double site_rotation_deg;
-  /**
-   * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
-   * `waymark site hash`): `site_salt_len` bytes (at least 16; the bytes the salt file's hex
-   * digits stand for), copied before the constructor returns. NULL with length 0 for a
-   * site with raw ids. A hashed site without it, or with another salt, returns
-   * `WAYMARK_RESULT_SALT_MISMATCH`; a salt given for a site with raw ids is ignored.
-   */
-  const uint8_t *site_salt;
-  /**
-   * Bytes at `site_salt`.
-   */
-  size_t site_salt_len;
-} waymark_engine_options;
-
-/**
  * One accelerometer (m/s², gravity included), gyroscope (rad/s) or magnetometer (µT) sample
  * in the phone's frame, with a monotonic timestamp in ns.
  */
@@ -552,6 +510,48 @@ typedef struct {
 typedef void (*waymark_status_callback)(void *userdata, const waymark_status *status);
 
 /**
+ * Engine settings for `waymark_engine_new_with_options`. Fill it with
+ * `waymark_engine_options_default`, then change the fields you need: a later version may add
+ * fields, which the defaults function sets.
+ */
+typedef struct {
+  /**
+   * A `waymark_transition` value.
+   */
+  uint32_t transition;
+  /**
+   * How many epochs behind the newest the fixed-lag estimate is.
+   */
+  uint32_t fixed_lag_epochs;
+  /**
+   * The user's step length, m, used on a site file without a surveyed step length; a site
+   * surveyed with `waymark survey` carries its surveyors' step length model, which the
+   * engine uses instead: on such a site this field has no effect.
+   */
+  double step_length_m;
+  /**
+   * Magnetic declination at the site, degrees east; NaN: the site file's.
+   */
+  double declination_deg;
+  /**
+   * True azimuth of the site's +y axis, degrees; NaN: the site file's.
+   */
+  double site_rotation_deg;
+  /**
+   * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
+   * `waymark site hash`): `site_salt_len` bytes (at least 16; the bytes the salt file's hex
+   * digits stand for), copied before the constructor returns. NULL with length 0 for a
+   * site with raw ids. A hashed site without it, or with another salt, returns
+   * `WAYMARK_RESULT_SALT_MISMATCH`; a salt given for a site with raw ids is ignored.
+   */
+  const uint8_t *site_salt;
+  /**
+   * Bytes at `site_salt`.
+   */
+  size_t site_salt_len;
+} waymark_engine_options;
+
+/**
  * What one `waymark_engine_learn_habits` pass did.
  */
 typedef struct {
@@ -608,59 +608,6 @@ typedef void (*waymark_log_callback)(void *userdata,
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
-
-/**
- * Fills `*out` with the default options: the default transition model and fixed lag, a step
- * length of 0.7 m, the site file's north (NaN declination and rotation), no salt. Call it
- * before setting the fields you need, so that fields a later version adds get their
- * defaults too.
- */
-waymark_result waymark_engine_options_default(waymark_engine_options *out);
-
-/**
- * Creates an engine from a site file's contents, `len` bytes at `site_file`: the binary
- * encoding (`waymark site pack`, what an app should ship: it loads several times faster and
- * in a third of the memory) or JSON text (not necessarily NUL-terminated), with `options`
- * (NULL for the defaults; see `waymark_engine_options_default`). On success `*out` holds the
- * engine; free it with `waymark_engine_free`. A site file on disk: read it into memory first.
- */
-waymark_result waymark_engine_new_with_options(const uint8_t *site_file,
-                                               size_t len,
-                                               const waymark_engine_options *options,
-                                               waymark_engine **out);
-
-/**
- * Deprecated: `waymark_engine_new_with_options` with NULL options does the same. Creates an
- * engine from a site file's contents (binary or JSON), `len` bytes at `site_file`.
- */
-waymark_result waymark_engine_new(const uint8_t *site_file, size_t len, waymark_engine **out);
-
-/**
- * Deprecated: read the file and call `waymark_engine_new_with_options`. Creates an engine
- * from the site file (binary or JSON) at the NUL-terminated `path`.
- */
-waymark_result waymark_engine_new_from_path(const char *path, waymark_engine **out);
-
-/**
- * Deprecated: `waymark_engine_new_with_options` with `site_salt` and `site_salt_len` set
- * does the same. As `waymark_engine_new`, for a site file whose transmitter ids are salted
- * hashes: `salt` points to `salt_len` bytes, as `waymark_engine_options.site_salt`.
- */
-waymark_result waymark_engine_new_with_salt(const uint8_t *site_file,
-                                            size_t len,
-                                            const uint8_t *salt,
-                                            size_t salt_len,
-                                            waymark_engine **out);
-
-/**
- * Deprecated: read the file and call `waymark_engine_new_with_options` with the salt in the
- * options. As `waymark_engine_new_from_path`, with the site's salt as in
- * `waymark_engine_new_with_salt`.
- */
-waymark_result waymark_engine_new_from_path_with_salt(const char *path,
-                                                      const uint8_t *salt,
-                                                      size_t salt_len,
-                                                      waymark_engine **out);
 
 /**
  * Frees an engine. NULL is ignored.
@@ -827,6 +774,59 @@ size_t waymark_last_error(char *buf, size_t len);
  * catch a header and library that do not match), a static NUL-terminated string.
  */
 const char *waymark_version(void);
+
+/**
+ * Fills `*out` with the default options: the default transition model and fixed lag, a step
+ * length of 0.7 m, the site file's north (NaN declination and rotation), no salt. Call it
+ * before setting the fields you need, so that fields a later version adds get their
+ * defaults too.
+ */
+waymark_result waymark_engine_options_default(waymark_engine_options *out);
+
+/**
+ * Creates an engine from a site file's contents, `len` bytes at `site_file`: the binary
+ * encoding (`waymark site pack`, what an app should ship: it loads several times faster and
+ * in a third of the memory) or JSON text (not necessarily NUL-terminated), with `options`
+ * (NULL for the defaults; see `waymark_engine_options_default`). On success `*out` holds the
+ * engine; free it with `waymark_engine_free`. A site file on disk: read it into memory first.
+ */
+waymark_result waymark_engine_new_with_options(const uint8_t *site_file,
+                                               size_t len,
+                                               const waymark_engine_options *options,
+                                               waymark_engine **out);
+
+/**
+ * Deprecated: `waymark_engine_new_with_options` with NULL options does the same. Creates an
+ * engine from a site file's contents (binary or JSON), `len` bytes at `site_file`.
+ */
+waymark_result waymark_engine_new(const uint8_t *site_file, size_t len, waymark_engine **out);
+
+/**
+ * Deprecated: read the file and call `waymark_engine_new_with_options`. Creates an engine
+ * from the site file (binary or JSON) at the NUL-terminated `path`.
+ */
+waymark_result waymark_engine_new_from_path(const char *path, waymark_engine **out);
+
+/**
+ * Deprecated: `waymark_engine_new_with_options` with `site_salt` and `site_salt_len` set
+ * does the same. As `waymark_engine_new`, for a site file whose transmitter ids are salted
+ * hashes: `salt` points to `salt_len` bytes, as `waymark_engine_options.site_salt`.
+ */
+waymark_result waymark_engine_new_with_salt(const uint8_t *site_file,
+                                            size_t len,
+                                            const uint8_t *salt,
+                                            size_t salt_len,
+                                            waymark_engine **out);
+
+/**
+ * Deprecated: read the file and call `waymark_engine_new_with_options` with the salt in the
+ * options. As `waymark_engine_new_from_path`, with the site's salt as in
+ * `waymark_engine_new_with_salt`.
+ */
+waymark_result waymark_engine_new_from_path_with_salt(const char *path,
+                                                      const uint8_t *salt,
+                                                      size_t salt_len,
+                                                      waymark_engine **out);
 
 /**
  * Learns the user's habits from the epochs of the engine's history not learned from yet
