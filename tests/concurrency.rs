@@ -9,8 +9,8 @@ use std::sync::mpsc;
 use std::sync::{Arc, Barrier, LazyLock, Mutex, Weak};
 use std::time::{Duration, Instant};
 use waymark::ffi::uniffi::{
-    EngineOptions, MotionSample, PositionEstimate, PositionListener, PositioningEngine, PositioningError,
-    RadioScan, StatusUpdate, Subscription, TrackPoint, WifiReading,
+    EngineOptions, ErrorReport, MotionSample, PositionEstimate, PositionListener, PositioningEngine,
+    PositioningError, RadioScan, StatusUpdate, Subscription, TrackPoint, WifiReading,
 };
 use waymark::sensors::SensorSample;
 use waymark::TransmitterId;
@@ -118,27 +118,23 @@ impl Recorder {
 }
 
 impl PositionListener for Recorder {
-    fn on_position(&self, position: PositionEstimate) -> Result<(), PositioningError> {
+    fn on_position(&self, position: PositionEstimate) {
         let _busy = self.enter();
         self.positions.lock().unwrap().push(position);
-        Ok(())
     }
-    fn on_status(&self, _: StatusUpdate) -> Result<(), PositioningError> {
+    fn on_status(&self, _: StatusUpdate) {
         let _busy = self.enter();
         self.statuses.fetch_add(1, Ordering::SeqCst);
-        Ok(())
     }
-    fn on_error(&self, _: String) -> Result<(), PositioningError> {
+    fn on_error(&self, _: ErrorReport) {
         let _busy = self.enter();
         self.errors.fetch_add(1, Ordering::SeqCst);
-        Ok(())
     }
 }
 
-/// Fails every call: an error from some, a panic from others.
+/// Fails every call, as a Kotlin or Swift listener that throws does.
 #[derive(Default)]
 struct Failing {
-    panics: bool,
     calls: AtomicUsize,
     positions: AtomicUsize,
 }
@@ -158,24 +154,23 @@ fn quiet_listener_panics() {
 }
 
 impl Failing {
-    fn fail(&self) -> Result<(), PositioningError> {
+    /// What a listener that throws in Kotlin or Swift is on the Rust side: uniffi turns the
+    /// exception of a method that returns nothing into a panic.
+    fn fail(&self) {
         self.calls.fetch_add(1, Ordering::SeqCst);
-        if self.panics {
-            panic!("a listener bug");
-        }
-        Err(PositioningError::Internal { reason: "a listener bug".into() })
+        panic!("a listener bug");
     }
 }
 
 impl PositionListener for Failing {
-    fn on_position(&self, _: PositionEstimate) -> Result<(), PositioningError> {
+    fn on_position(&self, _: PositionEstimate) {
         self.positions.fetch_add(1, Ordering::SeqCst);
         self.fail()
     }
-    fn on_status(&self, _: StatusUpdate) -> Result<(), PositioningError> {
+    fn on_status(&self, _: StatusUpdate) {
         self.fail()
     }
-    fn on_error(&self, _: String) -> Result<(), PositioningError> {
+    fn on_error(&self, _: ErrorReport) {
         self.fail()
     }
 }
@@ -194,14 +189,14 @@ struct Reentrant {
 }
 
 impl PositionListener for Reentrant {
-    fn on_position(&self, _: PositionEstimate) -> Result<(), PositioningError> {
+    fn on_position(&self, _: PositionEstimate) {
         if self.cancelled.load(Ordering::SeqCst) {
             self.after_cancel.fetch_add(1, Ordering::SeqCst);
         }
         let n = self.positions.fetch_add(1, Ordering::SeqCst) + 1;
-        let Some(engine) = self.engine.upgrade() else { return Ok(()) };
+        let Some(engine) = self.engine.upgrade() else { return };
         let other = Arc::clone(&engine).subscribe(Arc::new(Recorder::default()));
-        let _ = (engine.position(), engine.track());
+        let _ = (engine.position().unwrap(), engine.track().unwrap());
         other.cancel();
         if n >= self.cancel_after {
             if let Some(own) = self.own.lock().unwrap().take() {
@@ -209,14 +204,9 @@ impl PositionListener for Reentrant {
                 self.cancelled.store(true, Ordering::SeqCst);
             }
         }
-        Ok(())
     }
-    fn on_status(&self, _: StatusUpdate) -> Result<(), PositioningError> {
-        Ok(())
-    }
-    fn on_error(&self, _: String) -> Result<(), PositioningError> {
-        Ok(())
-    }
+    fn on_status(&self, _: StatusUpdate) {}
+    fn on_error(&self, _: ErrorReport) {}
 }
 
 fn subscribe_reentrant(engine: &Arc<PositioningEngine>, cancel_after: usize) -> Arc<Reentrant> {
@@ -271,7 +261,7 @@ fn hammer() {
     // Subscribed before the start and never cancelled: they must hear everything. The failing
     // ones go first, so the recorder's calls come after theirs.
     let failing = Arc::new(Failing::default());
-    let panicking = Arc::new(Failing { panics: true, ..Failing::default() });
+    let panicking = Arc::new(Failing::default());
     let _s0 = Arc::clone(&engine).subscribe(failing.clone());
     let _s1 = Arc::clone(&engine).subscribe(panicking.clone());
     let steady = Arc::new(Recorder::default());
@@ -354,11 +344,11 @@ fn hammer() {
             scope.spawn(move || {
                 start.wait();
                 while running() {
-                    if let Some(p) = engine.position() {
+                    if let Some(p) = engine.position().unwrap() {
                         assert!(finite(&p), "{p:?}");
                     }
-                    assert!(engine.track().iter().all(finite_point));
-                    assert!(engine.fixed_lag_position().iter().all(finite_point));
+                    assert!(engine.track().unwrap().iter().all(finite_point));
+                    assert!(engine.fixed_lag_position().unwrap().iter().all(finite_point));
                     std::thread::yield_now();
                 }
             });
@@ -409,7 +399,7 @@ fn hammer() {
     }
     assert!(reentrant.iter().any(|r| r.cancelled.load(Ordering::SeqCst)), "none cancelled itself");
     // The engine still works, and every listener still hears.
-    let last = engine.position().expect("a position").timestamp_ns;
+    let last = engine.position().unwrap().expect("a position").timestamp_ns;
     let p = engine.advance(last + EPOCH_NS).expect("usable after the hammer");
     assert!(finite(&p));
     assert_eq!(steady.timestamps().len(), ok + 1);
@@ -430,19 +420,14 @@ fn a_slow_listener_does_not_reorder_positions() {
         let (entered, in_slow) = mpsc::channel();
         struct Slow(Mutex<Option<mpsc::Sender<()>>>);
         impl PositionListener for Slow {
-            fn on_position(&self, _: PositionEstimate) -> Result<(), PositioningError> {
+            fn on_position(&self, _: PositionEstimate) {
                 if let Some(entered) = self.0.lock().unwrap().take() {
                     let _ = entered.send(());
                     std::thread::sleep(Duration::from_millis(300));
                 }
-                Ok(())
             }
-            fn on_status(&self, _: StatusUpdate) -> Result<(), PositioningError> {
-                Ok(())
-            }
-            fn on_error(&self, _: String) -> Result<(), PositioningError> {
-                Ok(())
-            }
+            fn on_status(&self, _: StatusUpdate) {}
+            fn on_error(&self, _: ErrorReport) {}
         }
         let _slow = Arc::clone(&engine).subscribe(Arc::new(Slow(Mutex::new(Some(entered)))));
         let recorder = Arc::new(Recorder::default());
@@ -474,7 +459,7 @@ fn listeners_may_call_the_engine_from_their_callback() {
             calls: AtomicUsize,
         }
         impl PositionListener for Nested {
-            fn on_position(&self, p: PositionEstimate) -> Result<(), PositioningError> {
+            fn on_position(&self, p: PositionEstimate) {
                 self.calls.fetch_add(1, Ordering::SeqCst);
                 let engine = self.engine.upgrade().expect("the engine");
                 let late = Arc::clone(&engine).subscribe(self.late.clone());
@@ -485,15 +470,10 @@ fn listeners_may_call_the_engine_from_their_callback() {
                 // An epoch from inside the callback, while this one is still being delivered.
                 let nested = engine.advance(p.timestamp_ns + EPOCH_NS).expect("a nested epoch");
                 assert_eq!(nested.timestamp_ns, p.timestamp_ns + EPOCH_NS);
-                assert_eq!(engine.position().map(|p| p.timestamp_ns), Some(nested.timestamp_ns));
-                Ok(())
+                assert_eq!(engine.position().unwrap().map(|p| p.timestamp_ns), Some(nested.timestamp_ns));
             }
-            fn on_status(&self, _: StatusUpdate) -> Result<(), PositioningError> {
-                Ok(())
-            }
-            fn on_error(&self, _: String) -> Result<(), PositioningError> {
-                Ok(())
-            }
+            fn on_status(&self, _: StatusUpdate) {}
+            fn on_error(&self, _: ErrorReport) {}
         }
         let before = Arc::new(Recorder::default());
         let _before = Arc::clone(&engine).subscribe(before.clone());

@@ -11,8 +11,8 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use waymark::ffi::uniffi::{
-    EngineOptions, MotionSample, PositionEstimate, PositionListener, PositioningEngine, PositioningError,
-    RadioScan, StatusUpdate, WifiReading,
+    EngineOptions, ErrorReport, MotionSample, PositionEstimate, PositionListener, PositioningEngine,
+    PositioningError, RadioScan, StatusUpdate, WifiReading,
 };
 use waymark::sensors::SensorSample;
 use waymark::FAULT_INJECTION_MID_EPOCH_NS as MID;
@@ -126,16 +126,12 @@ struct Counter {
 }
 
 impl PositionListener for Counter {
-    fn on_position(&self, position: PositionEstimate) -> Result<(), PositioningError> {
+    fn on_position(&self, position: PositionEstimate) {
         self.positions.lock().unwrap().push(position);
-        Ok(())
     }
-    fn on_status(&self, _: StatusUpdate) -> Result<(), PositioningError> {
-        Ok(())
-    }
-    fn on_error(&self, _: String) -> Result<(), PositioningError> {
+    fn on_status(&self, _: StatusUpdate) {}
+    fn on_error(&self, _: ErrorReport) {
         self.errors.fetch_add(1, Ordering::SeqCst);
-        Ok(())
     }
 }
 
@@ -188,7 +184,7 @@ fn a_panic_in_the_middle_of_an_epoch_is_internal_and_changes_nothing_across_the_
         let result = if advance { engine.advance(MID) } else { engine.push_scan(ffi_scan(&last.scan, MID)) };
         assert!(matches!(result, Err(PositioningError::Internal { .. })), "{result:?}");
         assert_eq!(engine.snapshot(), before, "advance: {advance}");
-        assert_eq!(engine.position(), before.1);
+        assert_eq!(engine.position().unwrap(), before.1);
         // The undone epoch's position reached no listener; the error did.
         assert_eq!(*listener.positions.lock().unwrap(), heard);
         assert_eq!(listener.errors.load(Ordering::SeqCst), errors + 1);

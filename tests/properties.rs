@@ -831,27 +831,24 @@ struct FfiRecorder {
 }
 
 impl FfiListener for FfiRecorder {
-    fn on_position(&self, position: PositionEstimate) -> Result<(), PositioningError> {
+    fn on_position(&self, position: PositionEstimate) {
         let mut heard = self.heard.lock().unwrap();
         if let Err(e) = check_estimate(&FIXTURES[self.fixture], &position) {
             heard.2.push(format!("listener: {e}"));
         }
         heard.0.push(position);
-        Ok(())
     }
 
-    fn on_status(&self, status: StatusUpdate) -> Result<(), PositioningError> {
+    fn on_status(&self, status: StatusUpdate) {
         if let StatusUpdate::TrackRevised { points } = status {
             if let Err(e) = check_ffi_track(&FIXTURES[self.fixture], &points) {
                 self.heard.lock().unwrap().2.push(format!("revision: {e}"));
             }
         }
-        Ok(())
     }
 
-    fn on_error(&self, _message: String) -> Result<(), PositioningError> {
+    fn on_error(&self, _error: waymark::ffi::uniffi::ErrorReport) {
         self.heard.lock().unwrap().1 += 1;
-        Ok(())
     }
 }
 
@@ -904,9 +901,9 @@ fn check_ffi_engine(f: &Fixture, engine: &PositioningEngine) -> Result<(), TestC
     if let Some(p) = &latest {
         check_estimate(f, p)?;
     }
-    prop_assert_eq!(engine.position(), latest);
-    check_ffi_track(f, &engine.track())?;
-    check_ffi_track(f, engine.fixed_lag_position().as_slice())?;
+    prop_assert_eq!(engine.position().unwrap(), latest);
+    check_ffi_track(f, &engine.track().unwrap())?;
+    check_ffi_track(f, engine.fixed_lag_position().unwrap().as_slice())?;
     Ok(())
 }
 
@@ -1018,7 +1015,7 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
             }
             Call::Read => {
                 let _ = (engine.position(), engine.track(), engine.fixed_lag_position());
-                let zones = engine.zone_posterior();
+                let zones = engine.zone_posterior().unwrap();
                 prop_assert_eq!(zones.len(), f.site.zones().len());
                 prop_assert_eq!(engine.snapshot(), before.clone(), "a read changed the engine");
                 None

@@ -1,9 +1,13 @@
 //! The only place that knows about uniffi and the C ABI: thin wrappers over the pure core.
 //! Kotlin and Swift see [`uniffi`]'s types; C (and dart:ffi, React Native, Unity) sees [`c`]'s,
-//! through the header `bindings/c/waymark.h`.
+//! through the header `bindings/c/waymark.h`. Both wrap one engine handle (`handle.rs`: the
+//! lock, the panic boundary, listener delivery and error mapping) and report failures with
+//! one error ([`error`]).
 
 pub mod c;
 mod delivery;
+pub mod error;
+mod handle;
 pub mod logging;
 pub mod uniffi;
 

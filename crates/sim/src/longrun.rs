@@ -204,21 +204,18 @@ struct AppListener {
 }
 
 impl ffi::PositionListener for AppListener {
-    fn on_position(&self, p: ffi::PositionEstimate) -> Result<(), ffi::PositioningError> {
+    fn on_position(&self, p: ffi::PositionEstimate) {
         let finite = p.x.is_finite() && p.y.is_finite() && p.accuracy_m.is_finite();
         let counter = if finite { &self.finite } else { &self.non_finite };
         counter.fetch_add(1, Ordering::Relaxed);
-        Ok(())
     }
 
-    fn on_status(&self, _status: ffi::StatusUpdate) -> Result<(), ffi::PositioningError> {
+    fn on_status(&self, _status: ffi::StatusUpdate) {
         self.statuses.fetch_add(1, Ordering::Relaxed);
-        Ok(())
     }
 
-    fn on_error(&self, _message: String) -> Result<(), ffi::PositioningError> {
+    fn on_error(&self, _error: ffi::ErrorReport) {
         self.errors.fetch_add(1, Ordering::Relaxed);
-        Ok(())
     }
 }
 

@@ -535,6 +535,30 @@ fileprivate struct FfiConverterDouble: FfiConverterPrimitive {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterBool : FfiConverter {
+    typealias FfiType = Int8
+    typealias SwiftType = Bool
+
+    public static func lift(_ value: Int8) throws -> Bool {
+        return value != 0
+    }
+
+    public static func lower(_ value: Bool) -> Int8 {
+        return value ? 1 : 0
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Bool {
+        return try lift(readInt(&buf))
+    }
+
+    public static func write(_ value: Bool, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterString: FfiConverter {
     typealias SwiftType = String
     typealias FfiType = RustBuffer
@@ -820,25 +844,26 @@ public func FfiConverterTypeLogSink_lower(_ value: LogSink) -> UInt64 {
  * happened, on a thread that called the engine (usually the one that pushed the input; while
  * one thread is delivering, input pushed by others is delivered by it). Never called from two
  * threads at once. A listener may call the engine, subscribe and cancel from its methods.
- * Throwing from a method is reported, never fatal.
+ * Its methods return nothing: an exception thrown from one is caught and logged, and the
+ * other listeners still hear the event.
  */
 public protocol PositionListener: AnyObject, Sendable {
     
     /**
      * A new position.
      */
-    func onPosition(position: PositionEstimate) throws 
+    func onPosition(position: PositionEstimate) 
     
     /**
      * A status change.
      */
-    func onStatus(status: StatusUpdate) throws 
+    func onStatus(status: StatusUpdate) 
     
     /**
-     * An input was rejected (the call that pushed it also returned the error): for apps that
-     * push from sensor callbacks and want failures in one place.
+     * A call failed (it also threw `error`): for apps that push from sensor callbacks and
+     * want failures in one place. Mostly `InputRejected`.
      */
-    func onError(message: String) throws 
+    func onError(error: ErrorReport) 
     
 }
 /**
@@ -846,7 +871,8 @@ public protocol PositionListener: AnyObject, Sendable {
  * happened, on a thread that called the engine (usually the one that pushed the input; while
  * one thread is delivering, input pushed by others is delivered by it). Never called from two
  * threads at once. A listener may call the engine, subscribe and cancel from its methods.
- * Throwing from a method is reported, never fatal.
+ * Its methods return nothing: an exception thrown from one is caught and logged, and the
+ * other listeners still hear the event.
  */
 open class PositionListenerImpl: PositionListener, @unchecked Sendable {
     fileprivate let handle: UInt64
@@ -904,7 +930,7 @@ open class PositionListenerImpl: PositionListener, @unchecked Sendable {
     /**
      * A new position.
      */
-open func onPosition(position: PositionEstimate)throws   {try rustCallWithError(FfiConverterTypePositioningError_lift) {
+open func onPosition(position: PositionEstimate)  {try! rustCall() {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positionlistener_on_position(
             self.uniffiCloneHandle(),
@@ -916,7 +942,7 @@ open func onPosition(position: PositionEstimate)throws   {try rustCallWithError(
     /**
      * A status change.
      */
-open func onStatus(status: StatusUpdate)throws   {try rustCallWithError(FfiConverterTypePositioningError_lift) {
+open func onStatus(status: StatusUpdate)  {try! rustCall() {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positionlistener_on_status(
             self.uniffiCloneHandle(),
@@ -926,14 +952,14 @@ open func onStatus(status: StatusUpdate)throws   {try rustCallWithError(FfiConve
 }
     
     /**
-     * An input was rejected (the call that pushed it also returned the error): for apps that
-     * push from sensor callbacks and want failures in one place.
+     * A call failed (it also threw `error`): for apps that push from sensor callbacks and
+     * want failures in one place. Mostly `InputRejected`.
      */
-open func onError(message: String)throws   {try rustCallWithError(FfiConverterTypePositioningError_lift) {
+open func onError(error: ErrorReport)  {try! rustCall() {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positionlistener_on_error(
             self.uniffiCloneHandle(),
-        FfiConverterString.lower(message),uniffiCallStatus
+        FfiConverterTypeErrorReport_lower(error),uniffiCallStatus
     )
 }
 }
@@ -977,18 +1003,17 @@ fileprivate struct UniffiCallbackInterfacePositionListener {
                 guard let uniffiObj = try? FfiConverterTypePositionListener.handleMap.get(handle: uniffiHandle) else {
                     throw UniffiInternalError.unexpectedStaleHandle
                 }
-                return try uniffiObj.onPosition(
+                return uniffiObj.onPosition(
                      position: try FfiConverterTypePositionEstimate_lift(position)
                 )
             }
 
             
             let writeReturn = { () }
-            uniffiTraitInterfaceCallWithError(
+            uniffiTraitInterfaceCall(
                 callStatus: uniffiCallStatus,
                 makeCall: makeCall,
-                writeReturn: writeReturn,
-                lowerError: FfiConverterTypePositioningError_lower
+                writeReturn: writeReturn
             )
         },
         onStatus: { (
@@ -1002,23 +1027,22 @@ fileprivate struct UniffiCallbackInterfacePositionListener {
                 guard let uniffiObj = try? FfiConverterTypePositionListener.handleMap.get(handle: uniffiHandle) else {
                     throw UniffiInternalError.unexpectedStaleHandle
                 }
-                return try uniffiObj.onStatus(
+                return uniffiObj.onStatus(
                      status: try FfiConverterTypeStatusUpdate_lift(status)
                 )
             }
 
             
             let writeReturn = { () }
-            uniffiTraitInterfaceCallWithError(
+            uniffiTraitInterfaceCall(
                 callStatus: uniffiCallStatus,
                 makeCall: makeCall,
-                writeReturn: writeReturn,
-                lowerError: FfiConverterTypePositioningError_lower
+                writeReturn: writeReturn
             )
         },
         onError: { (
             uniffiHandle: UInt64,
-            message: RustBuffer,
+            error: RustBuffer,
             uniffiOutReturn: UnsafeMutableRawPointer,
             uniffiCallStatus: UnsafeMutablePointer<RustCallStatus>
         ) in
@@ -1027,18 +1051,17 @@ fileprivate struct UniffiCallbackInterfacePositionListener {
                 guard let uniffiObj = try? FfiConverterTypePositionListener.handleMap.get(handle: uniffiHandle) else {
                     throw UniffiInternalError.unexpectedStaleHandle
                 }
-                return try uniffiObj.onError(
-                     message: try FfiConverterString.lift(message)
+                return uniffiObj.onError(
+                     error: try FfiConverterTypeErrorReport_lift(error)
                 )
             }
 
             
             let writeReturn = { () }
-            uniffiTraitInterfaceCallWithError(
+            uniffiTraitInterfaceCall(
                 callStatus: uniffiCallStatus,
                 makeCall: makeCall,
-                writeReturn: writeReturn,
-                lowerError: FfiConverterTypePositioningError_lower
+                writeReturn: writeReturn
             )
         }
     )
@@ -1125,6 +1148,9 @@ public func FfiConverterTypePositionListener_lower(_ value: PositionListener) ->
  * once. Create it from a site file; feed it sensor batches and scans with timestamps on one
  * monotonic clock; read positions by polling or by subscribing a listener.
  *
+ * Every method that fails throws `PositioningException` (Kotlin) or `PositioningError`
+ * (Swift): a getter never hides a failure behind an empty or default value.
+ *
  * Kotlin: a `String` argument holding a lone UTF-16 surrogate (`"\uD800"`, not text) cannot
  * be encoded by uniffi's generated code. In a transmitter id it is replaced by `?` on the way
  * in, so the scan throws `PositioningException.InputRejected`; in a constructor's `siteJson`
@@ -1142,7 +1168,7 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     /**
      * Forgets every learned habit and the fix error (when the user asks, or signs out).
      */
-    func clearHabits() 
+    func clearHabits() throws 
     
     /**
      * The user says they are within `radius_m` of (x, y) on `floor` (a tap on the map): as
@@ -1163,19 +1189,21 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     /**
      * The learned habits as versioned JSON (a few kB to a few hundred kB), to store per user
      * and site and give back to `importHabits` in a later session. An engine that learned
-     * nothing exports an empty model.
+     * nothing exports an empty model. Throws `Internal` (never an empty string) if the
+     * export failed.
      */
-    func exportHabits()  -> String
+    func exportHabits() throws  -> String
     
     /**
      * The fix error learned so far: zero bias and spread 1 before any fix was learned from.
+     * Throws `Internal` (never a made-up value) if it could not be read.
      */
-    func fixError()  -> FixError
+    func fixError() throws  -> FixError
     
     /**
      * The fixed-lag position: a few epochs old, but revised by what came after.
      */
-    func fixedLagPosition()  -> TrackPoint?
+    func fixedLagPosition() throws  -> TrackPoint?
     
     /**
      * Replaces the engine's habits by a model from `exportHabits` on the same site, learning
@@ -1185,6 +1213,11 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * range.
      */
     func importHabits(json: HabitsJson) throws 
+    
+    /**
+     * What the engine took and refused since it was created, and why.
+     */
+    func inputStats() throws  -> InputStats
     
     /**
      * Learns the user's habits from the epochs of this session not learned from yet (the
@@ -1202,7 +1235,7 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     /**
      * The latest position, if any.
      */
-    func position()  -> PositionEstimate?
+    func position() throws  -> PositionEstimate?
     
     /**
      * Accelerometer samples, oldest first. Bad samples are dropped and counted; returns how
@@ -1246,20 +1279,23 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     /**
      * The most likely recent track, oldest first.
      */
-    func track()  -> [TrackPoint]
+    func track() throws  -> [TrackPoint]
     
     /**
      * Every zone of the site, in the site file's order, with the probability of being in it
      * now (before the first epoch, its share of the site's states: the prior is uniform).
      * Empty for a site without zones.
      */
-    func zonePosterior()  -> [ZoneProbability]
+    func zonePosterior() throws  -> [ZoneProbability]
     
 }
 /**
  * The positioning engine. Thread-safe: sensor threads and the scan receiver may call it at
  * once. Create it from a site file; feed it sensor batches and scans with timestamps on one
  * monotonic clock; read positions by polling or by subscribing a listener.
+ *
+ * Every method that fails throws `PositioningException` (Kotlin) or `PositioningError`
+ * (Swift): a getter never hides a failure behind an empty or default value.
  *
  * Kotlin: a `String` argument holding a lone UTF-16 surrogate (`"\uD800"`, not text) cannot
  * be encoded by uniffi's generated code. In a transmitter id it is replaced by `?` on the way
@@ -1358,6 +1394,21 @@ public static func fromSiteBytes(site: Data, options: EngineOptions)throws  -> P
 })
 }
     
+    /**
+     * An engine on a site already loaded (`Site.fromBytes`, `Site.fromPath`): several engines
+     * (one per user, or a new one per session) share one site in memory, and none of them
+     * reads or checks the file again.
+     */
+public static func withSite(site: Site, options: EngineOptions)throws  -> PositioningEngine  {
+    return try  FfiConverterTypePositioningEngine_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_constructor_positioningengine_with_site(
+        FfiConverterTypeSite_lower(site),
+        FfiConverterTypeEngineOptions_lower(options),uniffiCallStatus
+    )
+})
+}
+    
 
     
     /**
@@ -1377,7 +1428,7 @@ open func advance(timestampNs: UInt64)throws  -> PositionEstimate  {
     /**
      * Forgets every learned habit and the fix error (when the user asks, or signs out).
      */
-open func clearHabits()  {try! rustCall() {
+open func clearHabits()throws   {try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_clear_habits(
             self.uniffiCloneHandle(),uniffiCallStatus
@@ -1425,10 +1476,11 @@ open func confirmZone(timestampNs: UInt64, zone: String)throws  -> PositionEstim
     /**
      * The learned habits as versioned JSON (a few kB to a few hundred kB), to store per user
      * and site and give back to `importHabits` in a later session. An engine that learned
-     * nothing exports an empty model.
+     * nothing exports an empty model. Throws `Internal` (never an empty string) if the
+     * export failed.
      */
-open func exportHabits() -> String  {
-    return try!  FfiConverterString.lift(try! rustCall() {
+open func exportHabits()throws  -> String  {
+    return try  FfiConverterString.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_export_habits(
             self.uniffiCloneHandle(),uniffiCallStatus
@@ -1438,9 +1490,10 @@ open func exportHabits() -> String  {
     
     /**
      * The fix error learned so far: zero bias and spread 1 before any fix was learned from.
+     * Throws `Internal` (never a made-up value) if it could not be read.
      */
-open func fixError() -> FixError  {
-    return try!  FfiConverterTypeFixError_lift(try! rustCall() {
+open func fixError()throws  -> FixError  {
+    return try  FfiConverterTypeFixError_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_fix_error(
             self.uniffiCloneHandle(),uniffiCallStatus
@@ -1451,8 +1504,8 @@ open func fixError() -> FixError  {
     /**
      * The fixed-lag position: a few epochs old, but revised by what came after.
      */
-open func fixedLagPosition() -> TrackPoint?  {
-    return try!  FfiConverterOptionTypeTrackPoint.lift(try! rustCall() {
+open func fixedLagPosition()throws  -> TrackPoint?  {
+    return try  FfiConverterOptionTypeTrackPoint.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_fixed_lag_position(
             self.uniffiCloneHandle(),uniffiCallStatus
@@ -1474,6 +1527,18 @@ open func importHabits(json: HabitsJson)throws   {try rustCallWithError(FfiConve
         FfiConverterTypeHabitsJson_lower(json),uniffiCallStatus
     )
 }
+}
+    
+    /**
+     * What the engine took and refused since it was created, and why.
+     */
+open func inputStats()throws  -> InputStats  {
+    return try  FfiConverterTypeInputStats_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_input_stats(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
 }
     
     /**
@@ -1499,8 +1564,8 @@ open func learnHabits()throws  -> HabitReport  {
     /**
      * The latest position, if any.
      */
-open func position() -> PositionEstimate?  {
-    return try!  FfiConverterOptionTypePositionEstimate.lift(try! rustCall() {
+open func position()throws  -> PositionEstimate?  {
+    return try  FfiConverterOptionTypePositionEstimate.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_position(
             self.uniffiCloneHandle(),uniffiCallStatus
@@ -1598,8 +1663,8 @@ open func subscribe(listener: PositionListener) -> Subscription  {
     /**
      * The most likely recent track, oldest first.
      */
-open func track() -> [TrackPoint]  {
-    return try!  FfiConverterSequenceTypeTrackPoint.lift(try! rustCall() {
+open func track()throws  -> [TrackPoint]  {
+    return try  FfiConverterSequenceTypeTrackPoint.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_track(
             self.uniffiCloneHandle(),uniffiCallStatus
@@ -1612,8 +1677,8 @@ open func track() -> [TrackPoint]  {
      * now (before the first epoch, its share of the site's states: the prior is uniform).
      * Empty for a site without zones.
      */
-open func zonePosterior() -> [ZoneProbability]  {
-    return try!  FfiConverterSequenceTypeZoneProbability.lift(try! rustCall() {
+open func zonePosterior()throws  -> [ZoneProbability]  {
+    return try  FfiConverterSequenceTypeZoneProbability.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_zone_posterior(
             self.uniffiCloneHandle(),uniffiCallStatus
@@ -1664,6 +1729,181 @@ public func FfiConverterTypePositioningEngine_lift(_ handle: UInt64) throws -> P
 #endif
 public func FfiConverterTypePositioningEngine_lower(_ value: PositioningEngine) -> UInt64 {
     return FfiConverterTypePositioningEngine.lower(value)
+}
+
+
+
+
+
+
+/**
+ * A site file, loaded and checked once, that several engines can share
+ * (`PositioningEngine.withSite`): one per user, or a new one per session, without reading the
+ * file again or holding it twice in memory.
+ */
+public protocol SiteProtocol: AnyObject, Sendable {
+    
+    /**
+     * The names of the site's floors, by floor index.
+     */
+    func floorNames()  -> [String]
+    
+    /**
+     * The names of the site's zones (rooms, corridors), in the site file's order.
+     */
+    func zoneNames()  -> [String]
+    
+}
+/**
+ * A site file, loaded and checked once, that several engines can share
+ * (`PositioningEngine.withSite`): one per user, or a new one per session, without reading the
+ * file again or holding it twice in memory.
+ */
+open class Site: SiteProtocol, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_waymark_fn_clone_site(self.handle, $0) }
+    }
+    // No primary constructor declared for this class.
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_waymark_fn_free_site(handle, $0) }
+    }
+
+    
+    /**
+     * A site file's contents: the binary encoding (`waymark site pack`, what an app should
+     * ship) or JSON. Throws `InvalidSite` for a file that is not a valid site.
+     */
+public static func fromBytes(site: Data)throws  -> Site  {
+    return try  FfiConverterTypeSite_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_constructor_site_from_bytes(
+        FfiConverterData.lower(site),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The site file (binary or JSON) at `path`.
+     */
+public static func fromPath(path: String)throws  -> Site  {
+    return try  FfiConverterTypeSite_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_constructor_site_from_path(
+        FfiConverterString.lower(path),uniffiCallStatus
+    )
+})
+}
+    
+
+    
+    /**
+     * The names of the site's floors, by floor index.
+     */
+open func floorNames() -> [String]  {
+    return try!  FfiConverterSequenceString.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_floor_names(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The names of the site's zones (rooms, corridors), in the site file's order.
+     */
+open func zoneNames() -> [String]  {
+    return try!  FfiConverterSequenceString.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_zone_names(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+
+    
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSite: FfiConverter {
+    typealias FfiType = UInt64
+    typealias SwiftType = Site
+
+    public static func lift(_ handle: UInt64) throws -> Site {
+        return Site(unsafeFromHandle: handle)
+    }
+
+    public static func lower(_ value: Site) -> UInt64 {
+        return value.uniffiCloneHandle()
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Site {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: Site, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSite_lift(_ handle: UInt64) throws -> Site {
+    return try FfiConverterTypeSite.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSite_lower(_ value: Site) -> UInt64 {
+    return FfiConverterTypeSite.lower(value)
 }
 
 
@@ -1924,7 +2164,9 @@ public struct EngineOptions: Equatable, Hashable {
      */
     public var transition: TransitionKind?
     /**
-     * The user's step length in metres (HIPE: 0.7 m).
+     * The user's step length in metres, used on a site file without a surveyed step length.
+     * A site surveyed with `waymark survey` carries its surveyors' step length model, which
+     * the engine uses instead, whatever this says: on such a site this field has no effect.
      */
     public var stepLengthM: Double
     /**
@@ -1955,7 +2197,9 @@ public struct EngineOptions: Equatable, Hashable {
          * Transition model; `null` / `nil` for the default (Hoang's).
          */transition: TransitionKind? = nil, 
         /**
-         * The user's step length in metres (HIPE: 0.7 m).
+         * The user's step length in metres, used on a site file without a surveyed step length.
+         * A site surveyed with `waymark survey` carries its surveyors' step length model, which
+         * the engine uses instead, whatever this says: on such a site this field has no effect.
          */stepLengthM: Double = Double(0.7), 
         /**
          * How many epochs behind the newest the fixed-lag estimate is.
@@ -2029,6 +2273,76 @@ public func FfiConverterTypeEngineOptions_lift(_ buf: RustBuffer) throws -> Engi
 #endif
 public func FfiConverterTypeEngineOptions_lower(_ value: EngineOptions) -> RustBuffer {
     return FfiConverterTypeEngineOptions.lower(value)
+}
+
+
+/**
+ * A failed call, as a listener's `onError` hears it: the kind of error and its message (the
+ * same text the call threw).
+ */
+public struct ErrorReport: Equatable, Hashable {
+    /**
+     * Which kind of error.
+     */
+    public var code: ErrorCode
+    /**
+     * What went wrong, for logs (not for users).
+     */
+    public var message: String
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Which kind of error.
+         */code: ErrorCode, 
+        /**
+         * What went wrong, for logs (not for users).
+         */message: String) {
+        self.code = code
+        self.message = message
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension ErrorReport: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeErrorReport: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ErrorReport {
+        return
+            try ErrorReport(
+                code: FfiConverterTypeErrorCode.read(from: &buf), 
+                message: FfiConverterString.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: ErrorReport, into buf: inout [UInt8]) {
+        FfiConverterTypeErrorCode.write(value.code, into: &buf)
+        FfiConverterString.write(value.message, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeErrorReport_lift(_ buf: RustBuffer) throws -> ErrorReport {
+    return try FfiConverterTypeErrorReport.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeErrorReport_lower(_ value: ErrorReport) -> RustBuffer {
+    return FfiConverterTypeErrorReport.lower(value)
 }
 
 
@@ -2119,111 +2433,47 @@ public func FfiConverterTypeFixError_lower(_ value: FixError) -> RustBuffer {
  */
 public struct HabitReport: Equatable, Hashable {
     /**
-     * Epochs of the history learned from in this pass (those learned before are skipped).
+     * Epochs of the history learned from in this pass (those learned before are skipped); 0
+     * when there was nothing new to learn from.
      */
     public var epochs: UInt32
-    /**
-     * Runs of epochs without a long gap learned from.
-     */
-    public var segments: UInt32
-    /**
-     * Runs skipped: a single epoch, or over too many states.
-     */
-    public var segmentsSkipped: UInt32
-    /**
-     * Epochs with the user's feedback (`confirmZone`, `confirmPosition`).
-     */
-    public var feedbackEpochs: UInt32
-    /**
-     * Epochs of position fixes (`pushFix`).
-     */
-    public var fixEpochs: UInt32
-    /**
-     * Baum-Welch iterations run.
-     */
-    public var iterations: UInt32
-    /**
-     * ln p(observations | model) before each iteration and for the learned model, in nats;
-     * it never decreases. Empty when there was nothing to learn from.
-     */
-    public var logLikelihood: [Double]
-    /**
-     * Feedback epochs the habits ruled out, at which learning restarted.
-     */
-    public var restarts: UInt32
-    /**
-     * Transitions between places with a learned count, after the pass (all passes so far).
-     */
-    public var learnedTransitions: UInt64
     /**
      * Epochs learned from over all passes, including those of an imported model.
      */
     public var totalEpochs: UInt64
     /**
-     * The fix error after the pass.
+     * Moves between places with a learned count, after the pass (all passes so far).
      */
-    public var fixError: FixError
+    public var learnedTransitions: UInt64
     /**
-     * How strongly the learned moves are applied, as a pseudo-count per reachable move;
-     * `null` / `nil` when they are not (they did not predict held-out parts of the history
-     * well enough yet, or there was only one part).
+     * Whether the learned moves now weigh on the positions. They do once they predict parts
+     * of the history they were not learned from better than the motion alone; until then
+     * the engine keeps learning but positions as before.
      */
-    public var strength: Double?
+    public var applied: Bool
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
     public init(
         /**
-         * Epochs of the history learned from in this pass (those learned before are skipped).
+         * Epochs of the history learned from in this pass (those learned before are skipped); 0
+         * when there was nothing new to learn from.
          */epochs: UInt32, 
-        /**
-         * Runs of epochs without a long gap learned from.
-         */segments: UInt32, 
-        /**
-         * Runs skipped: a single epoch, or over too many states.
-         */segmentsSkipped: UInt32, 
-        /**
-         * Epochs with the user's feedback (`confirmZone`, `confirmPosition`).
-         */feedbackEpochs: UInt32, 
-        /**
-         * Epochs of position fixes (`pushFix`).
-         */fixEpochs: UInt32, 
-        /**
-         * Baum-Welch iterations run.
-         */iterations: UInt32, 
-        /**
-         * ln p(observations | model) before each iteration and for the learned model, in nats;
-         * it never decreases. Empty when there was nothing to learn from.
-         */logLikelihood: [Double], 
-        /**
-         * Feedback epochs the habits ruled out, at which learning restarted.
-         */restarts: UInt32, 
-        /**
-         * Transitions between places with a learned count, after the pass (all passes so far).
-         */learnedTransitions: UInt64, 
         /**
          * Epochs learned from over all passes, including those of an imported model.
          */totalEpochs: UInt64, 
         /**
-         * The fix error after the pass.
-         */fixError: FixError, 
+         * Moves between places with a learned count, after the pass (all passes so far).
+         */learnedTransitions: UInt64, 
         /**
-         * How strongly the learned moves are applied, as a pseudo-count per reachable move;
-         * `null` / `nil` when they are not (they did not predict held-out parts of the history
-         * well enough yet, or there was only one part).
-         */strength: Double?) {
+         * Whether the learned moves now weigh on the positions. They do once they predict parts
+         * of the history they were not learned from better than the motion alone; until then
+         * the engine keeps learning but positions as before.
+         */applied: Bool) {
         self.epochs = epochs
-        self.segments = segments
-        self.segmentsSkipped = segmentsSkipped
-        self.feedbackEpochs = feedbackEpochs
-        self.fixEpochs = fixEpochs
-        self.iterations = iterations
-        self.logLikelihood = logLikelihood
-        self.restarts = restarts
-        self.learnedTransitions = learnedTransitions
         self.totalEpochs = totalEpochs
-        self.fixError = fixError
-        self.strength = strength
+        self.learnedTransitions = learnedTransitions
+        self.applied = applied
     }
 
     
@@ -2243,33 +2493,17 @@ public struct FfiConverterTypeHabitReport: FfiConverterRustBuffer {
         return
             try HabitReport(
                 epochs: FfiConverterUInt32.read(from: &buf), 
-                segments: FfiConverterUInt32.read(from: &buf), 
-                segmentsSkipped: FfiConverterUInt32.read(from: &buf), 
-                feedbackEpochs: FfiConverterUInt32.read(from: &buf), 
-                fixEpochs: FfiConverterUInt32.read(from: &buf), 
-                iterations: FfiConverterUInt32.read(from: &buf), 
-                logLikelihood: FfiConverterSequenceDouble.read(from: &buf), 
-                restarts: FfiConverterUInt32.read(from: &buf), 
-                learnedTransitions: FfiConverterUInt64.read(from: &buf), 
                 totalEpochs: FfiConverterUInt64.read(from: &buf), 
-                fixError: FfiConverterTypeFixError.read(from: &buf), 
-                strength: FfiConverterOptionDouble.read(from: &buf)
+                learnedTransitions: FfiConverterUInt64.read(from: &buf), 
+                applied: FfiConverterBool.read(from: &buf)
         )
     }
 
     public static func write(_ value: HabitReport, into buf: inout [UInt8]) {
         FfiConverterUInt32.write(value.epochs, into: &buf)
-        FfiConverterUInt32.write(value.segments, into: &buf)
-        FfiConverterUInt32.write(value.segmentsSkipped, into: &buf)
-        FfiConverterUInt32.write(value.feedbackEpochs, into: &buf)
-        FfiConverterUInt32.write(value.fixEpochs, into: &buf)
-        FfiConverterUInt32.write(value.iterations, into: &buf)
-        FfiConverterSequenceDouble.write(value.logLikelihood, into: &buf)
-        FfiConverterUInt32.write(value.restarts, into: &buf)
-        FfiConverterUInt64.write(value.learnedTransitions, into: &buf)
         FfiConverterUInt64.write(value.totalEpochs, into: &buf)
-        FfiConverterTypeFixError.write(value.fixError, into: &buf)
-        FfiConverterOptionDouble.write(value.strength, into: &buf)
+        FfiConverterUInt64.write(value.learnedTransitions, into: &buf)
+        FfiConverterBool.write(value.applied, into: &buf)
     }
 }
 
@@ -2286,6 +2520,235 @@ public func FfiConverterTypeHabitReport_lift(_ buf: RustBuffer) throws -> HabitR
 #endif
 public func FfiConverterTypeHabitReport_lower(_ value: HabitReport) -> RustBuffer {
     return FfiConverterTypeHabitReport.lower(value)
+}
+
+
+/**
+ * What the engine took and what it refused since it was created, and why: for an app's
+ * diagnostics screen or logs (a phone whose scans are mostly refused is misconfigured, or
+ * outside the site). Every rejected input also made its call throw.
+ */
+public struct InputStats: Equatable, Hashable {
+    /**
+     * Scans that made a position.
+     */
+    public var scansAccepted: UInt64
+    /**
+     * Scans refused because their time was not after the last position's.
+     */
+    public var scansOutOfOrder: UInt64
+    /**
+     * Scans refused for having no readings.
+     */
+    public var scansEmpty: UInt64
+    /**
+     * Scans refused for a NaN, infinite or impossible (below -1000 dBm) signal strength.
+     */
+    public var scansNonFinite: UInt64
+    /**
+     * Scans refused for a signal strength above +100 dBm, which no receiver reports.
+     */
+    public var scansRssiTooHigh: UInt64
+    /**
+     * Scans refused because none of their transmitters is in the site file: the phone is
+     * probably outside the surveyed area.
+     */
+    public var scansNoKnownTransmitter: UInt64
+    /**
+     * Readings ignored in accepted scans because the site file does not know their
+     * transmitter.
+     */
+    public var readingsUnknown: UInt64
+    /**
+     * Readings ignored in accepted scans because the scan repeated their transmitter.
+     */
+    public var readingsDuplicate: UInt64
+    /**
+     * Readings ignored in accepted scans because they were measured too long before it.
+     */
+    public var readingsStale: UInt64
+    /**
+     * Accepted scans the site's map did not explain: their positions followed the motion
+     * alone.
+     */
+    public var scansUnexplained: UInt64
+    /**
+     * Positions made from the motion alone (`advance`).
+     */
+    public var motionEpochs: UInt64
+    /**
+     * `advance` calls refused (a time not after the last position's).
+     */
+    public var advancesRejected: UInt64
+    /**
+     * Position fixes taken (`pushFix`).
+     */
+    public var fixesAccepted: UInt64
+    /**
+     * Position fixes refused.
+     */
+    public var fixesRejected: UInt64
+    /**
+     * User feedback taken (`confirmZone`, `confirmPosition`).
+     */
+    public var feedbackAccepted: UInt64
+    /**
+     * User feedback refused.
+     */
+    public var feedbackRejected: UInt64
+    /**
+     * Times the engine started over from "anywhere on the site": after a gap too long to
+     * bridge, or when nothing could explain a scan.
+     */
+    public var filterRestarts: UInt64
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Scans that made a position.
+         */scansAccepted: UInt64, 
+        /**
+         * Scans refused because their time was not after the last position's.
+         */scansOutOfOrder: UInt64, 
+        /**
+         * Scans refused for having no readings.
+         */scansEmpty: UInt64, 
+        /**
+         * Scans refused for a NaN, infinite or impossible (below -1000 dBm) signal strength.
+         */scansNonFinite: UInt64, 
+        /**
+         * Scans refused for a signal strength above +100 dBm, which no receiver reports.
+         */scansRssiTooHigh: UInt64, 
+        /**
+         * Scans refused because none of their transmitters is in the site file: the phone is
+         * probably outside the surveyed area.
+         */scansNoKnownTransmitter: UInt64, 
+        /**
+         * Readings ignored in accepted scans because the site file does not know their
+         * transmitter.
+         */readingsUnknown: UInt64, 
+        /**
+         * Readings ignored in accepted scans because the scan repeated their transmitter.
+         */readingsDuplicate: UInt64, 
+        /**
+         * Readings ignored in accepted scans because they were measured too long before it.
+         */readingsStale: UInt64, 
+        /**
+         * Accepted scans the site's map did not explain: their positions followed the motion
+         * alone.
+         */scansUnexplained: UInt64, 
+        /**
+         * Positions made from the motion alone (`advance`).
+         */motionEpochs: UInt64, 
+        /**
+         * `advance` calls refused (a time not after the last position's).
+         */advancesRejected: UInt64, 
+        /**
+         * Position fixes taken (`pushFix`).
+         */fixesAccepted: UInt64, 
+        /**
+         * Position fixes refused.
+         */fixesRejected: UInt64, 
+        /**
+         * User feedback taken (`confirmZone`, `confirmPosition`).
+         */feedbackAccepted: UInt64, 
+        /**
+         * User feedback refused.
+         */feedbackRejected: UInt64, 
+        /**
+         * Times the engine started over from "anywhere on the site": after a gap too long to
+         * bridge, or when nothing could explain a scan.
+         */filterRestarts: UInt64) {
+        self.scansAccepted = scansAccepted
+        self.scansOutOfOrder = scansOutOfOrder
+        self.scansEmpty = scansEmpty
+        self.scansNonFinite = scansNonFinite
+        self.scansRssiTooHigh = scansRssiTooHigh
+        self.scansNoKnownTransmitter = scansNoKnownTransmitter
+        self.readingsUnknown = readingsUnknown
+        self.readingsDuplicate = readingsDuplicate
+        self.readingsStale = readingsStale
+        self.scansUnexplained = scansUnexplained
+        self.motionEpochs = motionEpochs
+        self.advancesRejected = advancesRejected
+        self.fixesAccepted = fixesAccepted
+        self.fixesRejected = fixesRejected
+        self.feedbackAccepted = feedbackAccepted
+        self.feedbackRejected = feedbackRejected
+        self.filterRestarts = filterRestarts
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension InputStats: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeInputStats: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> InputStats {
+        return
+            try InputStats(
+                scansAccepted: FfiConverterUInt64.read(from: &buf), 
+                scansOutOfOrder: FfiConverterUInt64.read(from: &buf), 
+                scansEmpty: FfiConverterUInt64.read(from: &buf), 
+                scansNonFinite: FfiConverterUInt64.read(from: &buf), 
+                scansRssiTooHigh: FfiConverterUInt64.read(from: &buf), 
+                scansNoKnownTransmitter: FfiConverterUInt64.read(from: &buf), 
+                readingsUnknown: FfiConverterUInt64.read(from: &buf), 
+                readingsDuplicate: FfiConverterUInt64.read(from: &buf), 
+                readingsStale: FfiConverterUInt64.read(from: &buf), 
+                scansUnexplained: FfiConverterUInt64.read(from: &buf), 
+                motionEpochs: FfiConverterUInt64.read(from: &buf), 
+                advancesRejected: FfiConverterUInt64.read(from: &buf), 
+                fixesAccepted: FfiConverterUInt64.read(from: &buf), 
+                fixesRejected: FfiConverterUInt64.read(from: &buf), 
+                feedbackAccepted: FfiConverterUInt64.read(from: &buf), 
+                feedbackRejected: FfiConverterUInt64.read(from: &buf), 
+                filterRestarts: FfiConverterUInt64.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: InputStats, into buf: inout [UInt8]) {
+        FfiConverterUInt64.write(value.scansAccepted, into: &buf)
+        FfiConverterUInt64.write(value.scansOutOfOrder, into: &buf)
+        FfiConverterUInt64.write(value.scansEmpty, into: &buf)
+        FfiConverterUInt64.write(value.scansNonFinite, into: &buf)
+        FfiConverterUInt64.write(value.scansRssiTooHigh, into: &buf)
+        FfiConverterUInt64.write(value.scansNoKnownTransmitter, into: &buf)
+        FfiConverterUInt64.write(value.readingsUnknown, into: &buf)
+        FfiConverterUInt64.write(value.readingsDuplicate, into: &buf)
+        FfiConverterUInt64.write(value.readingsStale, into: &buf)
+        FfiConverterUInt64.write(value.scansUnexplained, into: &buf)
+        FfiConverterUInt64.write(value.motionEpochs, into: &buf)
+        FfiConverterUInt64.write(value.advancesRejected, into: &buf)
+        FfiConverterUInt64.write(value.fixesAccepted, into: &buf)
+        FfiConverterUInt64.write(value.fixesRejected, into: &buf)
+        FfiConverterUInt64.write(value.feedbackAccepted, into: &buf)
+        FfiConverterUInt64.write(value.feedbackRejected, into: &buf)
+        FfiConverterUInt64.write(value.filterRestarts, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeInputStats_lift(_ buf: RustBuffer) throws -> InputStats {
+    return try FfiConverterTypeInputStats.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeInputStats_lower(_ value: InputStats) -> RustBuffer {
+    return FfiConverterTypeInputStats.lower(value)
 }
 
 
@@ -3031,6 +3494,122 @@ public func FfiConverterTypeZoneProbability_lower(_ value: ZoneProbability) -> R
 
 
 /**
+ * Which kind of error a [`PositioningError`] is, without its message: what a listener's
+ * `onError` is told, and (as `waymark_result`) what a C call returns.
+ */
+
+public enum ErrorCode: Equatable, Hashable {
+    
+    /**
+     * `PositioningError.InvalidSite`.
+     */
+    case invalidSite
+    /**
+     * `PositioningError.InvalidConfig`.
+     */
+    case invalidConfig
+    /**
+     * `PositioningError.InputRejected`.
+     */
+    case inputRejected
+    /**
+     * `PositioningError.SaltMismatch`.
+     */
+    case saltMismatch
+    /**
+     * `PositioningError.HabitsRejected`.
+     */
+    case habitsRejected
+    /**
+     * `PositioningError.Internal`.
+     */
+    case `internal`
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension ErrorCode: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeErrorCode: FfiConverterRustBuffer {
+    typealias SwiftType = ErrorCode
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ErrorCode {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .invalidSite
+        
+        case 2: return .invalidConfig
+        
+        case 3: return .inputRejected
+        
+        case 4: return .saltMismatch
+        
+        case 5: return .habitsRejected
+        
+        case 6: return .`internal`
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: ErrorCode, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .invalidSite:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .invalidConfig:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .inputRejected:
+            writeInt(&buf, Int32(3))
+        
+        
+        case .saltMismatch:
+            writeInt(&buf, Int32(4))
+        
+        
+        case .habitsRejected:
+            writeInt(&buf, Int32(5))
+        
+        
+        case .`internal`:
+            writeInt(&buf, Int32(6))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeErrorCode_lift(_ buf: RustBuffer) throws -> ErrorCode {
+    return try FfiConverterTypeErrorCode.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeErrorCode_lower(_ value: ErrorCode) -> RustBuffer {
+    return FfiConverterTypeErrorCode.lower(value)
+}
+
+
+
+/**
  * Severity of a log record.
  */
 
@@ -3377,8 +3956,11 @@ enum PositioningError: Swift.Error, Equatable, Hashable, Foundation.LocalizedErr
          */reason: String
     )
     /**
-     * A bug in Waymark or in a listener: the call had no effect (a scan or an advance that
-     * panicked half-way is undone, and no listener hears its position).
+     * A bug in Waymark. An epoch (a scan, an advance, a fix, feedback) or a read that
+     * failed this way had no effect: the engine is as it was, no listener hears of it, and it
+     * stays usable. Any other call that failed this way may have left the engine half-changed:
+     * every later call on it throws `Internal` too (create a new engine). A getter throws it
+     * rather than answer with an empty or made-up value.
      */
     case Internal(
         /**
@@ -4041,23 +4623,23 @@ fileprivate struct FfiConverterOptionTypeTransmitterIdString: FfiConverterRustBu
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-fileprivate struct FfiConverterSequenceDouble: FfiConverterRustBuffer {
-    typealias SwiftType = [Double]
+fileprivate struct FfiConverterSequenceString: FfiConverterRustBuffer {
+    typealias SwiftType = [String]
 
-    public static func write(_ value: [Double], into buf: inout [UInt8]) {
+    public static func write(_ value: [String], into buf: inout [UInt8]) {
         let len = Int32(value.count)
         writeInt(&buf, len)
         for item in value {
-            FfiConverterDouble.write(item, into: &buf)
+            FfiConverterString.write(item, into: &buf)
         }
     }
 
-    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [Double] {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [String] {
         let len: Int32 = try readInt(&buf)
-        var seq = [Double]()
+        var seq = [String]()
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
-            seq.append(try FfiConverterDouble.read(from: &buf))
+            seq.append(try FfiConverterString.read(from: &buf))
         }
         return seq
     }
@@ -4279,6 +4861,16 @@ public func initLogging(sink: LogSink?, level: LogLevel)  {try! rustCall() {
     )
 }
 }
+/**
+ * Waymark's version, as `"0.1.0"`: the version of the Rust library the app bundles.
+ */
+public func version() -> String  {
+    return try!  FfiConverterString.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_func_version(uniffiCallStatus
+    )
+})
+}
 
 private enum InitializationResult {
     case ok
@@ -4298,82 +4890,103 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_func_init_logging() != 18123) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_func_version() != 18717) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_logsink_log() != 63629) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positionlistener_on_position() != 48969) {
+    if (uniffi_waymark_checksum_method_positionlistener_on_position() != 43277) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positionlistener_on_status() != 23137) {
+    if (uniffi_waymark_checksum_method_positionlistener_on_status() != 25792) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positionlistener_on_error() != 24961) {
+    if (uniffi_waymark_checksum_method_positionlistener_on_error() != 20759) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_advance() != 26132) {
+    if (uniffi_waymark_checksum_method_positioningengine_advance() != 1226) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_clear_habits() != 64021) {
+    if (uniffi_waymark_checksum_method_positioningengine_clear_habits() != 62222) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_confirm_position() != 57798) {
+    if (uniffi_waymark_checksum_method_positioningengine_confirm_position() != 45919) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_confirm_zone() != 17419) {
+    if (uniffi_waymark_checksum_method_positioningengine_confirm_zone() != 56562) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_export_habits() != 59107) {
+    if (uniffi_waymark_checksum_method_positioningengine_export_habits() != 63461) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_fix_error() != 19246) {
+    if (uniffi_waymark_checksum_method_positioningengine_fix_error() != 22503) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_fixed_lag_position() != 24784) {
+    if (uniffi_waymark_checksum_method_positioningengine_fixed_lag_position() != 40760) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_import_habits() != 29156) {
+    if (uniffi_waymark_checksum_method_positioningengine_import_habits() != 25536) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_learn_habits() != 5904) {
+    if (uniffi_waymark_checksum_method_positioningengine_input_stats() != 64531) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_position() != 4980) {
+    if (uniffi_waymark_checksum_method_positioningengine_learn_habits() != 63202) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_push_accelerometer() != 36579) {
+    if (uniffi_waymark_checksum_method_positioningengine_position() != 61181) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_push_fix() != 24136) {
+    if (uniffi_waymark_checksum_method_positioningengine_push_accelerometer() != 46671) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_push_gyroscope() != 39222) {
+    if (uniffi_waymark_checksum_method_positioningengine_push_fix() != 20293) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_push_magnetometer() != 29621) {
+    if (uniffi_waymark_checksum_method_positioningengine_push_gyroscope() != 67) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_push_scan() != 50876) {
+    if (uniffi_waymark_checksum_method_positioningengine_push_magnetometer() != 34522) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_push_scan() != 27547) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_subscribe() != 5158) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_track() != 56838) {
+    if (uniffi_waymark_checksum_method_positioningengine_track() != 55593) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_zone_posterior() != 53398) {
+    if (uniffi_waymark_checksum_method_positioningengine_zone_posterior() != 14053) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_floor_names() != 36392) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_zone_names() != 29126) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_subscription_cancel() != 31759) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_constructor_positioningengine_from_path() != 61377) {
+    if (uniffi_waymark_checksum_constructor_positioningengine_from_path() != 33646) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_constructor_positioningengine_from_site_bytes() != 35513) {
+    if (uniffi_waymark_checksum_constructor_positioningengine_from_site_bytes() != 61356) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_constructor_positioningengine_new() != 34780) {
+    if (uniffi_waymark_checksum_constructor_positioningengine_new() != 11485) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_constructor_positioningengine_with_site() != 60178) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_constructor_site_from_bytes() != 49602) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_constructor_site_from_path() != 18181) {
         return InitializationResult.apiChecksumMismatch
     }
 

@@ -19,35 +19,28 @@ final class Recorder: PositionListener, @unchecked Sendable {
     var statuses: [StatusUpdate] { lock.lock(); defer { lock.unlock() }; return _statuses }
     var errors: [String] { lock.lock(); defer { lock.unlock() }; return _errors }
 
-    func onPosition(position: PositionEstimate) throws {
+    func onPosition(position: PositionEstimate) {
         lock.lock(); defer { lock.unlock() }
         _positions.append(position)
     }
 
-    func onStatus(status: StatusUpdate) throws {
+    func onStatus(status: StatusUpdate) {
         lock.lock(); defer { lock.unlock() }
         _statuses.append(status)
     }
 
-    func onError(message: String) throws {
+    func onError(error: ErrorReport) {
         lock.lock(); defer { lock.unlock() }
-        _errors.append(message)
+        _errors.append(error.message)
     }
 }
 
-/// A listener that always throws, as a buggy app's might: a declared error from one method,
-/// an undeclared Swift error from the other.
+/// A listener that ignores everything. Listener methods cannot throw in Swift; the Kotlin and
+/// Rust tests cover one that throws or panics.
 final class Throwing: PositionListener, @unchecked Sendable {
-    struct AppBug: Error {}
-    func onPosition(position: PositionEstimate) throws {
-        throw PositioningError.Internal(reason: "app bug")
-    }
-    func onStatus(status: StatusUpdate) throws {
-        throw AppBug()
-    }
-    func onError(message: String) throws {
-        throw AppBug()
-    }
+    func onPosition(position: PositionEstimate) {}
+    func onStatus(status: StatusUpdate) {}
+    func onError(error: ErrorReport) {}
 }
 
 /// `walk.json` of `waymark sim-export`.
@@ -143,10 +136,10 @@ final class WaymarkTests: XCTestCase {
 
         // One position per accepted scan, the last one the engine's.
         XCTAssertEqual(recorder.positions.count, errors.count)
-        XCTAssertEqual(recorder.positions.last, engine.position())
+        XCTAssertEqual(recorder.positions.last, try engine.position())
         XCTAssertFalse(recorder.statuses.isEmpty, "walking starts: a motion-state change")
-        XCTAssertFalse(engine.track().isEmpty)
-        XCTAssertNotNil(engine.fixedLagPosition())
+        XCTAssertFalse(try engine.track().isEmpty)
+        XCTAssertNotNil(try engine.fixedLagPosition())
 
         // A cancelled subscription hears nothing more.
         subscription.cancel()
@@ -193,13 +186,13 @@ final class WaymarkTests: XCTestCase {
         // NaN and backwards samples are dropped, not fatal.
         let s = { (t: UInt64, x: Double) in MotionSample(timestampNs: first.timestampNs + t, x: x, y: 0, z: 9.81) }
         XCTAssertEqual(try engine.pushAccelerometer(batch: [s(15, 0), s(14, 0), s(16, .nan), s(17, 0.1)]), 2)
-        XCTAssertNotNil(engine.position())
+        XCTAssertNotNil(try engine.position())
     }
 
     // Zones (the office's rooms, aisle and stair hall), user feedback and a position fix.
     func testZonesFeedbackAndPositionFixes() throws {
         let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
-        let zones = engine.zonePosterior()
+        let zones = try engine.zonePosterior()
         XCTAssertEqual(zones.count, 12)
         XCTAssertEqual(zones[0].name, "aisle")
         XCTAssertEqual(zones[0].kind, .corridor)
@@ -227,14 +220,14 @@ final class WaymarkTests: XCTestCase {
         ) {
             guard case PositioningError.InputRejected = $0 else { return XCTFail("expected inputRejected, got \($0)") }
         }
-        XCTAssertEqual(engine.position(), fixed)
+        XCTAssertEqual(try engine.position(), fixed)
     }
 
     // Habits: learned from the walk with position fixes and the user's feedback, exported,
     // imported into a second engine, refused with a typed error when they do not fit, cleared.
     func testHabitsLearnExportImport() throws {
         let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
-        XCTAssertEqual(engine.fixError(), FixError(biasXM: 0, biasYM: 0, spread: 1))
+        XCTAssertEqual(try engine.fixError(), FixError(biasXM: 0, biasYM: 0, spread: 1))
         var positions = 0, fixes = 0, confirmations = 0
         for epoch in try walk().epochs {
             _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
@@ -261,28 +254,24 @@ final class WaymarkTests: XCTestCase {
 
         let report = try engine.learnHabits()
         XCTAssertGreaterThan(report.epochs, 10)
-        XCTAssertGreaterThanOrEqual(report.iterations, 1)
-        XCTAssertEqual(report.fixEpochs, UInt32(fixes))
-        XCTAssertGreaterThanOrEqual(report.feedbackEpochs, UInt32(confirmations))
         XCTAssertGreaterThan(report.learnedTransitions, 0)
         XCTAssertEqual(report.totalEpochs, UInt64(report.epochs))
-        XCTAssertEqual(report.logLikelihood.count, Int(report.iterations) + 1)
-        XCTAssertGreaterThanOrEqual(report.logLikelihood.last!, report.logLikelihood.first! - 1e-6)
-        let learned = engine.fixError()
-        XCTAssertEqual(learned, report.fixError)
+        XCTAssertEqual(version(), "0.1.0")
+        XCTAssertEqual(try engine.inputStats().fixesAccepted, UInt64(fixes))
+        let learned = try engine.fixError()
         // 1.5 m east, 0.5 m north, shrunk toward 0 by the prior's 5 pseudo-fixes.
         XCTAssertGreaterThan(learned.biasXM, 0.3)
         XCTAssertGreaterThan(learned.biasYM, 0)
         XCTAssertGreaterThan(learned.biasXM, learned.biasYM)
         XCTAssertEqual(try engine.learnHabits().epochs, 0, "each epoch is learned once")
 
-        let json = engine.exportHabits()
+        let json = try engine.exportHabits()
         let other = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
-        let empty = other.exportHabits()
+        let empty = try other.exportHabits()
         XCTAssertNotEqual(empty, json)
         try other.importHabits(json: json)
-        XCTAssertEqual(other.exportHabits(), json)
-        XCTAssertEqual(other.fixError(), learned)
+        XCTAssertEqual(try other.exportHabits(), json)
+        XCTAssertEqual(try other.fixError(), learned)
 
         let newer = json.replacingOccurrences(of: "\"version\":1,", with: "\"version\":99,")
         XCTAssertNotEqual(newer, json)
@@ -294,11 +283,11 @@ final class WaymarkTests: XCTestCase {
                 }
                 XCTAssertFalse(reason.isEmpty)
             }
-            XCTAssertEqual(other.exportHabits(), json, "a refused model changed the habits")
+            XCTAssertEqual(try other.exportHabits(), json, "a refused model changed the habits")
         }
-        other.clearHabits()
-        XCTAssertEqual(other.exportHabits(), empty)
-        XCTAssertEqual(other.fixError(), FixError(biasXM: 0, biasYM: 0, spread: 1))
+        try other.clearHabits()
+        XCTAssertEqual(try other.exportHabits(), empty)
+        XCTAssertEqual(try other.fixError(), FixError(biasXM: 0, biasYM: 0, spread: 1))
     }
 
     // A site whose transmitter ids are salted hashes: with its salt the engine positions exactly
@@ -319,7 +308,7 @@ final class WaymarkTests: XCTestCase {
             }
             XCTAssertEqual(try? raw.pushScan(scan: epoch.scan), try? hashed.pushScan(scan: epoch.scan))
         }
-        XCTAssertNotNil(hashed.position())
+        XCTAssertNotNil(try hashed.position())
 
         var wrong = salt
         wrong[0] ^= 1
@@ -451,15 +440,15 @@ final class WaymarkTests: XCTestCase {
                 if (try? engine.pushScan(scan: epoch.scan)) != nil {
                     lock.lock(); accepted += 1; lock.unlock()
                 }
-                _ = engine.position()
-                _ = engine.track()
-                _ = engine.fixedLagPosition()
+                _ = try? engine.position()
+                _ = try? engine.track()
+                _ = try? engine.fixedLagPosition()
             }
             subscription.cancel()
         }
         // Scans from other threads may arrive out of order and be rejected; the engine works.
         XCTAssertGreaterThan(accepted, 0)
-        XCTAssertNotNil(engine.position())
+        XCTAssertNotNil(try engine.position())
         _ = try engine.advance(timestampNs: epochs.last!.timestampNs + 1_000_000_000)
     }
 

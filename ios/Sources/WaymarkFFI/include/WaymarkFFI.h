@@ -338,7 +338,7 @@ void uniffi_waymark_fn_method_positionlistener_on_status(uint64_t ptr, RustBuffe
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONLISTENER_ON_ERROR
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONLISTENER_ON_ERROR
-void uniffi_waymark_fn_method_positionlistener_on_error(uint64_t ptr, RustBuffer message, RustCallStatus *_Nonnull out_status
+void uniffi_waymark_fn_method_positionlistener_on_error(uint64_t ptr, RustBuffer error, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_POSITIONINGENGINE
@@ -364,6 +364,11 @@ uint64_t uniffi_waymark_fn_constructor_positioningengine_from_site_bytes(RustBuf
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_POSITIONINGENGINE_NEW
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_POSITIONINGENGINE_NEW
 uint64_t uniffi_waymark_fn_constructor_positioningengine_new(RustBuffer site_json, RustBuffer options, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_POSITIONINGENGINE_WITH_SITE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_POSITIONINGENGINE_WITH_SITE
+uint64_t uniffi_waymark_fn_constructor_positioningengine_with_site(uint64_t site, RustBuffer options, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_ADVANCE
@@ -404,6 +409,11 @@ RustBuffer uniffi_waymark_fn_method_positioningengine_fixed_lag_position(uint64_
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_IMPORT_HABITS
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_IMPORT_HABITS
 void uniffi_waymark_fn_method_positioningengine_import_habits(uint64_t ptr, RustBuffer json, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_INPUT_STATS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_INPUT_STATS
+RustBuffer uniffi_waymark_fn_method_positioningengine_input_stats(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_LEARN_HABITS
@@ -456,6 +466,36 @@ RustBuffer uniffi_waymark_fn_method_positioningengine_track(uint64_t ptr, RustCa
 RustBuffer uniffi_waymark_fn_method_positioningengine_zone_posterior(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SITE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SITE
+uint64_t uniffi_waymark_fn_clone_site(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FREE_SITE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FREE_SITE
+void uniffi_waymark_fn_free_site(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_SITE_FROM_BYTES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_SITE_FROM_BYTES
+uint64_t uniffi_waymark_fn_constructor_site_from_bytes(RustBuffer site, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_SITE_FROM_PATH
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_SITE_FROM_PATH
+uint64_t uniffi_waymark_fn_constructor_site_from_path(RustBuffer path, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_FLOOR_NAMES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_FLOOR_NAMES
+RustBuffer uniffi_waymark_fn_method_site_floor_names(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ZONE_NAMES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ZONE_NAMES
+RustBuffer uniffi_waymark_fn_method_site_zone_names(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SUBSCRIPTION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SUBSCRIPTION
 uint64_t uniffi_waymark_fn_clone_subscription(uint64_t handle, RustCallStatus *_Nonnull out_status
@@ -474,6 +514,12 @@ void uniffi_waymark_fn_method_subscription_cancel(uint64_t ptr, RustCallStatus *
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FUNC_INIT_LOGGING
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FUNC_INIT_LOGGING
 void uniffi_waymark_fn_func_init_logging(RustBuffer sink, RustBuffer level, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FUNC_VERSION
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FUNC_VERSION
+RustBuffer uniffi_waymark_fn_func_version(RustCallStatus *_Nonnull out_status
+    
 );
 #endif
 #ifndef UNIFFI_FFIDEF_FFI_WAYMARK_RUSTBUFFER_ALLOC
@@ -742,6 +788,12 @@ uint16_t uniffi_waymark_checksum_func_init_logging(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_FUNC_VERSION
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_FUNC_VERSION
+uint16_t uniffi_waymark_checksum_func_version(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_LOGSINK_LOG
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_LOGSINK_LOG
 uint16_t uniffi_waymark_checksum_method_logsink_log(void
@@ -814,6 +866,12 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_import_habits(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_INPUT_STATS
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_INPUT_STATS
+uint16_t uniffi_waymark_checksum_method_positioningengine_input_stats(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_LEARN_HABITS
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_LEARN_HABITS
 uint16_t uniffi_waymark_checksum_method_positioningengine_learn_habits(void
@@ -874,6 +932,18 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_zone_posterior(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_FLOOR_NAMES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_FLOOR_NAMES
+uint16_t uniffi_waymark_checksum_method_site_floor_names(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ZONE_NAMES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ZONE_NAMES
+uint16_t uniffi_waymark_checksum_method_site_zone_names(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SUBSCRIPTION_CANCEL
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SUBSCRIPTION_CANCEL
 uint16_t uniffi_waymark_checksum_method_subscription_cancel(void
@@ -895,6 +965,24 @@ uint16_t uniffi_waymark_checksum_constructor_positioningengine_from_site_bytes(v
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_POSITIONINGENGINE_NEW
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_POSITIONINGENGINE_NEW
 uint16_t uniffi_waymark_checksum_constructor_positioningengine_new(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_POSITIONINGENGINE_WITH_SITE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_POSITIONINGENGINE_WITH_SITE
+uint16_t uniffi_waymark_checksum_constructor_positioningengine_with_site(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SITE_FROM_BYTES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SITE_FROM_BYTES
+uint16_t uniffi_waymark_checksum_constructor_site_from_bytes(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SITE_FROM_PATH
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SITE_FROM_PATH
+uint16_t uniffi_waymark_checksum_constructor_site_from_path(void
     
 );
 #endif

@@ -42,7 +42,7 @@ class ConcurrencyTest {
 
         override fun onStatus(status: StatusUpdate) = enter { }
 
-        override fun onError(message: String) = enter { errors.incrementAndGet(); Unit }
+        override fun onError(error: ErrorReport) = enter { errors.incrementAndGet(); Unit }
     }
 
     /** Throws a RuntimeException from every call, as a buggy app's listener might. */
@@ -61,7 +61,7 @@ class ConcurrencyTest {
             throw RuntimeException("app bug in onStatus")
         }
 
-        override fun onError(message: String) {
+        override fun onError(error: ErrorReport) {
             calls.incrementAndGet()
             throw RuntimeException("app bug in onError")
         }
@@ -90,7 +90,7 @@ class ConcurrencyTest {
 
         override fun onStatus(status: StatusUpdate) {}
 
-        override fun onError(message: String) {}
+        override fun onError(error: ErrorReport) {}
     }
 
     companion object {

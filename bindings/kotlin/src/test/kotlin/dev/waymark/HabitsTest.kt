@@ -69,16 +69,10 @@ class HabitsTest {
             assertTrue("$fixes fixes, $confirmations confirmations", fixes > 5 && confirmations > 2)
 
             val report = engine.learnHabits()
-            assertTrue("$report", report.epochs > 10u && report.segments >= 1u && report.iterations >= 1u)
-            assertEquals(fixes.toUInt(), report.fixEpochs)
-            assertTrue("$report", report.feedbackEpochs >= confirmations.toUInt())
+            assertTrue("$report", report.epochs > 10u)
             assertTrue("$report", report.learnedTransitions > 0uL)
             assertEquals(report.epochs.toULong(), report.totalEpochs)
-            val ll = report.logLikelihood
-            assertEquals(report.iterations.toInt() + 1, ll.size)
-            assertTrue("$ll", ll.zipWithNext().all { (a, b) -> b >= a - 1e-6 })
             val learned = engine.fixError()
-            assertEquals(report.fixError, learned)
             // 1.5 m east, 0.5 m north, shrunk toward 0 by the prior's 5 pseudo-fixes.
             assertTrue("$learned", learned.biasXM > 0.3 && learned.biasYM > 0.0 && learned.biasXM > learned.biasYM)
 
@@ -86,7 +80,7 @@ class HabitsTest {
             val json = engine.exportHabits()
             val again = engine.learnHabits()
             assertEquals(0u, again.epochs)
-            assertTrue(again.logLikelihood.isEmpty())
+            assertEquals(report.applied, again.applied)
             assertEquals(json, engine.exportHabits())
 
             PositioningEngine(siteJson, EngineOptions()).use { other ->
@@ -112,7 +106,7 @@ class HabitsTest {
             val listener = object : PositionListener {
                 override fun onPosition(position: PositionEstimate) {}
                 override fun onStatus(status: StatusUpdate) {}
-                override fun onError(message: String) {
+                override fun onError(error: ErrorReport) {
                     errors.incrementAndGet()
                 }
             }

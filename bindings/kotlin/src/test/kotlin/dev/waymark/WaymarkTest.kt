@@ -40,7 +40,7 @@ class WaymarkTest {
             statuses.incrementAndGet()
         }
 
-        override fun onError(message: String) {
+        override fun onError(error: ErrorReport) {
             errors.incrementAndGet()
         }
     }
@@ -60,7 +60,7 @@ class WaymarkTest {
             throw IllegalStateException("app bug in onStatus")
         }
 
-        override fun onError(message: String) {
+        override fun onError(error: ErrorReport) {
             throw IllegalStateException("app bug in onError")
         }
     }
@@ -83,7 +83,7 @@ class WaymarkTest {
             throw StackOverflowError("app bug in onStatus")
         }
 
-        override fun onError(message: String) {
+        override fun onError(error: ErrorReport) {
             calls.incrementAndGet()
         }
     }
@@ -416,7 +416,7 @@ class WaymarkTest {
 
                                 override fun onStatus(status: StatusUpdate) {}
 
-                                override fun onError(message: String) {}
+                                override fun onError(error: ErrorReport) {}
                             }
                             for ((k, epoch) in walk.withIndex().filter { it.index % threads == thread }.map { it.value }.withIndex()) {
                                 val subscription = engine.subscribe(if (k % 2 == 0) reentrant else Counter())

@@ -1,0 +1,305 @@
+//! The engine handle both FFIs wrap: Kotlin and Swift's `PositioningEngine`
+//! ([`super::uniffi`]) and C's `waymark_engine` ([`super::c`]).
+//!
+//! It owns what the two used to write each on their own: the lock around the single-threaded
+//! core [`Engine`], the panic boundary around every call into it, the queue of what the engine
+//! published (delivered after the lock is released, in the order of the epochs, by one thread
+//! at a time: [`Delivery`]), and the mapping of the core's errors to [`PositioningError`].
+//! Each FFI only converts arguments and results and says how to call its app's listeners
+//! ([`Listeners`]).
+
+use super::delivery::{lock, Delivery};
+use super::error::PositioningError;
+use crate::config::{EngineConfig, TransitionModel};
+use crate::engine::{self, Engine, Position, PositionListener as CoreListener};
+use crate::radio::Scan;
+use crate::sensors::{MdiScenario, MotionState};
+use crate::site::Site;
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+
+/// What the engine published, or a call's failure, waiting for delivery to the app.
+#[derive(Clone, Debug)]
+pub(crate) enum Event {
+    /// A new position.
+    Position(Position),
+    /// Something about the session changed.
+    Status(Status),
+    /// A call failed (it also returned the error).
+    Error(PositioningError),
+}
+
+/// A status change, in core terms; each FFI converts it.
+#[derive(Clone, Debug)]
+pub(crate) enum Status {
+    /// The motion information available changed.
+    ScenarioChanged { timestamp_ns: u64, scenario: MdiScenario },
+    /// The person started or stopped walking.
+    MotionStateChanged { timestamp_ns: u64, state: MotionState },
+    /// A scan heard no transmitter of the site.
+    NoSiteCoverage { timestamp_ns: u64 },
+    /// Earlier positions were revised by later evidence.
+    TrackRevised { points: Vec<engine::TrackPoint> },
+}
+
+/// How an FFI calls its app's listeners. Called with no lock of the handle held, never from
+/// two threads at once; a panic inside is caught and logged.
+pub(crate) trait Listeners: Send + Sync {
+    /// Hands `event` to every listener.
+    fn deliver(&self, event: &Event);
+}
+
+/// The engine options both FFIs offer, before they become an [`EngineConfig`].
+#[derive(Clone, Default)]
+pub(crate) struct Options {
+    /// `None`: the default model.
+    pub transition: Option<TransitionModel>,
+    /// `None`: the default.
+    pub fixed_lag_epochs: Option<usize>,
+    /// Degrees; `None`: the site file's.
+    pub declination_deg: Option<f64>,
+    /// Degrees; `None`: the site file's.
+    pub site_rotation_deg: Option<f64>,
+    /// The salt of a hashed site.
+    pub site_salt: Option<Vec<u8>>,
+    /// The user's step length, m, on a site without a surveyed one; `None`: the default.
+    pub step_length_m: Option<f64>,
+}
+
+impl Options {
+    /// The configuration of an engine on `site` with these options.
+    pub(crate) fn config(&self, site: &Site) -> Result<EngineConfig, PositioningError> {
+        let defaults = EngineConfig::default();
+        let mut config = EngineConfig {
+            transition: self.transition.unwrap_or_default(),
+            fixed_lag_epochs: self.fixed_lag_epochs.unwrap_or(defaults.fixed_lag_epochs),
+            ..defaults
+        };
+        if let Some(length_m) = self.step_length_m {
+            config.motion.step_length = crate::sensors::StepLengthModel::Constant { length_m };
+        }
+        if self.declination_deg.is_some() || self.site_rotation_deg.is_some() {
+            let from_site = site.north();
+            config.north = Some(crate::site::North {
+                declination_rad: self.declination_deg.map_or(from_site.declination_rad, f64::to_radians),
+                site_rotation_rad: self
+                    .site_rotation_deg
+                    .map_or(from_site.site_rotation_rad, f64::to_radians),
+            });
+        }
+        config.site_salt = match &self.site_salt {
+            None => None,
+            Some(bytes) => Some(
+                crate::Salt::new(bytes.clone())
+                    .map_err(|m| PositioningError::InvalidConfig { reason: format!("site_salt: {m}") })?,
+            ),
+        };
+        Ok(config)
+    }
+}
+
+/// With the `fault-injection` feature (test builds only), a scan at this timestamp panics
+/// inside the engine call, to show that a panic comes out as an error, not an abort.
+pub const FAULT_INJECTION_TIMESTAMP_NS: u64 = u64::MAX - 7;
+
+/// With the `fault-injection` feature (test builds only), importing this text as a habit
+/// model panics inside the engine call, half-way through a change the engine cannot undo: the
+/// engine is left unusable, so every later call fails with `Internal`.
+pub const FAULT_INJECTION_HABITS_JSON: &str = "waymark fault injection";
+
+/// Panics on the magic timestamp in test builds; nothing otherwise.
+fn fault_injection(timestamp_ns: u64) {
+    if cfg!(feature = "fault-injection") && timestamp_ns == FAULT_INJECTION_TIMESTAMP_NS {
+        panic!("fault injected at timestamp {timestamp_ns}");
+    }
+}
+
+/// Stages the core engine's publications (under the engine's lock, so in the order of the
+/// epochs); they are queued when the call that made them returns, dropped if it panics.
+struct Collector {
+    events: Arc<Delivery<Event>>,
+}
+
+impl CoreListener for Collector {
+    fn on_position(&mut self, p: &Position) {
+        self.events.stage(Event::Position(p.clone()));
+    }
+
+    fn on_status(&mut self, status: &engine::StatusEvent) {
+        let status = match *status {
+            engine::StatusEvent::ScenarioChanged { timestamp_ns, to, .. } => {
+                Status::ScenarioChanged { timestamp_ns, scenario: to }
+            }
+            engine::StatusEvent::MotionStateChanged { timestamp_ns, to, .. } => {
+                Status::MotionStateChanged { timestamp_ns, state: to }
+            }
+        };
+        self.events.stage(Event::Status(status));
+    }
+
+    fn on_track_revised(&mut self, revised: &[engine::TrackPoint]) {
+        self.events.stage(Event::Status(Status::TrackRevised { points: revised.to_vec() }));
+    }
+}
+
+/// A thread-safe engine with its app's listeners `L`.
+pub(crate) struct Handle<L> {
+    engine: Mutex<Engine>,
+    /// Set when a call that the engine cannot undo panicked: the engine may be half-changed,
+    /// so every later call fails.
+    broken: AtomicBool,
+    site: Arc<Site>,
+    events: Arc<Delivery<Event>>,
+    listeners: L,
+}
+
+impl<L: Listeners> Handle<L> {
+    /// An engine on `site` with `options`.
+    pub(crate) fn new(site: Arc<Site>, options: &Options, listeners: L) -> Result<Self, PositioningError> {
+        let config = options.config(&site)?;
+        let mut engine = Engine::new(Arc::clone(&site), config)?;
+        let events = Arc::new(Delivery::new());
+        engine.subscribe(Box::new(Collector { events: Arc::clone(&events) }));
+        Ok(Self { engine: Mutex::new(engine), broken: AtomicBool::new(false), site, events, listeners })
+    }
+
+    /// The engine's site.
+    pub(crate) fn site(&self) -> &Arc<Site> {
+        &self.site
+    }
+
+    /// The app's listeners.
+    pub(crate) fn listeners(&self) -> &L {
+        &self.listeners
+    }
+
+    /// Runs `f` on the engine under its lock, then delivers what it published to the
+    /// listeners with no lock held. A panic inside becomes `Internal`, and what the call
+    /// published is dropped; the engine is then unusable (it may be half-changed): every later
+    /// call fails with `Internal` too. A failure is also reported to the listeners, after what
+    /// the call published.
+    pub(crate) fn call<T>(
+        &self,
+        f: impl FnOnce(&mut Engine) -> Result<T, PositioningError>,
+    ) -> Result<T, PositioningError> {
+        self.run(true, f)
+    }
+
+    /// As [`call`](Self::call), for `f` that leaves the engine as it was if it panics: a read,
+    /// or an epoch (the engine undoes an epoch that panics). The engine stays usable.
+    pub(crate) fn call_undoable<T>(
+        &self,
+        f: impl FnOnce(&mut Engine) -> Result<T, PositioningError>,
+    ) -> Result<T, PositioningError> {
+        self.run(false, f)
+    }
+
+    fn run<T>(
+        &self,
+        breaks: bool,
+        f: impl FnOnce(&mut Engine) -> Result<T, PositioningError>,
+    ) -> Result<T, PositioningError> {
+        let result = {
+            let mut engine = lock(&self.engine);
+            let result = if self.broken.load(Ordering::SeqCst) {
+                Err(PositioningError::internal(
+                    "an earlier call panicked and left the engine unusable: create a new engine",
+                ))
+            } else {
+                match catch_unwind(AssertUnwindSafe(|| f(&mut engine))) {
+                    Ok(result) => {
+                        self.events.commit();
+                        result
+                    }
+                    Err(_) => {
+                        self.events.discard();
+                        if breaks {
+                            self.broken.store(true, Ordering::SeqCst);
+                            Err(PositioningError::internal(
+                                "Waymark panicked; the engine is unusable: create a new engine",
+                            ))
+                        } else {
+                            Err(PositioningError::internal("Waymark panicked; the call had no effect"))
+                        }
+                    }
+                }
+            };
+            // Queued under the engine's lock, so listeners hear it in the order of the calls.
+            if let Err(e) = &result {
+                self.events.push(Event::Error(e.clone()));
+            }
+            result
+        };
+        self.deliver();
+        result
+    }
+
+    /// An epoch made by `f`: its position, or the input error mapped to `InputRejected`.
+    pub(crate) fn epoch(
+        &self,
+        f: impl FnOnce(&mut Engine) -> Result<Position, crate::InputError>,
+    ) -> Result<Position, PositioningError> {
+        self.call_undoable(|engine| f(engine).map_err(PositioningError::from))
+    }
+
+    /// A read of the engine's state.
+    pub(crate) fn read<T>(&self, f: impl FnOnce(&Engine) -> T) -> Result<T, PositioningError> {
+        self.call_undoable(|engine| Ok(f(engine)))
+    }
+
+    /// Replaces the engine's habits by the model `json`.
+    pub(crate) fn import_habits(&self, json: &str) -> Result<(), PositioningError> {
+        self.call(|engine| {
+            if cfg!(feature = "fault-injection") && json == FAULT_INJECTION_HABITS_JSON {
+                engine.clear_habits();
+                panic!("fault injected half-way through importing habits");
+            }
+            Ok(engine.import_habits(json)?)
+        })
+    }
+
+    /// A scan: one epoch. A scan that hears no transmitter of the site is rejected, and the
+    /// listeners also hear `NoSiteCoverage`.
+    pub(crate) fn push_scan(&self, scan: &Scan) -> Result<Position, PositioningError> {
+        let events = Arc::clone(&self.events);
+        self.epoch(|engine| {
+            fault_injection(scan.timestamp_ns);
+            let result = engine.push_scan(scan);
+            if let Err(crate::InputError::NoKnownTransmitter { .. }) = result {
+                events.stage(Event::Status(Status::NoSiteCoverage { timestamp_ns: scan.timestamp_ns }));
+            }
+            result
+        })
+    }
+
+    /// Input rejected before it reached the engine (a malformed transmitter id): reported to
+    /// the listeners as the engine's own rejections are, and returned.
+    pub(crate) fn reject(&self, error: PositioningError) -> PositioningError {
+        self.events.push(Event::Error(error.clone()));
+        self.deliver();
+        error
+    }
+
+    /// Whether the calling thread is inside a listener call.
+    pub(crate) fn on_delivering_thread(&self) -> bool {
+        self.events.on_delivering_thread()
+    }
+
+    /// The engine, locked, for tests that look at its state. Not for the FFI calls: they go
+    /// through [`call`](Self::call).
+    pub(crate) fn lock_engine(&self) -> MutexGuard<'_, Engine> {
+        lock(&self.engine)
+    }
+
+    /// Delivers what was published, oldest first, one thread at a time and with no lock held
+    /// ([`Delivery`]). A listener that panics (or whose foreign code throws) is logged and
+    /// skipped; the others still hear the event.
+    fn deliver(&self) {
+        self.events.deliver(|event| {
+            if catch_unwind(AssertUnwindSafe(|| self.listeners.deliver(&event))).is_err() {
+                log::warn!("a listener panicked or threw");
+            }
+        });
+    }
+}

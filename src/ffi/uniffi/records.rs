@@ -1,0 +1,568 @@
+//! The records and enums of the Kotlin and Swift API, and their conversions from the core's
+//! types. A change here is a possible breaking change for apps (CHANGELOG, "Breaking changes").
+
+use crate::config::TransitionModel;
+use crate::engine;
+use crate::ffi::handle::{Options, Status};
+use crate::sensors::{self, SensorSample};
+use crate::site::Site;
+
+/// Which transition model the engine uses.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
+pub enum TransitionKind {
+    /// Radio only: uniform over the states reachable at the maximum speed.
+    Reach,
+    /// HIPE's high/low regions from distance and heading.
+    Hipe,
+    /// Hoang's Gaussian on the movement vector (the default).
+    Hoang,
+}
+
+/// Engine settings an app may change; every field has a default.
+#[derive(Clone, PartialEq, uniffi::Record)]
+pub struct EngineOptions {
+    /// Transition model; `null` / `nil` for the default (Hoang's).
+    #[uniffi(default = None)]
+    pub transition: Option<TransitionKind>,
+    /// The user's step length in metres, used on a site file without a surveyed step length.
+    /// A site surveyed with `waymark survey` carries its surveyors' step length model, which
+    /// the engine uses instead, whatever this says: on such a site this field has no effect.
+    #[uniffi(default = 0.7)]
+    pub step_length_m: f64,
+    /// How many epochs behind the newest the fixed-lag estimate is.
+    #[uniffi(default = 3)]
+    pub fixed_lag_epochs: u32,
+    /// Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+    #[uniffi(default = None)]
+    pub declination_deg: Option<f64>,
+    /// True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+    #[uniffi(default = None)]
+    pub site_rotation_deg: Option<f64>,
+    /// The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
+    /// `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
+    /// Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+    /// hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
+    /// site file's download and out of logs.
+    #[uniffi(default = None)]
+    pub site_salt: Option<Vec<u8>>,
+}
+
+/// By hand, so the salt never reaches a log.
+impl std::fmt::Debug for EngineOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("EngineOptions")
+            .field("transition", &self.transition)
+            .field("step_length_m", &self.step_length_m)
+            .field("fixed_lag_epochs", &self.fixed_lag_epochs)
+            .field("declination_deg", &self.declination_deg)
+            .field("site_rotation_deg", &self.site_rotation_deg)
+            .field("site_salt", &self.site_salt.as_ref().map(|s| format!("<{} bytes, redacted>", s.len())))
+            .finish()
+    }
+}
+
+impl Default for EngineOptions {
+    fn default() -> Self {
+        let core = crate::config::EngineConfig::default();
+        Self {
+            transition: None,
+            step_length_m: 0.7,
+            fixed_lag_epochs: core.fixed_lag_epochs as u32,
+            declination_deg: None,
+            site_rotation_deg: None,
+            site_salt: None,
+        }
+    }
+}
+
+impl EngineOptions {
+    /// The options both FFIs share.
+    pub(crate) fn to_options(&self) -> Options {
+        Options {
+            transition: self.transition.map(|t| match t {
+                TransitionKind::Reach => TransitionModel::Reach,
+                TransitionKind::Hipe => TransitionModel::Hipe,
+                TransitionKind::Hoang => TransitionModel::Hoang,
+            }),
+            fixed_lag_epochs: Some(self.fixed_lag_epochs as usize),
+            declination_deg: self.declination_deg,
+            site_rotation_deg: self.site_rotation_deg,
+            site_salt: self.site_salt.clone(),
+            step_length_m: Some(self.step_length_m),
+        }
+    }
+}
+
+/// One accelerometer (m/s², gravity included), gyroscope (rad/s) or magnetometer (µT) sample
+/// in the phone's frame, with its monotonic timestamp in nanoseconds (Android
+/// `SensorEvent.timestamp`; iOS `CMLogItem.timestamp` × 1e9).
+#[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
+pub struct MotionSample {
+    /// Nanoseconds on the monotonic clock shared by every input.
+    pub timestamp_ns: u64,
+    /// x axis.
+    pub x: f64,
+    /// y axis.
+    pub y: f64,
+    /// z axis.
+    pub z: f64,
+}
+
+/// A transmitter's id as an app gives it: a BSSID, a beacon's proximity UUID or its advertiser
+/// address. Kotlin and Swift see a `String`.
+///
+/// A Kotlin `String` can hold a lone UTF-16 surrogate (`"\uD800"`), which is not text: uniffi's
+/// generated code refuses to encode it and throws `CharacterCodingException` before the call
+/// reaches Waymark (and, for a method, leaks the engine's handle). This type's Kotlin
+/// conversion (`uniffi.toml`) encodes such an id with each lone surrogate replaced by `?`
+/// instead, so it reaches Waymark, parses as no id, and the scan throws
+/// `PositioningException.InputRejected` like any malformed id. A valid id is never changed.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct TransmitterIdString(pub String);
+
+uniffi::custom_newtype!(TransmitterIdString, String);
+
+impl std::ops::Deref for TransmitterIdString {
+    type Target = str;
+    fn deref(&self) -> &str {
+        &self.0
+    }
+}
+
+impl From<&str> for TransmitterIdString {
+    fn from(id: &str) -> Self {
+        Self(id.to_owned())
+    }
+}
+
+impl From<String> for TransmitterIdString {
+    fn from(id: String) -> Self {
+        Self(id)
+    }
+}
+
+/// A WiFi access point heard in a scan.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct WifiReading {
+    /// BSSID, any common notation. One that does not parse (in Kotlin, one holding a lone
+    /// UTF-16 surrogate too) makes `push_scan` throw `InputRejected`.
+    pub bssid: TransmitterIdString,
+    /// Signal strength, dBm.
+    pub rssi_dbm: f64,
+    /// How long before the scan this reading was measured, ms (0 if fresh).
+    #[uniffi(default = 0)]
+    pub age_ms: u64,
+}
+
+/// A BLE beacon heard in a scan: an iBeacon by its UUID, major and minor, or any beacon
+/// (Eddystone, an iBeacon left at major = minor = 0) by its advertiser address.
+///
+/// Which one it is: with an `address`, a beacon whose `uuid` is empty or whose major and
+/// minor are both 0 is identified by the address; otherwise by UUID, major and minor (the
+/// address must still be valid). A reading with neither a UUID nor an address, or with one
+/// that does not parse (in Kotlin, one holding a lone UTF-16 surrogate too), makes
+/// `push_scan` throw `InputRejected`.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct BeaconReading {
+    /// Proximity UUID, with or without hyphens; empty for a beacon known by its address only.
+    #[uniffi(default = "")]
+    pub uuid: TransmitterIdString,
+    /// Major number.
+    #[uniffi(default = 0)]
+    pub major: u16,
+    /// Minor number.
+    #[uniffi(default = 0)]
+    pub minor: u16,
+    /// Signal strength, dBm.
+    pub rssi_dbm: f64,
+    /// How long before the scan this reading was measured, ms (0 if fresh).
+    #[uniffi(default = 0)]
+    pub age_ms: u64,
+    /// The advertiser's MAC address (Android `ScanResult.getDevice().getAddress()`), any common
+    /// notation; `null` / `nil` or empty when unknown (iOS never reports it).
+    #[uniffi(default = None)]
+    pub address: Option<TransmitterIdString>,
+}
+
+/// Everything heard at one moment.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct RadioScan {
+    /// Nanoseconds on the monotonic clock shared by every input.
+    pub timestamp_ns: u64,
+    /// WiFi access points.
+    pub wifi: Vec<WifiReading>,
+    /// BLE beacons.
+    pub beacons: Vec<BeaconReading>,
+}
+
+/// Walking or not.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
+pub enum MotionState {
+    /// No accelerometer data.
+    Unknown,
+    /// Still.
+    Stationary,
+    /// Walking.
+    Walking,
+}
+
+/// Which motion information the engine had (HIPE's four scenarios).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
+pub enum MotionScenario {
+    /// Steps and heading.
+    DistanceHeading,
+    /// Steps, no trustworthy heading.
+    Distance,
+    /// Heading, no steps.
+    HeadingSpeed,
+    /// Neither.
+    Speed,
+}
+
+/// Where the phone is.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct PositionEstimate {
+    /// Time of the epoch, ns.
+    pub timestamp_ns: u64,
+    /// x in the site's metric frame, m.
+    pub x: f64,
+    /// y in the site's metric frame, m.
+    pub y: f64,
+    /// Floor index in the site file.
+    pub floor: u32,
+    /// Floor name.
+    pub floor_name: String,
+    /// Probability of that floor.
+    pub floor_probability: f64,
+    /// The most likely zone's name (a room, a corridor): the zone holding the most posterior
+    /// mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
+    /// than in any one. (The defaults here and below only keep code that builds estimates,
+    /// such as tests, compiling: the engine always sets both.)
+    #[uniffi(default = None)]
+    pub zone: Option<String>,
+    /// Probability of `zone` (of being in no zone when it is `null` / `nil`).
+    #[uniffi(default = 1.0)]
+    pub zone_probability: f64,
+    /// Radius of the 68% circle, m, as Android's `getAccuracy()` and iOS's
+    /// `horizontalAccuracy`.
+    pub accuracy_m: f64,
+    /// Radius of the 95% circle, m.
+    pub accuracy_95_m: f64,
+    /// Direction of travel, degrees clockwise from the site's +y axis, when known.
+    pub heading_deg: Option<f64>,
+    /// One standard deviation of the heading, degrees.
+    pub heading_accuracy_deg: Option<f64>,
+    /// Walking or not.
+    pub motion_state: MotionState,
+    /// Motion information available this epoch.
+    pub scenario: MotionScenario,
+    /// Steps since the previous epoch.
+    pub steps: u32,
+    /// Distance walked since the radio last explained a scan, m: 0 while it does. Above 0 the
+    /// phone is probably beyond the surveyed area (the site's map does not explain what it
+    /// hears), the estimate follows the motion alone and both radii include this distance.
+    #[uniffi(default = 0.0)]
+    pub beyond_radio_m: f64,
+}
+
+/// A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB.
+#[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
+pub struct PositionFix {
+    /// When it was measured, ns, on the clock of every other input.
+    pub timestamp_ns: u64,
+    /// x in the site's metric frame, m.
+    pub x: f64,
+    /// y in the site's metric frame, m.
+    pub y: f64,
+    /// Floor index in the site file, when the other system knows it (UWB, an RTT access
+    /// point's floor); `null` / `nil` for GNSS.
+    #[uniffi(default = None)]
+    pub floor: Option<u32>,
+    /// Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
+    pub accuracy_m: f64,
+}
+
+/// What kind of place a zone is.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
+pub enum ZoneKind {
+    /// A room (an office, a kitchen, a shop).
+    Room,
+    /// A corridor or aisle.
+    Corridor,
+    /// A hall, an atrium, a concourse.
+    Hall,
+    /// A staircase.
+    Stairs,
+    /// A lift (elevator) or its lobby.
+    Lift,
+    /// An entrance.
+    Entrance,
+    /// Anything else.
+    Other,
+}
+
+/// A zone of the site and how likely the phone is to be in it.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct ZoneProbability {
+    /// The zone's name, unique in the site.
+    pub name: String,
+    /// What kind of place it is.
+    pub kind: ZoneKind,
+    /// Posterior probability of being in it, now.
+    pub probability: f64,
+}
+
+pub(crate) fn zone_kind(k: crate::site::ZoneKind) -> ZoneKind {
+    match k {
+        crate::site::ZoneKind::Room => ZoneKind::Room,
+        crate::site::ZoneKind::Corridor => ZoneKind::Corridor,
+        crate::site::ZoneKind::Hall => ZoneKind::Hall,
+        crate::site::ZoneKind::Stairs => ZoneKind::Stairs,
+        crate::site::ZoneKind::Lift => ZoneKind::Lift,
+        crate::site::ZoneKind::Entrance => ZoneKind::Entrance,
+        crate::site::ZoneKind::Other => ZoneKind::Other,
+    }
+}
+
+/// One point of the smoothed track.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct TrackPoint {
+    /// Epoch time, ns.
+    pub timestamp_ns: u64,
+    /// x, m.
+    pub x: f64,
+    /// y, m.
+    pub y: f64,
+    /// Floor index.
+    pub floor: u32,
+}
+
+/// The learned error of external position fixes (`pushFix`): subtract the bias from a fix,
+/// then widen its accuracy by `spread`. The engine does both to every fix it takes.
+#[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
+pub struct FixError {
+    /// Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
+    pub bias_x_m: f64,
+    /// Mean error of the fixes along the site's y axis, m.
+    pub bias_y_m: f64,
+    /// Factor on the fixes' own accuracy: 1 when they are as good as they say, 2 when their
+    /// errors are twice what they report.
+    pub spread: f64,
+}
+
+impl From<crate::habits::FixError> for FixError {
+    fn from(e: crate::habits::FixError) -> Self {
+        Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
+    }
+}
+
+/// What one `learnHabits` pass did.
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+pub struct HabitReport {
+    /// Epochs of the history learned from in this pass (those learned before are skipped); 0
+    /// when there was nothing new to learn from.
+    pub epochs: u32,
+    /// Epochs learned from over all passes, including those of an imported model.
+    pub total_epochs: u64,
+    /// Moves between places with a learned count, after the pass (all passes so far).
+    pub learned_transitions: u64,
+    /// Whether the learned moves now weigh on the positions. They do once they predict parts
+    /// of the history they were not learned from better than the motion alone; until then
+    /// the engine keeps learning but positions as before.
+    pub applied: bool,
+}
+
+fn count(n: usize) -> u32 {
+    u32::try_from(n).unwrap_or(u32::MAX)
+}
+
+pub(crate) fn habit_report(r: &crate::habits::HabitReport, model: &crate::habits::HabitModel) -> HabitReport {
+    HabitReport {
+        epochs: count(r.epochs),
+        total_epochs: model.epochs(),
+        learned_transitions: r.learned_transitions as u64,
+        applied: model.strength().is_some(),
+    }
+}
+
+/// What the engine took and what it refused since it was created, and why: for an app's
+/// diagnostics screen or logs (a phone whose scans are mostly refused is misconfigured, or
+/// outside the site). Every rejected input also made its call throw.
+#[derive(Clone, Debug, Default, PartialEq, Eq, uniffi::Record)]
+pub struct InputStats {
+    /// Scans that made a position.
+    pub scans_accepted: u64,
+    /// Scans refused because their time was not after the last position's.
+    pub scans_out_of_order: u64,
+    /// Scans refused for having no readings.
+    pub scans_empty: u64,
+    /// Scans refused for a NaN, infinite or impossible (below -1000 dBm) signal strength.
+    pub scans_non_finite: u64,
+    /// Scans refused for a signal strength above +100 dBm, which no receiver reports.
+    pub scans_rssi_too_high: u64,
+    /// Scans refused because none of their transmitters is in the site file: the phone is
+    /// probably outside the surveyed area.
+    pub scans_no_known_transmitter: u64,
+    /// Readings ignored in accepted scans because the site file does not know their
+    /// transmitter.
+    pub readings_unknown: u64,
+    /// Readings ignored in accepted scans because the scan repeated their transmitter.
+    pub readings_duplicate: u64,
+    /// Readings ignored in accepted scans because they were measured too long before it.
+    pub readings_stale: u64,
+    /// Accepted scans the site's map did not explain: their positions followed the motion
+    /// alone.
+    pub scans_unexplained: u64,
+    /// Positions made from the motion alone (`advance`).
+    pub motion_epochs: u64,
+    /// `advance` calls refused (a time not after the last position's).
+    pub advances_rejected: u64,
+    /// Position fixes taken (`pushFix`).
+    pub fixes_accepted: u64,
+    /// Position fixes refused.
+    pub fixes_rejected: u64,
+    /// User feedback taken (`confirmZone`, `confirmPosition`).
+    pub feedback_accepted: u64,
+    /// User feedback refused.
+    pub feedback_rejected: u64,
+    /// Times the engine started over from "anywhere on the site": after a gap too long to
+    /// bridge, or when nothing could explain a scan.
+    pub filter_restarts: u64,
+}
+
+impl From<&engine::InputStats> for InputStats {
+    fn from(s: &engine::InputStats) -> Self {
+        Self {
+            scans_accepted: s.scans_accepted,
+            scans_out_of_order: s.scans_out_of_order,
+            scans_empty: s.scans_empty,
+            scans_non_finite: s.scans_non_finite,
+            scans_rssi_too_high: s.scans_rssi_too_high,
+            scans_no_known_transmitter: s.scans_no_known_transmitter,
+            readings_unknown: s.readings_unknown,
+            readings_duplicate: s.readings_duplicate,
+            readings_stale: s.readings_stale,
+            scans_unexplained: s.scans_unexplained,
+            motion_epochs: s.motion_epochs,
+            advances_rejected: s.advances_rejected,
+            fixes_accepted: s.fixes_accepted,
+            fixes_rejected: s.fixes_rejected,
+            feedback_accepted: s.feedback_accepted,
+            feedback_rejected: s.feedback_rejected,
+            filter_restarts: s.filter_restarts,
+        }
+    }
+}
+
+/// A habit model's JSON as an app gives it to `importHabits`. Kotlin and Swift see a `String`.
+///
+/// A Kotlin `String` can hold a lone UTF-16 surrogate, which is not text: uniffi's generated
+/// code would throw `CharacterCodingException` before the call reaches Waymark (and leak the
+/// engine's handle). This type's Kotlin conversion (`uniffi.toml`) replaces each lone
+/// surrogate by `?` instead, so such JSON reaches Waymark and is refused as any malformed
+/// model is (`HabitsRejected`). Valid text is never changed.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct HabitsJson(pub String);
+
+uniffi::custom_newtype!(HabitsJson, String);
+
+impl From<&str> for HabitsJson {
+    fn from(json: &str) -> Self {
+        Self(json.to_owned())
+    }
+}
+
+impl From<String> for HabitsJson {
+    fn from(json: String) -> Self {
+        Self(json)
+    }
+}
+
+/// Something about the session changed.
+#[derive(Clone, Debug, PartialEq, uniffi::Enum)]
+pub enum StatusUpdate {
+    /// The motion information changed (a sensor stopped, the compass became disturbed, ...).
+    ScenarioChanged {
+        /// Now.
+        scenario: MotionScenario,
+    },
+    /// The person started or stopped walking.
+    MotionStateChanged {
+        /// Now.
+        state: MotionState,
+    },
+    /// A scan heard no transmitter of the site: the phone is probably outside the surveyed
+    /// area (or the site file is for another building).
+    NoSiteCoverage {
+        /// The scan's time, ns.
+        timestamp_ns: u64,
+    },
+    /// Earlier positions were revised by later evidence.
+    TrackRevised {
+        /// The revised points, oldest first.
+        points: Vec<TrackPoint>,
+    },
+}
+
+fn scenario(s: sensors::MdiScenario) -> MotionScenario {
+    match s {
+        sensors::MdiScenario::DistanceHeading => MotionScenario::DistanceHeading,
+        sensors::MdiScenario::Distance => MotionScenario::Distance,
+        sensors::MdiScenario::HeadingSpeed => MotionScenario::HeadingSpeed,
+        sensors::MdiScenario::Speed => MotionScenario::Speed,
+    }
+}
+
+fn motion_state(s: sensors::MotionState) -> MotionState {
+    match s {
+        sensors::MotionState::Unknown => MotionState::Unknown,
+        sensors::MotionState::Stationary => MotionState::Stationary,
+        sensors::MotionState::Walking => MotionState::Walking,
+    }
+}
+
+pub(crate) fn track_point(p: &engine::TrackPoint) -> TrackPoint {
+    TrackPoint { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor as u32 }
+}
+
+pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
+    PositionEstimate {
+        timestamp_ns: p.timestamp_ns,
+        x: p.x,
+        y: p.y,
+        floor: p.floor as u32,
+        floor_name: site.floors().get(p.floor).map(|f| f.name.clone()).unwrap_or_default(),
+        floor_probability: p.floor_probability,
+        zone: p.zone.and_then(|z| site.zones().get(z)).map(|z| z.name.clone()),
+        zone_probability: p.zone_probability,
+        accuracy_m: p.accuracy_m,
+        accuracy_95_m: p.accuracy_95_m,
+        heading_deg: p.heading_rad.map(f64::to_degrees),
+        heading_accuracy_deg: p.heading_accuracy_rad.map(f64::to_degrees),
+        motion_state: motion_state(p.motion_state),
+        scenario: scenario(p.scenario),
+        steps: p.steps,
+        beyond_radio_m: p.beyond_radio_m,
+    }
+}
+
+pub(crate) fn status_update(status: &Status) -> StatusUpdate {
+    match status {
+        Status::ScenarioChanged { scenario: s, .. } => {
+            StatusUpdate::ScenarioChanged { scenario: scenario(*s) }
+        }
+        Status::MotionStateChanged { state, .. } => {
+            StatusUpdate::MotionStateChanged { state: motion_state(*state) }
+        }
+        Status::NoSiteCoverage { timestamp_ns } => {
+            StatusUpdate::NoSiteCoverage { timestamp_ns: *timestamp_ns }
+        }
+        Status::TrackRevised { points } => {
+            StatusUpdate::TrackRevised { points: points.iter().map(track_point).collect() }
+        }
+    }
+}
+
+pub(crate) fn samples(batch: &[MotionSample]) -> Vec<SensorSample> {
+    batch.iter().map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z }).collect()
+}
