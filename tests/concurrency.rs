@@ -225,7 +225,7 @@ fn subscribe_reentrant(engine: &Arc<PositioningEngine>, cancel_after: usize) -> 
 
 fn finite(p: &PositionEstimate) -> bool {
     [p.x, p.y, p.floor_probability, p.accuracy_m, p.accuracy_95_m].iter().all(|v| v.is_finite())
-        && p.heading_deg.map_or(true, f64::is_finite)
+        && p.heading_deg.is_none_or(f64::is_finite)
         && p.accuracy_m > 0.0
 }
 
@@ -364,11 +364,11 @@ fn hammer() {
                     let counter = Arc::new(Recorder::default());
                     let subscription = Arc::clone(engine).subscribe(counter);
                     std::thread::sleep(Duration::from_millis(1));
-                    if n % 2 == 0 {
+                    if n.is_multiple_of(2) {
                         subscription.cancel();
                     }
                     drop(subscription);
-                    if n % 10 == 0 {
+                    if n.is_multiple_of(10) {
                         reentrant.lock().unwrap().push(subscribe_reentrant(engine, 1 + n % 3));
                     }
                     n += 1;

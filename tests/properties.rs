@@ -450,7 +450,7 @@ fn check_optional(value: Option<f64>, what: &str) -> Result<(), TestCaseError> {
 
 fn check_position(f: &Fixture, p: &Position) -> Result<(), TestCaseError> {
     check_on_site(f, p.floor, p.x, p.y, "position")?;
-    prop_assert!(p.zone.map_or(true, |z| z < f.site.zones().len()), "zone {:?}", p.zone);
+    prop_assert!(p.zone.is_none_or(|z| z < f.site.zones().len()), "zone {:?}", p.zone);
     prop_assert!((0.0..=1.0 + 1e-9).contains(&p.zone_probability), "zone_probability {}", p.zone_probability);
     check_accuracy(p.accuracy_m, p.accuracy_95_m)?;
     prop_assert!(
@@ -478,7 +478,7 @@ fn check_estimate(f: &Fixture, p: &PositionEstimate) -> Result<(), TestCaseError
     );
     check_optional(p.heading_deg, "heading_deg")?;
     check_optional(p.heading_accuracy_deg, "heading_accuracy_deg")?;
-    prop_assert!(p.zone.as_ref().map_or(true, |name| f.site.zone_index(name).is_some()), "zone {:?}", p.zone);
+    prop_assert!(p.zone.as_ref().is_none_or(|name| f.site.zone_index(name).is_some()), "zone {:?}", p.zone);
     prop_assert!((0.0..=1.0 + 1e-9).contains(&p.zone_probability), "zone_probability {}", p.zone_probability);
     Ok(())
 }

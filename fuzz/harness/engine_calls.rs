@@ -192,7 +192,7 @@ fn options(c: &mut Cursor) -> ffi::EngineOptions {
     if c.u8() < 128 {
         return ffi::EngineOptions::default();
     }
-    let optional = |c: &mut Cursor| if c.u8() % 2 == 0 { None } else { Some(c.f64()) };
+    let optional = |c: &mut Cursor| if c.u8().is_multiple_of(2) { None } else { Some(c.f64()) };
     ffi::EngineOptions {
         transition: match c.u8() % 4 {
             0 => None,
@@ -201,7 +201,7 @@ fn options(c: &mut Cursor) -> ffi::EngineOptions {
             _ => Some(ffi::TransitionKind::Hoang),
         },
         step_length_m: c.f64(),
-        fixed_lag_epochs: if c.u8() % 2 == 0 { u32::from(c.u8()) } else { c.u32() },
+        fixed_lag_epochs: if c.u8().is_multiple_of(2) { u32::from(c.u8()) } else { c.u32() },
         declination_deg: optional(c),
         site_rotation_deg: optional(c),
         // The harness's sites hold raw ids; salts are fuzzed by tests/properties.rs.
@@ -402,16 +402,16 @@ fn scan(c: &mut Cursor, fixture: &Fixture, clock: &mut Clock) -> ScanInput {
 }
 
 fn motion(c: &mut Cursor, clock: &mut Clock) -> MotionUpdate {
-    let optional = |c: &mut Cursor| if c.u8() % 3 == 0 { None } else { Some(c.f64()) };
+    let optional = |c: &mut Cursor| if c.u8().is_multiple_of(3) { None } else { Some(c.f64()) };
     MotionUpdate {
         start_ns: clock.time(c),
         end_ns: clock.time(c),
-        steps: if c.u8() % 4 == 0 { c.u32() } else { u32::from(c.u8()) },
+        steps: if c.u8().is_multiple_of(4) { c.u32() } else { u32::from(c.u8()) },
         distance_m: optional(c),
         distance_sigma_m: c.f64(),
         heading_rad: optional(c),
         heading_sigma_rad: c.f64(),
-        displacement_m: if c.u8() % 3 == 0 { None } else { Some([c.f64(), c.f64()]) },
+        displacement_m: if c.u8().is_multiple_of(3) { None } else { Some([c.f64(), c.f64()]) },
         motion_state: [MotionState::Unknown, MotionState::Stationary, MotionState::Walking][c.below(3)],
         scenario: [
             MdiScenario::DistanceHeading,
@@ -426,11 +426,11 @@ fn motion(c: &mut Cursor, clock: &mut Clock) -> MotionUpdate {
 /// Whether a motion given from outside is a measurement: finite, distances and spreads ≥ 0.
 fn valid_motion(m: &MotionUpdate) -> bool {
     let non_negative = |v: f64| v.is_finite() && v >= 0.0;
-    m.distance_m.map_or(true, non_negative)
+    m.distance_m.is_none_or(non_negative)
         && non_negative(m.distance_sigma_m)
-        && m.heading_rad.map_or(true, f64::is_finite)
+        && m.heading_rad.is_none_or(f64::is_finite)
         && non_negative(m.heading_sigma_rad)
-        && m.displacement_m.map_or(true, |d| d.iter().all(|v| v.is_finite()))
+        && m.displacement_m.is_none_or(|d| d.iter().all(|v| v.is_finite()))
 }
 
 /// Why a scan must be rejected, by the documented rules, in the order the engine checks them;
@@ -811,7 +811,7 @@ pub fn run(data: &[u8]) {
                 if !s.ffi_subscriptions.is_empty() {
                     let k = c.below(s.ffi_subscriptions.len());
                     let subscription = s.ffi_subscriptions.remove(k);
-                    if c.u8() % 2 == 0 {
+                    if c.u8().is_multiple_of(2) {
                         subscription.cancel();
                     }
                 }
@@ -819,7 +819,7 @@ pub fn run(data: &[u8]) {
             _ => {
                 // Motion measured outside Waymark: the core only, so the engines part ways.
                 s.lockstep = false;
-                let with_scan = c.u8() % 2 == 0;
+                let with_scan = c.u8().is_multiple_of(2);
                 let m = motion(&mut c, &mut clock);
                 // Checked right after the time.
                 let valid = valid_motion(&m);
