@@ -72,18 +72,23 @@ impl Listeners for Callbacks {
     fn deliver(&self, event: &Event) {
         let _calling = lock(&self.calling);
         match event {
+            // Each callback is copied out before it is called: the lock must be free so the
+            // callback can replace itself (a guard in the `if let` would live through the call).
             Event::Position(p) => {
-                if let Some(callback) = *lock(&self.position) {
+                let callback = *lock(&self.position);
+                if let Some(callback) = callback {
                     callback.call(&position(p));
                 }
             }
             Event::Status(s) => {
-                if let Some(callback) = *lock(&self.status) {
+                let callback = *lock(&self.status);
+                if let Some(callback) = callback {
                     deliver_status(callback, s);
                 }
             }
             Event::Error(e) => {
-                if let Some(callback) = *lock(&self.status) {
+                let callback = *lock(&self.status);
+                if let Some(callback) = callback {
                     let message = c_string(&e.to_string());
                     callback.call(&waymark_status {
                         error: e.into(),
