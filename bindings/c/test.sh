@@ -44,6 +44,10 @@ cargo run -p waymark-cli --locked --quiet -- site pack "$work/site.json" "$work/
 cargo build -p waymark --lib --locked --quiet --features fault-injection
 python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
 flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -pthread -I bindings/c)
+# The README's C quickstart, compiled as the tests are (a function, so an object file only).
+python3 scripts/readme-snippet.py c-quickstart > "$work/readme_quickstart.c"
+gcc "${flags[@]}" -c "$work/readme_quickstart.c" -o "$work/readme_quickstart.o"
+echo "README C quickstart compiles"
 for test in test robustness threads; do
     gcc "${flags[@]}" "bindings/c/$test.c" -L "$target/debug" -lwaymark -lm -o "$work/${test}_shared"
     gcc "${flags[@]}" "bindings/c/$test.c" "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/${test}_static"

@@ -99,11 +99,12 @@ if grep -q 'kotlinx\.coroutines' "$GENERATED"; then
     compile_cp=$compile_cp:$COROUTINES
     run_cp=$run_cp:$COROUTINES
 fi
-step "kotlinc"
+step "kotlinc (with the README's Kotlin quickstart)"
 rm -rf "$OUT"
 mkdir -p "$OUT/classes"
+python3 "$REPO/scripts/readme-snippet.py" kotlin-quickstart > "$OUT/ReadmeQuickstart.kt"
 "$KOTLINC" -nowarn -jvm-target 17 -cp "$compile_cp" -d "$OUT/classes" \
-    "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt \
+    "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt "$OUT/ReadmeQuickstart.kt" \
     "$HERE"/../../android/src/main/kotlin/dev/waymark/android/Conversions.kt
 
 step "JUnit 4"

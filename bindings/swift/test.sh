@@ -70,6 +70,9 @@ if (( stale )); then
     exit 1
 fi
 
+# --- 4. The README's Swift quickstart, compiled into the test target (not committed).
+python3 "$REPO/scripts/readme-snippet.py" swift-quickstart > "$REPO/bindings/swift/Tests/WaymarkTests/ReadmeQuickstart.swift"
+
 # --- 5. XCTest in the chroot. The checkout (and the target dir, if elsewhere) is bind-mounted
 # at the same path inside, so every path resolves identically.
 log "swift test (in $ROOT)"
