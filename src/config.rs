@@ -2,7 +2,7 @@
 //! or the docs section (docs/tuning.md) holding the measurement that chose it.
 
 use crate::error::Error;
-use crate::sensors::MotionConfig;
+use crate::sensors::{MotionConfig, StepLengthModel};
 use serde::{Deserialize, Serialize};
 
 /// Which transition model the HMM uses.
@@ -146,8 +146,13 @@ pub struct EngineConfig {
     /// Whether the site file's [`Calibration`](crate::site::Calibration) applies: its γ when
     /// `rssi_weight` is `None`, its surveyors' step length model in place of
     /// `motion.step_length`, and its accuracy scales. Default on: a surveyed site's own
-    /// measurements beat generic defaults. Turn it off to give a user's own step length.
+    /// measurements beat generic defaults. A user's own step length goes in
+    /// `step_length_override`, which keeps the rest of the calibration.
     pub site_calibration: bool,
+    /// The user's own step length model, used in place of the site's surveyed one and of
+    /// `motion.step_length` (an app that knows its user's stride, e.g. from their height).
+    /// `None`: the site's, else `motion.step_length`.
+    pub step_length_override: Option<StepLengthModel>,
     /// Probability mass inside the reported `accuracy_m` circle: 0.68, as Android's
     /// `Location.getAccuracy()` and iOS's `horizontalAccuracy` define it.
     pub accuracy_mass: f64,
@@ -188,6 +193,7 @@ impl Default for EngineConfig {
             max_reading_age_ns: None,
             accuracy_mass: 0.68,
             site_calibration: true,
+            step_length_override: None,
             site_salt: None,
             history_epochs: 500,
             habits: HabitOptions::default(),
@@ -272,10 +278,12 @@ impl EngineConfig {
     /// the `north` override) applied.
     pub fn motion_for(&self, site: &crate::Site) -> MotionConfig {
         let north = self.north.unwrap_or_else(|| site.north());
-        let step_length = match (self.site_calibration, site.calibration().step_length) {
-            (true, Some(model)) => model,
-            _ => self.motion.step_length,
-        };
+        let step_length =
+            match (self.step_length_override, self.site_calibration, site.calibration().step_length) {
+                (Some(model), _, _) => model,
+                (None, true, Some(model)) => model,
+                _ => self.motion.step_length,
+            };
         MotionConfig {
             declination_rad: north.declination_rad,
             site_rotation_rad: north.site_rotation_rad,
@@ -381,6 +389,11 @@ impl EngineConfig {
             return fail(format!("transition_ratio must be finite and >= 1 (got {})", self.transition_ratio));
         }
         self.motion.validate()?;
+        if let Some(model) = self.step_length_override {
+            MotionConfig { step_length: model, ..self.motion.clone() }
+                .validate()
+                .map_err(|e| Error::InvalidConfig(format!("step_length_override: {e}")))?;
+        }
         if let Some(n) = self.north {
             if !(n.declination_rad.is_finite() && n.site_rotation_rad.is_finite()) {
                 return fail("north: angles must be finite".into());
@@ -474,5 +487,33 @@ mod tests {
         let bad = site.clone().with_floor_rssi_weights(&[[None, None], [Some(0.0), None]]).unwrap_err();
         assert!(bad.to_string().contains("floors[1].rssi_weight"), "{bad}");
         assert!(site.with_floor_rssi_weights(&[[None, None]; 4]).is_err());
+    }
+
+    #[test]
+    fn a_users_step_length_beats_the_sites_which_beats_the_default() {
+        use crate::site::{BuildOptions, Calibration, SiteBuilder};
+        let mut b = SiteBuilder::new("one");
+        let f = b.floor("G", 0.0);
+        b.state(f, nalgebra::Point2::new(0.0, 0.0), vec![]);
+        let plain = b.build(BuildOptions::default()).unwrap();
+        let surveyed_model = StepLengthModel::Weinberg { k: 0.48 };
+        let surveyed = plain
+            .clone()
+            .with_calibration(Calibration { step_length: Some(surveyed_model), ..Calibration::default() })
+            .unwrap();
+        let user = StepLengthModel::Constant { length_m: 0.82 };
+        let defaults = EngineConfig::default();
+        assert_eq!(defaults.motion_for(&plain).step_length, defaults.motion.step_length);
+        assert_eq!(defaults.motion_for(&surveyed).step_length, surveyed_model);
+        let mine = EngineConfig { step_length_override: Some(user), ..EngineConfig::default() };
+        assert_eq!(mine.motion_for(&surveyed).step_length, user);
+        assert_eq!(mine.motion_for(&plain).step_length, user);
+        // The override keeps the rest of the site's calibration.
+        assert!(mine.site_calibration);
+        let bad = EngineConfig {
+            step_length_override: Some(StepLengthModel::Constant { length_m: -0.7 }),
+            ..EngineConfig::default()
+        };
+        assert!(bad.validate().unwrap_err().to_string().contains("step_length_override"));
     }
 }

@@ -914,7 +914,8 @@ fn options() -> impl Strategy<Value = EngineOptions> {
         Just(TransitionKind::Hipe),
         Just(TransitionKind::Hoang)
     ]);
-    let length = prop_oneof![8 => 0.4..1.0f64, 1 => value(), 1 => Just(0.0), 1 => Just(-0.7)];
+    let length =
+        proptest::option::of(prop_oneof![8 => 0.4..1.0f64, 1 => value(), 1 => Just(0.0), 1 => Just(-0.7)]);
     let lag = prop_oneof![8 => 0..10u32, 1 => any::<u32>()];
     let angle = proptest::option::of(prop_oneof![4 => -360.0..360.0f64, 1 => value()]);
     // A salt, long enough or not: the fixtures' ids are raw, so a valid one is ignored.

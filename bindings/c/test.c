@@ -567,7 +567,7 @@ static void options_status_and_stats(const char *site_path) {
     waymark_engine_options options;
     CHECK(waymark_engine_options_default(NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL options");
     CHECK(waymark_engine_options_default(&options) == WAYMARK_RESULT_OK && options.transition == 0 &&
-              options.fixed_lag_epochs > 0 && options.step_length_m > 0 && isnan(options.declination_deg) &&
+              options.fixed_lag_epochs > 0 && isnan(options.step_length_m) && isnan(options.declination_deg) &&
               options.site_salt == NULL,
           "default options");
     size_t len = 0;

@@ -524,9 +524,9 @@ typedef struct {
    */
   uint32_t fixed_lag_epochs;
   /**
-   * The user's step length, m, used on a site file without a surveyed step length; a site
-   * surveyed with `waymark survey` carries its surveyors' step length model, which the
-   * engine uses instead: on such a site this field has no effect.
+   * The user's own step length, m, used in place of the step length model the site was
+   * surveyed with; NaN (the default): the site's surveyed model, or 0.7 m on a site
+   * without one.
    */
   double step_length_m;
   /**

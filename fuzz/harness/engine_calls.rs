@@ -200,7 +200,7 @@ fn options(c: &mut Cursor) -> ffi::EngineOptions {
             2 => Some(ffi::TransitionKind::Hipe),
             _ => Some(ffi::TransitionKind::Hoang),
         },
-        step_length_m: c.f64(),
+        step_length_m: optional(c),
         fixed_lag_epochs: if c.u8().is_multiple_of(2) { u32::from(c.u8()) } else { c.u32() },
         declination_deg: optional(c),
         site_rotation_deg: optional(c),

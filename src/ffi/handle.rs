@@ -63,7 +63,8 @@ pub(crate) struct Options {
     pub site_rotation_deg: Option<f64>,
     /// The salt of a hashed site.
     pub site_salt: Option<Vec<u8>>,
-    /// The user's step length, m, on a site without a surveyed one; `None`: the default.
+    /// The user's own step length, m, in place of the site's surveyed one; `None`: the
+    /// site's, or the engine's default on a site without one.
     pub step_length_m: Option<f64>,
 }
 
@@ -77,7 +78,7 @@ impl Options {
             ..defaults
         };
         if let Some(length_m) = self.step_length_m {
-            config.motion.step_length = crate::sensors::StepLengthModel::Constant { length_m };
+            config.step_length_override = Some(crate::sensors::StepLengthModel::Constant { length_m });
         }
         if self.declination_deg.is_some() || self.site_rotation_deg.is_some() {
             let from_site = site.north();
@@ -301,5 +302,34 @@ impl<L: Listeners> Handle<L> {
                 log::warn!("a listener panicked or threw");
             }
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sensors::StepLengthModel;
+    use crate::site::{BuildOptions, Calibration, SiteBuilder};
+
+    /// `stepLengthM` / `step_length_m` is honoured on a surveyed site: it replaces the site's
+    /// step length model and keeps the rest of its calibration.
+    #[test]
+    fn a_given_step_length_overrides_the_surveyed_one() {
+        let mut b = SiteBuilder::new("one");
+        let f = b.floor("G", 0.0);
+        b.state(f, nalgebra::Point2::new(0.0, 0.0), vec![]);
+        let surveyed_model = StepLengthModel::Weinberg { k: 0.48 };
+        let site = b
+            .build(BuildOptions::default())
+            .unwrap()
+            .with_calibration(Calibration { step_length: Some(surveyed_model), ..Calibration::default() })
+            .unwrap();
+        let config = Options::default().config(&site).unwrap();
+        assert_eq!(config.motion_for(&site).step_length, surveyed_model);
+        let given = Options { step_length_m: Some(0.82), ..Options::default() }.config(&site).unwrap();
+        assert_eq!(given.motion_for(&site).step_length, StepLengthModel::Constant { length_m: 0.82 });
+        assert!(given.site_calibration);
+        let negative = Options { step_length_m: Some(-0.7), ..Options::default() }.config(&site).unwrap();
+        assert!(negative.validate().is_err(), "the engine refuses it as an invalid config");
     }
 }

@@ -2164,11 +2164,11 @@ public struct EngineOptions: Equatable, Hashable {
      */
     public var transition: TransitionKind?
     /**
-     * The user's step length in metres, used on a site file without a surveyed step length.
-     * A site surveyed with `waymark survey` carries its surveyors' step length model, which
-     * the engine uses instead, whatever this says: on such a site this field has no effect.
+     * The user's own step length in metres, used in place of the step length model the site
+     * was surveyed with (for an app that knows its user's stride). `null` / `nil`: the
+     * site's surveyed model, or 0.7 m on a site without one.
      */
-    public var stepLengthM: Double
+    public var stepLengthM: Double?
     /**
      * How many epochs behind the newest the fixed-lag estimate is.
      */
@@ -2197,10 +2197,10 @@ public struct EngineOptions: Equatable, Hashable {
          * Transition model; `null` / `nil` for the default (Hoang's).
          */transition: TransitionKind? = nil, 
         /**
-         * The user's step length in metres, used on a site file without a surveyed step length.
-         * A site surveyed with `waymark survey` carries its surveyors' step length model, which
-         * the engine uses instead, whatever this says: on such a site this field has no effect.
-         */stepLengthM: Double = Double(0.7), 
+         * The user's own step length in metres, used in place of the step length model the site
+         * was surveyed with (for an app that knows its user's stride). `null` / `nil`: the
+         * site's surveyed model, or 0.7 m on a site without one.
+         */stepLengthM: Double? = nil, 
         /**
          * How many epochs behind the newest the fixed-lag estimate is.
          */fixedLagEpochs: UInt32 = UInt32(3), 
@@ -2242,7 +2242,7 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
         return
             try EngineOptions(
                 transition: FfiConverterOptionTypeTransitionKind.read(from: &buf), 
-                stepLengthM: FfiConverterDouble.read(from: &buf), 
+                stepLengthM: FfiConverterOptionDouble.read(from: &buf), 
                 fixedLagEpochs: FfiConverterUInt32.read(from: &buf), 
                 declinationDeg: FfiConverterOptionDouble.read(from: &buf), 
                 siteRotationDeg: FfiConverterOptionDouble.read(from: &buf), 
@@ -2252,7 +2252,7 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
 
     public static func write(_ value: EngineOptions, into buf: inout [UInt8]) {
         FfiConverterOptionTypeTransitionKind.write(value.transition, into: &buf)
-        FfiConverterDouble.write(value.stepLengthM, into: &buf)
+        FfiConverterOptionDouble.write(value.stepLengthM, into: &buf)
         FfiConverterUInt32.write(value.fixedLagEpochs, into: &buf)
         FfiConverterOptionDouble.write(value.declinationDeg, into: &buf)
         FfiConverterOptionDouble.write(value.siteRotationDeg, into: &buf)

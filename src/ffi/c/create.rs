@@ -19,10 +19,7 @@ pub extern "C" fn waymark_engine_options_default(out: *mut waymark_engine_option
             waymark_engine_options {
                 transition: waymark_transition::Default as u32,
                 fixed_lag_epochs: u32::try_from(defaults.fixed_lag_epochs).unwrap_or(u32::MAX),
-                step_length_m: match crate::sensors::StepLengthModel::default() {
-                    crate::sensors::StepLengthModel::Constant { length_m } => length_m,
-                    _ => 0.7,
-                },
+                step_length_m: f64::NAN,
                 declination_deg: f64::NAN,
                 site_rotation_deg: f64::NAN,
                 site_salt: std::ptr::null(),
@@ -66,7 +63,7 @@ fn options_arg(options: *const waymark_engine_options) -> Result<Options, waymar
         declination_deg: given(o.declination_deg),
         site_rotation_deg: given(o.site_rotation_deg),
         site_salt: salt,
-        step_length_m: Some(o.step_length_m),
+        step_length_m: given(o.step_length_m),
     })
 }
 

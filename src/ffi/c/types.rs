@@ -100,9 +100,9 @@ pub struct waymark_engine_options {
     pub transition: u32,
     /// How many epochs behind the newest the fixed-lag estimate is.
     pub fixed_lag_epochs: u32,
-    /// The user's step length, m, used on a site file without a surveyed step length; a site
-    /// surveyed with `waymark survey` carries its surveyors' step length model, which the
-    /// engine uses instead: on such a site this field has no effect.
+    /// The user's own step length, m, used in place of the step length model the site was
+    /// surveyed with; NaN (the default): the site's surveyed model, or 0.7 m on a site
+    /// without one.
     pub step_length_m: f64,
     /// Magnetic declination at the site, degrees east; NaN: the site file's.
     pub declination_deg: f64,

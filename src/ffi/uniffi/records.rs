@@ -24,11 +24,11 @@ pub struct EngineOptions {
     /// Transition model; `null` / `nil` for the default (Hoang's).
     #[uniffi(default = None)]
     pub transition: Option<TransitionKind>,
-    /// The user's step length in metres, used on a site file without a surveyed step length.
-    /// A site surveyed with `waymark survey` carries its surveyors' step length model, which
-    /// the engine uses instead, whatever this says: on such a site this field has no effect.
-    #[uniffi(default = 0.7)]
-    pub step_length_m: f64,
+    /// The user's own step length in metres, used in place of the step length model the site
+    /// was surveyed with (for an app that knows its user's stride). `null` / `nil`: the
+    /// site's surveyed model, or 0.7 m on a site without one.
+    #[uniffi(default = None)]
+    pub step_length_m: Option<f64>,
     /// How many epochs behind the newest the fixed-lag estimate is.
     #[uniffi(default = 3)]
     pub fixed_lag_epochs: u32,
@@ -66,7 +66,7 @@ impl Default for EngineOptions {
         let core = crate::config::EngineConfig::default();
         Self {
             transition: None,
-            step_length_m: 0.7,
+            step_length_m: None,
             fixed_lag_epochs: core.fixed_lag_epochs as u32,
             declination_deg: None,
             site_rotation_deg: None,
@@ -88,7 +88,7 @@ impl EngineOptions {
             declination_deg: self.declination_deg,
             site_rotation_deg: self.site_rotation_deg,
             site_salt: self.site_salt.clone(),
-            step_length_m: Some(self.step_length_m),
+            step_length_m: self.step_length_m,
         }
     }
 }
