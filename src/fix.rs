@@ -24,7 +24,7 @@ pub struct PositionFix {
     /// `None` for GNSS. With a floor, states of other floors cannot explain the fix.
     pub floor: Option<usize>,
     /// Radius of the circle holding the true position with probability 0.68, m, as Android's
-    /// `Location.getAccuracy()` defines it (DESIGN.md, "Confidence"). Must be > 0.
+    /// `Location.getAccuracy()` defines it (`docs/accuracy.md#the-radii`). Must be > 0.
     pub accuracy_m: f64,
 }
 

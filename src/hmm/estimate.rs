@@ -25,9 +25,7 @@ pub const MASS_95: f64 = 0.95;
 
 /// Share of a state's cell, in a corridor of cells `spacing` long, within which the true
 /// position lies with probability 0.68 when it is uniform over the cell: 0.68 · spacing / 2.
-/// Derived, not tuned; on the simulated office, radio only (`waymark demo --json --seed 1..5`,
-/// path-loss exponent 3.5 at the time), the radius held the truth in 41% of epochs without
-/// this term and in 72% with it.
+/// Derived, not tuned (its effect on the radius: `docs/tuning.md#radius-factors`).
 const CELL_RADIUS_PER_SPACING: f64 = 0.34;
 
 /// Estimates the position from `posterior` (which sums to 1).

@@ -123,50 +123,30 @@ impl FitOptions {
 }
 
 impl Default for FitOptions {
-    /// The regularised fit for the live engine, positions in metres. Measured with
-    /// `cargo run --release --example baum_welch_options` (`waymark simulate --experiment
-    /// baum-welch`, El Gemayel §IV, seeds 1-3; the CLI's default is seed 0): room accuracy
-    /// after ten runs with feedback 0.1 / decaying from 0.2, averaged over the seeds; default
-    /// 52.4% / 87.9% in 21 s (seed 2's feedback 0.1 ends at 7%, a local maximum). Which local
-    /// maximum Baum-Welch finds moves single seeds by ±10 points or more, so no alternative
-    /// below was consistently better; earlier sweeps, before the mean prior and with other
-    /// feedback epochs drawn, ranked them differently.
+    /// The regularised fit for the live engine, positions in metres. Each value is chosen on
+    /// the simulated Baum-Welch experiment (El Gemayel §IV); the sweep and its figures are in
+    /// `docs/tuning.md#baum-welch-options`.
     fn default() -> Self {
         Self {
             // The paper stops when "the improvement of the likelihood is negligible" (§III-A.3).
-            // 1e-4 nats per observation: 52.5% / 87.9% in 53 s; 1e-2: 52.8% / 89.5% in 11 s.
             tolerance: Some(1e-3),
-            // A bound only: with the mean prior no run took more than 15 iterations (seeds 1-3);
-            // 200 changed nothing. (Without it the first run from §IV's initialisation took
-            // 50-100.)
+            // A bound only, above what any run needs.
             max_iterations: 50,
             // A tenth of an observed move on every allowed transition, so that none vanishes
-            // and feedback is rarely ruled out: 0 gave 43.9% / 84.2%, 1 gave 57.6% / 88.4%.
+            // and feedback is rarely ruled out.
             transition_pseudocount: 0.1,
             // π is the row out of "before the first epoch": the same prior as a transition row.
-            // (The experiment's walks all start at the entrance, so it cannot measure this.)
             initial_pseudocount: 0.1,
             covariance_floor: 1e-9,
             // The spread of a position uniform over a 1 m × 1 m cell (El Gemayel §IV's cell
             // size), 1/12 m² per axis: a component stands for one cell, and its observations
-            // vary at least as much as the true positions inside it. No floor: 78.1% / 83.1%,
-            // but with the transitions known 76.4% against 91.6% (components collapse onto
-            // single points); 1/3 m²: 59.3% / 90.9%.
+            // vary at least as much as the true positions inside it.
             min_variance: 1.0 / 12.0,
             restart_on_contradicted_feedback: true,
             learn_transitions: true,
             // Reynolds et al.'s relevance factor, 16 (their adaptation of a Gaussian mixture to a
-            // speaker's little data). On `waymark simulate --experiment baum-welch` (El Gemayel
-            // §IV; seeds 0-3, 17, 18, the transitions known, in a form that took eq. 12 around
-            // the weighted mean) 4 learned as well on five seeds and failed on seed 3 (48%
-            // against 83% with 16, true parameters 93%). Eq. 15's Σ = 2500 I
-            // is so wide that the first E-step's posteriors barely tell the states apart, and
-            // without a prior eq. 11 moved every component of every state to within ~1 m of the
-            // same point, the walks' mean: the states lost their place on the floor and Baum-Welch
-            // converged to permuted states (A known, seed 0: 67% before learning, 20% after,
-            // 12% on its own training walk, whose likelihood it raised above the true
-            // parameters'); with the prior, 91% after one run and 94% after four, the true
-            // parameters' accuracy. Measured in the module documentation of `sim::baum_welch`.
+            // speaker's little data). Without a prior, eq. 15's wide Σ lets eq. 11 move every
+            // component to the walks' mean and the states lose their place on the floor.
             mean_prior_weight: 16.0,
         }
     }

@@ -1,8 +1,7 @@
 //! Learning a hidden Markov model from observations: exact inference (log-space forward-backward,
 //! smoothed posteriors, Viterbi) and Baum-Welch re-estimation of the initial distribution, a
 //! sparse transition matrix and Gaussian-mixture emissions, after El Gemayel et al.,
-//! "Improved Indoor Positioning Using the Baum-Welch Algorithm" (`../shared/papers/
-//! baum-welch-habitual-indoor-positioning.md`), who follow Rabiner's tutorial.
+//! "Improved Indoor Positioning Using the Baum-Welch Algorithm", who follow Rabiner's tutorial.
 //!
 //! - [`Chain`]: initial distribution π and a row-stochastic [`SparseTransition`] holding only the
 //!   allowed transitions (the paper's §II-B: "some elements are known to be zero").
