@@ -456,3 +456,26 @@ fn learning_while_other_threads_push_and_read() {
     let positions = counter.positions.load(Ordering::SeqCst) as u64;
     assert!(last.total_epochs <= positions && last.total_epochs > positions / 2, "{last:?}, {positions}");
 }
+
+/// One `Site` shared by several engines: each positions exactly as an engine that loaded the
+/// file itself, and a bad file is `InvalidSite` before any engine exists.
+#[test]
+fn one_shared_site_serves_several_engines() {
+    let office = Office::generate(&OfficeConfig::default());
+    let json = office.site.to_json();
+    let site = waymark::ffi::uniffi::Site::from_bytes(office.site.to_binary()).unwrap();
+    assert_eq!(site.floor_names(), vec!["office".to_string()]);
+    assert_eq!(site.zone_names().len(), office.site.zones().len());
+    let walk = office.walk(5, 40.0);
+    let replay = |engine: Arc<PositioningEngine>| -> Vec<Option<PositionEstimate>> {
+        walk.epochs.iter().map(|e| engine.push_scan(scan(&e.scan)).ok()).collect()
+    };
+    let own = replay(PositioningEngine::new(json, EngineOptions::default()).unwrap());
+    let first = replay(PositioningEngine::with_site(Arc::clone(&site), EngineOptions::default()).unwrap());
+    let second = replay(PositioningEngine::with_site(Arc::clone(&site), EngineOptions::default()).unwrap());
+    assert!(own.iter().filter(|p| p.is_some()).count() > walk.epochs.len() / 2);
+    assert_eq!(own, first);
+    assert_eq!(own, second);
+    let bad = waymark::ffi::uniffi::Site::from_bytes(b"{".to_vec());
+    assert!(matches!(bad, Err(PositioningError::InvalidSite { .. })));
+}

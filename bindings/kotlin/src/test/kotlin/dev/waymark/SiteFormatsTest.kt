@@ -41,4 +41,26 @@ class SiteFormatsTest {
             assertTrue(e.reason, e.reason.contains("damaged"))
         }
     }
+
+    @Test
+    fun oneSharedSiteServesSeveralEnginesThatPositionAsIfEachHadItsOwn() {
+        val walk = Walk.load(setting("waymark.walk"))
+        val site = Site.fromBytes(File(setting("waymark.packedSite")).readBytes())
+        site.use {
+            assertTrue("floors", it.floorNames().isNotEmpty())
+            assertEquals(Site.fromPath(setting("waymark.site")).use { json -> json.zoneNames() }, it.zoneNames())
+            val own = replay(PositioningEngine.fromPath(setting("waymark.packedSite"), EngineOptions()), walk)
+            val first = replay(PositioningEngine.withSite(it, EngineOptions()), walk)
+            val second = replay(PositioningEngine.withSite(it, EngineOptions()), walk)
+            assertTrue("positions", own.count { p -> p != null } > walk.size / 2)
+            assertEquals(own, first)
+            assertEquals(own, second)
+        }
+        try {
+            Site.fromBytes("{".toByteArray()).close()
+            fail("a truncated site loaded")
+        } catch (e: PositioningException.InvalidSite) {
+            assertTrue(e.reason, e.reason.isNotEmpty())
+        }
+    }
 }
