@@ -15,10 +15,9 @@ pub trait Transition {
 /// Posterior mass below which a state's row is not expanded: its mass is spread evenly
 /// instead, as the row's floor weight would spread most of it. Beam pruning as in every
 /// large-vocabulary decoder; with at most N such states the mass moved is below N · 1e-15
-/// (1e-11 at 10 000 states), far under the 1/K = 5e-6 the rows' own floor moves each epoch,
-/// and `waymark simulate` and `waymark demo` print the same errors to the millimetre with and
-/// without it. It is what keeps an epoch at 10 000 states within 2 ms (`waymark bench`): a
-/// tracked posterior has mass on a few hundred states.
+/// (1e-11 at 10 000 states), far under the 1/K = 5e-6 the rows' own floor moves each epoch;
+/// a tracked posterior has mass on a few hundred states, so this is what keeps an epoch fast
+/// at building scale (docs/tuning.md#engine-speed).
 pub const PRUNE_MASS: f64 = 1e-15;
 
 /// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least `PRUNE_MASS`.

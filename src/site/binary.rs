@@ -1,5 +1,5 @@
 //! The binary site encoding: what an app ships and loads. JSON stays the interchange form
-//! (`waymark survey` writes it, people read and diff it); `waymark site pack` turns it into
+//! (the survey writes it, people read and diff it; `docs/site-files.md`); packed, it becomes
 //! this, which loads a large site in a fraction of the time and memory the JSON parser needs
 //! (docs/tuning.md#engine-speed).
 //!
