@@ -14,7 +14,8 @@ use waymark::Error;
 use waymark::{EngineConfig, TransitionModel};
 use waymark_survey::metrics::{EpochError, ErrorSummary};
 
-/// What `waymark simulate` runs.
+/// The papers' artificial-data experiments on one simulated building: Hoang et al. Table 1
+/// and HIPE Table 5.
 #[derive(Clone, Debug)]
 pub struct PaperExperiment {
     /// Seed of the building and the walks.
@@ -86,7 +87,7 @@ pub struct HipeTable5 {
     pub mle: Table5Row,
 }
 
-/// Everything `waymark simulate` prints.
+/// The results of a [`PaperExperiment`], per paper table.
 #[derive(Clone, Debug, Serialize)]
 pub struct PaperReport {
     /// Hoang Table 1.

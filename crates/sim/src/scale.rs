@@ -1,4 +1,4 @@
-//! Sites of any size, for measuring speed and memory (`waymark bench`, `benches/`): one floor
+//! Sites of any size, for measuring speed and memory (the benchmarks): one floor
 //! of states on the survey's regular grid, densely covered by access points, and scans that
 //! hear a fixed number of them.
 //!
@@ -238,7 +238,7 @@ impl ScaleSite {
 
 /// The forward step as a general-purpose HMM library computes it: a dense N × N transition
 /// matrix and a dense N × T emission table, O(N² + N·T) per epoch. The reference the sparse
-/// engine is timed against (`waymark bench`: `dense_over_sparse_ratio`).
+/// engine is timed against (the benchmark's `dense_over_sparse_ratio`).
 pub struct DenseForward {
     n: usize,
     transition: Vec<f64>,

@@ -5,8 +5,7 @@
 //! samples ([`super::imu`]). A [`Feeder`] hands the samples to an engine in app-sized batches
 //! up to each epoch and says where the person really was then.
 //!
-//! Used by the long-run and recovery experiments (`waymark simulate --experiment long-run |
-//! recovery`).
+//! Used by the long-run and recovery experiments ([`crate::longrun`], [`crate::recovery`]).
 
 use super::imu::{lying_still, synthesize, ImuConfig, ImuTrace};
 use super::{Office, Trajectory};

@@ -104,7 +104,7 @@ pub struct FitOptions {
 }
 
 impl FitOptions {
-    /// Plain maximum likelihood, as `waymark hmm fit` runs it: exactly `iterations`
+    /// Plain maximum likelihood, as the JSON `fit` runs it ([`super::json`]): exactly `iterations`
     /// re-estimations, no priors, and only 1e-9 added to the covariances' diagonals (so a
     /// component fitted to one point stays invertible).
     pub fn maximum_likelihood(iterations: usize) -> Self {

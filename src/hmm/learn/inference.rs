@@ -568,7 +568,7 @@ pub fn viterbi(chain: &Chain, log_emission: &EpochMatrix) -> Result<(Vec<u32>, f
     Ok((path, best))
 }
 
-/// Everything `waymark hmm decode` prints.
+/// Everything a decode reports.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Decoded {
     /// The forward-backward result.

@@ -1,5 +1,5 @@
-//! The JSON documents of `waymark hmm decode` and `waymark hmm fit`, and the functions the CLI
-//! runs on them, so that other implementations can be checked against this one.
+//! The JSON documents of a decode and a fit, and the functions that compute them from the
+//! documents, so that other implementations can be checked against this one.
 //!
 //! Decode reads `{"initial": [N], "transition": [[N × N]], "log_emission": [[T × N]]}` (a
 //! `null` log-emission is −∞: the state cannot emit that observation) and writes
@@ -18,7 +18,7 @@ use super::{
 use nalgebra::{SMatrix, SVector};
 use serde::{Deserialize, Serialize};
 
-/// Input of `waymark hmm decode`.
+/// Input of a decode.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct DecodeInput {
@@ -30,7 +30,7 @@ pub struct DecodeInput {
     pub log_emission: Vec<Vec<Option<f64>>>,
 }
 
-/// Output of `waymark hmm decode`.
+/// Output of a decode.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 pub struct DecodeOutput {
     /// ln p(o_1..T).
@@ -45,7 +45,7 @@ pub struct DecodeOutput {
     pub viterbi_log_prob: f64,
 }
 
-/// Input of `waymark hmm fit`.
+/// Input of a fit.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 #[serde(deny_unknown_fields)]
 pub struct FitInput {
@@ -63,7 +63,7 @@ pub struct FitInput {
     pub iterations: usize,
 }
 
-/// Output of `waymark hmm fit`.
+/// Output of a fit.
 #[derive(Clone, Debug, Deserialize, Serialize)]
 pub struct FitOutput {
     /// π̂.
@@ -78,7 +78,7 @@ pub struct FitOutput {
     pub log_likelihood: Vec<f64>,
 }
 
-/// What `waymark hmm decode` computes.
+/// What a decode computes.
 pub fn decode_json(input: &DecodeInput) -> Result<DecodeOutput, LearnError> {
     let transition = SparseTransition::from_dense(&input.transition)?;
     let chain = Chain::new(input.initial.clone(), transition)?;
@@ -99,7 +99,7 @@ pub fn decode_json(input: &DecodeInput) -> Result<DecodeOutput, LearnError> {
     })
 }
 
-/// What `waymark hmm fit` computes.
+/// What a fit computes.
 pub fn fit_json(input: &FitInput) -> Result<FitOutput, LearnError> {
     let d = input
         .means

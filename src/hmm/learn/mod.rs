@@ -11,7 +11,7 @@
 //! - [`GaussianMixtures`]: eq. 7, M_i components per state with fixed weights 1/M_i.
 //! - [`fit`]: Baum-Welch (eqs. 10-13) over several [`Sequence`]s, with [`FitOptions`] for plain
 //!   maximum likelihood or the regularised fit a live engine needs.
-//! - [`json`]: the JSON forms behind `waymark hmm decode` and `waymark hmm fit`.
+//! - [`json`]: the JSON documents of a decode and a fit, for tools and tests.
 //!
 //! These recursions are exact: unlike [`predict`](super::predict) and
 //! [`viterbi_step`](super::viterbi_step), which prune rows and paths for the live engine, they
