@@ -51,7 +51,7 @@ fn epoch(c: &mut Criterion) {
                     (scan, motion)
                 },
                 |(scan, motion)| {
-                    black_box(engine.push_scan_with_motion(&scan, &motion).expect("a good scan"))
+                    black_box(engine.push_scan_with_motion(&scan, &motion).expect("a good scan").position)
                 },
                 BatchSize::SmallInput,
             )

@@ -22,8 +22,8 @@ pub mod site;
 
 pub use config::{EngineConfig, HipeConfig, HoangConfig, TransitionModel};
 pub use engine::{
-    Engine, EngineSnapshot, InputStats, Position, PositionListener, ScanTiming, StatusEvent, SubscriptionId,
-    TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,
+    Engine, EngineSnapshot, Epoch, InputStats, Position, ScanTiming, StatusEvent, TrackPoint,
+    FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,
 };
 pub use error::{Error, InputError};
 pub use fix::PositionFix;

@@ -4,8 +4,8 @@
 mod common;
 
 use common::{scan, two_floor_site};
-use std::sync::{Arc, Mutex};
-use waymark::{Engine, EngineConfig, InputError, Position, Site};
+use std::sync::Arc;
+use waymark::{Engine, EngineConfig, InputError, Site};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -22,7 +22,7 @@ fn readings_at(f: usize, x: f64) -> Vec<(u8, f64)> {
 fn finds_the_floor_and_the_place() {
     let mut engine = engine();
     for k in 0..3 {
-        let p = engine.push_scan(&scan(SECOND * (k + 1), &readings_at(1, 9.0))).unwrap();
+        let p = engine.push_scan(&scan(SECOND * (k + 1), &readings_at(1, 9.0))).unwrap().position;
         assert_eq!(p.floor, 1);
         assert!(p.floor_probability > 0.99, "{p:?}");
         assert!((p.x - 9.0).abs() < 1.0 && p.y.abs() < 1e-9, "{p:?}");
@@ -36,7 +36,7 @@ fn finds_the_floor_and_the_place() {
 #[test]
 fn rejected_input_leaves_the_engine_unchanged_and_is_counted() {
     let mut engine = engine();
-    let first = engine.push_scan(&scan(10 * SECOND, &readings_at(0, 3.0))).unwrap();
+    let first = engine.push_scan(&scan(10 * SECOND, &readings_at(0, 3.0))).unwrap().position;
     let posterior = engine.posterior().to_vec();
 
     let back = engine.push_scan(&scan(9 * SECOND, &readings_at(1, 3.0)));
@@ -80,18 +80,15 @@ fn rejected_input_leaves_the_engine_unchanged_and_is_counted() {
 }
 
 #[test]
-fn listeners_hear_every_epoch_until_unsubscribed() {
+fn each_epoch_returns_its_position_and_a_rejected_one_returns_nothing() {
     let mut engine = engine();
-    let heard: Arc<Mutex<Vec<Position>>> = Arc::default();
-    let sink = Arc::clone(&heard);
-    let id = engine.subscribe(Box::new(move |p: &Position| sink.lock().unwrap().push(p.clone())));
-    let p1 = engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
-    let p2 = engine.push_scan(&scan(2 * SECOND, &readings_at(0, 3.0))).unwrap();
-    let _ = engine.push_scan(&scan(SECOND, &readings_at(0, 3.0)));
-    assert!(engine.unsubscribe(id));
-    assert!(!engine.unsubscribe(id));
-    engine.push_scan(&scan(3 * SECOND, &readings_at(0, 6.0))).unwrap();
-    assert_eq!(*heard.lock().unwrap(), vec![p1, p2]);
+    let first = engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
+    assert_eq!(engine.position(), Some(&first.position));
+    assert!(first.status.is_empty() && first.revised_track.is_empty(), "nothing came before it: {first:?}");
+    let second = engine.push_scan(&scan(2 * SECOND, &readings_at(0, 3.0))).unwrap();
+    assert_eq!(second.position.timestamp_ns, 2 * SECOND);
+    assert!(engine.push_scan(&scan(SECOND, &readings_at(0, 3.0))).is_err());
+    assert_eq!(engine.position(), Some(&second.position), "the rejected scan changed nothing");
 }
 
 #[test]
@@ -99,7 +96,7 @@ fn a_long_silence_restarts_from_the_prior_and_recovers() {
     let mut engine = engine();
     engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
     // Ten minutes later, on the other floor.
-    let p = engine.push_scan(&scan(601 * SECOND, &readings_at(1, 12.0))).unwrap();
+    let p = engine.push_scan(&scan(601 * SECOND, &readings_at(1, 12.0))).unwrap().position;
     assert_eq!(engine.stats().filter_restarts, 1);
     assert_eq!(p.floor, 1);
     assert!((p.x - 12.0).abs() < 1.5, "{p:?}");
@@ -112,7 +109,9 @@ fn a_site_file_round_trip_gives_the_same_track() {
     let run = |site: Site| {
         let mut engine = Engine::new(Arc::new(site), EngineConfig::default()).unwrap();
         (0..5)
-            .map(|k| engine.push_scan(&scan(SECOND * (k + 1), &readings_at(0, 3.0 * k as f64))).unwrap())
+            .map(|k| {
+                engine.push_scan(&scan(SECOND * (k + 1), &readings_at(0, 3.0 * k as f64))).unwrap().position
+            })
             .collect::<Vec<_>>()
     };
     assert_eq!(run(site), run(reloaded));
@@ -130,14 +129,14 @@ fn an_rssi_no_receiver_reports_rejects_the_scan() {
     // Found by fuzzing (`engine_calls`): at f64::MAX dBm every state's log-likelihood was -inf,
     // the filter restarted, and the position carried a radio_log_evidence of -inf.
     let mut engine = engine();
-    let first = engine.push_scan(&scan(10 * SECOND, &readings_at(0, 3.0))).unwrap();
+    let first = engine.push_scan(&scan(10 * SECOND, &readings_at(0, 3.0))).unwrap().position;
     for rssi in [f64::MAX, 1e300, 100.5] {
         let high = engine.push_scan(&scan(11 * SECOND, &[(0, -60.0), (1, rssi)]));
         assert!(matches!(high, Err(InputError::RssiTooHigh { index: 1, .. })), "{rssi}: {high:?}");
     }
     assert_eq!(engine.stats().scans_rssi_too_high, 3);
     assert_eq!(engine.position(), Some(&first));
-    let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark::MAX_RSSI_DBM)])).unwrap();
+    let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark::MAX_RSSI_DBM)])).unwrap().position;
     assert!(loud.radio_log_evidence.is_some_and(f64::is_finite));
 }
 
@@ -166,7 +165,7 @@ fn each_epoch_weighs_the_radio_by_the_gamma_of_the_floor_it_is_on() {
                 .into_iter()
                 .chain(readings_at(1 - f, 9.0).into_iter().map(|(t, v)| (t, v - 20.0)))
                 .collect();
-            let p = engine.push_scan(&scan(k * SECOND, &readings)).unwrap();
+            let p = engine.push_scan(&scan(k * SECOND, &readings)).unwrap().position;
             assert_eq!(p.floor, f);
             posteriors.push(engine.posterior().to_vec());
         }
@@ -194,7 +193,7 @@ fn radius_factors_follow_the_epochs_scenario() {
     let radius = |calibration: Calibration| {
         let site = Arc::new(two_floor_site().with_calibration(calibration).unwrap());
         let mut engine = Engine::new(site, EngineConfig::default()).unwrap();
-        let p = engine.push_scan(&scan(SECOND, &readings_at(0, 3.0))).unwrap();
+        let p = engine.push_scan(&scan(SECOND, &readings_at(0, 3.0))).unwrap().position;
         assert_eq!(p.scenario, MdiScenario::Speed);
         (p.accuracy_m, p.accuracy_95_m)
     };
@@ -258,9 +257,9 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
                     scenario: MdiScenario::Distance,
                     ..MotionUpdate::default()
                 };
-                engine.push_scan_with_motion(&s, &motion).unwrap()
+                engine.push_scan_with_motion(&s, &motion).unwrap().position
             } else {
-                engine.push_scan(&s).unwrap()
+                engine.push_scan(&s).unwrap().position
             };
             assert_eq!(p.scenario, if walked { MdiScenario::Distance } else { MdiScenario::Speed });
             posteriors.push(engine.posterior().to_vec());
@@ -315,8 +314,9 @@ fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
     // Floor 0's transmitters all faint, as nowhere on the map: a state that never heard them
     // does about as well as any.
     let unexplained: Vec<(u8, f64)> = (0..3).map(|t| (t, -92.0)).collect();
-    let fit =
-        |readings: &[(u8, f64)]| engine().push_scan(&scan(SECOND, readings)).unwrap().radio_fit.unwrap();
+    let fit = |readings: &[(u8, f64)]| {
+        engine().push_scan(&scan(SECOND, readings)).unwrap().position.radio_fit.unwrap()
+    };
     let (good, bad) = (fit(&explained), fit(&unexplained));
     assert!(good > bad + 2.0, "{good} {bad}");
     let site = |floor: f64| {
@@ -329,17 +329,17 @@ fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
     let mut engine = Engine::new(Arc::clone(&site), EngineConfig::default()).unwrap();
     let mut twin = Engine::new(Arc::clone(&site), EngineConfig::default()).unwrap();
     // The first scan is all there is to go on.
-    let first = engine.push_scan_with_motion(&scan(SECOND, &unexplained), &walked(1)).unwrap();
+    let first = engine.push_scan_with_motion(&scan(SECOND, &unexplained), &walked(1)).unwrap().position;
     assert_eq!((first.beyond_radio_m, engine.stats().scans_unexplained), (0.0, 0));
     twin.push_scan_with_motion(&scan(SECOND, &unexplained), &walked(1)).unwrap();
     assert_eq!(engine.posterior(), twin.posterior());
-    let p = engine.push_scan_with_motion(&scan(2 * SECOND, &explained), &walked(2)).unwrap();
+    let p = engine.push_scan_with_motion(&scan(2 * SECOND, &explained), &walked(2)).unwrap().position;
     assert_eq!(p.beyond_radio_m, 0.0);
     twin.push_scan_with_motion(&scan(2 * SECOND, &explained), &walked(2)).unwrap();
     // Three unexplained scans: each moves the estimate as the motion alone would.
     for k in 3..=5u64 {
         twin.advance_with_motion(k * SECOND, &walked(k)).unwrap();
-        let p = engine.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked(k)).unwrap();
+        let p = engine.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked(k)).unwrap().position;
         assert!(p.radio_fit.is_some_and(|f| f < 0.5 * (good + bad)), "{p:?}");
         assert_eq!(engine.posterior(), twin.posterior());
         let beyond = 1.5 * (k - 2) as f64;
@@ -348,17 +348,17 @@ fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
     }
     assert_eq!(engine.stats().scans_unexplained, 3);
     // No scan since an unexplained one: still growing.
-    let p = engine.advance_with_motion(6 * SECOND, &walked(6)).unwrap();
+    let p = engine.advance_with_motion(6 * SECOND, &walked(6)).unwrap().position;
     assert!((p.beyond_radio_m - 6.0).abs() < 1e-9, "{p:?}");
     // Explained again.
-    let p = engine.push_scan_with_motion(&scan(7 * SECOND, &explained), &walked(7)).unwrap();
+    let p = engine.push_scan_with_motion(&scan(7 * SECOND, &explained), &walked(7)).unwrap().position;
     assert_eq!(p.beyond_radio_m, 0.0);
     assert!(p.accuracy_m < 3.0, "{p:?}");
 
     let config = EngineConfig { site_calibration: false, ..EngineConfig::default() };
     let mut plain = Engine::new(site, config).unwrap();
     plain.push_scan_with_motion(&scan(SECOND, &explained), &walked(1)).unwrap();
-    let p = plain.push_scan_with_motion(&scan(2 * SECOND, &unexplained), &walked(2)).unwrap();
+    let p = plain.push_scan_with_motion(&scan(2 * SECOND, &unexplained), &walked(2)).unwrap().position;
     assert_eq!((p.beyond_radio_m, plain.stats().scans_unexplained), (0.0, 0));
 }
 
@@ -433,14 +433,17 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
     let mut engine = Engine::new(Arc::clone(&open), EngineConfig::default()).unwrap();
     let mut pinned = Engine::new(closed, EngineConfig::default()).unwrap();
     for (k, x) in [(1, 6.0), (2, 9.0), (3, 12.0)] {
-        let p = engine.push_scan_with_motion(&scan(k * SECOND, &explained_at(x)), &walked_east(k)).unwrap();
+        let p = engine
+            .push_scan_with_motion(&scan(k * SECOND, &explained_at(x)), &walked_east(k))
+            .unwrap()
+            .position;
         pinned.push_scan_with_motion(&scan(k * SECOND, &explained_at(x)), &walked_east(k)).unwrap();
         assert_eq!(unsurveyed_mass(&engine), 0.0, "{p:?}");
         assert!((p.x - x).abs() < 1.5, "{p:?}");
     }
     // Walking on past the map's end, hearing nothing the map explains. One such scan could be
     // a bad one on the map: the estimate stays on it, moved by the motion alone.
-    let p = engine.push_scan_with_motion(&scan(4 * SECOND, &unexplained), &walked_east(4)).unwrap();
+    let p = engine.push_scan_with_motion(&scan(4 * SECOND, &unexplained), &walked_east(4)).unwrap().position;
     pinned.push_scan_with_motion(&scan(4 * SECOND, &unexplained), &walked_east(4)).unwrap();
     assert_eq!(unsurveyed_mass(&engine), 0.0, "{p:?}");
     let same =
@@ -449,8 +452,10 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
     // From the second in a row the motion carries it off the map, a scan behind the walker.
     let mut last_x = p.x;
     for k in 5..=7u64 {
-        let p = engine.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked_east(k)).unwrap();
-        let q = pinned.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked_east(k)).unwrap();
+        let p =
+            engine.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked_east(k)).unwrap().position;
+        let q =
+            pinned.push_scan_with_motion(&scan(k * SECOND, &unexplained), &walked_east(k)).unwrap().position;
         let truth = 3.0 * k as f64 + 3.0;
         // About 2.7 m of each 3 m walked (measured 14.4, 17.1, 19.9 m), behind the truth.
         assert!(p.x > last_x + 2.0 && p.x < truth, "{truth} {p:?}");
@@ -460,10 +465,13 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
     }
     assert!(unsurveyed_mass(&engine) > 0.99);
     // A motion-only epoch out there moves it on.
-    let p = engine.advance_with_motion(8 * SECOND, &walked_east(8)).unwrap();
+    let p = engine.advance_with_motion(8 * SECOND, &walked_east(8)).unwrap().position;
     assert!(p.x > last_x + 2.0, "{p:?}");
     // The radio explains a scan again: back on the map, the unsurveyed states emptied.
-    let p = engine.push_scan_with_motion(&scan(9 * SECOND, &explained_at(12.0)), &walked_east(9)).unwrap();
+    let p = engine
+        .push_scan_with_motion(&scan(9 * SECOND, &explained_at(12.0)), &walked_east(9))
+        .unwrap()
+        .position;
     assert_eq!(unsurveyed_mass(&engine), 0.0);
     assert!((p.x - 12.0).abs() < 1.5 && p.beyond_radio_m == 0.0, "{p:?}");
 }
@@ -523,7 +531,8 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
     let default = EngineConfig::default;
     // Radii: the band's factors where it has some, else the scenario's (none here: 1).
     let (a, b) = (run(&plain, default(), &throttled), run(&scales, default(), &throttled));
-    let ratios: Vec<f64> = a.iter().zip(&b).map(|(a, b)| b.0.accuracy_m / a.0.accuracy_m).collect();
+    let ratios: Vec<f64> =
+        a.iter().zip(&b).map(|(a, b)| b.0.position.accuracy_m / a.0.position.accuracy_m).collect();
     let expected = |s: u64| match s {
         1 | 31 => 3.0,
         3 | 5 | 33 | 35 => 5.0,
@@ -534,7 +543,10 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
         assert_eq!(a[k].1, b[k].1, "the factors change the radii only");
     }
     let (a, b) = (run(&plain, default(), &steady), run(&scales, default(), &steady));
-    assert!((b[0].0.accuracy_m / a[0].0.accuracy_m - 3.0).abs() < 1e-9, "the first scan is sparse");
+    assert!(
+        (b[0].0.position.accuracy_m / a[0].0.position.accuracy_m - 3.0).abs() < 1e-9,
+        "the first scan is sparse"
+    );
     assert!(a.iter().zip(&b).skip(1).all(|(a, b)| a.0 == b.0), "a steady stream keeps the site's factors");
     // γ: the first epoch has no movement likelihood; from the second on, the sparse γ.
     let (a, b) = (run(&plain, default(), &throttled), run(&gamma, default(), &throttled));

@@ -4,10 +4,10 @@
 mod common;
 
 use common::{scan, two_floor_site};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
 use waymark::TransitionModel;
-use waymark::{Engine, EngineConfig, InputError, Position, PositionListener, StatusEvent, TrackPoint};
+use waymark::{Engine, EngineConfig, Epoch, InputError, Position, StatusEvent, TrackPoint};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -38,16 +38,14 @@ struct Recorder {
     revisions: Vec<Vec<TrackPoint>>,
 }
 
-struct Shared(Arc<Mutex<Recorder>>);
-impl PositionListener for Shared {
-    fn on_position(&mut self, p: &Position) {
-        self.0.lock().unwrap().positions.push(p.clone());
-    }
-    fn on_status(&mut self, s: &StatusEvent) {
-        self.0.lock().unwrap().statuses.push(s.clone());
-    }
-    fn on_track_revised(&mut self, r: &[TrackPoint]) {
-        self.0.lock().unwrap().revisions.push(r.to_vec());
+impl Recorder {
+    /// Keeps what an epoch returned.
+    fn take(&mut self, epoch: Epoch) {
+        self.positions.push(epoch.position);
+        self.statuses.extend(epoch.status);
+        if !epoch.revised_track.is_empty() {
+            self.revisions.push(epoch.revised_track);
+        }
     }
 }
 
@@ -60,7 +58,8 @@ fn every_model_follows_a_walk_and_the_track_has_every_epoch() {
             let x = 3.0 * k as f64;
             let p = engine
                 .push_scan_with_motion(&scan(SECOND * (k + 1), &readings_at(0, x)), &walking(4))
-                .unwrap();
+                .unwrap()
+                .position;
             assert!((p.x - x).abs() < 1.0 && p.floor == 0, "{model:?}: {p:?}");
             assert_eq!(p.scenario, MdiScenario::DistanceHeading);
         }
@@ -87,12 +86,10 @@ fn every_model_follows_a_walk_and_the_track_has_every_epoch() {
 #[test]
 fn scenario_and_motion_changes_are_announced() {
     let mut engine = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
-    let recorder = Arc::new(Mutex::new(Recorder::default()));
-    engine.subscribe(Box::new(Shared(Arc::clone(&recorder))));
-    engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
-    engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), &walking(4)).unwrap();
-    engine.push_scan_with_motion(&scan(3 * SECOND, &readings_at(0, 6.0)), &walking(4)).unwrap();
-    let r = recorder.lock().unwrap();
+    let mut r = Recorder::default();
+    r.take(engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap());
+    r.take(engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), &walking(4)).unwrap());
+    r.take(engine.push_scan_with_motion(&scan(3 * SECOND, &readings_at(0, 6.0)), &walking(4)).unwrap());
     assert_eq!(r.positions.len(), 3);
     assert_eq!(
         r.statuses,
@@ -134,16 +131,14 @@ fn symmetric_corridor() -> waymark::Site {
 #[test]
 fn a_later_epoch_revises_an_ambiguous_past() {
     let mut engine = Engine::new(Arc::new(symmetric_corridor()), EngineConfig::default()).unwrap();
-    let recorder = Arc::new(Mutex::new(Recorder::default()));
-    engine.subscribe(Box::new(Shared(Arc::clone(&recorder))));
+    let mut r = Recorder::default();
     // At an end: which one, the radio cannot say.
-    engine.push_scan(&scan(SECOND, &[(0, -50.0)])).unwrap();
+    r.take(engine.push_scan(&scan(SECOND, &[(0, -50.0)])).unwrap());
     let first_guess = engine.track()[0].x;
     // Four steps east, and the signal fades: only the west end fits.
-    engine.push_scan_with_motion(&scan(2 * SECOND, &[(0, -60.0)]), &walking(4)).unwrap();
+    r.take(engine.push_scan_with_motion(&scan(2 * SECOND, &[(0, -60.0)]), &walking(4)).unwrap());
     let track = engine.track();
     assert_eq!(track.iter().map(|p| p.x).collect::<Vec<_>>(), vec![0.0, 3.0]);
-    let r = recorder.lock().unwrap();
     if first_guess != 0.0 {
         assert_eq!(r.revisions.len(), 1, "{:?}", r.revisions);
         assert_eq!(r.revisions[0], vec![track[0].clone()]);
@@ -167,7 +162,7 @@ fn standing_still_holds_the_estimate_that_walking_would_move() {
         let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
         engine.push_scan(&scan(SECOND, &readings_at(0, 6.0))).unwrap();
         // The radio now leans towards x = 9 by about 3.6 nats.
-        engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 7.6)), motion).unwrap()
+        engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 7.6)), motion).unwrap().position
     };
     let held = run(&still);
     assert!((held.x - 6.0).abs() < 0.5, "{held:?}");
@@ -182,7 +177,7 @@ fn motion_epochs_move_the_estimate_without_radio() {
     engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
     let mut p = None;
     for k in 0..4u64 {
-        p = Some(engine.advance_with_motion(SECOND * (k + 2), &walking(4)).unwrap());
+        p = Some(engine.advance_with_motion(SECOND * (k + 2), &walking(4)).unwrap().position);
     }
     let p = p.unwrap();
     assert!(p.radio_log_evidence.is_none());
@@ -196,7 +191,7 @@ fn motion_with_a_nan_or_negative_field_is_rejected_and_changes_nothing() {
     // Found by fuzzing (`engine_calls`): a NaN heading given with a scan came out as the
     // position's heading.
     let mut engine = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
-    let first = engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
+    let first = engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap().position;
     let posterior = engine.posterior().to_vec();
     let bad = [
         MotionUpdate { heading_rad: Some(f64::NAN), ..walking(4) },
@@ -215,6 +210,7 @@ fn motion_with_a_nan_or_negative_field_is_rejected_and_changes_nothing() {
     assert_eq!(engine.stats().scans_invalid_motion, bad.len() as u64);
     assert_eq!(engine.posterior(), &posterior[..]);
     assert_eq!(engine.position(), Some(&first));
-    let p = engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), &walking(4)).unwrap();
+    let p =
+        engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), &walking(4)).unwrap().position;
     assert!(p.heading_rad.is_some_and(f64::is_finite));
 }

@@ -191,8 +191,8 @@ fn the_bias_of_external_fixes_is_learned_and_taken_off() {
         floor: Some(0),
         accuracy_m: 1.0,
     };
-    let corrected = engine.push_fix(&fix).unwrap();
-    let raw = plain.push_fix(&fix).unwrap();
+    let corrected = engine.push_fix(&fix).unwrap().position;
+    let raw = plain.push_fix(&fix).unwrap().position;
     assert!((corrected.x - 6.0).abs() < (raw.x - 6.0).abs() - 0.5, "corrected {corrected:?} raw {raw:?}");
 }
 
@@ -264,7 +264,7 @@ proptest::proptest! {
             Ok(()) => {}
             Err(_) => proptest::prop_assert_eq!(engine.export_habits(), before),
         }
-        let p = engine.push_scan(&scan(SECOND, &readings_at(6.0))).unwrap();
+        let p = engine.push_scan(&scan(SECOND, &readings_at(6.0))).unwrap().position;
         proptest::prop_assert!(p.x.is_finite() && p.accuracy_m > 0.0);
         proptest::prop_assert!((engine.posterior().iter().sum::<f64>() - 1.0).abs() < 1e-9);
     }

@@ -30,12 +30,12 @@ use waymark::ffi::uniffi::{
     TransitionKind, WifiReading,
 };
 use waymark::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
+use waymark::EngineSnapshot;
 use waymark::TransitionModel;
 use waymark::{
-    Engine, EngineConfig, InputError, InputStats, Position, PositionFix, PositionListener, Reading, Scan,
-    Site, TrackPoint, TransmitterId, Zone, ZoneKind,
+    Engine, EngineConfig, Epoch, InputError, InputStats, Position, PositionFix, Reading, Scan, Site,
+    TrackPoint, TransmitterId, Zone, ZoneKind,
 };
-use waymark::{EngineSnapshot, StatusEvent};
 use waymark_sim::{imu, Office, OfficeConfig};
 
 const SECOND: u64 = 1_000_000_000;
@@ -588,40 +588,8 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
 struct Panicked;
 
 /// Runs an epoch call, catching a panic (the injected one is expected; any other fails).
-fn guarded(
-    call: impl FnOnce() -> Result<Position, InputError>,
-) -> Result<Result<Position, InputError>, Panicked> {
+fn guarded(call: impl FnOnce() -> Result<Epoch, InputError>) -> Result<Result<Epoch, InputError>, Panicked> {
     std::panic::catch_unwind(std::panic::AssertUnwindSafe(call)).map_err(|_| Panicked)
-}
-
-/// What a listener heard, checked as it hears it.
-#[derive(Default)]
-struct Heard {
-    positions: Vec<Position>,
-    problems: Vec<String>,
-}
-
-struct Recorder {
-    fixture: usize,
-    heard: Arc<Mutex<Heard>>,
-}
-
-impl PositionListener for Recorder {
-    fn on_position(&mut self, position: &Position) {
-        let mut heard = self.heard.lock().unwrap();
-        if let Err(e) = check_position(&FIXTURES[self.fixture], position) {
-            heard.problems.push(format!("listener: {e}"));
-        }
-        heard.positions.push(position.clone());
-    }
-
-    fn on_status(&mut self, _status: &StatusEvent) {}
-
-    fn on_track_revised(&mut self, revised: &[TrackPoint]) {
-        if let Err(e) = check_track(&FIXTURES[self.fixture], revised, Some(u64::MAX)) {
-            self.heard.lock().unwrap().problems.push(format!("revision: {e}"));
-        }
-    }
 }
 
 // --- The core engine ------------------------------------------------------------------------
@@ -671,10 +639,7 @@ fn run_core(
     let f = &FIXTURES[fixture];
     let config = EngineConfig { transition, max_reading_age_ns, ..EngineConfig::default() };
     let mut engine = Engine::new(Arc::clone(&f.site), config).unwrap();
-    let heard = Arc::new(Mutex::new(Heard::default()));
-    engine.subscribe(Box::new(Recorder { fixture, heard: Arc::clone(&heard) }));
     let mut clock = Clock::default();
-    let mut epochs = 0;
     check_engine(f, &engine)?;
     for (n, call) in calls.iter().enumerate() {
         let before = engine.snapshot();
@@ -771,8 +736,7 @@ fn run_core(
         let after = engine.snapshot();
         match outcome {
             Some((t, _, Err(Panicked))) => {
-                // The injected panic half-way through an epoch: undone, counters included. The
-                // listener heard the position before the panic; that cannot be taken back.
+                // The injected panic half-way through an epoch: undone, counters included.
                 prop_assert!(
                     cfg!(feature = "fault-injection") && t == waymark::FAULT_INJECTION_MID_EPOCH_NS,
                     "call {} ({:?} at {}) panicked",
@@ -781,18 +745,14 @@ fn run_core(
                     t
                 );
                 prop_assert_eq!(&after, &before, "call {} panicked half-way and changed the engine", n);
-                let mut heard = heard.lock().unwrap();
-                prop_assert_eq!(heard.positions.len(), epochs + 1);
-                heard.positions.pop();
             }
-            Some((t, _, Ok(Ok(p)))) => {
-                epochs += 1;
+            Some((t, _, Ok(Ok(epoch)))) => {
+                let p = &epoch.position;
                 prop_assert_eq!(p.timestamp_ns, t);
                 prop_assert_eq!(after.last_epoch_ns, Some(t));
-                prop_assert_eq!(engine.position(), Some(&p));
-                let heard = heard.lock().unwrap();
-                prop_assert_eq!(heard.positions.len(), epochs, "one position per epoch to the listener");
-                prop_assert_eq!(heard.positions.last(), Some(&p));
+                prop_assert_eq!(engine.position(), Some(p));
+                check_position(f, p)?;
+                check_track(f, &epoch.revised_track, Some(u64::MAX))?;
             }
             Some((t, kind, Ok(Err(e)))) => {
                 prop_assert_eq!(
@@ -815,8 +775,6 @@ fn run_core(
         }
         check_engine(f, &engine)
             .map_err(|e| TestCaseError::fail(format!("after call {n} ({call:?}): {e}")))?;
-        let heard = heard.lock().unwrap();
-        prop_assert!(heard.problems.is_empty(), "{:?}", heard.problems);
     }
     Ok(())
 }
@@ -1177,7 +1135,7 @@ fn invalid_motion_from_outside_is_rejected() {
         assert_eq!(engine.stats().advances_rejected, k as u64 + 1);
         assert_eq!(without_stats(engine.snapshot()), without_stats(before));
     }
-    let p = engine.push_scan_with_motion(&scan(SECOND), &good).unwrap();
+    let p = engine.push_scan_with_motion(&scan(SECOND), &good).unwrap().position;
     assert_eq!(p.heading_accuracy_rad, Some(0.1));
     engine.advance_with_motion(2 * SECOND, &good).unwrap();
 }

@@ -44,25 +44,25 @@ fn assert_distribution(p: &[f64]) {
 #[test]
 fn positions_carry_the_most_likely_zone() {
     let mut engine = engine_on(zoned_site());
-    let p = engine.push_scan(&scan(SECOND, &readings_at(0, 12.0))).unwrap();
+    let p = engine.push_scan(&scan(SECOND, &readings_at(0, 12.0))).unwrap().position;
     assert_eq!(p.zone, Some(1), "{p:?}");
     let zones = engine.zone_posterior();
     assert_eq!(zones.len(), 3);
     assert_eq!(p.zone_probability, zones[1]);
     assert!(zones[1] > 0.9 && zones.iter().sum::<f64>() <= 1.0 + 1e-12, "{zones:?}");
     // Mass outside every zone beats any one zone: no zone.
-    let p = engine.push_scan(&scan(2 * SECOND, &readings_at(0, 6.0))).unwrap();
+    let p = engine.push_scan(&scan(2 * SECOND, &readings_at(0, 6.0))).unwrap().position;
     let zones = engine.zone_posterior();
     let outside = 1.0 - zones.iter().sum::<f64>();
     assert!(outside > zones[0] && outside > zones[1], "{zones:?}");
     assert_eq!(p.zone, None);
     assert!((p.zone_probability - outside).abs() < 1e-12);
-    let p = engine.push_scan(&scan(3 * SECOND, &readings_at(1, 3.0))).unwrap();
+    let p = engine.push_scan(&scan(3 * SECOND, &readings_at(1, 3.0))).unwrap().position;
     assert_eq!(p.zone, Some(2));
 
     // A site without zones: always no zone, with certainty.
     let mut plain = engine_on(two_floor_site());
-    let p = plain.push_scan(&scan(SECOND, &readings_at(0, 12.0))).unwrap();
+    let p = plain.push_scan(&scan(SECOND, &readings_at(0, 12.0))).unwrap().position;
     assert_eq!((p.zone, p.zone_probability), (None, 1.0));
     assert!(plain.zone_posterior().is_empty());
 }
@@ -73,7 +73,7 @@ fn confirming_a_zone_pins_the_posterior_to_it() {
     engine.push_scan(&scan(SECOND, &readings_at(0, 12.0))).unwrap();
     assert_eq!(engine.position().unwrap().zone, Some(1));
     // The user says: west, at the time of the position they were shown. That epoch is pinned.
-    let p = engine.confirm_zone_named(SECOND, "west").unwrap();
+    let p = engine.confirm_zone_named(SECOND, "west").unwrap().position;
     assert_eq!((p.timestamp_ns, p.zone), (SECOND, Some(0)));
     assert!((p.zone_probability - 1.0).abs() < 1e-12, "{p:?}");
     assert!(p.x <= 3.0 + 1e-9, "{p:?}");
@@ -85,7 +85,7 @@ fn confirming_a_zone_pins_the_posterior_to_it() {
     assert_eq!(engine.history()[0].allowed, Some(vec![0, 1]));
     assert_eq!(engine.history()[0].input, EpochInput::Scan);
     // Later feedback is an epoch of its own; by index, on another floor.
-    let p = engine.confirm_zone(3 * SECOND, 2).unwrap();
+    let p = engine.confirm_zone(3 * SECOND, 2).unwrap().position;
     assert_eq!((p.timestamp_ns, p.floor, p.zone), (3 * SECOND, 1, Some(2)));
     assert_eq!(engine.history().len(), 2);
     assert_eq!(engine.history()[1].input, EpochInput::Feedback);
@@ -101,7 +101,7 @@ fn confirming_a_zone_pins_the_posterior_to_it() {
 fn a_confirmed_position_pins_the_states_within_its_radius() {
     let mut engine = engine_on(zoned_site());
     engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
-    let p = engine.confirm_position(2 * SECOND, 7.0, 0.5, 0, 2.0).unwrap();
+    let p = engine.confirm_position(2 * SECOND, 7.0, 0.5, 0, 2.0).unwrap().position;
     assert!((p.x - 6.0).abs() < 1e-9 && p.floor == 0, "only the state at x = 6 is within 2 m: {p:?}");
     assert_eq!(p.zone, None);
     assert_eq!(engine.posterior()[2], 1.0);
@@ -164,7 +164,7 @@ fn contradicting_feedback_at_one_epoch_ends_with_the_latest() {
     let mut engine = engine_on(zoned_site());
     engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
     engine.confirm_zone_named(SECOND, "west").unwrap();
-    let p = engine.confirm_zone_named(SECOND, "east").unwrap();
+    let p = engine.confirm_zone_named(SECOND, "east").unwrap().position;
     assert_eq!(p.zone, Some(1));
     assert_distribution(engine.posterior());
     assert_eq!(engine.history()[0].allowed, Some(vec![3, 4]));
@@ -182,7 +182,7 @@ fn pull_of_a_fix(offset_m: f64, accuracy_m: f64) -> (f64, f64) {
     let walk = office.walk(3, 20.0);
     let mut last = None;
     for e in walk.epochs.iter().take(6) {
-        last = Some(engine.push_scan(&e.scan).unwrap());
+        last = Some(engine.push_scan(&e.scan).unwrap().position);
     }
     let before = last.unwrap();
     let east = Point2::new(before.x + offset_m, before.y);
@@ -200,7 +200,7 @@ fn pull_of_a_fix(offset_m: f64, accuracy_m: f64) -> (f64, f64) {
         floor: None,
         accuracy_m,
     };
-    let after = engine.push_fix(&fix).unwrap();
+    let after = engine.push_fix(&fix).unwrap().position;
     assert_eq!(after.radio_log_evidence, None);
     assert_eq!(engine.history().back().unwrap().input, EpochInput::Fix(fix));
     let from_fix = |x: f64, y: f64| nalgebra::distance(&target, &Point2::new(x, y));
@@ -227,7 +227,7 @@ fn a_fix_with_a_floor_rules_out_the_other_floors() {
     let mut engine = engine_on(zoned_site());
     engine.push_scan(&scan(SECOND, &readings_at(0, 3.0))).unwrap();
     let fix = PositionFix { timestamp_ns: 2 * SECOND, x: 3.0, y: 0.0, floor: Some(1), accuracy_m: 3.0 };
-    let p = engine.push_fix(&fix).unwrap();
+    let p = engine.push_fix(&fix).unwrap().position;
     assert_eq!(p.floor, 1);
     assert!(engine.posterior()[..5].iter().all(|&v| v == 0.0));
     assert_eq!(engine.stats().fixes_accepted, 1);

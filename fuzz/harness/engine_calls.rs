@@ -1,7 +1,7 @@
 //! `engine_calls`: a sequence of calls decoded from the input, made on the core `Engine` and on
 //! the FFI `PositioningEngine` over the same site: inertial batches (any timestamps, NaN, ±inf,
 //! huge values, up to 4096 samples), scans (empty, duplicated and unknown transmitters, NaN or
-//! infinite RSSI, any age), advances, motion given from outside, queries, subscriptions.
+//! infinite RSSI, any age), advances, motion given from outside, queries, FFI subscriptions.
 //!
 //! After every call: the posterior is a distribution; every position and track point that
 //! leaves either engine is finite with a radius > 0; a scan or advance is taken exactly when
@@ -15,8 +15,8 @@ use std::sync::{Arc, OnceLock, Weak};
 use waymark::ffi::uniffi as ffi;
 use waymark::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
 use waymark::TransitionModel;
-use waymark::{Engine, EngineConfig, InputError, Position, PositionListener, Reading, Scan, Site};
-use waymark::{SubscriptionId, TrackPoint, TransmitterId};
+use waymark::TransmitterId;
+use waymark::{Engine, EngineConfig, Epoch, InputError, Position, Reading, Scan, Site};
 use waymark_sim::{imu, Office, OfficeConfig};
 
 /// Calls decoded from one input, at most.
@@ -475,23 +475,6 @@ fn error_kind(e: &InputError) -> &'static str {
     }
 }
 
-/// Checks every position and track revision the core engine publishes.
-struct CoreChecker {
-    floors: usize,
-    states: usize,
-}
-
-impl PositionListener for CoreChecker {
-    fn on_position(&mut self, position: &Position) {
-        checks::position(position, self.floors);
-    }
-
-    fn on_track_revised(&mut self, revised: &[TrackPoint]) {
-        assert!(!revised.is_empty(), "an empty revision");
-        checks::track(revised, self.states, self.floors);
-    }
-}
-
 /// Checks what the FFI delivers; may call back into the engine, or fail.
 struct FfiChecker {
     floor_names: Vec<String>,
@@ -548,7 +531,6 @@ struct Session<'f> {
     lockstep: bool,
     core_last: Option<u64>,
     ffi_last: Option<u64>,
-    core_subscriptions: Vec<(SubscriptionId, bool)>,
     ffi_subscriptions: Vec<Arc<ffi::Subscription>>,
 }
 
@@ -627,16 +609,17 @@ impl Session<'_> {
         &mut self,
         timestamp_ns: u64,
         rejection: Option<&'static str>,
-        call: impl FnOnce(&mut Engine) -> Result<Position, InputError>,
+        call: impl FnOnce(&mut Engine) -> Result<Epoch, InputError>,
     ) -> Option<Position> {
         let before = (self.core.posterior().to_vec(), self.core.position().cloned(), self.core.track());
         let stats = self.core.stats().clone();
         match (call(&mut self.core), rejection) {
-            (Ok(p), None) => {
-                assert_eq!(p.timestamp_ns, timestamp_ns);
-                checks::position(&p, self.floors());
+            (Ok(Epoch { position, revised_track, .. }), None) => {
+                assert_eq!(position.timestamp_ns, timestamp_ns);
+                checks::position(&position, self.floors());
+                checks::track(&revised_track, self.states(), self.floors());
                 self.core_last = Some(timestamp_ns);
-                Some(p)
+                Some(position)
             }
             (Err(e), Some(why)) => {
                 assert_eq!(error_kind(&e), why, "rejected for the wrong reason: {e}");
@@ -757,7 +740,6 @@ pub fn run(data: &[u8]) {
         lockstep,
         core_last: None,
         ffi_last: None,
-        core_subscriptions: Vec::new(),
         ffi_subscriptions: Vec::new(),
     };
     let mut clock = Clock { now: 0 };
@@ -781,20 +763,7 @@ pub fn run(data: &[u8]) {
                 s.advance(t);
             }
             10 => s.queries(),
-            11 => {
-                let checker = CoreChecker { floors: s.floors(), states: s.states() };
-                let id = s.core.subscribe(Box::new(checker));
-                s.core_subscriptions.push((id, true));
-            }
-            12 => {
-                if !s.core_subscriptions.is_empty() {
-                    let k = c.below(s.core_subscriptions.len());
-                    let (id, active) = &mut s.core_subscriptions[k];
-                    assert_eq!(s.core.unsubscribe(*id), *active, "unsubscribe's answer");
-                    *active = false;
-                }
-            }
-            13 => {
+            11 | 13 => {
                 let flags = c.u8();
                 if let Some(ffi) = &s.ffi {
                     let checker = FfiChecker {
@@ -807,7 +776,7 @@ pub fn run(data: &[u8]) {
                     s.ffi_subscriptions.push(subscription);
                 }
             }
-            14 => {
+            12 | 14 => {
                 if !s.ffi_subscriptions.is_empty() {
                     let k = c.below(s.ffi_subscriptions.len());
                     let subscription = s.ffi_subscriptions.remove(k);

@@ -63,13 +63,13 @@ fn exercise(mut engine: Engine) {
     };
     for (k, rssi) in [(1u64, -60.0), (4, -85.0), (5, waymark::MAX_RSSI_DBM)] {
         match engine.push_scan(&scan(k * 1_000_000_000, rssi)) {
-            Ok(p) => checks::position(&p, floors),
+            Ok(e) => checks::position(&e.position, floors),
             Err(InputError::EmptyScan) => assert!(transmitters.is_empty()),
             Err(e) => panic!("a scan of the site's own transmitters was rejected: {e}"),
         }
         checks::posterior(engine.posterior(), states);
         if k == 1 {
-            let p = engine.advance(2_500_000_000).expect("an advance in time order is taken");
+            let p = engine.advance(2_500_000_000).expect("an advance in time order is taken").position;
             checks::position(&p, floors);
             checks::posterior(engine.posterior(), states);
         }

@@ -1,7 +1,7 @@
-//! One epoch: the scan's emissions, the filter step, the estimate and its publication.
+//! One epoch: the scan's emissions, the filter step, the estimate and what it returns.
 
 use super::input::check_motion;
-use super::{Engine, Position, StatusEvent, TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM};
+use super::{Engine, Epoch, Position, StatusEvent, TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM};
 use crate::error::InputError;
 use crate::history::{EpochInput, EpochRecord, History};
 use crate::hmm::estimate;
@@ -14,7 +14,7 @@ impl Engine {
         &mut self,
         scan: &Scan,
         motion: Option<&MotionUpdate>,
-    ) -> Result<Position, InputError> {
+    ) -> Result<Epoch, InputError> {
         self.check_time(scan.timestamp_ns)?;
         motion.map_or(Ok(()), check_motion)?;
         if scan.readings.is_empty() {
@@ -68,7 +68,7 @@ impl Engine {
         }))
     }
 
-    /// Prediction, update, estimate, publication, history. `ln_emission` holds the observation
+    /// Prediction, update, estimate, status events, history. `ln_emission` holds the observation
     /// (zeros for motion alone); `allowed` is the user's feedback at this epoch.
     pub(super) fn run_epoch(
         &mut self,
@@ -76,7 +76,7 @@ impl Engine {
         input: EpochInput,
         allowed: Option<Vec<u32>>,
         motion: &MotionUpdate,
-    ) -> Position {
+    ) -> Epoch {
         let dt_s = self.last_epoch_ns.map(|last| (timestamp_ns - last) as f64 * 1e-9);
         let radio = self.epoch_radio_fit.take().filter(|_| input == EpochInput::Scan);
         let beyond_radio_m = self.beyond_radio_m(radio.map(|r| r.1), dt_s, motion);
@@ -161,23 +161,26 @@ impl Engine {
         }
     }
 
-    /// Publishes `position`, makes it the latest and records it in the history, last: nothing
-    /// after a possible panic, so the history needs no undo.
+    /// The epoch of `position`: its status events and track revisions against the latest
+    /// position, which it then becomes, and its record in the history, last: nothing after a
+    /// possible panic, so the history needs no undo.
     pub(super) fn conclude(
         &mut self,
         position: Position,
         record: impl FnOnce(&mut History, &Position),
-    ) -> Position {
-        self.publish(&position);
+    ) -> Epoch {
+        let status = self.status_changes(&position);
+        let revised_track = self.revise_track();
         if cfg!(feature = "fault-injection") && position.timestamp_ns == FAULT_INJECTION_MID_EPOCH_NS {
             panic!("fault injected in the middle of the epoch at {}", position.timestamp_ns);
         }
         self.latest = Some(position.clone());
         record(&mut self.history, &position);
-        position
+        Epoch { position, status, revised_track }
     }
 
-    pub(super) fn publish(&mut self, position: &Position) {
+    /// What changed about the session between the latest position and `position`.
+    fn status_changes(&self, position: &Position) -> Vec<StatusEvent> {
         let mut events = Vec::new();
         if let Some(previous) = &self.latest {
             if previous.scenario != position.scenario {
@@ -195,27 +198,18 @@ impl Engine {
                 });
             }
         }
-        let revised = self.revise_track();
-        for (_, listener) in &mut self.listeners {
-            for event in &events {
-                listener.on_status(event);
-            }
-            if !revised.is_empty() {
-                listener.on_track_revised(&revised);
-            }
-            listener.on_position(position);
-        }
+        events
     }
 
-    /// The points of the Viterbi path, before the newest epoch, that differ from what was last
-    /// published.
+    /// The points of the Viterbi path, before the newest epoch, that differ from what the
+    /// previous epoch returned.
     pub(super) fn revise_track(&mut self) -> Vec<TrackPoint> {
         let track = self.track();
         let revised: Vec<TrackPoint> = match track.split_last() {
             Some((_, earlier)) => earlier
                 .iter()
                 .filter(|p| {
-                    self.published_track
+                    self.last_track
                         .iter()
                         .find(|q| q.timestamp_ns == p.timestamp_ns)
                         .is_some_and(|q| q.state != p.state)
@@ -224,7 +218,7 @@ impl Engine {
                 .collect(),
             None => Vec::new(),
         };
-        self.published_track = track;
+        self.last_track = track;
         revised
     }
 }

@@ -1,7 +1,7 @@
 //! The inputs an engine takes: inertial batches, scans, advances without radio, position
 //! fixes and user feedback, each epoch run atomically.
 
-use super::{Engine, Position};
+use super::{Engine, Epoch, Position};
 use crate::error::InputError;
 use crate::fix::{self, PositionFix};
 use crate::history::EpochInput;
@@ -28,18 +28,14 @@ impl Engine {
     /// Takes a WiFi or BLE scan: one epoch of the HMM, with the motion the inertial sensors
     /// measured since the previous epoch (push the inertial batches up to the scan's time
     /// first). A rejected scan leaves the engine as it was and is counted by reason.
-    pub fn push_scan(&mut self, scan: &Scan) -> Result<Position, InputError> {
+    pub fn push_scan(&mut self, scan: &Scan) -> Result<Epoch, InputError> {
         self.push_scan_from(scan, None)
     }
 
     /// Takes a scan with motion measured outside Waymark (a platform step detector, a test)
     /// instead of the engine's own inertial tracker. Motion with a non-finite value or a
     /// negative distance or spread rejects the scan.
-    pub fn push_scan_with_motion(
-        &mut self,
-        scan: &Scan,
-        motion: &MotionUpdate,
-    ) -> Result<Position, InputError> {
+    pub fn push_scan_with_motion(&mut self, scan: &Scan, motion: &MotionUpdate) -> Result<Epoch, InputError> {
         self.push_scan_from(scan, Some(motion))
     }
 
@@ -47,7 +43,7 @@ impl Engine {
         &mut self,
         scan: &Scan,
         motion: Option<&MotionUpdate>,
-    ) -> Result<Position, InputError> {
+    ) -> Result<Epoch, InputError> {
         let result = self.scan_epoch(scan, motion);
         if let Err(e) = &result {
             let counter = match e {
@@ -73,7 +69,7 @@ impl Engine {
     /// since the previous epoch: call it on a timer when scans are rare (iOS, throttled
     /// Android) to keep the position moving. Scans older than it will then be rejected as out
     /// of order.
-    pub fn advance(&mut self, timestamp_ns: u64) -> Result<Position, InputError> {
+    pub fn advance(&mut self, timestamp_ns: u64) -> Result<Epoch, InputError> {
         self.advance_from(timestamp_ns, None)
     }
 
@@ -82,7 +78,7 @@ impl Engine {
         &mut self,
         timestamp_ns: u64,
         motion: &MotionUpdate,
-    ) -> Result<Position, InputError> {
+    ) -> Result<Epoch, InputError> {
         self.advance_from(timestamp_ns, Some(motion))
     }
 
@@ -90,7 +86,7 @@ impl Engine {
         &mut self,
         timestamp_ns: u64,
         motion: Option<&MotionUpdate>,
-    ) -> Result<Position, InputError> {
+    ) -> Result<Epoch, InputError> {
         let result = self.motion_epoch(timestamp_ns, motion);
         if let Err(e) = &result {
             self.stats.advances_rejected += 1;
@@ -103,7 +99,7 @@ impl Engine {
         &mut self,
         timestamp_ns: u64,
         motion: Option<&MotionUpdate>,
-    ) -> Result<Position, InputError> {
+    ) -> Result<Epoch, InputError> {
         self.check_time(timestamp_ns)?;
         motion.map_or(Ok(()), check_motion)?;
         Ok(self.atomically(motion.is_none(), |engine| {
@@ -122,7 +118,7 @@ impl Engine {
     /// `fixes_rejected`: a timestamp not after the last epoch, a NaN or infinite coordinate, an
     /// accuracy not > 0, an unknown floor, or a fix farther from every state than its own
     /// error allows (`fix::FIX_GATE_MASS`).
-    pub fn push_fix(&mut self, fix: &PositionFix) -> Result<Position, InputError> {
+    pub fn push_fix(&mut self, fix: &PositionFix) -> Result<Epoch, InputError> {
         let result = self.fix_epoch(fix);
         if let Err(e) = &result {
             self.stats.fixes_rejected += 1;
@@ -131,7 +127,7 @@ impl Engine {
         result
     }
 
-    pub(super) fn fix_epoch(&mut self, fix: &PositionFix) -> Result<Position, InputError> {
+    pub(super) fn fix_epoch(&mut self, fix: &PositionFix) -> Result<Epoch, InputError> {
         self.check_time(fix.timestamp_ns)?;
         // The learned fix error (§II-C): the bias taken off, the spread widened.
         let error = self.fix_error();
@@ -155,7 +151,7 @@ impl Engine {
     /// epoch of its own, with the motion since the previous one. Recorded in the
     /// [`history`](Self::history) for a learning pass. Rejected, changing nothing but
     /// `feedback_rejected`: a time before the latest epoch, or no such zone.
-    pub fn confirm_zone(&mut self, timestamp_ns: u64, zone: usize) -> Result<Position, InputError> {
+    pub fn confirm_zone(&mut self, timestamp_ns: u64, zone: usize) -> Result<Epoch, InputError> {
         let states = match self.site.zones().get(zone) {
             Some(z) => Ok(z.states.clone()),
             None => Err(InputError::UnknownZone { zone: format!("#{zone}") }),
@@ -164,7 +160,7 @@ impl Engine {
     }
 
     /// [`confirm_zone`](Self::confirm_zone) by the zone's name.
-    pub fn confirm_zone_named(&mut self, timestamp_ns: u64, name: &str) -> Result<Position, InputError> {
+    pub fn confirm_zone_named(&mut self, timestamp_ns: u64, name: &str) -> Result<Epoch, InputError> {
         let states = match self.site.zone_index(name) {
             Some(z) => Ok(self.site.zones()[z].states.clone()),
             None => Err(InputError::UnknownZone { zone: name.to_owned() }),
@@ -182,7 +178,7 @@ impl Engine {
         y: f64,
         floor: usize,
         radius_m: f64,
-    ) -> Result<Position, InputError> {
+    ) -> Result<Epoch, InputError> {
         let states = fix::states_within(&self.site, x, y, floor, radius_m);
         self.feedback(timestamp_ns, states)
     }
@@ -191,7 +187,7 @@ impl Engine {
         &mut self,
         timestamp_ns: u64,
         states: Result<Vec<u32>, InputError>,
-    ) -> Result<Position, InputError> {
+    ) -> Result<Epoch, InputError> {
         let result = self.feedback_epoch(timestamp_ns, states);
         if let Err(e) = &result {
             self.stats.feedback_rejected += 1;
@@ -204,7 +200,7 @@ impl Engine {
         &mut self,
         timestamp_ns: u64,
         states: Result<Vec<u32>, InputError>,
-    ) -> Result<Position, InputError> {
+    ) -> Result<Epoch, InputError> {
         let latest = self.latest.clone().filter(|p| p.timestamp_ns == timestamp_ns);
         if latest.is_none() {
             self.check_time(timestamp_ns)?;
@@ -231,7 +227,7 @@ impl Engine {
     /// Feedback at the time of the latest epoch: its posterior and Viterbi scores are weighted
     /// by `ln_emission` (no prediction), and its position revised. Feedback that contradicts
     /// earlier feedback at the same epoch wins: the posterior restarts on its states.
-    pub(super) fn pin_latest(&mut self, latest: Position, states: &[u32]) -> Position {
+    pub(super) fn pin_latest(&mut self, latest: Position, states: &[u32]) -> Epoch {
         if self.filter.step(None, &self.ln_emission).is_err() {
             self.restart();
         }
@@ -243,19 +239,17 @@ impl Engine {
     /// Runs the part of an accepted epoch that changes the engine so that it happens whole or
     /// not at all: a panic inside (a bug) undoes it, leaving the engine exactly as it was before
     /// the call, then goes on unwinding to the caller (the FFI turns it into an error). With
-    /// `uses_tracker` the epoch takes its motion from the tracker, which is saved too. What
-    /// listeners heard before the panic cannot be taken back: the FFI holds what its own
-    /// listener hears until the call has returned, and drops it on a panic.
+    /// `uses_tracker` the epoch takes its motion from the tracker, which is saved too.
     ///
     /// The cost, at every epoch: a pointer swap in the filter and in the Viterbi window (the
     /// scores they replace are kept aside, not copied), a copy of the last position, the
-    /// published track and the counters, and a clone of the tracker when it is used.
+    /// returned track and the counters, and a clone of the tracker when it is used.
     pub(super) fn atomically<T>(&mut self, uses_tracker: bool, epoch: impl FnOnce(&mut Self) -> T) -> T {
         self.undo.last_epoch_ns = self.last_epoch_ns;
         self.undo.unexplained_run = self.unexplained_run;
         self.undo.scan_timing = self.scan_timing;
         self.undo.latest.clone_from(&self.latest);
-        self.undo.published_track.clone_from(&self.published_track);
+        self.undo.last_track.clone_from(&self.last_track);
         self.undo.stats.clone_from(&self.stats);
         self.undo.tracker = uses_tracker.then(|| self.tracker.clone());
         self.filter.checkpoint();
@@ -274,7 +268,7 @@ impl Engine {
                 self.unexplained_run = self.undo.unexplained_run;
                 self.scan_timing = self.undo.scan_timing;
                 std::mem::swap(&mut self.latest, &mut self.undo.latest);
-                std::mem::swap(&mut self.published_track, &mut self.undo.published_track);
+                std::mem::swap(&mut self.last_track, &mut self.undo.last_track);
                 std::mem::swap(&mut self.stats, &mut self.undo.stats);
                 if let Some(tracker) = self.undo.tracker.take() {
                     self.tracker = tracker;

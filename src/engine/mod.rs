@@ -1,6 +1,6 @@
 //! The positioning session: takes inertial batches and scans in time order, runs one HMM epoch
-//! per scan (or per [`Engine::advance`] without radio), and publishes positions, status
-//! changes and track revisions to whoever polls or listens.
+//! per scan (or per [`Engine::advance`] without radio), and returns what each epoch produced:
+//! the position, status changes and track revisions ([`Epoch`]).
 //!
 //! The engine is single-threaded and deterministic, so a replay is exact; the FFI layer puts
 //! it behind a lock.
@@ -20,10 +20,7 @@ use crate::sensors::{MotionStats, MotionTracker};
 use crate::site::{ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
-pub use types::{
-    EngineSnapshot, InputStats, Position, PositionListener, ScanTiming, StatusEvent, SubscriptionId,
-    TrackPoint,
-};
+pub use types::{EngineSnapshot, Epoch, InputStats, Position, ScanTiming, StatusEvent, TrackPoint};
 
 /// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
 /// BLE transmit at most +36 dBm EIRP. A higher value is a corrupt producer, and one far higher
@@ -34,7 +31,7 @@ pub const MAX_RSSI_DBM: f64 = 100.0;
 
 /// With the `fault-injection` feature (test builds only), an epoch (a scan or an advance) at
 /// this time panics after it has stepped the filter and the track, moved the clock, raised the
-/// counters and told the listeners, just before it stores the position: as half-done as an
+/// counters and worked out its status events, just before it stores the position: as half-done as an
 /// epoch gets. The engine must come out of it exactly as it was before the call.
 pub const FAULT_INJECTION_MID_EPOCH_NS: u64 = u64::MAX - 8;
 
@@ -56,9 +53,7 @@ pub struct Engine {
     scratch: Vec<(f64, f64)>,
     last_epoch_ns: Option<u64>,
     latest: Option<Position>,
-    published_track: Vec<TrackPoint>,
-    listeners: Vec<(SubscriptionId, Box<dyn PositionListener>)>,
-    next_subscription: u64,
+    last_track: Vec<TrackPoint>,
     stats: InputStats,
     /// γ in effect per floor (the configuration's, else the floor's, else the site's) in
     /// epochs with and without a movement likelihood.
@@ -105,7 +100,7 @@ struct Undo {
     unexplained_run: u32,
     scan_timing: ScanTiming,
     latest: Option<Position>,
-    published_track: Vec<TrackPoint>,
+    last_track: Vec<TrackPoint>,
     stats: InputStats,
     /// Only for an epoch that takes its motion from the tracker.
     tracker: Option<MotionTracker>,
@@ -145,9 +140,7 @@ impl Engine {
             scratch: Vec::with_capacity(n),
             last_epoch_ns: None,
             latest: None,
-            published_track: Vec::new(),
-            listeners: Vec::new(),
-            next_subscription: 0,
+            last_track: Vec::new(),
             stats: InputStats::default(),
             rssi_weight,
             site_rssi_weight,
@@ -226,30 +219,14 @@ impl Engine {
             last_epoch_ns: self.last_epoch_ns,
             position: self.latest.clone(),
             posterior: self.filter.posterior().to_vec(),
-            published_track: self.published_track.clone(),
+            last_track: self.last_track.clone(),
             stats: self.stats.clone(),
-            subscriptions: (self.listeners.iter().map(|(id, _)| *id).collect(), self.next_subscription),
             internals: format!(
                 "{:?}\n{:?}\n{:?}\n{:?}",
                 self.filter, self.viterbi, self.tracker, self.scan_timing
             ),
             history: self.history.records().iter().cloned().collect(),
         }
-    }
-
-    /// Calls `listener` with everything published until [`unsubscribe`](Self::unsubscribe).
-    pub fn subscribe(&mut self, listener: Box<dyn PositionListener>) -> SubscriptionId {
-        let id = SubscriptionId(self.next_subscription);
-        self.next_subscription += 1;
-        self.listeners.push((id, listener));
-        id
-    }
-
-    /// Stops a subscription; `false` if it was not active.
-    pub fn unsubscribe(&mut self, id: SubscriptionId) -> bool {
-        let before = self.listeners.len();
-        self.listeners.retain(|(l, _)| *l != id);
-        self.listeners.len() != before
     }
 
     /// The most likely path over the last `track_window_epochs` epochs (HIPE §4.1: Viterbi for

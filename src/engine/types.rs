@@ -1,5 +1,5 @@
-//! What an engine publishes and reports: positions, track points, status events, listeners,
-//! input counts and snapshots, and the scan timing of the sparse regime.
+//! What an engine returns and reports: epochs with their positions, status events and track
+//! revisions, input counts and snapshots, and the scan timing of the sparse regime.
 
 #[allow(unused_imports)] // doc links
 use super::{Engine, MAX_RSSI_DBM};
@@ -97,26 +97,18 @@ pub enum StatusEvent {
     },
 }
 
-/// Receives what the engine publishes. Only `on_position` is required.
-pub trait PositionListener: Send {
-    /// Called after each epoch, on the thread that pushed the input.
-    fn on_position(&mut self, position: &Position);
-    /// Called when the motion scenario or state changes.
-    fn on_status(&mut self, _status: &StatusEvent) {}
-    /// Called when the most likely track changed for epochs before the latest one (a later
-    /// observation showed an earlier position was wrong): the revised points, oldest first.
-    fn on_track_revised(&mut self, _revised: &[TrackPoint]) {}
+/// What one epoch produced: the position, and what else changed with it. Every input that
+/// makes an epoch (a scan, an advance, a fix, feedback) returns one; there is no other channel.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Epoch {
+    /// Where the phone is now.
+    pub position: Position,
+    /// What changed about the session at this epoch, in the order it happened.
+    pub status: Vec<StatusEvent>,
+    /// The points of the most likely track, before this epoch, that a later observation moved
+    /// to another state since the previous epoch, oldest first; empty when none did.
+    pub revised_track: Vec<TrackPoint>,
 }
-
-impl<F: FnMut(&Position) + Send> PositionListener for F {
-    fn on_position(&mut self, position: &Position) {
-        self(position)
-    }
-}
-
-/// Identifies a subscription for [`Engine::unsubscribe`].
-#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub struct SubscriptionId(pub(super) u64);
 
 /// What the engine took and what it dropped, by reason.
 #[derive(Clone, Debug, Default, PartialEq, Eq)]
@@ -177,12 +169,10 @@ pub struct EngineSnapshot {
     pub position: Option<Position>,
     /// The posterior over the site's states.
     pub posterior: Vec<f64>,
-    /// The track as last published to listeners.
-    pub published_track: Vec<TrackPoint>,
+    /// The track as last returned ([`Epoch::revised_track`] is the change from it).
+    pub last_track: Vec<TrackPoint>,
     /// Counts of accepted and dropped input (a test decides whether these count as state).
     pub stats: InputStats,
-    /// The active subscriptions, and the next id.
-    pub subscriptions: (Vec<SubscriptionId>, u64),
     /// `Debug` of the forward filter, the Viterbi window and the motion tracker.
     pub internals: String,
     /// The epoch history with its feedback.

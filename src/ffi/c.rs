@@ -21,7 +21,7 @@ use super::delivery::lock;
 use super::error::PositioningError;
 use super::handle::{Event, Handle, Listeners, Options, Status};
 use crate::config::TransitionModel;
-use crate::engine::{Engine, Position};
+use crate::engine::{Engine, Epoch};
 use crate::radio::{Reading, Scan, TransmitterId};
 use crate::sensors::SensorSample;
 use crate::site::Site;
@@ -233,7 +233,7 @@ fn read<T>(
 fn epoch(
     engine: *mut waymark_engine,
     out: *mut waymark_position,
-    f: impl FnOnce(&mut Engine) -> Result<Position, crate::InputError>,
+    f: impl FnOnce(&mut Engine) -> Result<Epoch, crate::InputError>,
 ) -> waymark_result {
     with_handle(engine, |handle| match handle.epoch(f) {
         Ok(p) => {

@@ -2,8 +2,8 @@
 //! ([`super::uniffi`]) and C's `waymark_engine` ([`super::c`]).
 //!
 //! It owns what the two used to write each on their own: the lock around the single-threaded
-//! core [`Engine`], the panic boundary around every call into it, the queue of what the engine
-//! published (delivered after the lock is released, in the order of the epochs, by one thread
+//! core [`Engine`], the panic boundary around every call into it, the queue of what the epochs
+//! produced (delivered after the lock is released, in the order of the epochs, by one thread
 //! at a time: [`Delivery`]), and the mapping of the core's errors to [`PositioningError`].
 //! Each FFI only converts arguments and results and says how to call its app's listeners
 //! ([`Listeners`]).
@@ -11,7 +11,7 @@
 use super::delivery::{lock, Delivery};
 use super::error::PositioningError;
 use crate::config::{EngineConfig, TransitionModel};
-use crate::engine::{self, Engine, Position, PositionListener as CoreListener};
+use crate::engine::{self, Engine, Epoch, Position};
 use crate::radio::Scan;
 use crate::sensors::{MdiScenario, MotionState};
 use crate::site::Site;
@@ -19,7 +19,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 
-/// What the engine published, or a call's failure, waiting for delivery to the app.
+/// What an epoch produced, or a call's failure, waiting for delivery to the app.
 #[derive(Clone, Debug)]
 pub(crate) enum Event {
     /// A new position.
@@ -116,34 +116,6 @@ fn fault_injection(timestamp_ns: u64) {
     }
 }
 
-/// Stages the core engine's publications (under the engine's lock, so in the order of the
-/// epochs); they are queued when the call that made them returns, dropped if it panics.
-struct Collector {
-    events: Arc<Delivery<Event>>,
-}
-
-impl CoreListener for Collector {
-    fn on_position(&mut self, p: &Position) {
-        self.events.stage(Event::Position(p.clone()));
-    }
-
-    fn on_status(&mut self, status: &engine::StatusEvent) {
-        let status = match *status {
-            engine::StatusEvent::ScenarioChanged { timestamp_ns, to, .. } => {
-                Status::ScenarioChanged { timestamp_ns, scenario: to }
-            }
-            engine::StatusEvent::MotionStateChanged { timestamp_ns, to, .. } => {
-                Status::MotionStateChanged { timestamp_ns, state: to }
-            }
-        };
-        self.events.stage(Event::Status(status));
-    }
-
-    fn on_track_revised(&mut self, revised: &[engine::TrackPoint]) {
-        self.events.stage(Event::Status(Status::TrackRevised { points: revised.to_vec() }));
-    }
-}
-
 /// A thread-safe engine with its app's listeners `L`.
 pub(crate) struct Handle<L> {
     engine: Mutex<Engine>,
@@ -159,9 +131,8 @@ impl<L: Listeners> Handle<L> {
     /// An engine on `site` with `options`.
     pub(crate) fn new(site: Arc<Site>, options: &Options, listeners: L) -> Result<Self, PositioningError> {
         let config = options.config(&site)?;
-        let mut engine = Engine::new(Arc::clone(&site), config)?;
+        let engine = Engine::new(Arc::clone(&site), config)?;
         let events = Arc::new(Delivery::new());
-        engine.subscribe(Box::new(Collector { events: Arc::clone(&events) }));
         Ok(Self { engine: Mutex::new(engine), broken: AtomicBool::new(false), site, events, listeners })
     }
 
@@ -175,9 +146,9 @@ impl<L: Listeners> Handle<L> {
         &self.listeners
     }
 
-    /// Runs `f` on the engine under its lock, then delivers what it published to the
-    /// listeners with no lock held. A panic inside becomes `Internal`, and what the call
-    /// published is dropped; the engine is then unusable (it may be half-changed): every later
+    /// Runs `f` on the engine under its lock, then delivers what it staged to the listeners
+    /// with no lock held. A panic inside becomes `Internal`, and what the call staged is
+    /// dropped; the engine is then unusable (it may be half-changed): every later
     /// call fails with `Internal` too. A failure is also reported to the listeners, after what
     /// the call published.
     pub(crate) fn call<T>(
@@ -236,12 +207,32 @@ impl<L: Listeners> Handle<L> {
         result
     }
 
-    /// An epoch made by `f`: its position, or the input error mapped to `InputRejected`.
+    /// An epoch made by `f`: its position, or the input error mapped to `InputRejected`. What
+    /// the epoch produced is staged for the listeners in the order it happened: status
+    /// changes, track revisions, then the position.
     pub(crate) fn epoch(
         &self,
-        f: impl FnOnce(&mut Engine) -> Result<Position, crate::InputError>,
+        f: impl FnOnce(&mut Engine) -> Result<Epoch, crate::InputError>,
     ) -> Result<Position, PositioningError> {
-        self.call_undoable(|engine| f(engine).map_err(PositioningError::from))
+        let events = Arc::clone(&self.events);
+        self.call_undoable(|engine| {
+            let Epoch { position, status, revised_track } = f(engine)?;
+            for change in status {
+                events.stage(Event::Status(match change {
+                    engine::StatusEvent::ScenarioChanged { timestamp_ns, to, .. } => {
+                        Status::ScenarioChanged { timestamp_ns, scenario: to }
+                    }
+                    engine::StatusEvent::MotionStateChanged { timestamp_ns, to, .. } => {
+                        Status::MotionStateChanged { timestamp_ns, state: to }
+                    }
+                }));
+            }
+            if !revised_track.is_empty() {
+                events.stage(Event::Status(Status::TrackRevised { points: revised_track }));
+            }
+            events.stage(Event::Position(position.clone()));
+            Ok(position)
+        })
     }
 
     /// A read of the engine's state.

@@ -81,8 +81,9 @@ pub struct Site {
 
 #[uniffi::export]
 impl Site {
-    /// A site file's contents: the binary encoding (`waymark site pack`, what an app should
-    /// ship) or JSON. Throws `InvalidSite` for a file that is not a valid site.
+    /// A site file's contents: the binary encoding (what an app should ship, see
+    /// docs/site-files.md#binary-encoding) or JSON. Throws `InvalidSite` for a file that is not
+    /// a valid site.
     #[uniffi::constructor]
     pub fn from_bytes(site: Vec<u8>) -> Result<Arc<Self>, PositioningError> {
         Ok(Arc::new(Self { inner: Arc::new(CoreSite::from_bytes(&site)?) }))
@@ -161,7 +162,7 @@ impl PositioningEngine {
 
     fn epoch(
         &self,
-        f: impl FnOnce(&mut engine::Engine) -> Result<engine::Position, crate::InputError>,
+        f: impl FnOnce(&mut engine::Engine) -> Result<engine::Epoch, crate::InputError>,
     ) -> Result<PositionEstimate, PositioningError> {
         let position = self.handle.epoch(f)?;
         Ok(estimate(&position, self.handle.site()))
@@ -185,8 +186,8 @@ impl PositioningEngine {
         Self::create(Arc::new(site), &options)
     }
 
-    /// An engine on a site file's contents: the binary encoding (`waymark site pack`, what an
-    /// app should ship: it loads several times faster and in a third of the memory) or JSON.
+    /// An engine on a site file's contents: the binary encoding (what an app should ship: it
+    /// loads faster and in less memory, docs/site-files.md#binary-encoding) or JSON.
     #[uniffi::constructor]
     pub fn from_site_bytes(site: Vec<u8>, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
         let site = CoreSite::from_bytes(&site)?;

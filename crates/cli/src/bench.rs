@@ -153,7 +153,7 @@ fn run(args: &BenchArgs) -> Result<Value, String> {
         for (k, epoch) in walk.iter().enumerate() {
             let start = Clock::now();
             let position =
-                engine.push_scan_with_motion(&epoch.scan, &epoch.motion).map_err(|e| e.to_string())?;
+                engine.push_scan_with_motion(&epoch.scan, &epoch.motion).map_err(|e| e.to_string())?.position;
             let elapsed = ms(start);
             if k >= args.warm_up {
                 times.push(elapsed);

@@ -1,6 +1,5 @@
 //! Simulated walks tracked by fresh engines fed exactly as an app feeds them: raw inertial
-//! batches up to each scan, then the scan. Used by `waymark demo`, `waymark simulate` and the
-//! tests.
+//! batches up to each scan, then the scan: the demo, the papers' experiments and the tests.
 
 use super::imu::{synthesize, ImuConfig, ImuTrace};
 use super::{Office, OfficeConfig, Walk};
@@ -86,7 +85,7 @@ pub fn track_walk(
         }
         previous = Some(t);
         // A scan where no access point was heard is rejected (and counted): nothing to score.
-        let Ok(position) = engine.push_scan(&epoch.scan) else { continue };
+        let Ok(waymark::Epoch { position, .. }) = engine.push_scan(&epoch.scan) else { continue };
         points.push(TrackPoint { truth: epoch.truth, truth_zone: epoch.zone, position });
         for (lag, out) in lag_errors.iter_mut().enumerate() {
             let back = engine.smoothed_position(lag).zip(k.checked_sub(lag));
@@ -111,7 +110,7 @@ pub fn errors(points: &[TrackPoint]) -> Vec<EpochError> {
         .collect()
 }
 
-/// What `waymark demo` runs.
+/// Random walks through the simulated office, each tracked by a fresh engine.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Experiment {
     /// The building (its seed also seeds the walks).

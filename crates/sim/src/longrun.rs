@@ -5,8 +5,7 @@
 //! a table); a [`Feeder`] pushes accelerometer, gyroscope and magnetometer samples in batches
 //! of 50 up to each epoch; a WiFi scan comes every 2 s. The same input goes, in lockstep, to
 //! the FFI's [`PositioningEngine`](waymark::ffi::uniffi::PositioningEngine) (what Kotlin and
-//! Swift apps hold, with a subscribed listener) and to a core [`Engine`] (with a subscribed
-//! listener too), which exposes the counters and memory accounting the FFI does not; their
+//! Swift apps hold, with a subscribed listener) and to a core [`Engine`], which exposes the counters and memory accounting the FFI does not; their
 //! positions must agree exactly. Every report interval (an hour by default) the process's
 //! resident memory (`VmRSS`, `VmHWM` from `/proc/self/status`), the engine's accounted track
 //! memory and the error against the truth are recorded.
@@ -17,7 +16,7 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::Serialize;
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Instant;
 use waymark::ffi::uniffi as ffi;
 use waymark::radio::{Scan, TransmitterId};
@@ -36,7 +35,7 @@ pub const SCAN_INTERVAL_NS: u64 = 2_000_000_000;
 /// (`io::ilc::EventOptions`); an imitation of an app, not a tuned value.
 pub const BATCH_SAMPLES: usize = 50;
 
-/// What `waymark simulate --experiment long-run` runs.
+/// The long-run experiment: hours of one simulated session through the FFI and the core engine.
 #[derive(Clone, Debug)]
 pub struct LongRunConfig {
     /// Simulated length, hours (24: a day).
@@ -290,14 +289,7 @@ pub fn run(
     let site_json = site.to_json();
     let site = Arc::new(Site::from_json(site_json.as_bytes())?);
     let engine_config = EngineConfig::default();
-    let mut core = Engine::new(Arc::clone(&site), engine_config.clone())?;
-    let core_positions = Arc::new(Mutex::new(0u64));
-    let counter = Arc::clone(&core_positions);
-    core.subscribe(Box::new(move |_: &waymark::Position| {
-        if let Ok(mut n) = counter.lock() {
-            *n += 1;
-        }
-    }));
+    let core = Engine::new(Arc::clone(&site), engine_config.clone())?;
     let ffi_engine = ffi::PositioningEngine::new(site_json, ffi::EngineOptions::default())
         .map_err(|e| Error::InvalidConfig(format!("the FFI engine refused the site: {e}")))?;
     drop(site);
@@ -327,7 +319,7 @@ pub fn run(
         walking += u64::from(segment.walking_at(t));
         table += u64::from(segment.activity == Activity::Table);
         let scan = office.field.scan_at(truth, t, &mut rng);
-        let core_result = engines.core.push_scan(&scan);
+        let core_result = engines.core.push_scan(&scan).map(|epoch| epoch.position);
         let ffi_result = engines.ffi.push_scan(radio_scan(&scan));
         match (&core_result, &ffi_result) {
             (Ok(c), Ok(f)) => {

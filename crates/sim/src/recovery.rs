@@ -82,7 +82,7 @@ pub const WARMUP_EPOCHS: usize = 10;
 /// The target: back to normal within 10 epochs of good data.
 pub const TARGET_EPOCHS: usize = 10;
 
-/// What `waymark simulate --experiment recovery` runs.
+/// The recovery experiment: how fast the engine finds the walker again after a kidnap or a gap.
 #[derive(Clone, Debug)]
 pub struct RecoveryConfig {
     /// Runs per scenario; run k uses building and walks seeded `first_seed + k`.
@@ -395,7 +395,7 @@ fn pass(
         // The scan is drawn whether or not it is delivered, so both twins see the same radio.
         let scan = office.field.scan_at(truth, t, &mut scan_rng);
         let result = if radio(k, t) { engine.push_scan(&scan) } else { engine.advance(t) };
-        let position = result.ok().map(|p| Point2::new(p.x, p.y));
+        let position = result.ok().map(|e| Point2::new(e.position.x, e.position.y));
         out.errors.push(position.map_or(f64::INFINITY, |p| nalgebra::distance(&truth, &p)));
         out.positions.push(position);
         out.truths.push(truth);

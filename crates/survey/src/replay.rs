@@ -155,7 +155,7 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
             // Waypoints up to this event's time, confirmed in order (once an epoch exists).
             while let Some(w) = waypoints.next_if(|w| w.timestamp_ns < t) {
                 if last_epoch.is_some_and(|l| w.timestamp_ns >= l) {
-                    if let Ok(p) =
+                    if let Ok(waymark::Epoch { position: p, .. }) =
                         engine.confirm_position(w.timestamp_ns, w.x, w.y, feedback.floor, feedback.radius_m)
                     {
                         if last_epoch != Some(p.timestamp_ns) {
@@ -211,7 +211,7 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
                 None => engine.advance(t),
             })
         });
-        if let Some(Ok(position)) = result {
+        if let Some(Ok(waymark::Epoch { position, .. })) = result {
             last_epoch = Some(position.timestamp_ns);
             out.positions.push(position);
             out.fixed_lag.extend(engine.fixed_lag_position());
