@@ -785,8 +785,8 @@ waymark_result waymark_engine_options_default(waymark_engine_options *out);
 
 /**
  * Creates an engine from a site file's contents, `len` bytes at `site_file`: the binary
- * encoding (`waymark site pack`, what an app should ship: it loads several times faster and
- * in a third of the memory) or JSON text (not necessarily NUL-terminated), with `options`
+ * encoding (what an app should ship: it loads faster and in less memory,
+ * docs/site-files.md#binary-encoding) or JSON text (not necessarily NUL-terminated), with `options`
  * (NULL for the defaults; see `waymark_engine_options_default`). On success `*out` holds the
  * engine; free it with `waymark_engine_free`. A site file on disk: read it into memory first.
  */
