@@ -156,6 +156,9 @@ pub struct EngineConfig {
     /// Probability mass inside the reported `accuracy_m` circle: 0.68, as Android's
     /// `Location.getAccuracy()` and iOS's `horizontalAccuracy` define it.
     pub accuracy_mass: f64,
+    /// When the person enters and leaves a zone or geofence
+    /// ([`StatusEvent::ZoneEntered`](crate::StatusEvent::ZoneEntered) and the rest).
+    pub zone_hysteresis: ZoneHysteresis,
     /// The salt the site's transmitter ids were hashed with, for a site file that holds
     /// hashes instead of MAC addresses ([`Site::hashed`](crate::Site::hashed)); scans are
     /// hashed with it before matching. `None` for a site with raw ids. An engine on a hashed
@@ -192,12 +195,33 @@ impl Default for EngineConfig {
             max_reach_passes: 16,
             max_reading_age_ns: None,
             accuracy_mass: 0.68,
+            zone_hysteresis: ZoneHysteresis::default(),
             site_calibration: true,
             step_length_override: None,
             site_salt: None,
             history_epochs: 500,
             habits: HabitOptions::default(),
         }
+    }
+}
+
+/// The posterior mass of a zone or geofence at which the person is reported to enter it, and
+/// below which to leave it; between the two nothing changes, so an estimate that hovers at a
+/// boundary does not flap in and out (a Schmitt trigger). The defaults put the band around an
+/// even chance at the confidence every radius the engine reports is given at: in once the place
+/// holds as much mass as the 68% circle does, out once it holds less than the 32% outside that
+/// circle (docs/zones.md#enter-and-exit, where the events are measured on simulated walks).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ZoneHysteresis {
+    /// In at this mass or more: 0.68.
+    pub enter_mass: f64,
+    /// Out below this mass: 0.32.
+    pub exit_mass: f64,
+}
+
+impl Default for ZoneHysteresis {
+    fn default() -> Self {
+        Self { enter_mass: 0.68, exit_mass: 0.32 }
     }
 }
 
@@ -437,6 +461,12 @@ impl EngineConfig {
         }
         if !(self.accuracy_mass > 0.0 && self.accuracy_mass < 1.0) {
             return fail(format!("accuracy_mass must be in (0, 1) (got {})", self.accuracy_mass));
+        }
+        let ZoneHysteresis { enter_mass, exit_mass } = self.zone_hysteresis;
+        if !(0.0 < exit_mass && exit_mass <= enter_mass && enter_mass <= 1.0) {
+            return fail(format!(
+                "zone_hysteresis needs 0 < exit_mass <= enter_mass <= 1 (got exit {exit_mass}, enter {enter_mass})"
+            ));
         }
         Ok(())
     }

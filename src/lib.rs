@@ -14,19 +14,21 @@ mod history;
 // files: the site model and its file formats, radio fingerprints, the motion pipeline, the HMM,
 // habit models, and the binding surface Kotlin, Swift and C see.
 pub mod ffi;
+pub mod geofence;
 pub mod habits;
 pub mod hmm;
 pub mod radio;
 pub mod sensors;
 pub mod site;
 
-pub use config::{EngineConfig, HipeConfig, HoangConfig, TransitionModel};
+pub use config::{EngineConfig, HipeConfig, HoangConfig, TransitionModel, ZoneHysteresis};
 pub use engine::{
     Engine, EngineSnapshot, Epoch, InputStats, Position, ScanTiming, StatusEvent, TrackPoint,
     FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,
 };
 pub use error::{Error, InputError};
 pub use fix::PositionFix;
+pub use geofence::{Geofence, GeofenceError, GeofenceShape};
 pub use history::{EpochInput, EpochRecord};
 pub use radio::{Reading, Salt, Scan, TransmitterId};
 pub use site::{Site, SiteError, Zone, ZoneKind};

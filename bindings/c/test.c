@@ -532,6 +532,69 @@ static void habits(const char *site_path, const char *walk_path) {
     waymark_engine_free(other);
 }
 
+/* Zone and geofence events through the status callback. */
+typedef struct {
+    int zone_entered, zone_exited, fence_entered, fence_exited;
+    char last_zone[32], last_fence[32];
+} presence;
+
+static void on_presence(void *userdata, const waymark_status *status) {
+    presence *s = userdata;
+    switch (status->kind) {
+    case WAYMARK_STATUS_KIND_ZONE_ENTERED:
+    case WAYMARK_STATUS_KIND_ZONE_EXITED:
+        if (status->kind == WAYMARK_STATUS_KIND_ZONE_ENTERED) s->zone_entered++; else s->zone_exited++;
+        snprintf(s->last_zone, sizeof s->last_zone, "%d %s", status->zone, status->name ? status->name : "");
+        break;
+    case WAYMARK_STATUS_KIND_GEOFENCE_ENTERED:
+    case WAYMARK_STATUS_KIND_GEOFENCE_EXITED:
+        if (status->kind == WAYMARK_STATUS_KIND_GEOFENCE_ENTERED) s->fence_entered++; else s->fence_exited++;
+        snprintf(s->last_fence, sizeof s->last_fence, "%s", status->name ? status->name : "");
+        break;
+    default: break;
+    }
+}
+
+static void geofences_and_zone_events(const char *site_path) {
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "site");
+    presence heard = {0};
+    CHECK(waymark_engine_set_status_callback(engine, on_presence, &heard) == WAYMARK_RESULT_OK, "callback");
+    /* Around the aisle's first state, (1.7, 11.5). */
+    CHECK(waymark_engine_add_geofence_circle(engine, "entrance", 0, 1.7, 11.5, 3.0) == WAYMARK_RESULT_OK, "circle");
+    CHECK(waymark_engine_add_geofence_circle(engine, "entrance", 0, 1.7, 11.5, 3.0) ==
+              WAYMARK_RESULT_INPUT_REJECTED, "a taken id");
+    CHECK(waymark_engine_add_geofence_circle(engine, NULL, 0, 1.7, 11.5, 3.0) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL id");
+    CHECK(waymark_engine_add_geofence_circle(engine, "nan", 0, NAN, 11.5, 3.0) == WAYMARK_RESULT_INPUT_REJECTED,
+          "NaN centre");
+    double stairs[] = {33.0, 9.0, 38.0, 9.0, 38.0, 14.0, 33.0, 14.0};
+    CHECK(waymark_engine_add_geofence_polygon(engine, "stairs", 0, stairs, 4) == WAYMARK_RESULT_OK, "polygon");
+    CHECK(waymark_engine_add_geofence_polygon(engine, "line", 0, stairs, 2) == WAYMARK_RESULT_INPUT_REJECTED,
+          "two vertices");
+    CHECK(waymark_engine_add_geofence_polygon(engine, "null", 0, NULL, 3) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL vertices");
+
+    waymark_wifi_reading known[2] = {{"02:00:00:00:00:00", -60.0, 0}, {"02:00:00:00:00:01", -70.0, 0}};
+    waymark_position p;
+    CHECK(waymark_engine_push_scan(engine, 10, known, 2, NULL, 0, &p) == WAYMARK_RESULT_OK, "scan");
+    /* Pinned at the entrance, then at the stair hall 40 s later: in, out, in. */
+    CHECK(waymark_engine_confirm_position(engine, 10, 1.7, 11.5, 0, 1.0, &p) == WAYMARK_RESULT_OK, "at the door");
+    CHECK(heard.fence_entered == 1 && strcmp(heard.last_fence, "entrance") == 0, "entered %d %s",
+          heard.fence_entered, heard.last_fence);
+    CHECK(heard.zone_entered >= 1 && strcmp(heard.last_zone, "0 aisle") == 0, "zone %s", heard.last_zone);
+    CHECK(waymark_engine_confirm_position(engine, 40000000000ull, 35.5, 11.5, 0, 1.0, &p) == WAYMARK_RESULT_OK,
+          "at the stairs");
+    CHECK(heard.fence_exited == 1 && heard.fence_entered == 2 && strcmp(heard.last_fence, "stairs") == 0,
+          "left the entrance for the stairs: %d %d %s", heard.fence_exited, heard.fence_entered, heard.last_fence);
+    CHECK(heard.zone_exited >= 1 && strcmp(heard.last_zone, "11 stair hall") == 0, "zone %s", heard.last_zone);
+    bool removed = false;
+    CHECK(waymark_engine_remove_geofence(engine, "stairs", &removed) == WAYMARK_RESULT_OK && removed, "removed");
+    CHECK(waymark_engine_remove_geofence(engine, "stairs", &removed) == WAYMARK_RESULT_OK && !removed,
+          "removed once");
+    waymark_engine_free(engine);
+}
+
 /* What the status callback heard. */
 typedef struct {
     int no_coverage, errors, other;
@@ -640,6 +703,7 @@ int main(int argc, char **argv) {
     options_status_and_stats(argv[1]);
     address_beacons(argv[1]);
     zones_and_feedback(argv[1]);
+    geofences_and_zone_events(argv[1]);
     walk(argv[1], argv[2], NULL, 0);
     habits(argv[1], argv[2]);
     walk(argv[5], argv[2], NULL, 0);

@@ -126,6 +126,23 @@ enum waymark_status_kind
    * A call failed (it also returned `error`); `message` says why.
    */
   WAYMARK_STATUS_KIND_ERROR = 5,
+  /**
+   * The person entered one of the site's zones: `zone`, `name` (its name), `probability`.
+   */
+  WAYMARK_STATUS_KIND_ZONE_ENTERED = 6,
+  /**
+   * The person left a zone they had entered: `zone`, `name`, `probability`.
+   */
+  WAYMARK_STATUS_KIND_ZONE_EXITED = 7,
+  /**
+   * The person entered a geofence (`waymark_engine_add_geofence_circle` / `_polygon`):
+   * `name` (its id), `probability`.
+   */
+  WAYMARK_STATUS_KIND_GEOFENCE_ENTERED = 8,
+  /**
+   * The person left a geofence they had entered: `name`, `probability`.
+   */
+  WAYMARK_STATUS_KIND_GEOFENCE_EXITED = 9,
 };
 #ifndef __cplusplus
 #if __STDC_VERSION__ >= 202311L
@@ -501,6 +518,18 @@ typedef struct {
    * `ERROR`: NUL-terminated message (as `waymark_last_error` gives it to that call's thread).
    */
   const char *message;
+  /**
+   * `ZONE_ENTERED`, `ZONE_EXITED`: the zone's index into the site's zones; -1 otherwise.
+   */
+  int32_t zone;
+  /**
+   * `ZONE_*`: the zone's name; `GEOFENCE_*`: the geofence's id. NUL-terminated UTF-8.
+   */
+  const char *name;
+  /**
+   * `ZONE_*`, `GEOFENCE_*`: the posterior probability of being inside it then.
+   */
+  double probability;
 } waymark_status;
 
 /**
@@ -827,6 +856,43 @@ waymark_result waymark_engine_new_from_path_with_salt(const char *path,
                                                       const uint8_t *salt,
                                                       size_t salt_len,
                                                       waymark_engine **out);
+
+/**
+ * Adds a circular geofence named `id` (NUL-terminated UTF-8, unique among the engine's
+ * geofences) on `floor`: the points within `radius_m` of (x, y), in the site's metric frame.
+ * From the next position on, entering and leaving it reach the status callback, with the
+ * hysteresis of the site's zones; a person already inside is reported as entering. Returns
+ * `WAYMARK_RESULT_INPUT_REJECTED`, changing nothing, for an empty or taken id, an unknown
+ * floor, a centre or radius that is not finite, a radius not > 0, or a circle that holds no
+ * place of the site.
+ */
+waymark_result waymark_engine_add_geofence_circle(waymark_engine *engine,
+                                                  const char *id,
+                                                  uint32_t floor,
+                                                  double x,
+                                                  double y,
+                                                  double radius_m);
+
+/**
+ * Adds a polygonal geofence named `id` on `floor`: the inside of the polygon whose
+ * `vertex_count` vertices (at least 3) are `xy[0..2 * vertex_count]` as x, y pairs in the
+ * site's metric frame (the last vertex joins the first). Otherwise as
+ * `waymark_engine_add_geofence_circle`; also rejected: fewer than 3 vertices, or one that is
+ * not finite.
+ */
+waymark_result waymark_engine_add_geofence_polygon(waymark_engine *engine,
+                                                   const char *id,
+                                                   uint32_t floor,
+                                                   const double *xy,
+                                                   size_t vertex_count);
+
+/**
+ * Removes the geofence `id` (no exit event); `*removed` (may be NULL) says whether there was
+ * one.
+ */
+waymark_result waymark_engine_remove_geofence(waymark_engine *engine,
+                                              const char *id,
+                                              bool *removed);
 
 /**
  * Learns the user's habits from the epochs of the engine's history not learned from yet

@@ -169,11 +169,19 @@ impl Engine {
         position: Position,
         record: impl FnOnce(&mut History, &Position),
     ) -> Epoch {
-        let status = self.status_changes(&position);
+        let mut status = self.status_changes(&position);
+        let (presence, changes) = self.presence.evaluate(
+            position.timestamp_ns,
+            self.filter.posterior(),
+            &self.zone_mass,
+            &self.config.zone_hysteresis,
+        );
+        status.extend(presence);
         let revised_track = self.revise_track();
         if cfg!(feature = "fault-injection") && position.timestamp_ns == FAULT_INJECTION_MID_EPOCH_NS {
             panic!("fault injected in the middle of the epoch at {}", position.timestamp_ns);
         }
+        self.presence.apply(changes);
         self.latest = Some(position.clone());
         record(&mut self.history, &position);
         Epoch { position, status, revised_track }

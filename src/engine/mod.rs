@@ -7,6 +7,7 @@
 
 mod epoch;
 mod input;
+mod presence;
 mod transition;
 mod types;
 
@@ -88,6 +89,8 @@ pub struct Engine {
     unexplained_run: u32,
     /// The site's calibration for scans far apart.
     sparse_scans: SparseScans,
+    /// Whether the person is in each zone and geofence, and the app's geofences.
+    presence: presence::Presence,
     /// When the latest accepted scan came, and how long after the one before.
     scan_timing: ScanTiming,
 }
@@ -156,6 +159,7 @@ impl Engine {
             unsurveyed,
             unexplained_run: 0,
             sparse_scans,
+            presence: presence::Presence::new(site_zones),
             scan_timing: ScanTiming::default(),
             config,
             undo: Undo::default(),
@@ -222,8 +226,12 @@ impl Engine {
             last_track: self.last_track.clone(),
             stats: self.stats.clone(),
             internals: format!(
-                "{:?}\n{:?}\n{:?}\n{:?}",
-                self.filter, self.viterbi, self.tracker, self.scan_timing
+                "{:?}\n{:?}\n{:?}\n{:?}\n{:?}",
+                self.filter,
+                self.viterbi,
+                self.tracker,
+                self.scan_timing,
+                self.presence.flags()
             ),
             history: self.history.records().iter().cloned().collect(),
         }

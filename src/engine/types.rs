@@ -95,6 +95,43 @@ pub enum StatusEvent {
         /// Now.
         to: MotionState,
     },
+    /// The person entered one of the site's zones: its posterior mass reached
+    /// `zone_hysteresis.enter_mass`.
+    ZoneEntered {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// Index into the site's zones.
+        zone: usize,
+        /// The zone's posterior mass then.
+        probability: f64,
+    },
+    /// The person left a zone they had entered: its mass fell below `zone_hysteresis.exit_mass`.
+    ZoneExited {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// Index into the site's zones.
+        zone: usize,
+        /// The zone's posterior mass then.
+        probability: f64,
+    },
+    /// The person entered one of the app's geofences ([`Engine::add_geofence`]).
+    GeofenceEntered {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// The geofence's id.
+        id: String,
+        /// Its posterior mass then.
+        probability: f64,
+    },
+    /// The person left a geofence they had entered.
+    GeofenceExited {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// The geofence's id.
+        id: String,
+        /// Its posterior mass then.
+        probability: f64,
+    },
 }
 
 /// What one epoch produced: the position, and what else changed with it. Every input that

@@ -11,6 +11,7 @@
 #![allow(clippy::not_unsafe_ptr_arg_deref)]
 
 mod create;
+mod geofence;
 mod habits;
 mod log_hook;
 mod types;
@@ -69,7 +70,7 @@ impl<T> Callback<T> {
 
 impl Listeners for Callbacks {
     /// Reads the callback afresh for each event.
-    fn deliver(&self, event: &Event) {
+    fn deliver(&self, event: &Event, site: &Site) {
         let _calling = lock(&self.calling);
         match event {
             // Each callback is copied out before it is called: the lock must be free so the
@@ -83,7 +84,7 @@ impl Listeners for Callbacks {
             Event::Status(s) => {
                 let callback = *lock(&self.status);
                 if let Some(callback) = callback {
-                    deliver_status(callback, s);
+                    deliver_status(callback, s, site);
                 }
             }
             Event::Error(e) => {
@@ -111,10 +112,13 @@ fn status(kind: waymark_status_kind, timestamp_ns: u64) -> waymark_status {
         point_count: 0,
         error: waymark_result::Ok,
         message: std::ptr::null(),
+        zone: -1,
+        name: std::ptr::null(),
+        probability: 0.0,
     }
 }
 
-fn deliver_status(callback: Callback<waymark_status>, s: &Status) {
+fn deliver_status(callback: Callback<waymark_status>, s: &Status, site: &Site) {
     match s {
         Status::ScenarioChanged { timestamp_ns, scenario: to } => callback.call(&waymark_status {
             scenario: scenario(*to),
@@ -133,6 +137,30 @@ fn deliver_status(callback: Callback<waymark_status>, s: &Status) {
                 points: points.as_ptr(),
                 point_count: points.len(),
                 ..status(waymark_status_kind::TrackRevised, 0)
+            })
+        }
+        &Status::Zone { timestamp_ns, zone, entered, probability } => {
+            let kind =
+                if entered { waymark_status_kind::ZoneEntered } else { waymark_status_kind::ZoneExited };
+            let name = c_string(&site.zones()[zone].name);
+            callback.call(&waymark_status {
+                zone: i32::try_from(zone).unwrap_or(-1),
+                name: name.as_ptr(),
+                probability,
+                ..status(kind, timestamp_ns)
+            })
+        }
+        Status::Geofence { timestamp_ns, id, entered, probability } => {
+            let kind = if *entered {
+                waymark_status_kind::GeofenceEntered
+            } else {
+                waymark_status_kind::GeofenceExited
+            };
+            let name = c_string(id);
+            callback.call(&waymark_status {
+                name: name.as_ptr(),
+                probability: *probability,
+                ..status(kind, *timestamp_ns)
             })
         }
     }

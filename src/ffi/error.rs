@@ -148,6 +148,12 @@ impl From<crate::InputError> for PositioningError {
     }
 }
 
+impl From<crate::geofence::GeofenceError> for PositioningError {
+    fn from(e: crate::geofence::GeofenceError) -> Self {
+        PositioningError::InputRejected { reason: e.to_string() }
+    }
+}
+
 impl From<crate::habits::HabitError> for PositioningError {
     fn from(e: crate::habits::HabitError) -> Self {
         match e {

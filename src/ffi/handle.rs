@@ -41,13 +41,17 @@ pub(crate) enum Status {
     NoSiteCoverage { timestamp_ns: u64 },
     /// Earlier positions were revised by later evidence.
     TrackRevised { points: Vec<engine::TrackPoint> },
+    /// The person entered (`entered`) or left one of the site's zones, by index.
+    Zone { timestamp_ns: u64, zone: usize, entered: bool, probability: f64 },
+    /// The person entered or left one of the app's geofences.
+    Geofence { timestamp_ns: u64, id: String, entered: bool, probability: f64 },
 }
 
 /// How an FFI calls its app's listeners. Called with no lock of the handle held, never from
 /// two threads at once; a panic inside is caught and logged.
 pub(crate) trait Listeners: Send + Sync {
-    /// Hands `event` to every listener.
-    fn deliver(&self, event: &Event);
+    /// Hands `event`, of an engine on `site`, to every listener.
+    fn deliver(&self, event: &Event, site: &Site);
 }
 
 /// The engine options both FFIs offer, before they become an [`EngineConfig`].
@@ -225,6 +229,18 @@ impl<L: Listeners> Handle<L> {
                     engine::StatusEvent::MotionStateChanged { timestamp_ns, to, .. } => {
                         Status::MotionStateChanged { timestamp_ns, state: to }
                     }
+                    engine::StatusEvent::ZoneEntered { timestamp_ns, zone, probability } => {
+                        Status::Zone { timestamp_ns, zone, entered: true, probability }
+                    }
+                    engine::StatusEvent::ZoneExited { timestamp_ns, zone, probability } => {
+                        Status::Zone { timestamp_ns, zone, entered: false, probability }
+                    }
+                    engine::StatusEvent::GeofenceEntered { timestamp_ns, id, probability } => {
+                        Status::Geofence { timestamp_ns, id, entered: true, probability }
+                    }
+                    engine::StatusEvent::GeofenceExited { timestamp_ns, id, probability } => {
+                        Status::Geofence { timestamp_ns, id, entered: false, probability }
+                    }
                 }));
             }
             if !revised_track.is_empty() {
@@ -289,7 +305,7 @@ impl<L: Listeners> Handle<L> {
     /// skipped; the others still hear the event.
     fn deliver(&self) {
         self.events.deliver(|event| {
-            if catch_unwind(AssertUnwindSafe(|| self.listeners.deliver(&event))).is_err() {
+            if catch_unwind(AssertUnwindSafe(|| self.listeners.deliver(&event, &self.site))).is_err() {
                 log::warn!("a listener panicked or threw");
             }
         });

@@ -3,10 +3,12 @@
 //! the `Handle` (`handle.rs`) the C API wraps too. A change in this module is a possible breaking change
 //! for apps (CHANGELOG, "Breaking changes").
 
+mod geofence;
 mod records;
 
 pub use super::error::{ErrorCode, ErrorReport, PositioningError};
 pub use super::handle::{FAULT_INJECTION_HABITS_JSON, FAULT_INJECTION_TIMESTAMP_NS};
+pub use geofence::{Geofence, GeofenceShape, SitePoint};
 pub use records::*;
 
 use super::delivery::lock;
@@ -44,15 +46,12 @@ pub trait PositionListener: Send + Sync {
 struct Subscribers {
     list: Mutex<Vec<(u64, Arc<dyn PositionListener>)>>,
     next: Mutex<u64>,
-    /// For the names in positions.
-    site: Arc<CoreSite>,
 }
 
 impl Listeners for Subscribers {
     /// A listener subscribed during an event hears the events after it; one cancelled during
     /// an event hears nothing more.
-    fn deliver(&self, event: &Event) {
-        let site = &self.site;
+    fn deliver(&self, event: &Event, site: &CoreSite) {
         let listeners = lock(&self.list).clone();
         for (id, listener) in &listeners {
             // Cancelled by a callback earlier in this event.
@@ -61,7 +60,7 @@ impl Listeners for Subscribers {
             }
             let outcome = catch_unwind(AssertUnwindSafe(|| match event {
                 Event::Position(p) => listener.on_position(estimate(p, site)),
-                Event::Status(s) => listener.on_status(status_update(s)),
+                Event::Status(s) => listener.on_status(status_update(s, site)),
                 Event::Error(e) => listener.on_error(e.report()),
             }));
             if outcome.is_err() {
@@ -148,8 +147,7 @@ impl Drop for Subscription {
 
 impl PositioningEngine {
     fn create(site: Arc<CoreSite>, options: &EngineOptions) -> Result<Arc<Self>, PositioningError> {
-        let subscribers =
-            Subscribers { list: Mutex::new(Vec::new()), next: Mutex::new(0), site: Arc::clone(&site) };
+        let subscribers = Subscribers { list: Mutex::new(Vec::new()), next: Mutex::new(0) };
         let handle = Handle::new(site, &options.to_options(), subscribers)?;
         Ok(Arc::new(Self { handle }))
     }
@@ -303,6 +301,30 @@ impl PositioningEngine {
         radius_m: f64,
     ) -> Result<PositionEstimate, PositioningError> {
         self.epoch(|engine| engine.confirm_position(timestamp_ns, x, y, floor as usize, radius_m))
+    }
+
+    /// Adds a geofence: from the next position on, entering and leaving it reach the
+    /// listeners as `StatusUpdate.GeofenceEntered` / `GeofenceExited`, with the hysteresis of
+    /// the site's zones; a person already inside is reported as entering. Throws
+    /// `InputRejected`, changing nothing, for an empty or taken id, an unknown floor, a shape
+    /// that is not finite or has no area, or one that holds no place of the site.
+    pub fn add_geofence(&self, geofence: Geofence) -> Result<(), PositioningError> {
+        self.handle.call_undoable(|engine| Ok(engine.add_geofence(geofence.into())?))
+    }
+
+    /// Removes the geofence `id` (no exit event); `false` if there was none.
+    pub fn remove_geofence(&self, id: String) -> Result<bool, PositioningError> {
+        self.handle.call_undoable(|engine| Ok(engine.remove_geofence(&id)))
+    }
+
+    /// The engine's geofences, in the order they were added.
+    pub fn geofences(&self) -> Result<Vec<Geofence>, PositioningError> {
+        self.handle.read(|engine| engine.geofences().map(Geofence::from).collect())
+    }
+
+    /// The probability of being inside geofence `id` now; `null` / `nil` for no such geofence.
+    pub fn geofence_probability(&self, id: String) -> Result<Option<f64>, PositioningError> {
+        self.handle.read(|engine| engine.geofence_probability(&id))
     }
 
     /// Every zone of the site, in the site file's order, with the probability of being in it

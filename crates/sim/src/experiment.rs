@@ -46,6 +46,8 @@ pub struct TrackPoint {
     pub truth_zone: Option<usize>,
     /// What the engine said.
     pub position: Position,
+    /// What changed about the session at that epoch (zones entered and left, ...).
+    pub status: Vec<waymark::StatusEvent>,
 }
 
 /// A tracked walk: every epoch's position, and the error of the Viterbi track `lag` epochs
@@ -85,8 +87,8 @@ pub fn track_walk(
         }
         previous = Some(t);
         // A scan where no access point was heard is rejected (and counted): nothing to score.
-        let Ok(waymark::Epoch { position, .. }) = engine.push_scan(&epoch.scan) else { continue };
-        points.push(TrackPoint { truth: epoch.truth, truth_zone: epoch.zone, position });
+        let Ok(waymark::Epoch { position, status, .. }) = engine.push_scan(&epoch.scan) else { continue };
+        points.push(TrackPoint { truth: epoch.truth, truth_zone: epoch.zone, position, status });
         for (lag, out) in lag_errors.iter_mut().enumerate() {
             let back = engine.smoothed_position(lag).zip(k.checked_sub(lag));
             if let Some((p, past)) = back {

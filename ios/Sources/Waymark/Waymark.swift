@@ -1160,6 +1160,15 @@ public func FfiConverterTypePositionListener_lower(_ value: PositionListener) ->
 public protocol PositioningEngineProtocol: AnyObject, Sendable {
     
     /**
+     * Adds a geofence: from the next position on, entering and leaving it reach the
+     * listeners as `StatusUpdate.GeofenceEntered` / `GeofenceExited`, with the hysteresis of
+     * the site's zones; a person already inside is reported as entering. Throws
+     * `InputRejected`, changing nothing, for an empty or taken id, an unknown floor, a shape
+     * that is not finite or has no area, or one that holds no place of the site.
+     */
+    func addGeofence(geofence: Geofence) throws 
+    
+    /**
      * An epoch without radio, from the motion since the last one: call it on a timer when
      * scans are rare.
      */
@@ -1204,6 +1213,16 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * The fixed-lag position: a few epochs old, but revised by what came after.
      */
     func fixedLagPosition() throws  -> TrackPoint?
+    
+    /**
+     * The probability of being inside geofence `id` now; `null` / `nil` for no such geofence.
+     */
+    func geofenceProbability(id: String) throws  -> Double?
+    
+    /**
+     * The engine's geofences, in the order they were added.
+     */
+    func geofences() throws  -> [Geofence]
     
     /**
      * Replaces the engine's habits by a model from `exportHabits` on the same site, learning
@@ -1269,6 +1288,11 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * nothing.
      */
     func pushScan(scan: RadioScan) throws  -> PositionEstimate
+    
+    /**
+     * Removes the geofence `id` (no exit event); `false` if there was none.
+     */
+    func removeGeofence(id: String) throws  -> Bool
     
     /**
      * Calls `listener` with every position and status change until the returned subscription
@@ -1381,8 +1405,8 @@ public static func fromPath(path: String, options: EngineOptions)throws  -> Posi
 }
     
     /**
-     * An engine on a site file's contents: the binary encoding (`waymark site pack`, what an
-     * app should ship: it loads several times faster and in a third of the memory) or JSON.
+     * An engine on a site file's contents: the binary encoding (what an app should ship: it
+     * loads faster and in less memory, docs/site-files.md#binary-encoding) or JSON.
      */
 public static func fromSiteBytes(site: Data, options: EngineOptions)throws  -> PositioningEngine  {
     return try  FfiConverterTypePositioningEngine_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
@@ -1410,6 +1434,22 @@ public static func withSite(site: Site, options: EngineOptions)throws  -> Positi
 }
     
 
+    
+    /**
+     * Adds a geofence: from the next position on, entering and leaving it reach the
+     * listeners as `StatusUpdate.GeofenceEntered` / `GeofenceExited`, with the hysteresis of
+     * the site's zones; a person already inside is reported as entering. Throws
+     * `InputRejected`, changing nothing, for an empty or taken id, an unknown floor, a shape
+     * that is not finite or has no area, or one that holds no place of the site.
+     */
+open func addGeofence(geofence: Geofence)throws   {try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_add_geofence(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeGeofence_lower(geofence),uniffiCallStatus
+    )
+}
+}
     
     /**
      * An epoch without radio, from the motion since the last one: call it on a timer when
@@ -1508,6 +1548,31 @@ open func fixedLagPosition()throws  -> TrackPoint?  {
     return try  FfiConverterOptionTypeTrackPoint.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
     uniffi_waymark_fn_method_positioningengine_fixed_lag_position(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The probability of being inside geofence `id` now; `null` / `nil` for no such geofence.
+     */
+open func geofenceProbability(id: String)throws  -> Double?  {
+    return try  FfiConverterOptionDouble.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_geofence_probability(
+            self.uniffiCloneHandle(),
+        FfiConverterString.lower(id),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The engine's geofences, in the order they were added.
+     */
+open func geofences()throws  -> [Geofence]  {
+    return try  FfiConverterSequenceTypeGeofence.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_geofences(
             self.uniffiCloneHandle(),uniffiCallStatus
     )
 })
@@ -1642,6 +1707,19 @@ open func pushScan(scan: RadioScan)throws  -> PositionEstimate  {
     uniffi_waymark_fn_method_positioningengine_push_scan(
             self.uniffiCloneHandle(),
         FfiConverterTypeRadioScan_lower(scan),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Removes the geofence `id` (no exit event); `false` if there was none.
+     */
+open func removeGeofence(id: String)throws  -> Bool  {
+    return try  FfiConverterBool.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_remove_geofence(
+            self.uniffiCloneHandle(),
+        FfiConverterString.lower(id),uniffiCallStatus
     )
 })
 }
@@ -1811,8 +1889,9 @@ open class Site: SiteProtocol, @unchecked Sendable {
 
     
     /**
-     * A site file's contents: the binary encoding (`waymark site pack`, what an app should
-     * ship) or JSON. Throws `InvalidSite` for a file that is not a valid site.
+     * A site file's contents: the binary encoding (what an app should ship, see
+     * docs/site-files.md#binary-encoding) or JSON. Throws `InvalidSite` for a file that is not
+     * a valid site.
      */
 public static func fromBytes(site: Data)throws  -> Site  {
     return try  FfiConverterTypeSite_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
@@ -2425,6 +2504,86 @@ public func FfiConverterTypeFixError_lift(_ buf: RustBuffer) throws -> FixError 
 #endif
 public func FfiConverterTypeFixError_lower(_ value: FixError) -> RustBuffer {
     return FfiConverterTypeFixError.lower(value)
+}
+
+
+/**
+ * A region of one floor whose entries and exits the engine reports as
+ * `StatusUpdate.GeofenceEntered` and `GeofenceExited` (docs/zones.md).
+ */
+public struct Geofence: Equatable, Hashable {
+    /**
+     * The app's name for it, unique among the engine's geofences; the events carry it.
+     */
+    public var id: String
+    /**
+     * Floor index, as in `PositionEstimate.floor`.
+     */
+    public var floor: UInt32
+    /**
+     * Its outline.
+     */
+    public var shape: GeofenceShape
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The app's name for it, unique among the engine's geofences; the events carry it.
+         */id: String, 
+        /**
+         * Floor index, as in `PositionEstimate.floor`.
+         */floor: UInt32, 
+        /**
+         * Its outline.
+         */shape: GeofenceShape) {
+        self.id = id
+        self.floor = floor
+        self.shape = shape
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension Geofence: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGeofence: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Geofence {
+        return
+            try Geofence(
+                id: FfiConverterString.read(from: &buf), 
+                floor: FfiConverterUInt32.read(from: &buf), 
+                shape: FfiConverterTypeGeofenceShape.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: Geofence, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.id, into: &buf)
+        FfiConverterUInt32.write(value.floor, into: &buf)
+        FfiConverterTypeGeofenceShape.write(value.shape, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeofence_lift(_ buf: RustBuffer) throws -> Geofence {
+    return try FfiConverterTypeGeofence.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeofence_lower(_ value: Geofence) -> RustBuffer {
+    return FfiConverterTypeGeofence.lower(value)
 }
 
 
@@ -3245,6 +3404,75 @@ public func FfiConverterTypeRadioScan_lower(_ value: RadioScan) -> RustBuffer {
 
 
 /**
+ * A point of the site's metric frame, m.
+ */
+public struct SitePoint: Equatable, Hashable {
+    /**
+     * x, m.
+     */
+    public var x: Double
+    /**
+     * y, m.
+     */
+    public var y: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * x, m.
+         */x: Double, 
+        /**
+         * y, m.
+         */y: Double) {
+        self.x = x
+        self.y = y
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension SitePoint: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSitePoint: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SitePoint {
+        return
+            try SitePoint(
+                x: FfiConverterDouble.read(from: &buf), 
+                y: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: SitePoint, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.x, into: &buf)
+        FfiConverterDouble.write(value.y, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSitePoint_lift(_ buf: RustBuffer) throws -> SitePoint {
+    return try FfiConverterTypeSitePoint.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSitePoint_lower(_ value: SitePoint) -> RustBuffer {
+    return FfiConverterTypeSitePoint.lower(value)
+}
+
+
+/**
  * One point of the smoothed track.
  */
 public struct TrackPoint: Equatable, Hashable {
@@ -3605,6 +3833,101 @@ public func FfiConverterTypeErrorCode_lift(_ buf: RustBuffer) throws -> ErrorCod
 #endif
 public func FfiConverterTypeErrorCode_lower(_ value: ErrorCode) -> RustBuffer {
     return FfiConverterTypeErrorCode.lower(value)
+}
+
+
+
+/**
+ * The outline of a geofence, in the site's metric frame.
+ */
+
+public enum GeofenceShape: Equatable, Hashable {
+    
+    /**
+     * The points within `radius_m` of (x, y).
+     */
+    case circle(
+        /**
+         * Centre, x, m.
+         */x: Double, 
+        /**
+         * Centre, y, m.
+         */y: Double, 
+        /**
+         * Radius, m; > 0.
+         */radiusM: Double
+    )
+    /**
+     * The inside of a simple polygon of three vertices or more (the last joins the first).
+     */
+    case polygon(
+        /**
+         * Its vertices.
+         */vertices: [SitePoint]
+    )
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension GeofenceShape: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGeofenceShape: FfiConverterRustBuffer {
+    typealias SwiftType = GeofenceShape
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> GeofenceShape {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .circle(x: try FfiConverterDouble.read(from: &buf), y: try FfiConverterDouble.read(from: &buf), radiusM: try FfiConverterDouble.read(from: &buf)
+        )
+        
+        case 2: return .polygon(vertices: try FfiConverterSequenceTypeSitePoint.read(from: &buf)
+        )
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: GeofenceShape, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case let .circle(x,y,radiusM):
+            writeInt(&buf, Int32(1))
+            FfiConverterDouble.write(x, into: &buf)
+            FfiConverterDouble.write(y, into: &buf)
+            FfiConverterDouble.write(radiusM, into: &buf)
+            
+        
+        case let .polygon(vertices):
+            writeInt(&buf, Int32(2))
+            FfiConverterSequenceTypeSitePoint.write(vertices, into: &buf)
+            
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeofenceShape_lift(_ buf: RustBuffer) throws -> GeofenceShape {
+    return try FfiConverterTypeGeofenceShape.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeofenceShape_lower(_ value: GeofenceShape) -> RustBuffer {
+    return FfiConverterTypeGeofenceShape.lower(value)
 }
 
 
@@ -4114,6 +4437,63 @@ public enum StatusUpdate: Equatable, Hashable {
          * The revised points, oldest first.
          */points: [TrackPoint]
     )
+    /**
+     * The person entered one of the site's zones (its posterior mass reached the engine's
+     * enter threshold; docs/zones.md).
+     */
+    case zoneEntered(
+        /**
+         * When, ns.
+         */timestampNs: UInt64, 
+        /**
+         * The zone's name.
+         */zone: String, 
+        /**
+         * The zone's posterior probability then.
+         */probability: Double
+    )
+    /**
+     * The person left a zone they had entered.
+     */
+    case zoneExited(
+        /**
+         * When, ns.
+         */timestampNs: UInt64, 
+        /**
+         * The zone's name.
+         */zone: String, 
+        /**
+         * The zone's posterior probability then.
+         */probability: Double
+    )
+    /**
+     * The person entered one of the app's geofences (`addGeofence`).
+     */
+    case geofenceEntered(
+        /**
+         * When, ns.
+         */timestampNs: UInt64, 
+        /**
+         * The geofence's id.
+         */id: String, 
+        /**
+         * Its posterior probability then.
+         */probability: Double
+    )
+    /**
+     * The person left a geofence they had entered.
+     */
+    case geofenceExited(
+        /**
+         * When, ns.
+         */timestampNs: UInt64, 
+        /**
+         * The geofence's id.
+         */id: String, 
+        /**
+         * Its posterior probability then.
+         */probability: Double
+    )
 
 
 
@@ -4147,6 +4527,18 @@ public struct FfiConverterTypeStatusUpdate: FfiConverterRustBuffer {
         case 4: return .trackRevised(points: try FfiConverterSequenceTypeTrackPoint.read(from: &buf)
         )
         
+        case 5: return .zoneEntered(timestampNs: try FfiConverterUInt64.read(from: &buf), zone: try FfiConverterString.read(from: &buf), probability: try FfiConverterDouble.read(from: &buf)
+        )
+        
+        case 6: return .zoneExited(timestampNs: try FfiConverterUInt64.read(from: &buf), zone: try FfiConverterString.read(from: &buf), probability: try FfiConverterDouble.read(from: &buf)
+        )
+        
+        case 7: return .geofenceEntered(timestampNs: try FfiConverterUInt64.read(from: &buf), id: try FfiConverterString.read(from: &buf), probability: try FfiConverterDouble.read(from: &buf)
+        )
+        
+        case 8: return .geofenceExited(timestampNs: try FfiConverterUInt64.read(from: &buf), id: try FfiConverterString.read(from: &buf), probability: try FfiConverterDouble.read(from: &buf)
+        )
+        
         default: throw UniffiInternalError.unexpectedEnumCase
         }
     }
@@ -4173,6 +4565,34 @@ public struct FfiConverterTypeStatusUpdate: FfiConverterRustBuffer {
         case let .trackRevised(points):
             writeInt(&buf, Int32(4))
             FfiConverterSequenceTypeTrackPoint.write(points, into: &buf)
+            
+        
+        case let .zoneEntered(timestampNs,zone,probability):
+            writeInt(&buf, Int32(5))
+            FfiConverterUInt64.write(timestampNs, into: &buf)
+            FfiConverterString.write(zone, into: &buf)
+            FfiConverterDouble.write(probability, into: &buf)
+            
+        
+        case let .zoneExited(timestampNs,zone,probability):
+            writeInt(&buf, Int32(6))
+            FfiConverterUInt64.write(timestampNs, into: &buf)
+            FfiConverterString.write(zone, into: &buf)
+            FfiConverterDouble.write(probability, into: &buf)
+            
+        
+        case let .geofenceEntered(timestampNs,id,probability):
+            writeInt(&buf, Int32(7))
+            FfiConverterUInt64.write(timestampNs, into: &buf)
+            FfiConverterString.write(id, into: &buf)
+            FfiConverterDouble.write(probability, into: &buf)
+            
+        
+        case let .geofenceExited(timestampNs,id,probability):
+            writeInt(&buf, Int32(8))
+            FfiConverterUInt64.write(timestampNs, into: &buf)
+            FfiConverterString.write(id, into: &buf)
+            FfiConverterDouble.write(probability, into: &buf)
             
         }
     }
@@ -4673,6 +5093,31 @@ fileprivate struct FfiConverterSequenceTypeBeaconReading: FfiConverterRustBuffer
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceTypeGeofence: FfiConverterRustBuffer {
+    typealias SwiftType = [Geofence]
+
+    public static func write(_ value: [Geofence], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeGeofence.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [Geofence] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [Geofence]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeGeofence.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceTypeMotionSample: FfiConverterRustBuffer {
     typealias SwiftType = [MotionSample]
 
@@ -4690,6 +5135,31 @@ fileprivate struct FfiConverterSequenceTypeMotionSample: FfiConverterRustBuffer 
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
             seq.append(try FfiConverterTypeMotionSample.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeSitePoint: FfiConverterRustBuffer {
+    typealias SwiftType = [SitePoint]
+
+    public static func write(_ value: [SitePoint], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeSitePoint.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [SitePoint] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [SitePoint]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeSitePoint.read(from: &buf))
         }
         return seq
     }
@@ -4905,6 +5375,9 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positionlistener_on_error() != 20759) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_positioningengine_add_geofence() != 7636) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_positioningengine_advance() != 1226) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -4924,6 +5397,12 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_fixed_lag_position() != 40760) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_geofence_probability() != 10139) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_geofences() != 52600) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_import_habits() != 25536) {
@@ -4953,6 +5432,9 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_push_scan() != 27547) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_positioningengine_remove_geofence() != 35993) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_positioningengine_subscribe() != 5158) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -4974,7 +5456,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_constructor_positioningengine_from_path() != 33646) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_constructor_positioningengine_from_site_bytes() != 61356) {
+    if (uniffi_waymark_checksum_constructor_positioningengine_from_site_bytes() != 8963) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_constructor_positioningengine_new() != 11485) {
@@ -4983,7 +5465,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_constructor_positioningengine_with_site() != 60178) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_constructor_site_from_bytes() != 49602) {
+    if (uniffi_waymark_checksum_constructor_site_from_bytes() != 34192) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_constructor_site_from_path() != 18181) {

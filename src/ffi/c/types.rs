@@ -253,6 +253,15 @@ pub enum waymark_status_kind {
     TrackRevised = 4,
     /// A call failed (it also returned `error`); `message` says why.
     Error = 5,
+    /// The person entered one of the site's zones: `zone`, `name` (its name), `probability`.
+    ZoneEntered = 6,
+    /// The person left a zone they had entered: `zone`, `name`, `probability`.
+    ZoneExited = 7,
+    /// The person entered a geofence (`waymark_engine_add_geofence_circle` / `_polygon`):
+    /// `name` (its id), `probability`.
+    GeofenceEntered = 8,
+    /// The person left a geofence they had entered: `name`, `probability`.
+    GeofenceExited = 9,
 }
 
 /// Something about the session changed, or a call failed. Only the fields its `kind` names are
@@ -276,6 +285,12 @@ pub struct waymark_status {
     pub error: waymark_result,
     /// `ERROR`: NUL-terminated message (as `waymark_last_error` gives it to that call's thread).
     pub message: *const c_char,
+    /// `ZONE_ENTERED`, `ZONE_EXITED`: the zone's index into the site's zones; -1 otherwise.
+    pub zone: i32,
+    /// `ZONE_*`: the zone's name; `GEOFENCE_*`: the geofence's id. NUL-terminated UTF-8.
+    pub name: *const c_char,
+    /// `ZONE_*`, `GEOFENCE_*`: the posterior probability of being inside it then.
+    pub probability: f64,
 }
 
 /// The learned error of external position fixes: subtract the bias from a fix, then widen its

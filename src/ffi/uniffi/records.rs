@@ -502,6 +502,43 @@ pub enum StatusUpdate {
         /// The revised points, oldest first.
         points: Vec<TrackPoint>,
     },
+    /// The person entered one of the site's zones (its posterior mass reached the engine's
+    /// enter threshold; docs/zones.md).
+    ZoneEntered {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// The zone's name.
+        zone: String,
+        /// The zone's posterior probability then.
+        probability: f64,
+    },
+    /// The person left a zone they had entered.
+    ZoneExited {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// The zone's name.
+        zone: String,
+        /// The zone's posterior probability then.
+        probability: f64,
+    },
+    /// The person entered one of the app's geofences (`addGeofence`).
+    GeofenceEntered {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// The geofence's id.
+        id: String,
+        /// Its posterior probability then.
+        probability: f64,
+    },
+    /// The person left a geofence they had entered.
+    GeofenceExited {
+        /// When, ns.
+        timestamp_ns: u64,
+        /// The geofence's id.
+        id: String,
+        /// Its posterior probability then.
+        probability: f64,
+    },
 }
 
 fn scenario(s: sensors::MdiScenario) -> MotionScenario {
@@ -546,7 +583,7 @@ pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
     }
 }
 
-pub(crate) fn status_update(status: &Status) -> StatusUpdate {
+pub(crate) fn status_update(status: &Status, site: &crate::Site) -> StatusUpdate {
     match status {
         Status::ScenarioChanged { scenario: s, .. } => {
             StatusUpdate::ScenarioChanged { scenario: scenario(*s) }
@@ -559,6 +596,22 @@ pub(crate) fn status_update(status: &Status) -> StatusUpdate {
         }
         Status::TrackRevised { points } => {
             StatusUpdate::TrackRevised { points: points.iter().map(track_point).collect() }
+        }
+        &Status::Zone { timestamp_ns, zone, entered, probability } => {
+            let zone = site.zones()[zone].name.clone();
+            if entered {
+                StatusUpdate::ZoneEntered { timestamp_ns, zone, probability }
+            } else {
+                StatusUpdate::ZoneExited { timestamp_ns, zone, probability }
+            }
+        }
+        Status::Geofence { timestamp_ns, id, entered, probability } => {
+            let (timestamp_ns, id, probability) = (*timestamp_ns, id.clone(), *probability);
+            if *entered {
+                StatusUpdate::GeofenceEntered { timestamp_ns, id, probability }
+            } else {
+                StatusUpdate::GeofenceExited { timestamp_ns, id, probability }
+            }
         }
     }
 }

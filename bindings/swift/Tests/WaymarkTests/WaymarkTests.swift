@@ -223,6 +223,40 @@ final class WaymarkTests: XCTestCase {
         XCTAssertEqual(try engine.position(), fixed)
     }
 
+    // Zone and geofence entries and exits reach the listener as status updates, exits first.
+    func testZoneAndGeofenceEvents() throws {
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let recorder = Recorder()
+        let subscription = engine.subscribe(listener: recorder)
+        try engine.addGeofence(geofence: Geofence(id: "entrance", floor: 0, shape: .circle(x: 1.7, y: 11.5, radiusM: 3)))
+        let square = [SitePoint(x: 33, y: 9), SitePoint(x: 38, y: 9), SitePoint(x: 38, y: 14), SitePoint(x: 33, y: 14)]
+        try engine.addGeofence(geofence: Geofence(id: "stairs", floor: 0, shape: .polygon(vertices: square)))
+        XCTAssertThrowsError(
+            try engine.addGeofence(geofence: Geofence(id: "stairs", floor: 0, shape: .circle(x: 1.7, y: 11.5, radiusM: 3)))
+        ) {
+            guard case PositioningError.InputRejected = $0 else { return XCTFail("expected inputRejected, got \($0)") }
+        }
+        let first = try engine.pushScan(scan: try walk().epochs[0].scan)
+        _ = try engine.confirmPosition(timestampNs: first.timestampNs, x: 1.7, y: 11.5, floor: 0, radiusM: 1)
+        _ = try engine.confirmPosition(
+            timestampNs: first.timestampNs + 40_000_000_000, x: 35.5, y: 11.5, floor: 0, radiusM: 1)
+        let names: [String] = recorder.statuses.compactMap {
+            switch $0 {
+            case .zoneEntered(_, let zone, _): return "+" + zone
+            case .zoneExited(_, let zone, _): return "-" + zone
+            case .geofenceEntered(_, let id, _): return "+" + id
+            case .geofenceExited(_, let id, _): return "-" + id
+            default: return nil
+            }
+        }
+        XCTAssertEqual(Array(names.suffix(4)), ["-aisle", "-entrance", "+stair hall", "+stairs"], "\(names)")
+        XCTAssertTrue(names.contains("+entrance") && names.contains("+aisle"), "\(names)")
+        XCTAssertTrue(try engine.removeGeofence(id: "stairs"))
+        XCTAssertFalse(try engine.removeGeofence(id: "stairs"))
+        XCTAssertNil(try engine.geofenceProbability(id: "stairs"))
+        subscription.cancel()
+    }
+
     // Habits: learned from the walk with position fixes and the user's feedback, exported,
     // imported into a second engine, refused with a typed error when they do not fit, cleared.
     func testHabitsLearnExportImport() throws {

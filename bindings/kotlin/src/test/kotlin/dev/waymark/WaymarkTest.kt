@@ -225,6 +225,51 @@ class WaymarkTest {
     }
 
     @Test
+    fun zoneAndGeofenceEventsReachTheListener() {
+        PositioningEngine.fromPath(sitePath, EngineOptions()).use { engine ->
+            val heard = Collections.synchronizedList(ArrayList<StatusUpdate>())
+            val subscription = engine.subscribe(object : PositionListener {
+                override fun onPosition(position: PositionEstimate) {}
+                override fun onStatus(status: StatusUpdate) { heard.add(status) }
+                override fun onError(error: ErrorReport) {}
+            })
+            // Around the aisle's first state, and a square over the stair hall's middle.
+            engine.addGeofence(Geofence("entrance", 0U, GeofenceShape.Circle(1.7, 11.5, 3.0)))
+            val square = listOf(SitePoint(33.0, 9.0), SitePoint(38.0, 9.0), SitePoint(38.0, 14.0), SitePoint(33.0, 14.0))
+            engine.addGeofence(Geofence("stairs", 0U, GeofenceShape.Polygon(square)))
+            assertEquals(listOf("entrance", "stairs"), engine.geofences().map { it.id })
+            try {
+                engine.addGeofence(Geofence("stairs", 0U, GeofenceShape.Circle(1.7, 11.5, 3.0)))
+                fail("a taken id was accepted")
+            } catch (e: PositioningException.InputRejected) {
+                assertTrue(e.reason, e.reason.contains("stairs"))
+            }
+            val first = pushEpoch(engine, walk[0]) ?: pushEpoch(engine, walk[1])!!
+            heard.clear()
+            engine.confirmPosition(first.timestampNs, 1.7, 11.5, 0U, 1.0)
+            assertTrue(heard.toString(), heard.any { it is StatusUpdate.GeofenceEntered && it.id == "entrance" })
+            assertTrue(heard.toString(), heard.any { it is StatusUpdate.ZoneEntered && it.zone == "aisle" })
+            assertTrue(engine.geofenceProbability("entrance")!! >= 0.68)
+            heard.clear()
+            engine.confirmPosition(first.timestampNs + 40_000_000_000UL, 35.5, 11.5, 0U, 1.0)
+            val names = heard.mapNotNull {
+                when (it) {
+                    is StatusUpdate.GeofenceExited -> "-${it.id}"
+                    is StatusUpdate.GeofenceEntered -> "+${it.id}"
+                    is StatusUpdate.ZoneExited -> "-${it.zone}"
+                    is StatusUpdate.ZoneEntered -> "+${it.zone}"
+                    else -> null
+                }
+            }
+            assertEquals(listOf("-aisle", "-entrance", "+stair hall", "+stairs"), names)
+            assertTrue(engine.removeGeofence("stairs"))
+            assertFalse(engine.removeGeofence("stairs"))
+            assertEquals(null, engine.geofenceProbability("stairs"))
+            subscription.cancel()
+        }
+    }
+
+    @Test
     fun anInjectedPanicIsAnExceptionAndTheEngineGoesOn() {
         val engine = PositioningEngine.fromPath(sitePath, EngineOptions())
         val counter = Counter()
