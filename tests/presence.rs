@@ -3,30 +3,11 @@
 
 mod common;
 
-use common::{scan, two_floor_site};
+use common::{corridor_readings as readings_at, scan, two_floor_site, zoned_site};
 use std::sync::Arc;
-use waymark::{
-    Engine, EngineConfig, Geofence, GeofenceError, GeofenceShape, Site, StatusEvent, Zone, ZoneKind,
-};
+use waymark::{Engine, EngineConfig, Geofence, GeofenceError, GeofenceShape, StatusEvent};
 
 const SECOND: u64 = 1_000_000_000;
-
-/// The two-floor corridor with "west" (states 0-1), "east" (3-4) and "upstairs" (floor 1).
-fn zoned_site() -> Site {
-    let zone = |name: &str, kind, states: Vec<u32>| Zone { name: name.into(), kind, states };
-    two_floor_site()
-        .with_zones(vec![
-            zone("west", ZoneKind::Room, vec![0, 1]),
-            zone("east", ZoneKind::Room, vec![3, 4]),
-            zone("upstairs", ZoneKind::Hall, (5..10).collect()),
-        ])
-        .unwrap()
-}
-
-/// What the site's transmitters say at x on floor f.
-fn readings_at(f: usize, x: f64) -> Vec<(u8, f64)> {
-    (0..3).map(|t| ((3 * f + t) as u8, -40.0 - 4.0 * (x - 6.0 * t as f64).abs())).collect()
-}
 
 /// The enter and exit events among `status`, as (entered, place).
 fn presence(status: &[StatusEvent]) -> Vec<(bool, String)> {

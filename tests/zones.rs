@@ -1,39 +1,21 @@
-//! Zones, user feedback and external position fixes (issue 6; El Gemayel et al. §II-C, §IV-C):
+//! Zones, user feedback and external position fixes (El Gemayel et al. §II-C, §IV-C):
 //! the zone posterior and most likely zone in every position, feedback that pins the posterior
 //! to a zone or a circle, fixes from other systems as observations, all rejected with a typed
 //! error and a counter when they are bad, and kept in a bounded history for learning.
 
 mod common;
 
-use common::{scan, two_floor_site};
+use common::{corridor_readings as readings_at, scan, two_floor_site, zoned_site};
 use nalgebra::Point2;
 use std::sync::Arc;
 use waymark::EpochInput;
-use waymark::{Engine, EngineConfig, InputError, PositionFix, Site, Zone, ZoneKind};
+use waymark::{Engine, EngineConfig, InputError, PositionFix, Site};
 use waymark_sim::{Office, OfficeConfig};
 
 const SECOND: u64 = 1_000_000_000;
 
-/// Two floors of five states 3 m apart (x = 0..12): "west" is states 0-1, "east" 3-4 (state
-/// 2 in no zone), "upstairs" all of floor 1.
-fn zoned_site() -> Site {
-    let zone = |name: &str, kind, states: Vec<u32>| Zone { name: name.into(), kind, states };
-    two_floor_site()
-        .with_zones(vec![
-            zone("west", ZoneKind::Room, vec![0, 1]),
-            zone("east", ZoneKind::Room, vec![3, 4]),
-            zone("upstairs", ZoneKind::Hall, (5..10).collect()),
-        ])
-        .unwrap()
-}
-
 fn engine_on(site: Site) -> Engine {
     Engine::new(Arc::new(site), EngineConfig::default()).unwrap()
-}
-
-/// What a transmitter layout predicts at x on floor f (the site's training means).
-fn readings_at(f: usize, x: f64) -> Vec<(u8, f64)> {
-    (0..3).map(|t| ((3 * f + t) as u8, -40.0 - 4.0 * (x - 6.0 * t as f64).abs())).collect()
 }
 
 fn assert_distribution(p: &[f64]) {

@@ -639,15 +639,7 @@ pub extern "C" fn waymark_engine_set_callback(
     callback: waymark_position_callback,
     userdata: *mut c_void,
 ) -> waymark_result {
-    with_handle(engine, |handle| {
-        let callbacks = handle.listeners();
-        *lock(&callbacks.position) =
-            callback.map(|function| Callback { function, userdata: userdata as usize });
-        if !handle.on_delivering_thread() {
-            drop(lock(&callbacks.calling));
-        }
-        waymark_result::Ok
-    })
+    with_handle(engine, |handle| replace_callback(handle, |c| &c.position, callback, userdata))
 }
 
 /// Sets (or, with a NULL callback, clears) the function called with every status change
@@ -661,15 +653,23 @@ pub extern "C" fn waymark_engine_set_status_callback(
     callback: waymark_status_callback,
     userdata: *mut c_void,
 ) -> waymark_result {
-    with_handle(engine, |handle| {
-        let callbacks = handle.listeners();
-        *lock(&callbacks.status) =
-            callback.map(|function| Callback { function, userdata: userdata as usize });
-        if !handle.on_delivering_thread() {
-            drop(lock(&callbacks.calling));
-        }
-        waymark_result::Ok
-    })
+    with_handle(engine, |handle| replace_callback(handle, |c| &c.status, callback, userdata))
+}
+
+/// Puts `callback` with `userdata` in the slot `slot` picks, then waits for a callback running
+/// on another thread to return (not on the delivering thread itself: it would wait for itself).
+fn replace_callback<T>(
+    handle: &Handle<Callbacks>,
+    slot: impl FnOnce(&Callbacks) -> &Mutex<Option<Callback<T>>>,
+    callback: Option<unsafe extern "C" fn(userdata: *mut c_void, event: *const T)>,
+    userdata: *mut c_void,
+) -> waymark_result {
+    let callbacks = handle.listeners();
+    *lock(slot(callbacks)) = callback.map(|function| Callback { function, userdata: userdata as usize });
+    if !handle.on_delivering_thread() {
+        drop(lock(&callbacks.calling));
+    }
+    waymark_result::Ok
 }
 
 /// Copies the calling thread's last error message into `buf` (NUL-terminated, truncated to

@@ -54,3 +54,22 @@ pub fn two_floor_site() -> Site {
     b.edge(first[0], first[1], Some(6.0));
     b.build(BuildOptions::default()).unwrap()
 }
+
+/// [`two_floor_site`] with zones: "west" is states 0-1, "east" 3-4 (state 2 in no zone),
+/// "upstairs" all of floor 1.
+pub fn zoned_site() -> Site {
+    use waymark::{Zone, ZoneKind};
+    let zone = |name: &str, kind, states: Vec<u32>| Zone { name: name.into(), kind, states };
+    two_floor_site()
+        .with_zones(vec![
+            zone("west", ZoneKind::Room, vec![0, 1]),
+            zone("east", ZoneKind::Room, vec![3, 4]),
+            zone("upstairs", ZoneKind::Hall, (5..10).collect()),
+        ])
+        .unwrap()
+}
+
+/// What [`two_floor_site`]'s transmitters say at x on floor f (the training means).
+pub fn corridor_readings(f: usize, x: f64) -> Vec<(u8, f64)> {
+    (0..3).map(|t| ((3 * f + t) as u8, -40.0 - 4.0 * (x - 6.0 * t as f64).abs())).collect()
+}
