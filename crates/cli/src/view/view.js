@@ -36,6 +36,7 @@
   var epochs = [];
   var duration = 0;
   var frames = [];
+  var layer = { key: null, canvas: null };
 
   // Epoch rows: [t s, floor, x, y, r68, truth floor, truth x, truth y] (truth null if unknown).
   function epochAt(time) {
@@ -113,18 +114,15 @@
   function draw() {
     var dpr = window.devicePixelRatio || 1;
     var w = canvas.clientWidth, h = canvas.clientHeight;
-    canvas.width = Math.max(1, Math.round(w * dpr));
-    canvas.height = Math.max(1, Math.round(h * dpr));
-    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
-    ctx.fillStyle = COLORS.background;
-    ctx.fillRect(0, 0, w, h);
-
+    var pw = Math.max(1, Math.round(w * dpr)), ph = Math.max(1, Math.round(h * dpr));
+    if (canvas.width !== pw) canvas.width = pw;
+    if (canvas.height !== ph) canvas.height = ph;
     var f = data.floors[view.floor], frame = frames[view.floor], box = frame.box;
     var margin = 24;
     var s = Math.min((w - 2 * margin) / Math.max(box.x1 - box.x0, 1), (h - 2 * margin) / Math.max(box.y1 - box.y0, 1));
     if (!(s > 0)) s = 1;
     var ox = (w - s * (box.x1 - box.x0)) / 2, oy = (h - s * (box.y1 - box.y0)) / 2;
-    // The site frame has y north (up); the canvas has y down.
+    // The site frame's +y is up; the canvas's y is down.
     function X(x) { return ox + (x - box.x0) * s; }
     function Y(y) { return oy + (box.y1 - y) * s; }
     function ring(flat) {
@@ -134,79 +132,103 @@
       ctx.closePath();
     }
 
-    if (f.plan) {
-      ctx.beginPath();
-      f.plan.outline.forEach(function (poly) { poly.forEach(ring); });
-      ctx.fillStyle = COLORS.floor;
-      ctx.fill("evenodd");
-      ctx.beginPath();
-      f.plan.rooms.forEach(function (poly) { poly.forEach(ring); });
-      ctx.strokeStyle = COLORS.room;
-      ctx.lineWidth = 0.8;
-      ctx.stroke();
-      ctx.beginPath();
-      f.plan.outline.forEach(function (poly) { poly.forEach(ring); });
-      ctx.strokeStyle = COLORS.wall;
-      ctx.lineWidth = 1.5;
-      ctx.stroke();
+    // What does not move (background, plan, zones, graph, states, names, scale) is painted
+    // once per floor and size into an offscreen canvas; a frame copies it and adds the walk.
+    var key = [view.floor, w, h, dpr].join("|");
+    if (layer.key !== key) {
+      layer.key = key;
+      layer.canvas = document.createElement("canvas");
+      layer.canvas.width = canvas.width;
+      layer.canvas.height = canvas.height;
+      var screen = ctx;
+      ctx = layer.canvas.getContext("2d");
+      paintStatic();
+      ctx = screen;
     }
+    ctx.setTransform(1, 0, 0, 1, 0, 0);
+    ctx.drawImage(layer.canvas, 0, 0);
+    ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
 
-    // Zones: the hull of their states, widened by most of half a state cell.
-    var pad = Math.max(2, 0.4 * data.spacing_m * s);
-    ctx.lineJoin = "round";
-    ctx.lineCap = "round";
-    frame.zones.forEach(function (z) {
-      ctx.beginPath();
-      z.hull.forEach(function (p, i) { if (i === 0) ctx.moveTo(X(p[0]), Y(p[1])); else ctx.lineTo(X(p[0]), Y(p[1])); });
-      ctx.closePath();
-      ctx.fillStyle = ctx.strokeStyle = zoneTint(z.index);
-      ctx.lineWidth = 2 * pad;
-      ctx.fill();
-      ctx.stroke();
-    });
+    function paintStatic() {
+      ctx.setTransform(dpr, 0, 0, dpr, 0, 0);
+      ctx.fillStyle = COLORS.background;
+      ctx.fillRect(0, 0, w, h);
 
-    ctx.beginPath();
-    for (var e = 0; e + 1 < f.edges.length; e += 2) {
-      var a = f.edges[e], b = f.edges[e + 1];
-      ctx.moveTo(X(f.states[2 * a]), Y(f.states[2 * a + 1]));
-      ctx.lineTo(X(f.states[2 * b]), Y(f.states[2 * b + 1]));
-    }
-    ctx.strokeStyle = COLORS.edge;
-    ctx.lineWidth = 1;
-    ctx.stroke();
-
-    var r = Math.max(1.2, Math.min(3.5, 0.18 * data.spacing_m * s));
-    [[0, COLORS.surveyed, true], [1, COLORS.pseudo, true], [2, COLORS.unsurveyed, false]].forEach(function (k) {
-      ctx.beginPath();
-      for (var i = 0; i < f.kinds.length; i++) {
-        if (f.kinds[i] !== k[0]) continue;
-        var x = X(f.states[2 * i]), y = Y(f.states[2 * i + 1]);
-        ctx.moveTo(x + r, y);
-        ctx.arc(x, y, r, 0, 2 * Math.PI);
+      if (f.plan) {
+        ctx.beginPath();
+        f.plan.outline.forEach(function (poly) { poly.forEach(ring); });
+        ctx.fillStyle = COLORS.floor;
+        ctx.fill("evenodd");
+        ctx.beginPath();
+        f.plan.rooms.forEach(function (poly) { poly.forEach(ring); });
+        ctx.strokeStyle = COLORS.room;
+        ctx.lineWidth = 0.8;
+        ctx.stroke();
+        ctx.beginPath();
+        f.plan.outline.forEach(function (poly) { poly.forEach(ring); });
+        ctx.strokeStyle = COLORS.wall;
+        ctx.lineWidth = 1.5;
+        ctx.stroke();
       }
-      if (k[2]) { ctx.fillStyle = k[1]; ctx.fill(); } else { ctx.strokeStyle = k[1]; ctx.lineWidth = 1; ctx.stroke(); }
-    });
 
-    ctx.beginPath();
-    f.connectors.forEach(function (i) {
-      var x = X(f.states[2 * i]), y = Y(f.states[2 * i + 1]), q = r + 3;
-      ctx.moveTo(x, y - q); ctx.lineTo(x + q, y + q); ctx.lineTo(x - q, y + q); ctx.closePath();
-    });
-    ctx.fillStyle = COLORS.connector;
-    ctx.fill();
+      // Zones: the hull of their states, widened by most of half a state cell.
+      var pad = Math.max(2, 0.4 * data.spacing_m * s);
+      ctx.lineJoin = "round";
+      ctx.lineCap = "round";
+      frame.zones.forEach(function (z) {
+        ctx.beginPath();
+        z.hull.forEach(function (p, i) { if (i === 0) ctx.moveTo(X(p[0]), Y(p[1])); else ctx.lineTo(X(p[0]), Y(p[1])); });
+        ctx.closePath();
+        ctx.fillStyle = ctx.strokeStyle = zoneTint(z.index);
+        ctx.lineWidth = 2 * pad;
+        ctx.fill();
+        ctx.stroke();
+      });
 
-    ctx.font = "12px system-ui, sans-serif";
-    ctx.textAlign = "center";
-    ctx.textBaseline = "middle";
-    frame.zones.forEach(function (z) {
-      var name = data.zones[z.index] ? data.zones[z.index].name : "";
-      var x = X(z.label[0]), y = Y(z.label[1]);
-      ctx.lineWidth = 3;
-      ctx.strokeStyle = "rgba(255,255,255,0.9)";
-      ctx.strokeText(name, x, y);
-      ctx.fillStyle = "#111827";
-      ctx.fillText(name, x, y);
-    });
+      ctx.beginPath();
+      for (var e = 0; e + 1 < f.edges.length; e += 2) {
+        var a = f.edges[e], b = f.edges[e + 1];
+        ctx.moveTo(X(f.states[2 * a]), Y(f.states[2 * a + 1]));
+        ctx.lineTo(X(f.states[2 * b]), Y(f.states[2 * b + 1]));
+      }
+      ctx.strokeStyle = COLORS.edge;
+      ctx.lineWidth = 1;
+      ctx.stroke();
+
+      var r = Math.max(1.2, Math.min(3.5, 0.18 * data.spacing_m * s));
+      [[0, COLORS.surveyed, true], [1, COLORS.pseudo, true], [2, COLORS.unsurveyed, false]].forEach(function (k) {
+        ctx.beginPath();
+        for (var i = 0; i < f.kinds.length; i++) {
+          if (f.kinds[i] !== k[0]) continue;
+          var x = X(f.states[2 * i]), y = Y(f.states[2 * i + 1]);
+          ctx.moveTo(x + r, y);
+          ctx.arc(x, y, r, 0, 2 * Math.PI);
+        }
+        if (k[2]) { ctx.fillStyle = k[1]; ctx.fill(); } else { ctx.strokeStyle = k[1]; ctx.lineWidth = 1; ctx.stroke(); }
+      });
+
+      ctx.beginPath();
+      f.connectors.forEach(function (i) {
+        var x = X(f.states[2 * i]), y = Y(f.states[2 * i + 1]), q = r + 3;
+        ctx.moveTo(x, y - q); ctx.lineTo(x + q, y + q); ctx.lineTo(x - q, y + q); ctx.closePath();
+      });
+      ctx.fillStyle = COLORS.connector;
+      ctx.fill();
+
+      ctx.font = "12px system-ui, sans-serif";
+      ctx.textAlign = "center";
+      ctx.textBaseline = "middle";
+      frame.zones.forEach(function (z) {
+        var name = data.zones[z.index] ? data.zones[z.index].name : "";
+        var x = X(z.label[0]), y = Y(z.label[1]);
+        ctx.lineWidth = 3;
+        ctx.strokeStyle = "rgba(255,255,255,0.9)";
+        ctx.strokeText(name, x, y);
+        ctx.fillStyle = "#111827";
+        ctx.fillText(name, x, y);
+      });
+      scaleBar(s, h);
+    }
 
     var current = epochAt(view.time);
     var status = "";
@@ -263,7 +285,6 @@
       ctx.stroke();
     }
 
-    scaleBar(s, h);
     var states = f.kinds.length;
     document.getElementById("status").textContent =
       f.name + ": " + states + " states, " + frame.zones.length + " zones" + (status ? " | " + status : "");
@@ -274,6 +295,7 @@
     });
     var rect = canvas.getBoundingClientRect();
     body.setAttribute("data-floor", String(view.floor));
+    body.setAttribute("data-time", view.time.toFixed(1));
     body.setAttribute("data-states", String(states));
     body.setAttribute("data-canvas", [rect.left, rect.top, rect.width, rect.height].map(Math.round).join(","));
     body.setAttribute("data-rendered", "1");
@@ -368,9 +390,12 @@
     prepare();
     legend();
 
-    // #floor=N picks the floor (and turns following off), #t=S the time in seconds.
+    // #floor=N picks the floor (and turns following off), #t=S the time in seconds,
+    // #speed=K the playback speed, #play starts playing.
     var hash = window.location.hash;
     var floor = /[#&]floor=(\d+)/.exec(hash), t = /[#&]t=([0-9.]+)/.exec(hash);
+    var speed = /[#&]speed=([0-9.]+)/.exec(hash);
+    if (speed && Number(speed[1]) > 0) view.speed = Number(speed[1]);
     if (t) view.time = Math.min(duration, Number(t[1]) || 0);
     if (floor) {
       view.follow = false;
@@ -394,6 +419,8 @@
       document.getElementById("play").addEventListener("click", function () { setPlaying(!view.playing); });
       document.getElementById("speed").addEventListener("change", function (e) { view.speed = Number(e.target.value); });
       follow.addEventListener("change", function () { view.follow = follow.checked; });
+      var option = document.querySelector('#speed option[value="' + view.speed + '"]');
+      if (option) option.selected = true;
     }
     window.addEventListener("resize", draw);
     window.addEventListener("hashchange", function () {
@@ -401,6 +428,7 @@
       if (m) { setFloor(Number(m[1])); draw(); }
     });
     draw();
+    if (epochs.length && /[#&]play(&|$)/.test(hash)) setPlaying(true);
   }
 
   try {
