@@ -32,7 +32,7 @@
   };
 
   var data, canvas, ctx;
-  var view = { floor: 0, time: 0, playing: false, speed: 4, follow: true, last: null };
+  var view = { floor: 0, time: 0, playing: false, speed: 4, follow: true, last: null, zoom: 1, panX: 0, panY: 0 };
   var epochs = [];
   var duration = 0;
   var frames = [];
@@ -101,7 +101,13 @@
       var zones = Object.keys(byZone).map(function (z) {
         var pts = byZone[z], cx = 0, cy = 0;
         pts.forEach(function (p) { cx += p[0]; cy += p[1]; });
-        return { index: Number(z), hull: hull(pts.slice()), label: [cx / pts.length, cy / pts.length] };
+        // Its hull's area, m², plus its state count (a zone in a line has no area).
+        var shape = hull(pts.slice()), area = 0;
+        for (var k = 0; k < shape.length; k++) {
+          var p = shape[k], q = shape[(k + 1) % shape.length];
+          area += p[0] * q[1] - q[0] * p[1];
+        }
+        return { index: Number(z), hull: shape, area: Math.abs(area) / 2 + pts.length, label: [cx / pts.length, cy / pts.length] };
       });
       return { box: floorBox(f, index), zones: zones };
     });
@@ -122,6 +128,10 @@
     var s = Math.min((w - 2 * margin) / Math.max(box.x1 - box.x0, 1), (h - 2 * margin) / Math.max(box.y1 - box.y0, 1));
     if (!(s > 0)) s = 1;
     var ox = (w - s * (box.x1 - box.x0)) / 2, oy = (h - s * (box.y1 - box.y0)) / 2;
+    // Zoom and pan (wheel, drag): screen = pan + zoom * fitted.
+    ox = view.panX + view.zoom * ox;
+    oy = view.panY + view.zoom * oy;
+    s *= view.zoom;
     // The site frame's +y is up; the canvas's y is down.
     function X(x) { return ox + (x - box.x0) * s; }
     function Y(y) { return oy + (box.y1 - y) * s; }
@@ -134,7 +144,7 @@
 
     // What does not move (background, plan, zones, graph, states, names, scale) is painted
     // once per floor and size into an offscreen canvas; a frame copies it and adds the walk.
-    var key = [view.floor, w, h, dpr].join("|");
+    var key = [view.floor, w, h, dpr, view.zoom, view.panX, view.panY].join("|");
     if (layer.key !== key) {
       layer.key = key;
       layer.canvas = document.createElement("canvas");
@@ -218,9 +228,15 @@
       ctx.font = "12px system-ui, sans-serif";
       ctx.textAlign = "center";
       ctx.textBaseline = "middle";
-      frame.zones.forEach(function (z) {
+      // Names of the largest zones first; a name that would overlap one already written is
+      // left out (a mall floor has hundreds of shops).
+      var placed = [];
+      frame.zones.slice().sort(function (a, b) { return b.area - a.area; }).forEach(function (z) {
         var name = data.zones[z.index] ? data.zones[z.index].name : "";
         var x = X(z.label[0]), y = Y(z.label[1]);
+        var half = ctx.measureText(name).width / 2 + 2, box = [x - half, y - 8, x + half, y + 8];
+        if (placed.some(function (o) { return box[0] < o[2] && o[0] < box[2] && box[1] < o[3] && o[1] < box[3]; })) return;
+        placed.push(box);
         ctx.lineWidth = 3;
         ctx.strokeStyle = "rgba(255,255,255,0.9)";
         ctx.strokeText(name, x, y);
@@ -317,8 +333,14 @@
     ctx.fillText(m + " m", x + 4, y - 4);
   }
 
+  // Another floor opens fitted to the window.
   function setFloor(index) {
-    view.floor = Math.max(0, Math.min(data.floors.length - 1, index));
+    var floor = Math.max(0, Math.min(data.floors.length - 1, index));
+    if (floor !== view.floor) {
+      view.zoom = 1;
+      view.panX = view.panY = 0;
+    }
+    view.floor = floor;
   }
 
   function tick(now) {
@@ -423,6 +445,35 @@
       if (option) option.selected = true;
     }
     window.addEventListener("resize", draw);
+    // Wheel zooms about the pointer, drag pans, double-click fits the floor again.
+    canvas.addEventListener("wheel", function (e) {
+      e.preventDefault();
+      var k = Math.exp(-e.deltaY * 0.0015), zoom = Math.max(0.5, Math.min(50, view.zoom * k));
+      k = zoom / view.zoom;
+      var rect = canvas.getBoundingClientRect(), mx = e.clientX - rect.left, my = e.clientY - rect.top;
+      view.panX = mx - (mx - view.panX) * k;
+      view.panY = my - (my - view.panY) * k;
+      view.zoom = zoom;
+      draw();
+    }, { passive: false });
+    var drag = null;
+    canvas.addEventListener("pointerdown", function (e) {
+      drag = { x: e.clientX, y: e.clientY };
+      canvas.setPointerCapture(e.pointerId);
+    });
+    canvas.addEventListener("pointermove", function (e) {
+      if (!drag) return;
+      view.panX += e.clientX - drag.x;
+      view.panY += e.clientY - drag.y;
+      drag = { x: e.clientX, y: e.clientY };
+      draw();
+    });
+    canvas.addEventListener("pointerup", function () { drag = null; });
+    canvas.addEventListener("dblclick", function () {
+      view.zoom = 1;
+      view.panX = view.panY = 0;
+      draw();
+    });
     window.addEventListener("hashchange", function () {
       var m = /[#&]floor=(\d+)/.exec(window.location.hash);
       if (m) { setFloor(Number(m[1])); draw(); }
