@@ -89,6 +89,39 @@
     return lower.concat(upper);
   }
 
+  // Whether every point of a zone's hull (sampled a state spacing apart) is within three
+  // spacings of one of its states, found through a grid of buckets that size.
+  function hullFits(shape, pts) {
+    if (shape.length < 3) return true;
+    var step = Math.max(data.spacing_m, 0.25), reach = 3 * step, buckets = {};
+    function bucket(x, y) { return Math.floor(x / reach) + "," + Math.floor(y / reach); }
+    pts.forEach(function (p) { (buckets[bucket(p[0], p[1])] = buckets[bucket(p[0], p[1])] || []).push(p); });
+    function inside(x, y) {
+      for (var k = 0; k < shape.length; k++) {
+        var a = shape[k], b = shape[(k + 1) % shape.length];
+        if ((b[0] - a[0]) * (y - a[1]) - (b[1] - a[1]) * (x - a[0]) < 0) return false;
+      }
+      return true;
+    }
+    function near(x, y) {
+      var bx = Math.floor(x / reach), by = Math.floor(y / reach);
+      for (var dx = -1; dx <= 1; dx++) {
+        for (var dy = -1; dy <= 1; dy++) {
+          var b = buckets[(bx + dx) + "," + (by + dy)] || [];
+          for (var i = 0; i < b.length; i++) if (Math.hypot(b[i][0] - x, b[i][1] - y) <= reach) return true;
+        }
+      }
+      return false;
+    }
+    var xs = shape.map(function (p) { return p[0]; }), ys = shape.map(function (p) { return p[1]; });
+    var x0 = Math.min.apply(null, xs), x1 = Math.max.apply(null, xs);
+    var y0 = Math.min.apply(null, ys), y1 = Math.max.apply(null, ys);
+    for (var x = x0; x <= x1; x += step) {
+      for (var y = y0; y <= y1; y += step) if (inside(x, y) && !near(x, y)) return false;
+    }
+    return true;
+  }
+
   // Per floor, what does not change with time: box, and per zone its hull and label point.
   function prepare() {
     frames = data.floors.map(function (f, index) {
@@ -101,13 +134,18 @@
       var zones = Object.keys(byZone).map(function (z) {
         var pts = byZone[z], cx = 0, cy = 0;
         pts.forEach(function (p) { cx += p[0]; cy += p[1]; });
-        // Its hull's area, m², plus its state count (a zone in a line has no area).
         var shape = hull(pts.slice()), area = 0;
         for (var k = 0; k < shape.length; k++) {
           var p = shape[k], q = shape[(k + 1) % shape.length];
           area += p[0] * q[1] - q[0] * p[1];
         }
-        return { index: Number(z), hull: shape, area: Math.abs(area) / 2 + pts.length, label: [cx / pts.length, cy / pts.length] };
+        area = Math.abs(area) / 2;
+        // A zone its hull fits (a room) is drawn as the hull; one the hull would overstate (an
+        // L-shaped shop, a corridor round a corner) as its states' cells.
+        return {
+          index: Number(z), hull: shape, points: pts, cells: !hullFits(shape, pts),
+          size: area + pts.length, label: [cx / pts.length, cy / pts.length]
+        };
       });
       return { box: floorBox(f, index), zones: zones };
     });
@@ -169,6 +207,29 @@
         f.plan.outline.forEach(function (poly) { poly.forEach(ring); });
         ctx.fillStyle = COLORS.floor;
         ctx.fill("evenodd");
+      }
+
+      // Zones: the hull of their states, widened by most of half a state cell.
+      var pad = Math.max(2, 0.4 * data.spacing_m * s);
+      ctx.lineJoin = "round";
+      ctx.lineCap = "round";
+      var half = 0.5 * data.spacing_m * s + 0.5;
+      frame.zones.forEach(function (z) {
+        ctx.fillStyle = ctx.strokeStyle = zoneTint(z.index);
+        if (z.cells) {
+          z.points.forEach(function (p) { ctx.fillRect(X(p[0]) - half, Y(p[1]) - half, 2 * half, 2 * half); });
+          return;
+        }
+        ctx.beginPath();
+        z.hull.forEach(function (p, i) { if (i === 0) ctx.moveTo(X(p[0]), Y(p[1])); else ctx.lineTo(X(p[0]), Y(p[1])); });
+        ctx.closePath();
+        ctx.lineWidth = 2 * pad;
+        ctx.fill();
+        ctx.stroke();
+      });
+
+      // The plan's rooms and walls over the zones' tints.
+      if (f.plan) {
         ctx.beginPath();
         f.plan.rooms.forEach(function (poly) { poly.forEach(ring); });
         ctx.strokeStyle = COLORS.room;
@@ -180,20 +241,6 @@
         ctx.lineWidth = 1.5;
         ctx.stroke();
       }
-
-      // Zones: the hull of their states, widened by most of half a state cell.
-      var pad = Math.max(2, 0.4 * data.spacing_m * s);
-      ctx.lineJoin = "round";
-      ctx.lineCap = "round";
-      frame.zones.forEach(function (z) {
-        ctx.beginPath();
-        z.hull.forEach(function (p, i) { if (i === 0) ctx.moveTo(X(p[0]), Y(p[1])); else ctx.lineTo(X(p[0]), Y(p[1])); });
-        ctx.closePath();
-        ctx.fillStyle = ctx.strokeStyle = zoneTint(z.index);
-        ctx.lineWidth = 2 * pad;
-        ctx.fill();
-        ctx.stroke();
-      });
 
       ctx.beginPath();
       for (var e = 0; e + 1 < f.edges.length; e += 2) {
@@ -231,8 +278,10 @@
       // Names of the largest zones first; a name that would overlap one already written is
       // left out (a mall floor has hundreds of shops).
       var placed = [];
-      frame.zones.slice().sort(function (a, b) { return b.area - a.area; }).forEach(function (z) {
-        var name = data.zones[z.index] ? data.zones[z.index].name : "";
+      frame.zones.slice().sort(function (a, b) { return b.size - a.size; }).forEach(function (z) {
+        // "F1/UNIQLO" on F1 reads "UNIQLO".
+        var name = data.zones[z.index] ? data.zones[z.index].name : "", prefix = f.name + "/";
+        if (name.indexOf(prefix) === 0 && name.length > prefix.length) name = name.slice(prefix.length);
         var x = X(z.label[0]), y = Y(z.label[1]);
         var half = ctx.measureText(name).width / 2 + 2, box = [x - half, y - 8, x + half, y + 8];
         if (placed.some(function (o) { return box[0] < o[2] && o[0] < box[2] && box[1] < o[3] && o[1] < box[3]; })) return;
