@@ -40,12 +40,12 @@ pub struct ViewArgs {
     /// The simulated office of `waymark demo`, with its first walk and the truth.
     #[arg(long)]
     demo: bool,
-    /// With --demo: seed of the office and its walk.
-    #[arg(long, default_value_t = 0)]
-    seed: u64,
-    /// With --demo: length of the walk, m.
-    #[arg(long, default_value_t = 200.0)]
-    walk_length_m: f64,
+    /// With --demo: seed of the office and its walk [default: 0].
+    #[arg(long)]
+    seed: Option<u64>,
+    /// With --demo: length of the walk, m [default: 200].
+    #[arg(long)]
+    walk_length_m: Option<f64>,
     /// Where to write the page (HTML).
     #[arg(long)]
     out: PathBuf,
@@ -108,8 +108,10 @@ pub fn view(args: &ViewArgs) -> ExitCode {
 /// Builds the page `args` ask for and writes it; returns a line saying what was written.
 fn write_view(args: &ViewArgs) -> Result<String, ViewError> {
     let (site, track) = if args.demo {
-        let (site, track) = demo(args.seed, args.walk_length_m)?;
+        let (site, track) = demo(args.seed.unwrap_or(0), args.walk_length_m.unwrap_or(200.0))?;
         (site, Some(track))
+    } else if args.seed.is_some() || args.walk_length_m.is_some() {
+        return Err(ViewError::Argument("--seed and --walk-length-m go with --demo".into()));
     } else {
         let Some(path) = &args.site else {
             return Err(ViewError::Argument("give --site FILE or --demo".into()));

@@ -203,6 +203,7 @@ fn bad_input_fails_with_a_message() {
         (vec!["--site", arg(&site), "--plan", arg(&plan)], "no floor \"B9\""),
         (vec!["--site", arg(&site), "--walk", arg(&dir.join("missing.txt"))], "missing.txt"),
         (vec!["--demo", "--walk-length-m=-3"], "positive"),
+        (vec!["--site", arg(&site), "--seed", "3"], "go with --demo"),
     ] {
         let mut all = vec!["view", "--out", arg(&out)];
         all.extend(args);
