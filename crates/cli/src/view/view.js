@@ -276,7 +276,7 @@
       ctx.textAlign = "center";
       ctx.textBaseline = "middle";
       // Names of the largest zones first; a name that would overlap one already written is
-      // left out (a mall floor has hundreds of shops).
+      // left out until a closer zoom (a mall floor has many shops; docs/view.md).
       var placed = [];
       frame.zones.slice().sort(function (a, b) { return b.size - a.size; }).forEach(function (z) {
         // "F1/UNIQLO" on F1 reads "UNIQLO".
