@@ -22,6 +22,7 @@ for component in rustfmt clippy; do
         rustup component add "$component"
     fi
 done
+command -v chromium >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; }
 
 step "Formatting (cargo fmt --check)"
 cargo fmt --all -- --check
@@ -52,6 +53,9 @@ run bash bindings/kotlin/test.sh
 
 step "Swift bindings on Linux (XCTest in a Debian trixie chroot)"
 run bash bindings/swift/test.sh
+
+step "waymark view in headless Chromium (every floor renders, no console errors)"
+run bash scripts/view-test.sh
 
 step "All tests"
 python3 - "$log" <<'PY'

@@ -4,6 +4,7 @@
 mod bench;
 mod hmm;
 mod real;
+mod view;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
@@ -49,6 +50,9 @@ enum Command {
     /// `hmm fit`: Baum-Welch), for checking against other implementations. Input from a file
     /// or standard input, JSON on standard output, exit status 2 on bad input.
     Hmm(hmm::HmmArgs),
+    /// Write one self-contained HTML page showing a site's floors (plan, states, zones) and
+    /// optionally a walk: the estimate with its 68% circle and the truth, to play back.
+    View(view::ViewArgs),
 }
 
 #[derive(clap::Args)]
@@ -173,6 +177,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::bench(&args),
         Command::Site(args) => real::site(&args),
         Command::Hmm(args) => hmm::hmm(&args),
+        Command::View(args) => view::view(&args),
     }
 }
 
