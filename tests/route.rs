@@ -387,7 +387,7 @@ fn the_c_surface_routes_and_tracks() {
     let mut route = null_mut();
     assert_eq!(waymark_engine_route_to_zone(engine, &from, zone.as_ptr(), &mut route), waymark_result::Ok);
     let mut info = std::mem::MaybeUninit::<waymark_route_info>::uninit();
-    assert_eq!(waymark_route_info(route, info.as_mut_ptr()), waymark_result::Ok);
+    assert_eq!(waymark_route_get_info(route, info.as_mut_ptr()), waymark_result::Ok);
     // SAFETY: written by the call that returned Ok.
     let info = unsafe { info.assume_init() };
     let core =
@@ -396,11 +396,11 @@ fn the_c_surface_routes_and_tracks() {
     assert_eq!(info.leg_count, core.legs().len());
     assert!((info.length_m - core.length_m()).abs() < 1e-9);
     let mut leg = std::mem::MaybeUninit::<waymark_route_leg>::uninit();
-    assert_eq!(waymark_route_leg(route, 1, leg.as_mut_ptr()), waymark_result::Ok);
+    assert_eq!(waymark_route_get_leg(route, 1, leg.as_mut_ptr()), waymark_result::Ok);
     // SAFETY: as above.
     let leg = unsafe { leg.assume_init() };
     assert_ne!(leg.turn, waymark_turn::None);
-    assert_eq!(waymark_route_leg(route, 99, leg_out()), waymark_result::InputRejected);
+    assert_eq!(waymark_route_get_leg(route, 99, leg_out()), waymark_result::InputRejected);
     let mut progress = std::mem::MaybeUninit::<waymark_route_progress>::uninit();
     assert_eq!(waymark_route_update(route, &from, 1.0, progress.as_mut_ptr()), waymark_result::Ok);
     let bad = waymark_site_point { floor: 0, x: f64::NAN, y: 0.0 };
@@ -424,7 +424,7 @@ fn the_c_surface_routes_and_tracks() {
         waymark_engine_route_to_point(engine, &from, null(), &mut route_out()),
         waymark_result::NullParameter
     );
-    assert_eq!(waymark_route_info(null(), info_out()), waymark_result::NullParameter);
+    assert_eq!(waymark_route_get_info(null(), info_out()), waymark_result::NullParameter);
     waymark_route_free(route);
     waymark_route_free(null_mut());
     waymark_engine_free(engine);

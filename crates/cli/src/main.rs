@@ -4,6 +4,7 @@
 mod bench;
 mod hmm;
 mod real;
+mod route;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
@@ -49,6 +50,9 @@ enum Command {
     /// `hmm fit`: Baum-Welch), for checking against other implementations. Input from a file
     /// or standard input, JSON on standard output, exit status 2 on bad input.
     Hmm(hmm::HmmArgs),
+    /// The shortest walkable route on a site (or the demo's office) from a point to a point
+    /// or a zone, as legs with turns; `--json` for one JSON object.
+    Route(route::RouteArgs),
 }
 
 #[derive(clap::Args)]
@@ -173,6 +177,7 @@ fn main() -> ExitCode {
         Command::Bench(args) => bench::bench(&args),
         Command::Site(args) => real::site(&args),
         Command::Hmm(args) => hmm::hmm(&args),
+        Command::Route(args) => route::route(&args),
     }
 }
 

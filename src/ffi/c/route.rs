@@ -54,7 +54,7 @@ pub enum waymark_turn {
     UTurn = 8,
 }
 
-/// A route as a whole (`waymark_route_info`).
+/// A route as a whole (`waymark_route_get_info`).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct waymark_route_info {
@@ -72,7 +72,7 @@ pub struct waymark_route_info {
     pub end_snap_m: f64,
 }
 
-/// One leg (`waymark_route_leg`): a straight walk on one floor, or a change of floor.
+/// One leg (`waymark_route_get_leg`): a straight walk on one floor, or a change of floor.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
 pub struct waymark_route_leg {
@@ -235,7 +235,7 @@ fn with_route(
 
 /// The route as a whole into `*out`.
 #[no_mangle]
-pub extern "C" fn waymark_route_info(
+pub extern "C" fn waymark_route_get_info(
     route: *const waymark_route,
     out: *mut waymark_route_info,
 ) -> waymark_result {
@@ -260,10 +260,10 @@ pub extern "C" fn waymark_route_info(
     })
 }
 
-/// Leg `index` (from 0 to `leg_count` - 1 of `waymark_route_info`) into `*out`; an index out
+/// Leg `index` (from 0 to `leg_count` - 1 of `waymark_route_get_info`) into `*out`; an index out
 /// of range returns `INPUT_REJECTED`.
 #[no_mangle]
-pub extern "C" fn waymark_route_leg(
+pub extern "C" fn waymark_route_get_leg(
     route: *const waymark_route,
     index: usize,
     out: *mut waymark_route_leg,
@@ -344,7 +344,7 @@ pub extern "C" fn waymark_route_update(
 
 /// Plans a new route to the same destination from `from` (NULL: the latest position given to
 /// `waymark_route_update`, with its accuracy) and follows it from its start; read it again
-/// with `waymark_route_info` and `waymark_route_leg`. Fails as the constructors do, or with
+/// with `waymark_route_get_info` and `waymark_route_get_leg`. Fails as the constructors do, or with
 /// `NO_POSITION` for NULL `from` before the first update; the route is then unchanged.
 #[no_mangle]
 pub extern "C" fn waymark_route_reroute(
