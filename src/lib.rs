@@ -32,7 +32,7 @@ pub use fix::PositionFix;
 pub use geofence::{Geofence, GeofenceError, GeofenceShape};
 pub use history::{EpochInput, EpochRecord};
 pub use radio::{Reading, Salt, Scan, TransmitterId};
-pub use route::{Destination, Progress, Route, RouteError, RouteTracker, SitePoint};
+pub use route::{Destination, FloorPoint, Progress, Route, RouteError, RouteTracker};
 pub use site::{Site, SiteError, Zone, ZoneKind};
 
 uniffi::setup_scaffolding!();

@@ -8,7 +8,7 @@ use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::sync::{Arc, OnceLock};
-use waymark::route::{Destination, Route, RouteError, RouteTracker, SitePoint, SIGMA_PER_ACCURACY_68};
+use waymark::route::{Destination, FloorPoint, Route, RouteError, RouteTracker, SIGMA_PER_ACCURACY_68};
 use waymark::site::{ReachTable, Site, SiteBuilder};
 use waymark_sim::{Office, OfficeConfig};
 
@@ -83,7 +83,7 @@ fn crosses(a: &Segment, b: &Segment) -> bool {
 }
 
 /// Every property a route must have on `site`, from `from` to a destination.
-fn check(site: &Site, route: &Route, from: &SitePoint) {
+fn check(site: &Site, route: &Route, from: &FloorPoint) {
     let (start, end) = (route.start(), route.end());
     // Never shorter than the straight line: between its ends, and (with the snaps) between
     // the points it was asked for on one floor.
@@ -155,9 +155,9 @@ fn table_distance(site: &Site, a: u32, b: u32) -> Option<f64> {
     table.reachable(a as usize, 1000.0).iter().find(|e| e.0 == b).map(|e| f64::from(e.1))
 }
 
-fn point_strategy(floors: usize) -> impl Strategy<Value = SitePoint> {
+fn point_strategy(floors: usize) -> impl Strategy<Value = FloorPoint> {
     // The office is 40 m x 23 m; its outermost states are 1.5-3 m inside its walls.
-    (0..floors, 1.0..39.0f64, 1.0..22.0f64).prop_map(|(f, x, y)| SitePoint::new(f, x, y))
+    (0..floors, 1.0..39.0f64, 1.0..22.0f64).prop_map(|(f, x, y)| FloorPoint::new(f, x, y))
 }
 
 proptest! {
@@ -217,7 +217,7 @@ proptest! {
 fn room_to_room_goes_through_both_doors() {
     let site = &office().site;
     let route =
-        Route::plan(site, &SitePoint::new(0, 4.9, 2.0), &Destination::Zone("room 10".into())).unwrap();
+        Route::plan(site, &FloorPoint::new(0, 4.9, 2.0), &Destination::Zone("room 10".into())).unwrap();
     let names: Vec<Option<&str>> = route.legs().iter().map(|l| l.turn.map(|t| t.name())).collect();
     assert!(route.legs().len() >= 3, "{names:?}");
     assert_eq!(names[0], None);
@@ -229,19 +229,19 @@ fn room_to_room_goes_through_both_doors() {
     assert_eq!(zones.first(), Some(&Some("room 1")));
     assert!(zones.contains(&Some("aisle")));
     assert_eq!(zones.last(), Some(&Some("room 10")));
-    check(site, &route, &SitePoint::new(0, 4.9, 2.0));
+    check(site, &route, &FloorPoint::new(0, 4.9, 2.0));
 }
 
 #[test]
 fn errors_are_typed() {
     let site = two_floors();
-    let here = SitePoint::new(0, 1.7, 11.5);
+    let here = FloorPoint::new(0, 1.7, 11.5);
     assert_eq!(
         Route::plan(site, &here, &Destination::Zone("kitchen".into())),
         Err(RouteError::UnknownZone("kitchen".into()))
     );
     for bad in
-        [SitePoint::new(2, 1.7, 11.5), SitePoint::new(0, f64::NAN, 1.0), SitePoint::new(0, 100.0, 100.0)]
+        [FloorPoint::new(2, 1.7, 11.5), FloorPoint::new(0, f64::NAN, 1.0), FloorPoint::new(0, 100.0, 100.0)]
     {
         let e = Route::plan(site, &bad, &Destination::Point(here)).unwrap_err();
         assert!(
@@ -263,7 +263,7 @@ fn errors_are_typed() {
     }
     let unlinked = b.build(Default::default()).unwrap();
     assert!(matches!(
-        Route::plan(&unlinked, &here, &Destination::Point(SitePoint::new(1, 1.7, 11.5))),
+        Route::plan(&unlinked, &here, &Destination::Point(FloorPoint::new(1, 1.7, 11.5))),
         Err(RouteError::Unreachable { .. })
     ));
 }
@@ -275,7 +275,7 @@ fn errors_are_typed() {
 fn a_noisy_walk_along_the_route_stays_on_it_and_a_detour_leaves_it() {
     let site = &office().site;
     let route =
-        Route::plan(site, &SitePoint::new(0, 1.9, 9.0), &Destination::Zone("stair hall".into())).unwrap();
+        Route::plan(site, &FloorPoint::new(0, 1.9, 9.0), &Destination::Zone("stair hall".into())).unwrap();
     let mut tracker = RouteTracker::new(route.clone());
     let accuracy_m = 2.0;
     let sigma = accuracy_m * SIGMA_PER_ACCURACY_68;
@@ -287,7 +287,7 @@ fn a_noisy_walk_along_the_route_stays_on_it_and_a_detour_leaves_it() {
         for k in 0..10 {
             let t = k as f64 / 10.0;
             let truth = w[0].position() + (w[1].position() - w[0].position()) * t;
-            let seen = SitePoint::new(0, truth.x + noise.sample(&mut rng), truth.y + noise.sample(&mut rng));
+            let seen = FloorPoint::new(0, truth.x + noise.sample(&mut rng), truth.y + noise.sample(&mut rng));
             let p = tracker.update(&seen, accuracy_m).unwrap();
             positions += 1;
             off += usize::from(p.off_route);
@@ -311,14 +311,14 @@ fn a_noisy_walk_along_the_route_stays_on_it_and_a_detour_leaves_it() {
     let detour = [(8.0, 11.0), (8.5, 9.0), (9.0, 7.0), (9.5, 5.0), (10.0, 3.0)];
     let flags: Vec<bool> = detour
         .iter()
-        .map(|&(x, y)| tracker.update(&SitePoint::new(0, x, y), accuracy_m).unwrap().off_route)
+        .map(|&(x, y)| tracker.update(&FloorPoint::new(0, x, y), accuracy_m).unwrap().off_route)
         .collect();
     // On the aisle and in the door: on the route; deep in the room: off it, and it stays so.
     assert!(!flags[0] && !flags[1] && flags[4], "{flags:?}");
     assert!(flags.windows(2).all(|f| f[0] <= f[1]), "{flags:?}");
     let again = tracker.reroute(site, None).unwrap().clone();
     assert_eq!(site.zone_of(again.states()[0] as usize), site.zone_index("room 2"));
-    assert!(!tracker.update(&SitePoint::new(0, 10.0, 3.0), accuracy_m).unwrap().off_route);
+    assert!(!tracker.update(&FloorPoint::new(0, 10.0, 3.0), accuracy_m).unwrap().off_route);
 }
 
 /// The uniffi surface: `Site.route`, `RouteTracker`, typed errors, from Rust.
@@ -326,12 +326,12 @@ fn a_noisy_walk_along_the_route_stays_on_it_and_a_detour_leaves_it() {
 fn the_uniffi_surface_routes_and_tracks() {
     use waymark::ffi::uniffi as api;
     let site = Arc::new(api::Site::from_bytes(two_floors().to_json().into_bytes()).unwrap());
-    let from = api::SitePoint { floor: 0, x: 4.9, y: 2.0 };
+    let from = api::FloorPoint { floor: 0, x: 4.9, y: 2.0 };
     let to = api::Destination::Zone { name: "upstairs room 10".into() };
     let route = site.route(from, to.clone()).unwrap();
     let core = Route::plan(
         two_floors(),
-        &SitePoint::new(0, 4.9, 2.0),
+        &FloorPoint::new(0, 4.9, 2.0),
         &Destination::Zone("upstairs room 10".into()),
     )
     .unwrap();
@@ -342,10 +342,10 @@ fn the_uniffi_surface_routes_and_tracks() {
     assert_eq!(route.legs[1].turn, core.legs()[1].turn.map(Into::into));
     let tracker = api::RouteTracker::new(Arc::clone(&site), from, to).unwrap();
     assert_eq!(tracker.route(), route);
-    let p = tracker.update_point(api::SitePoint { floor: 0, x: 4.9, y: 2.5 }, 1.0).unwrap();
+    let p = tracker.update_point(api::FloorPoint { floor: 0, x: 4.9, y: 2.5 }, 1.0).unwrap();
     assert!(!p.off_route && (p.remaining_m - route.length_m).abs() < 1.0);
     assert!(matches!(
-        tracker.update_point(api::SitePoint { floor: 9, x: 0.0, y: 0.0 }, 1.0),
+        tracker.update_point(api::FloorPoint { floor: 9, x: 0.0, y: 0.0 }, 1.0),
         Err(api::RouteError::OffGraph { .. })
     ));
     assert!(matches!(
@@ -376,7 +376,7 @@ fn the_c_surface_routes_and_tracks() {
     let created = unsafe { waymark_engine_new_with_options(json.as_ptr(), json.len(), null(), &mut engine) };
     let engine = engine as *mut waymark_engine;
     assert_eq!(created, waymark_result::Ok);
-    let from = waymark_site_point { floor: 0, x: 4.9, y: 2.0 };
+    let from = waymark_floor_point { floor: 0, x: 4.9, y: 2.0 };
     let zone = c"room 10";
     let mut route = null_mut();
     assert_eq!(waymark_engine_route_to_zone(engine, &from, zone.as_ptr(), &mut route), waymark_result::Ok);
@@ -385,7 +385,7 @@ fn the_c_surface_routes_and_tracks() {
     // SAFETY: written by the call that returned Ok.
     let info = unsafe { info.assume_init() };
     let core =
-        Route::plan(&office().site, &SitePoint::new(0, 4.9, 2.0), &Destination::Zone("room 10".into()))
+        Route::plan(&office().site, &FloorPoint::new(0, 4.9, 2.0), &Destination::Zone("room 10".into()))
             .unwrap();
     assert_eq!(info.leg_count, core.legs().len());
     assert!((info.length_m - core.length_m()).abs() < 1e-9);
@@ -397,7 +397,7 @@ fn the_c_surface_routes_and_tracks() {
     assert_eq!(waymark_route_get_leg(route, 99, leg_out()), waymark_result::InputRejected);
     let mut progress = std::mem::MaybeUninit::<waymark_route_progress>::uninit();
     assert_eq!(waymark_route_update(route, &from, 1.0, progress.as_mut_ptr()), waymark_result::Ok);
-    let bad = waymark_site_point { floor: 0, x: f64::NAN, y: 0.0 };
+    let bad = waymark_floor_point { floor: 0, x: f64::NAN, y: 0.0 };
     assert_eq!(waymark_route_update(route, &bad, 1.0, null_mut()), waymark_result::OffGraph);
     assert_eq!(waymark_route_reroute(route, null()), waymark_result::Ok);
     // No position yet: a route from it is refused; unknown zone and NULLs are typed.
@@ -409,7 +409,7 @@ fn the_c_surface_routes_and_tracks() {
         waymark_engine_route_to_zone(engine, &from, c"nope".as_ptr(), &mut route_out()),
         waymark_result::UnknownZone
     );
-    let far = waymark_site_point { floor: 0, x: 500.0, y: 0.0 };
+    let far = waymark_floor_point { floor: 0, x: 500.0, y: 0.0 };
     assert_eq!(
         waymark_engine_route_to_point(engine, &from, &far, &mut route_out()),
         waymark_result::OffGraph

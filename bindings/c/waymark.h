@@ -723,7 +723,7 @@ typedef struct {
    * y, m.
    */
   double y;
-} waymark_site_point;
+} waymark_floor_point;
 
 /**
  * A route as a whole (`waymark_route_get_info`).
@@ -740,11 +740,11 @@ typedef struct {
   /**
    * Where it starts: the walkable place nearest the origin.
    */
-  waymark_site_point start;
+  waymark_floor_point start;
   /**
    * Where it ends.
    */
-  waymark_site_point end;
+  waymark_floor_point end;
   /**
    * Straight-line distance from the origin to `start`, m (not part of the route).
    */
@@ -762,11 +762,11 @@ typedef struct {
   /**
    * Where it starts (on `start.floor`).
    */
-  waymark_site_point start;
+  waymark_floor_point start;
   /**
    * Where it ends (on `end.floor`; another floor for a floor change).
    */
-  waymark_site_point end;
+  waymark_floor_point end;
   /**
    * Whether it changes floor.
    */
@@ -1143,8 +1143,8 @@ waymark_result waymark_set_log_callback(uint32_t level,
  * point), `UNREACHABLE`, or `NO_POSITION` (NULL `from` before the first epoch).
  */
 waymark_result waymark_engine_route_to_point(const waymark_engine *engine,
-                                             const waymark_site_point *from,
-                                             const waymark_site_point *to,
+                                             const waymark_floor_point *from,
+                                             const waymark_floor_point *to,
                                              waymark_route **out);
 
 /**
@@ -1152,7 +1152,7 @@ waymark_result waymark_engine_route_to_point(const waymark_engine *engine,
  * route ends at the zone's walkable place nearest on foot. Also fails with `UNKNOWN_ZONE`.
  */
 waymark_result waymark_engine_route_to_zone(const waymark_engine *engine,
-                                            const waymark_site_point *from,
+                                            const waymark_floor_point *from,
                                             const char *zone,
                                             waymark_route **out);
 
@@ -1180,7 +1180,7 @@ waymark_result waymark_route_get_leg(const waymark_route *route,
  * value, a negative accuracy or an unknown floor returns `OFF_GRAPH` and changes nothing.
  */
 waymark_result waymark_route_update(waymark_route *route,
-                                    const waymark_site_point *position,
+                                    const waymark_floor_point *position,
                                     double accuracy_m,
                                     waymark_route_progress *out);
 
@@ -1190,7 +1190,7 @@ waymark_result waymark_route_update(waymark_route *route,
  * with `waymark_route_get_info` and `waymark_route_get_leg`. Fails as the constructors do, or with
  * `NO_POSITION` for NULL `from` before the first update; the route is then unchanged.
  */
-waymark_result waymark_route_reroute(waymark_route *route, const waymark_site_point *from);
+waymark_result waymark_route_reroute(waymark_route *route, const waymark_floor_point *from);
 
 #ifdef __cplusplus
 }  // extern "C"

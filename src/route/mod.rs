@@ -21,7 +21,7 @@ use nalgebra::Point2;
 
 /// A point of the site: a floor and a position in its metric frame.
 #[derive(Clone, Copy, Debug, PartialEq)]
-pub struct SitePoint {
+pub struct FloorPoint {
     /// Index into [`Site::floors`].
     pub floor: usize,
     /// x in the site's metric frame, m.
@@ -30,7 +30,7 @@ pub struct SitePoint {
     pub y: f64,
 }
 
-impl SitePoint {
+impl FloorPoint {
     /// The point on `floor` at (`x`, `y`).
     pub fn new(floor: usize, x: f64, y: f64) -> Self {
         Self { floor, x, y }
@@ -51,7 +51,7 @@ impl SitePoint {
 #[derive(Clone, Debug, PartialEq)]
 pub enum Destination {
     /// A point: the route ends at the walkable state nearest it on its floor.
-    Point(SitePoint),
+    Point(FloorPoint),
     /// A zone by name: the route ends at the zone's state nearest on foot.
     Zone(String),
 }
@@ -112,7 +112,7 @@ pub fn snap_tolerance_m(site: &Site, accuracy_m: f64) -> f64 {
 
 /// The walkable state nearest `point` on its floor, with its distance, within
 /// [`snap_tolerance_m`] for a point with `accuracy_m` (0 for a free point).
-pub fn snap(site: &Site, point: &SitePoint, accuracy_m: f64) -> Result<(u32, f64), RouteError> {
+pub fn snap(site: &Site, point: &FloorPoint, accuracy_m: f64) -> Result<(u32, f64), RouteError> {
     if point.floor >= site.floors().len() {
         return Err(RouteError::UnknownFloor { floor: point.floor, floors: site.floors().len() });
     }
@@ -147,14 +147,14 @@ pub fn snap(site: &Site, point: &SitePoint, accuracy_m: f64) -> Result<(u32, f64
 #[derive(Clone, Debug, PartialEq)]
 pub struct Route {
     /// The point it was asked from.
-    origin: SitePoint,
+    origin: FloorPoint,
     destination: Destination,
     /// States walked through, first the start's, last the destination's.
     path: Vec<u32>,
     /// Walking distance from the start to each state of `path`, m.
     along: Vec<f64>,
     /// Each state of `path` as a point.
-    points: Vec<SitePoint>,
+    points: Vec<FloorPoint>,
     /// How many floors the site has.
     floors: usize,
     legs: Vec<Leg>,
@@ -176,7 +176,7 @@ pub(crate) fn edge_cost(site: &Site, a: u32, b: u32, length_m: f64) -> f64 {
 impl Route {
     /// The shortest walkable route from `from` (a free point: snapped within the site's
     /// spacing) to `to`.
-    pub fn plan(site: &Site, from: &SitePoint, to: &Destination) -> Result<Route, RouteError> {
+    pub fn plan(site: &Site, from: &FloorPoint, to: &Destination) -> Result<Route, RouteError> {
         Route::plan_from(site, from, 0.0, to)
     }
 
@@ -184,7 +184,7 @@ impl Route {
     /// (it widens the snapping tolerance: [`snap_tolerance_m`]).
     pub fn plan_from(
         site: &Site,
-        from: &SitePoint,
+        from: &FloorPoint,
         accuracy_m: f64,
         to: &Destination,
     ) -> Result<Route, RouteError> {
@@ -227,7 +227,7 @@ impl Route {
         }
         let half_cell_m = site.spacing_m() / 2.0;
         let legs = legs::build(site, &path, &along, half_cell_m);
-        let points = path.iter().map(|&s| SitePoint::of_state(site, s)).collect();
+        let points = path.iter().map(|&s| FloorPoint::of_state(site, s)).collect();
         Ok(Route {
             origin: *from,
             destination: to.clone(),
@@ -263,22 +263,22 @@ impl Route {
     }
 
     /// Each of [`states`](Self::states) as a point.
-    pub fn points(&self) -> &[SitePoint] {
+    pub fn points(&self) -> &[FloorPoint] {
         &self.points
     }
 
     /// Where the route starts: the walkable state the origin snapped to.
-    pub fn start(&self) -> SitePoint {
+    pub fn start(&self) -> FloorPoint {
         self.points[0]
     }
 
     /// Where the route ends: the destination's state.
-    pub fn end(&self) -> SitePoint {
+    pub fn end(&self) -> FloorPoint {
         self.points[self.points.len() - 1]
     }
 
     /// The point the route was asked from.
-    pub fn origin(&self) -> SitePoint {
+    pub fn origin(&self) -> FloorPoint {
         self.origin
     }
 

@@ -41,9 +41,12 @@ fn turn_classes_follow_the_bands() {
 #[test]
 fn collinear_edges_merge_and_corners_turn() {
     let site = l_site();
-    let route =
-        Route::plan(&site, &SitePoint::new(0, 0.2, -0.3), &Destination::Point(SitePoint::new(0, 12.0, 9.0)))
-            .unwrap();
+    let route = Route::plan(
+        &site,
+        &FloorPoint::new(0, 0.2, -0.3),
+        &Destination::Point(FloorPoint::new(0, 12.0, 9.0)),
+    )
+    .unwrap();
     assert_eq!(route.states(), &[0, 1, 2, 3, 4, 5, 6, 7]);
     assert_eq!(route.legs().len(), 2, "{:?}", route.legs());
     let [east, north] = [&route.legs()[0], &route.legs()[1]];
@@ -58,7 +61,7 @@ fn collinear_edges_merge_and_corners_turn() {
 #[test]
 fn a_route_goes_round_the_wall_to_a_zone() {
     let site = l_site();
-    let route = Route::plan(&site, &SitePoint::new(0, 0.0, 0.0), &Destination::Zone("room".into())).unwrap();
+    let route = Route::plan(&site, &FloorPoint::new(0, 0.0, 0.0), &Destination::Zone("room".into())).unwrap();
     assert_eq!(route.end().position(), Point2::new(0.0, 2.0));
     assert!((route.length_m() - (21.0 + 12.0f64.hypot(7.0))).abs() < 1e-9);
     let last = route.legs().last().unwrap();
@@ -70,7 +73,7 @@ fn a_route_goes_round_the_wall_to_a_zone() {
 fn floor_changes_are_their_own_leg() {
     let site = l_site();
     let route =
-        Route::plan(&site, &SitePoint::new(0, 0.0, 0.0), &Destination::Zone("landing".into())).unwrap();
+        Route::plan(&site, &FloorPoint::new(0, 0.0, 0.0), &Destination::Zone("landing".into())).unwrap();
     assert_eq!(route.legs().len(), 2);
     let stairs = &route.legs()[1];
     assert!(stairs.is_floor_change());
@@ -90,7 +93,7 @@ fn a_zig_zag_within_half_a_cell_is_one_leg() {
     }
     let site = b.build(BuildOptions::default()).unwrap();
     let route =
-        Route::plan(&site, &SitePoint::new(0, 0.0, 0.0), &Destination::Point(SitePoint::new(0, 5.0, 1.0)))
+        Route::plan(&site, &FloorPoint::new(0, 0.0, 0.0), &Destination::Point(FloorPoint::new(0, 5.0, 1.0)))
             .unwrap();
     assert_eq!(route.legs().len(), 1, "{:?}", route.legs());
 }
@@ -98,22 +101,22 @@ fn a_zig_zag_within_half_a_cell_is_one_leg() {
 #[test]
 fn errors_are_typed() {
     let site = l_site();
-    let here = SitePoint::new(0, 0.0, 0.0);
+    let here = FloorPoint::new(0, 0.0, 0.0);
     assert_eq!(
         Route::plan(&site, &here, &Destination::Zone("kitchen".into())),
         Err(RouteError::UnknownZone("kitchen".into()))
     );
     assert!(matches!(
-        Route::plan(&site, &SitePoint::new(5, 0.0, 0.0), &Destination::Zone("room".into())),
+        Route::plan(&site, &FloorPoint::new(5, 0.0, 0.0), &Destination::Zone("room".into())),
         Err(RouteError::UnknownFloor { floor: 5, floors: 2 })
     ));
     assert!(matches!(
-        Route::plan(&site, &SitePoint::new(0, f64::NAN, 0.0), &Destination::Zone("room".into())),
+        Route::plan(&site, &FloorPoint::new(0, f64::NAN, 0.0), &Destination::Zone("room".into())),
         Err(RouteError::NotFinite(_))
     ));
     // 3 m is the spacing: a point 10 m from every state is off the graph, unless its accuracy
     // radius covers the gap.
-    let far = SitePoint::new(0, -10.0, 0.0);
+    let far = FloorPoint::new(0, -10.0, 0.0);
     assert!(matches!(
         Route::plan(&site, &far, &Destination::Zone("room".into())),
         Err(RouteError::OffGraph { .. })
@@ -128,7 +131,11 @@ fn errors_are_typed() {
     b.edge(a, c, None);
     let islands = b.build(BuildOptions::default()).unwrap();
     assert!(matches!(
-        Route::plan(&islands, &SitePoint::new(0, 0.0, 0.0), &Destination::Point(SitePoint::new(0, 6.0, 0.0))),
+        Route::plan(
+            &islands,
+            &FloorPoint::new(0, 0.0, 0.0),
+            &Destination::Point(FloorPoint::new(0, 6.0, 0.0))
+        ),
         Err(RouteError::Unreachable { from: 0, .. })
     ));
 }
@@ -136,11 +143,11 @@ fn errors_are_typed() {
 #[test]
 fn already_there_is_an_empty_route() {
     let site = l_site();
-    let route = Route::plan(&site, &SitePoint::new(0, 0.1, 2.0), &Destination::Zone("room".into())).unwrap();
+    let route = Route::plan(&site, &FloorPoint::new(0, 0.1, 2.0), &Destination::Zone("room".into())).unwrap();
     assert!(route.legs().is_empty());
     assert_eq!(route.length_m(), 0.0);
     let mut tracker = RouteTracker::new(route);
-    let progress = tracker.update(&SitePoint::new(0, 0.0, 2.0), 1.0).unwrap();
+    let progress = tracker.update(&FloorPoint::new(0, 0.0, 2.0), 1.0).unwrap();
     assert!(progress.arrived && !progress.off_route);
     assert_eq!((progress.remaining_m, progress.leg), (0.0, 0));
 }
@@ -149,10 +156,10 @@ fn already_there_is_an_empty_route() {
 fn the_tracker_follows_turns_and_leaves_with_hysteresis() {
     let site = l_site();
     let route =
-        Route::plan(&site, &SitePoint::new(0, 0.0, 0.0), &Destination::Point(SitePoint::new(0, 12.0, 9.0)))
+        Route::plan(&site, &FloorPoint::new(0, 0.0, 0.0), &Destination::Point(FloorPoint::new(0, 12.0, 9.0)))
             .unwrap();
     let mut t = RouteTracker::new(route);
-    let at = |t: &mut RouteTracker, x: f64, y: f64, r: f64| t.update(&SitePoint::new(0, x, y), r).unwrap();
+    let at = |t: &mut RouteTracker, x: f64, y: f64, r: f64| t.update(&FloorPoint::new(0, x, y), r).unwrap();
     let p = at(&mut t, 6.0, 0.5, 2.0);
     assert_eq!((p.along_m, p.remaining_m, p.leg, p.off_route, p.arrived), (6.0, 15.0, 0, false, false));
     // At the corner, the next leg is the one to take.
@@ -172,15 +179,15 @@ fn the_tracker_follows_turns_and_leaves_with_hysteresis() {
     // A vaguer position needs to be further out.
     assert!(!at(&mut t, 12.0 + enter + 0.01, 4.0, 3.0).off_route);
     // The other floor is not on this route: off it, whatever the accuracy.
-    let upstairs = t.update(&SitePoint::new(1, 12.0, 4.0), 50.0).unwrap();
+    let upstairs = t.update(&FloorPoint::new(1, 12.0, 4.0), 50.0).unwrap();
     assert!(upstairs.off_route && upstairs.distance_from_route_m.is_infinite());
     assert!(!at(&mut t, 12.0, 5.0, 2.0).arrived, "not within reach of the end yet");
     let there = at(&mut t, 12.0, 8.5, 1.0);
     assert!(there.arrived && there.leg == 1 && (there.remaining_m - 0.5).abs() < 1e-12);
     // Bad input changes nothing.
-    assert!(t.update(&SitePoint::new(0, f64::INFINITY, 0.0), 1.0).is_err());
-    assert!(t.update(&SitePoint::new(0, 0.0, 0.0), -1.0).is_err());
-    assert!(matches!(t.update(&SitePoint::new(7, 0.0, 0.0), 1.0), Err(RouteError::UnknownFloor { .. })));
+    assert!(t.update(&FloorPoint::new(0, f64::INFINITY, 0.0), 1.0).is_err());
+    assert!(t.update(&FloorPoint::new(0, 0.0, 0.0), -1.0).is_err());
+    assert!(matches!(t.update(&FloorPoint::new(7, 0.0, 0.0), 1.0), Err(RouteError::UnknownFloor { .. })));
     assert_eq!(at(&mut t, 12.0, 8.5, 1.0), there);
 }
 
@@ -188,16 +195,16 @@ fn the_tracker_follows_turns_and_leaves_with_hysteresis() {
 fn reroute_starts_from_the_latest_position() {
     let site = l_site();
     let route =
-        Route::plan(&site, &SitePoint::new(0, 0.0, 0.0), &Destination::Zone("landing".into())).unwrap();
+        Route::plan(&site, &FloorPoint::new(0, 0.0, 0.0), &Destination::Zone("landing".into())).unwrap();
     let mut t = RouteTracker::new(route);
     assert_eq!(t.reroute(&site, None).unwrap_err(), RouteError::NoPosition);
-    assert!(t.update(&SitePoint::new(0, 12.0, 6.0), 1.0).unwrap().off_route);
+    assert!(t.update(&FloorPoint::new(0, 12.0, 6.0), 1.0).unwrap().off_route);
     let again = t.reroute(&site, None).unwrap();
     assert_eq!(again.states(), &[6, 5, 4, 9]);
     assert_eq!(again.destination(), &Destination::Zone("landing".into()));
-    let p = t.update(&SitePoint::new(0, 12.0, 6.0), 1.0).unwrap();
+    let p = t.update(&FloorPoint::new(0, 12.0, 6.0), 1.0).unwrap();
     assert!(!p.off_route && p.along_m == 0.0 && p.remaining_m == 12.0);
     // A failed reroute keeps the route.
-    assert!(t.reroute(&site, Some((SitePoint::new(0, 100.0, 0.0), 0.0))).is_err());
+    assert!(t.reroute(&site, Some((FloorPoint::new(0, 100.0, 0.0), 0.0))).is_err());
     assert_eq!(t.route().states(), &[6, 5, 4, 9]);
 }

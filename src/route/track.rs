@@ -1,7 +1,7 @@
 //! Following a route as positions arrive: how far along it the walker is, what is left, which
 //! leg they are on, whether they arrived, and whether they left it (docs/routes.md#progress).
 
-use super::{Destination, Route, RouteError, SitePoint};
+use super::{Destination, FloorPoint, Route, RouteError};
 use crate::site::Site;
 
 /// σ of one coordinate of a position's error per metre of its 68% radius: the 68% circle of an
@@ -47,7 +47,7 @@ pub struct RouteTracker {
     arrived: bool,
     along_m: f64,
     /// The latest position and its 68% radius, for rerouting.
-    last: Option<(SitePoint, f64)>,
+    last: Option<(FloorPoint, f64)>,
 }
 
 impl RouteTracker {
@@ -69,7 +69,7 @@ impl RouteTracker {
     /// parts of the route come within half a cell of that distance (a route that passes near
     /// itself), to the one nearest along the route to the previous match, so the progress does
     /// not jump between them.
-    pub fn update(&mut self, position: &SitePoint, accuracy_m: f64) -> Result<Progress, RouteError> {
+    pub fn update(&mut self, position: &FloorPoint, accuracy_m: f64) -> Result<Progress, RouteError> {
         if !(position.x.is_finite() && position.y.is_finite()) {
             return Err(RouteError::NotFinite("a position's coordinate"));
         }
@@ -118,7 +118,7 @@ impl RouteTracker {
 
     /// (distance, along) of the position's nearest point on each part of the route on its
     /// floor: each edge on the floor, and the end on this floor of each edge between floors.
-    fn candidates(&self, position: &SitePoint) -> Vec<(f64, f64)> {
+    fn candidates(&self, position: &FloorPoint) -> Vec<(f64, f64)> {
         let r = &self.route;
         let p = position.position();
         let mut out = Vec::new();
@@ -154,7 +154,7 @@ impl RouteTracker {
     /// Plans a new route to the same destination from `from` (with its 68% radius), or, with
     /// `None`, from the latest position given to [`update`](Self::update); the tracker starts
     /// again at its beginning. On an error the tracker keeps its route.
-    pub fn reroute(&mut self, site: &Site, from: Option<(SitePoint, f64)>) -> Result<&Route, RouteError> {
+    pub fn reroute(&mut self, site: &Site, from: Option<(FloorPoint, f64)>) -> Result<&Route, RouteError> {
         let (point, accuracy_m) = from.or(self.last).ok_or(RouteError::NoPosition)?;
         let destination: Destination = self.route.destination.clone();
         let route = Route::plan_from(site, &point, accuracy_m, &destination)?;

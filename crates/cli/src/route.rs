@@ -2,7 +2,7 @@
 //! from a point to a point or a zone, as legs with turns (docs/routes.md).
 
 use std::process::ExitCode;
-use waymark::route::{Destination, Route, SitePoint};
+use waymark::route::{Destination, FloorPoint, Route};
 use waymark::site::Site;
 use waymark_sim as sim;
 
@@ -33,7 +33,7 @@ pub struct RouteArgs {
 }
 
 /// A point given as FLOOR:X,Y, the floor by name (first) or index.
-fn parse_point(site: &Site, text: &str) -> Result<SitePoint, String> {
+fn parse_point(site: &Site, text: &str) -> Result<FloorPoint, String> {
     let bad = || format!("{text:?} is not FLOOR:X,Y (a floor name or index, then x and y in metres)");
     let (floor, xy) = text.rsplit_once(':').ok_or_else(bad)?;
     let (x, y) = xy.split_once(',').ok_or_else(bad)?;
@@ -45,7 +45,7 @@ fn parse_point(site: &Site, text: &str) -> Result<SitePoint, String> {
                 format!("no floor {floor:?} (floors: {})", names.join(", "))
             },
         )?;
-    Ok(SitePoint::new(floor, x, y))
+    Ok(FloorPoint::new(floor, x, y))
 }
 
 fn floor_name(site: &Site, floor: usize) -> String {
@@ -53,7 +53,7 @@ fn floor_name(site: &Site, floor: usize) -> String {
 }
 
 fn to_json(site: &Site, route: &Route) -> serde_json::Value {
-    let point = |p: &SitePoint| serde_json::json!({"floor": p.floor, "floor_name": floor_name(site, p.floor), "x": p.x, "y": p.y});
+    let point = |p: &FloorPoint| serde_json::json!({"floor": p.floor, "floor_name": floor_name(site, p.floor), "x": p.x, "y": p.y});
     let legs: Vec<serde_json::Value> = route
         .legs()
         .iter()

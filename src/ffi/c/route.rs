@@ -5,7 +5,7 @@
 
 use super::{boundary, fail, string_arg, waymark_engine, waymark_result, with_handle, write};
 use crate::ffi::delivery::lock;
-use crate::route::{Destination, Route, RouteError, RouteTracker, SitePoint, Turn};
+use crate::route::{Destination, FloorPoint, Route, RouteError, RouteTracker, Turn};
 use crate::site::Site;
 use std::ffi::c_char;
 use std::sync::{Arc, Mutex};
@@ -20,7 +20,7 @@ pub struct waymark_route {
 /// A point of the site: a floor index and a position in the site's metric frame, m.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
-pub struct waymark_site_point {
+pub struct waymark_floor_point {
     /// Floor index in the site file.
     pub floor: u32,
     /// x, m.
@@ -63,9 +63,9 @@ pub struct waymark_route_info {
     /// Number of legs; 0 when the start is already at the destination.
     pub leg_count: usize,
     /// Where it starts: the walkable place nearest the origin.
-    pub start: waymark_site_point,
+    pub start: waymark_floor_point,
     /// Where it ends.
-    pub end: waymark_site_point,
+    pub end: waymark_floor_point,
     /// Straight-line distance from the origin to `start`, m (not part of the route).
     pub start_snap_m: f64,
     /// Straight-line distance from a destination point to `end`, m; 0 for a zone.
@@ -77,9 +77,9 @@ pub struct waymark_route_info {
 #[derive(Clone, Copy, Debug)]
 pub struct waymark_route_leg {
     /// Where it starts (on `start.floor`).
-    pub start: waymark_site_point,
+    pub start: waymark_floor_point,
     /// Where it ends (on `end.floor`; another floor for a floor change).
-    pub end: waymark_site_point,
+    pub end: waymark_floor_point,
     /// Whether it changes floor.
     pub floor_change: bool,
     /// Walking distance, m.
@@ -122,19 +122,19 @@ fn route_error(e: &RouteError) -> waymark_result {
     fail(code, e.to_string())
 }
 
-fn point(p: &waymark_site_point) -> SitePoint {
-    SitePoint::new(p.floor as usize, p.x, p.y)
+fn point(p: &waymark_floor_point) -> FloorPoint {
+    FloorPoint::new(p.floor as usize, p.x, p.y)
 }
 
-fn site_point(p: &SitePoint) -> waymark_site_point {
-    waymark_site_point { floor: p.floor as u32, x: p.x, y: p.y }
+fn floor_point(p: &FloorPoint) -> waymark_floor_point {
+    waymark_floor_point { floor: p.floor as u32, x: p.x, y: p.y }
 }
 
 /// Plans the route from `from` (NULL: the engine's latest position) to `to` and writes the new
 /// handle to `out`.
 fn plan(
     engine: *const waymark_engine,
-    from: *const waymark_site_point,
+    from: *const waymark_floor_point,
     to: impl FnOnce() -> Result<Destination, waymark_result>,
     out: *mut *mut waymark_route,
 ) -> waymark_result {
@@ -146,12 +146,12 @@ fn plan(
             Ok(to) => to,
             Err(code) => return code,
         };
-        // SAFETY: a non-NULL `from` points to one initialised waymark_site_point (the header's
+        // SAFETY: a non-NULL `from` points to one initialised waymark_floor_point (the header's
         // contract).
         let (from, accuracy_m) = match unsafe { from.as_ref() } {
             Some(p) => (point(p), 0.0),
             None => match handle.read(|e| e.position().cloned()) {
-                Ok(Some(p)) => (SitePoint::new(p.floor, p.x, p.y), p.accuracy_m),
+                Ok(Some(p)) => (FloorPoint::new(p.floor, p.x, p.y), p.accuracy_m),
                 Ok(None) => return fail(waymark_result::NoPosition, "no epoch has run yet"),
                 Err(e) => return super::fail_with(&e),
             },
@@ -177,12 +177,12 @@ fn plan(
 #[no_mangle]
 pub extern "C" fn waymark_engine_route_to_point(
     engine: *const waymark_engine,
-    from: *const waymark_site_point,
-    to: *const waymark_site_point,
+    from: *const waymark_floor_point,
+    to: *const waymark_floor_point,
     out: *mut *mut waymark_route,
 ) -> waymark_result {
     let to = || {
-        // SAFETY: a non-NULL `to` points to one initialised waymark_site_point (the header's
+        // SAFETY: a non-NULL `to` points to one initialised waymark_floor_point (the header's
         // contract).
         match unsafe { to.as_ref() } {
             Some(p) => Ok(Destination::Point(point(p))),
@@ -197,7 +197,7 @@ pub extern "C" fn waymark_engine_route_to_point(
 #[no_mangle]
 pub extern "C" fn waymark_engine_route_to_zone(
     engine: *const waymark_engine,
-    from: *const waymark_site_point,
+    from: *const waymark_floor_point,
     zone: *const c_char,
     out: *mut *mut waymark_route,
 ) -> waymark_result {
@@ -250,8 +250,8 @@ pub extern "C" fn waymark_route_get_info(
             waymark_route_info {
                 length_m: r.length_m(),
                 leg_count: r.legs().len(),
-                start: site_point(&r.start()),
-                end: site_point(&r.end()),
+                start: floor_point(&r.start()),
+                end: floor_point(&r.end()),
                 start_snap_m: r.start_snap_m(),
                 end_snap_m: r.end_snap_m(),
             },
@@ -294,8 +294,8 @@ pub extern "C" fn waymark_route_get_leg(
         write(
             out,
             waymark_route_leg {
-                start: site_point(&r.points()[leg.first]),
-                end: site_point(&r.points()[leg.last]),
+                start: floor_point(&r.points()[leg.first]),
+                end: floor_point(&r.points()[leg.last]),
                 floor_change: leg.is_floor_change(),
                 distance_m: leg.distance_m,
                 turn,
@@ -312,12 +312,12 @@ pub extern "C" fn waymark_route_get_leg(
 #[no_mangle]
 pub extern "C" fn waymark_route_update(
     route: *mut waymark_route,
-    position: *const waymark_site_point,
+    position: *const waymark_floor_point,
     accuracy_m: f64,
     out: *mut waymark_route_progress,
 ) -> waymark_result {
     with_route(route, |route| {
-        // SAFETY: a non-NULL `position` points to one initialised waymark_site_point (the
+        // SAFETY: a non-NULL `position` points to one initialised waymark_floor_point (the
         // header's contract).
         let Some(position) = (unsafe { position.as_ref() }) else {
             return fail(waymark_result::NullParameter, "position must not be NULL");
@@ -349,10 +349,10 @@ pub extern "C" fn waymark_route_update(
 #[no_mangle]
 pub extern "C" fn waymark_route_reroute(
     route: *mut waymark_route,
-    from: *const waymark_site_point,
+    from: *const waymark_floor_point,
 ) -> waymark_result {
     with_route(route, |route| {
-        // SAFETY: a non-NULL `from` points to one initialised waymark_site_point (the header's
+        // SAFETY: a non-NULL `from` points to one initialised waymark_floor_point (the header's
         // contract).
         let from = unsafe { from.as_ref() }.map(|p| (point(p), 0.0));
         match lock(&route.tracker).reroute(&route.site, from) {

@@ -11,7 +11,7 @@ use std::sync::{Arc, Mutex};
 
 /// A point of the site: a floor index and a position in the site's metric frame, m.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
-pub struct SitePoint {
+pub struct FloorPoint {
     /// Floor index in the site file.
     pub floor: u32,
     /// x in the site's metric frame, m.
@@ -26,7 +26,7 @@ pub enum Destination {
     /// A point: the route ends at the walkable place nearest it on its floor.
     Point {
         /// The point.
-        point: SitePoint,
+        point: FloorPoint,
     },
     /// A zone of the site (`Site.zoneNames`): the route ends at its nearest place on foot.
     Zone {
@@ -89,7 +89,7 @@ pub struct RouteLeg {
     /// The signed angle of that turn, degrees, positive to the left.
     pub turn_deg: Option<f64>,
     /// The places it passes, first to last, for drawing (each on its own floor).
-    pub points: Vec<SitePoint>,
+    pub points: Vec<FloorPoint>,
 }
 
 /// A route over the site's walkable graph.
@@ -100,9 +100,9 @@ pub struct Route {
     /// Walking length, m: the sum of the legs'.
     pub length_m: f64,
     /// Where it starts: the walkable place nearest the origin.
-    pub start: SitePoint,
+    pub start: FloorPoint,
     /// Where it ends.
-    pub end: SitePoint,
+    pub end: FloorPoint,
     /// Straight-line distance from the origin to `start`, m (not part of the route).
     pub start_snap_m: f64,
     /// Straight-line distance from a destination point to `end`, m; 0 for a zone.
@@ -188,12 +188,12 @@ fn guarded<T>(f: impl FnOnce() -> Result<T, RouteError>) -> Result<T, RouteError
         .unwrap_or_else(|_| Err(RouteError::Internal { reason: "Waymark panicked; nothing changed".into() }))
 }
 
-fn point(p: &SitePoint) -> core::SitePoint {
-    core::SitePoint::new(p.floor as usize, p.x, p.y)
+fn point(p: &FloorPoint) -> core::FloorPoint {
+    core::FloorPoint::new(p.floor as usize, p.x, p.y)
 }
 
-fn site_point(p: &core::SitePoint) -> SitePoint {
-    SitePoint { floor: p.floor as u32, x: p.x, y: p.y }
+fn floor_point(p: &core::FloorPoint) -> FloorPoint {
+    FloorPoint { floor: p.floor as u32, x: p.x, y: p.y }
 }
 
 fn destination(d: &Destination) -> core::Destination {
@@ -214,14 +214,14 @@ fn route(r: &core::Route) -> Route {
             distance_m: l.distance_m,
             turn: l.turn.map(Turn::from),
             turn_deg: l.turn_angle_rad.map(f64::to_degrees),
-            points: r.points()[l.first..=l.last].iter().map(site_point).collect(),
+            points: r.points()[l.first..=l.last].iter().map(floor_point).collect(),
         })
         .collect();
     Route {
         legs,
         length_m: r.length_m(),
-        start: site_point(&r.start()),
-        end: site_point(&r.end()),
+        start: floor_point(&r.start()),
+        end: floor_point(&r.end()),
         start_snap_m: r.start_snap_m(),
         end_snap_m: r.end_snap_m(),
     }
@@ -244,7 +244,7 @@ impl Site {
     /// graph, floor changes included where the site has stairs or lifts. `from` snaps to the
     /// nearest walkable place on its floor within the site's spacing. Throws `UnknownZone`,
     /// `OffGraph` or `Unreachable`.
-    pub fn route(&self, from: SitePoint, destination: Destination) -> Result<Route, RouteError> {
+    pub fn route(&self, from: FloorPoint, destination: Destination) -> Result<Route, RouteError> {
         guarded(|| {
             Ok(route(&core::Route::plan(&self.inner, &point(&from), &self::destination(&destination))?))
         })
@@ -280,7 +280,7 @@ impl PositioningEngine {
             .read(|e| e.position().cloned())
             .map_err(|e| RouteError::Internal { reason: e.to_string() })?
             .ok_or(RouteError::NoPosition)?;
-        let from = core::SitePoint::new(position.floor, position.x, position.y);
+        let from = core::FloorPoint::new(position.floor, position.x, position.y);
         let route = core::Route::plan_from(self.handle.site(), &from, position.accuracy_m, &destination(to))?;
         let mut tracker = CoreTracker::new(route);
         tracker.update(&from, position.accuracy_m)?;
@@ -300,7 +300,7 @@ pub struct RouteTracker {
 impl RouteTracker {
     /// A tracker on the route from `from` to `destination` on `site`; throws as `Site.route`.
     #[uniffi::constructor]
-    pub fn new(site: Arc<Site>, from: SitePoint, destination: Destination) -> Result<Arc<Self>, RouteError> {
+    pub fn new(site: Arc<Site>, from: FloorPoint, destination: Destination) -> Result<Arc<Self>, RouteError> {
         guarded(|| {
             let route = core::Route::plan(&site.inner, &point(&from), &self::destination(&destination))?;
             Ok(Arc::new(Self { site: Arc::clone(&site.inner), inner: Mutex::new(CoreTracker::new(route)) }))
@@ -315,12 +315,12 @@ impl RouteTracker {
     /// Takes a position from the engine and says where it puts the user on the route.
     /// Throws `OffGraph`, changing nothing, for a NaN or infinite value or an unknown floor.
     pub fn update(&self, position: PositionEstimate) -> Result<RouteProgress, RouteError> {
-        let at = SitePoint { floor: position.floor, x: position.x, y: position.y };
+        let at = FloorPoint { floor: position.floor, x: position.x, y: position.y };
         self.update_point(at, position.accuracy_m)
     }
 
     /// As `update`, from a position given as a point and the radius of its 68% circle, m.
-    pub fn update_point(&self, point: SitePoint, accuracy_m: f64) -> Result<RouteProgress, RouteError> {
+    pub fn update_point(&self, point: FloorPoint, accuracy_m: f64) -> Result<RouteProgress, RouteError> {
         guarded(|| Ok(progress(&lock(&self.inner).update(&self::point(&point), accuracy_m)?)))
     }
 

@@ -18,7 +18,7 @@ class RouteTest {
     fun aRouteToAZoneComesAsLegsWithTurns() {
         site().use { site ->
             // From room 1's far corner to room 10, across the aisle.
-            val route = site.route(SitePoint(0u, 4.9, 2.0), Destination.Zone("room 10"))
+            val route = site.route(FloorPoint(0u, 4.9, 2.0), Destination.Zone("room 10"))
             assertTrue("legs", route.legs.size >= 3)
             assertEquals(route.lengthM, route.legs.sumOf { it.distanceM }, 1e-9)
             val straight = Math.hypot(route.end.x - route.start.x, route.end.y - route.start.y)
@@ -36,7 +36,7 @@ class RouteTest {
     @Test
     fun aTrackerFollowsTheRouteAndNoticesADetour() {
         site().use { site ->
-            val tracker = RouteTracker(site, SitePoint(0u, 1.9, 9.0), Destination.Zone("stair hall"))
+            val tracker = RouteTracker(site, FloorPoint(0u, 1.9, 9.0), Destination.Zone("stair hall"))
             tracker.use {
                 val route = it.route()
                 val first = it.updatePoint(route.start, 2.0)
@@ -44,11 +44,11 @@ class RouteTest {
                 assertEquals(route.lengthM, first.remainingM, 1e-9)
                 assertEquals(0u, first.leg)
                 // Deep in room 2 (x 6.8-13.6, y 0-10), off the aisle: off the route.
-                assertTrue(it.updatePoint(SitePoint(0u, 10.0, 3.0), 2.0).offRoute)
+                assertTrue(it.updatePoint(FloorPoint(0u, 10.0, 3.0), 2.0).offRoute)
                 // Rerouting from there leads on, and the new route is followed from its start.
                 val again = it.reroute()
                 assertEquals(route.end, again.end)
-                assertFalse(it.updatePoint(SitePoint(0u, 10.0, 3.0), 2.0).offRoute)
+                assertFalse(it.updatePoint(FloorPoint(0u, 10.0, 3.0), 2.0).offRoute)
                 val there = it.updatePoint(again.end, 1.0)
                 assertTrue(there.arrived)
                 assertEquals(0.0, there.remainingM, 1e-9)
@@ -60,14 +60,14 @@ class RouteTest {
     fun routeErrorsAreTyped() {
         site().use { site ->
             try {
-                site.route(SitePoint(0u, 4.9, 2.0), Destination.Zone("kitchen"))
+                site.route(FloorPoint(0u, 4.9, 2.0), Destination.Zone("kitchen"))
                 fail("an unknown zone routed")
             } catch (e: RouteException.UnknownZone) {
                 assertEquals("kitchen", e.name)
             }
-            for (bad in listOf(SitePoint(7u, 1.0, 1.0), SitePoint(0u, Double.NaN, 1.0), SitePoint(0u, 500.0, 1.0))) {
+            for (bad in listOf(FloorPoint(7u, 1.0, 1.0), FloorPoint(0u, Double.NaN, 1.0), FloorPoint(0u, 500.0, 1.0))) {
                 try {
-                    site.route(bad, Destination.Point(SitePoint(0u, 4.9, 2.0)))
+                    site.route(bad, Destination.Point(FloorPoint(0u, 4.9, 2.0)))
                     fail("$bad routed")
                 } catch (e: RouteException.OffGraph) {
                     assertTrue(e.reason, e.reason.isNotEmpty())
