@@ -80,6 +80,19 @@ enum waymark_result
    */
   WAYMARK_RESULT_BUFFER_TOO_SMALL = 9,
   /**
+   * A route's destination names a zone the site does not have (`waymark_engine_route_to_zone`).
+   */
+  WAYMARK_RESULT_UNKNOWN_ZONE = 10,
+  /**
+   * A point is off the site's walkable graph: its floor does not exist, a coordinate or the
+   * accuracy is NaN or infinite, or no walkable place is near enough (docs/routes.md).
+   */
+  WAYMARK_RESULT_OFF_GRAPH = 11,
+  /**
+   * No walkable path joins a route's start to its destination.
+   */
+  WAYMARK_RESULT_UNREACHABLE = 12,
+  /**
    * Waymark panicked, or refused its own data (a bug). An epoch (a scan, an advance, a fix,
    * feedback) or a read that panicked had no effect: the engine is as it was before the
    * call, no callback hears of it, and it stays usable. Any other call that panicked may
@@ -149,6 +162,60 @@ enum waymark_status_kind
 typedef enum waymark_status_kind waymark_status_kind;
 #else
 typedef uint32_t waymark_status_kind;
+#endif // __STDC_VERSION__ >= 202311L
+#endif // __cplusplus
+
+/**
+ * Which way to turn onto a leg, by the angle between the legs: straight under 11°, slight
+ * 11-45°, left / right 45-135°, sharp 135-160°, u-turn from 160°.
+ */
+enum waymark_turn
+#if defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+  : uint32_t
+#endif // defined(__cplusplus) || __STDC_VERSION__ >= 202311L
+ {
+  /**
+   * No turn is given: the first leg, a floor change, and the leg after one.
+   */
+  WAYMARK_TURN_NONE = 0,
+  /**
+   * Under 11° either way.
+   */
+  WAYMARK_TURN_STRAIGHT = 1,
+  /**
+   * 11-45° to the left.
+   */
+  WAYMARK_TURN_SLIGHT_LEFT = 2,
+  /**
+   * 11-45° to the right.
+   */
+  WAYMARK_TURN_SLIGHT_RIGHT = 3,
+  /**
+   * 45-135° to the left.
+   */
+  WAYMARK_TURN_LEFT = 4,
+  /**
+   * 45-135° to the right.
+   */
+  WAYMARK_TURN_RIGHT = 5,
+  /**
+   * 135-160° to the left.
+   */
+  WAYMARK_TURN_SHARP_LEFT = 6,
+  /**
+   * 135-160° to the right.
+   */
+  WAYMARK_TURN_SHARP_RIGHT = 7,
+  /**
+   * 160° or more: back the way the user came.
+   */
+  WAYMARK_TURN_U_TURN = 8,
+};
+#ifndef __cplusplus
+#if __STDC_VERSION__ >= 202311L
+typedef enum waymark_turn waymark_turn;
+#else
+typedef uint32_t waymark_turn;
 #endif // __STDC_VERSION__ >= 202311L
 #endif // __cplusplus
 
@@ -227,6 +294,12 @@ typedef uint32_t waymark_log_level;
  * `waymark_engine_free`. Thread-safe: any thread may call any function on it.
  */
 typedef struct waymark_engine waymark_engine;
+
+/**
+ * A route and its progress. Opaque; create with `waymark_engine_route_to_point` or
+ * `waymark_engine_route_to_zone`, free with `waymark_route_free`. Thread-safe.
+ */
+typedef struct waymark_route waymark_route;
 
 /**
  * One accelerometer (m/s², gravity included), gyroscope (rad/s) or magnetometer (µT) sample
@@ -634,6 +707,116 @@ typedef void (*waymark_log_callback)(void *userdata,
                                      const char *target,
                                      const char *message);
 
+/**
+ * A point of the site: a floor index and a position in the site's metric frame, m.
+ */
+typedef struct {
+  /**
+   * Floor index in the site file.
+   */
+  uint32_t floor;
+  /**
+   * x, m.
+   */
+  double x;
+  /**
+   * y, m.
+   */
+  double y;
+} waymark_floor_point;
+
+/**
+ * A route as a whole (`waymark_route_get_info`).
+ */
+typedef struct {
+  /**
+   * Walking length, m: the sum of the legs'.
+   */
+  double length_m;
+  /**
+   * Number of legs; 0 when the start is already at the destination.
+   */
+  size_t leg_count;
+  /**
+   * Where it starts: the walkable place nearest the origin.
+   */
+  waymark_floor_point start;
+  /**
+   * Where it ends.
+   */
+  waymark_floor_point end;
+  /**
+   * Straight-line distance from the origin to `start`, m (not part of the route).
+   */
+  double start_snap_m;
+  /**
+   * Straight-line distance from a destination point to `end`, m; 0 for a zone.
+   */
+  double end_snap_m;
+} waymark_route_info;
+
+/**
+ * One leg (`waymark_route_get_leg`): a straight walk on one floor, or a change of floor.
+ */
+typedef struct {
+  /**
+   * Where it starts (on `start.floor`).
+   */
+  waymark_floor_point start;
+  /**
+   * Where it ends (on `end.floor`; another floor for a floor change).
+   */
+  waymark_floor_point end;
+  /**
+   * Whether it changes floor.
+   */
+  bool floor_change;
+  /**
+   * Walking distance, m.
+   */
+  double distance_m;
+  /**
+   * The turn onto it.
+   */
+  waymark_turn turn;
+  /**
+   * The signed angle of that turn, degrees, positive to the left; NaN with
+   * `WAYMARK_TURN_NONE`.
+   */
+  double turn_deg;
+} waymark_route_leg;
+
+/**
+ * Where a position puts the user on the route (`waymark_route_update`).
+ */
+typedef struct {
+  /**
+   * Walking distance from the route's start to the user's point on it, m.
+   */
+  double along_m;
+  /**
+   * Walking distance left, m.
+   */
+  double remaining_m;
+  /**
+   * Index of the leg the user is on (at a leg's end, the next one).
+   */
+  size_t leg;
+  /**
+   * Distance from the position to the route on its floor, m; infinite when the route does
+   * not visit that floor.
+   */
+  double distance_from_route_m;
+  /**
+   * The user has left the route: call `waymark_route_reroute`.
+   */
+  bool off_route;
+  /**
+   * The user has reached the end; it stays set until a reroute.
+   */
+  bool arrived;
+} waymark_route_progress;
+
 #ifdef __cplusplus
 extern "C" {
 #endif // __cplusplus
@@ -950,6 +1133,64 @@ waymark_result waymark_engine_fix_error(const waymark_engine *engine, waymark_fi
 waymark_result waymark_set_log_callback(uint32_t level,
                                         waymark_log_callback callback,
                                         void *userdata);
+
+/**
+ * The shortest walkable route on the engine's site from `from` (NULL: the engine's latest
+ * position, which snaps within the site's spacing plus its accuracy; a point snaps within
+ * the spacing) to the point `to`, over the walkable graph and its stairs and lifts. On
+ * success `*out` holds the route; free it with `waymark_route_free`. Fails with
+ * `OFF_GRAPH` (an unknown floor, a NaN or infinite coordinate, no walkable place near a
+ * point), `UNREACHABLE`, or `NO_POSITION` (NULL `from` before the first epoch).
+ */
+waymark_result waymark_engine_route_to_point(const waymark_engine *engine,
+                                             const waymark_floor_point *from,
+                                             const waymark_floor_point *to,
+                                             waymark_route **out);
+
+/**
+ * As `waymark_engine_route_to_point`, to the zone named `zone` (NUL-terminated UTF-8): the
+ * route ends at the zone's walkable place nearest on foot. Also fails with `UNKNOWN_ZONE`.
+ */
+waymark_result waymark_engine_route_to_zone(const waymark_engine *engine,
+                                            const waymark_floor_point *from,
+                                            const char *zone,
+                                            waymark_route **out);
+
+/**
+ * Frees a route. NULL is ignored.
+ */
+void waymark_route_free(waymark_route *route);
+
+/**
+ * The route as a whole into `*out`.
+ */
+waymark_result waymark_route_get_info(const waymark_route *route, waymark_route_info *out);
+
+/**
+ * Leg `index` (from 0 to `leg_count` - 1 of `waymark_route_get_info`) into `*out`; an index out
+ * of range returns `INPUT_REJECTED`.
+ */
+waymark_result waymark_route_get_leg(const waymark_route *route,
+                                     size_t index,
+                                     waymark_route_leg *out);
+
+/**
+ * Takes a position (`accuracy_m`: the radius of its 68% circle, as in `waymark_position`) and
+ * writes where it puts the user on the route into `*out` (may be NULL). A NaN or infinite
+ * value, a negative accuracy or an unknown floor returns `OFF_GRAPH` and changes nothing.
+ */
+waymark_result waymark_route_update(waymark_route *route,
+                                    const waymark_floor_point *position,
+                                    double accuracy_m,
+                                    waymark_route_progress *out);
+
+/**
+ * Plans a new route to the same destination from `from` (NULL: the latest position given to
+ * `waymark_route_update`, with its accuracy) and follows it from its start; read it again
+ * with `waymark_route_get_info` and `waymark_route_get_leg`. Fails as the constructors do, or with
+ * `NO_POSITION` for NULL `from` before the first update; the route is then unchanged.
+ */
+waymark_result waymark_route_reroute(waymark_route *route, const waymark_floor_point *from);
 
 #ifdef __cplusplus
 }  // extern "C"

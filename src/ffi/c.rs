@@ -14,8 +14,10 @@ mod create;
 mod geofence;
 mod habits;
 mod log_hook;
+mod route;
 mod types;
 
+pub use route::*;
 pub use types::*;
 
 use super::delivery::lock;

@@ -5,11 +5,13 @@
 
 mod geofence;
 mod records;
+mod route;
 
 pub use super::error::{ErrorCode, ErrorReport, PositioningError};
 pub use super::handle::{FAULT_INJECTION_HABITS_JSON, FAULT_INJECTION_TIMESTAMP_NS};
 pub use geofence::{Geofence, GeofenceShape, SitePoint};
 pub use records::*;
+pub use route::*;
 
 use super::delivery::lock;
 use super::handle::{Event, Handle, Listeners};

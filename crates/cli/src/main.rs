@@ -4,6 +4,7 @@
 mod bench;
 mod hmm;
 mod real;
+mod route;
 mod view;
 
 use clap::{Parser, Subcommand, ValueEnum};
@@ -53,6 +54,9 @@ enum Command {
     /// Write one self-contained HTML page showing a site's floors (plan, states, zones) and
     /// optionally a walk: the estimate with its 68% circle and the truth, to play back.
     View(view::ViewArgs),
+    /// The shortest walkable route on a site (or the demo's office) from a point to a point
+    /// or a zone, as legs with turns; `--json` for one JSON object.
+    Route(route::RouteArgs),
 }
 
 #[derive(clap::Args)]
@@ -178,6 +182,7 @@ fn main() -> ExitCode {
         Command::Site(args) => real::site(&args),
         Command::Hmm(args) => hmm::hmm(&args),
         Command::View(args) => view::view(&args),
+        Command::Route(args) => route::route(&args),
     }
 }
 

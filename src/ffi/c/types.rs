@@ -49,6 +49,13 @@ pub enum waymark_result {
     /// The caller's buffer is too small for the whole text; nothing but an empty string was
     /// written to it, and the length it needs was returned (`waymark_engine_export_habits`).
     BufferTooSmall = 9,
+    /// A route's destination names a zone the site does not have (`waymark_engine_route_to_zone`).
+    UnknownZone = 10,
+    /// A point is off the site's walkable graph: its floor does not exist, a coordinate or the
+    /// accuracy is NaN or infinite, or no walkable place is near enough (docs/routes.md).
+    OffGraph = 11,
+    /// No walkable path joins a route's start to its destination.
+    Unreachable = 12,
     /// Waymark panicked, or refused its own data (a bug). An epoch (a scan, an advance, a fix,
     /// feedback) or a read that panicked had no effect: the engine is as it was before the
     /// call, no callback hears of it, and it stays usable. Any other call that panicked may
