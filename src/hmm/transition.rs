@@ -133,10 +133,10 @@ fn expand(
     // Prediction: the mass that rows below PRUNE_MASS and every row's floor spread evenly.
     let mut shared = 0.0;
     let uniform = 1.0 / prior.len().max(1) as f64;
-    let mut predicted = predicted.map(|out| {
+    let mut predicted = predicted;
+    if let Some(out) = predicted.as_deref_mut() {
         out.fill(0.0);
-        out
-    });
+    }
     // Viterbi: the best predecessor through the shared (floor) weight, valid for every j.
     let (mut floor_best, mut floor_arg) = (f64::NEG_INFINITY, 0u32);
     let best = delta.iter().copied().fold(f64::NEG_INFINITY, f64::max);
