@@ -1,5 +1,5 @@
-//! A site for timing the engine at building scale, in a minute instead of the half hour of
-//! `waymark survey`'s calibration: every walk of the floors surveyed at a given fingerprint
+//! A site for timing the engine at building scale without `waymark survey`'s calibration (its
+//! thousands of held-out replays): every walk of the floors surveyed at a given fingerprint
 //! radius, with γ given instead of calibrated (the states, fingerprints and walking-distance
 //! tables are those of `waymark survey` at that radius; no radius factors, no radio fit
 //! floor). `site_epoch_time` then times an engine on it (`docs/results.md#speed`).
