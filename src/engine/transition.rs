@@ -81,8 +81,9 @@ impl Engine {
         // Learned habits: a prior multiplied into the motion-based transition of each epoch.
         let habitual = Habitual { inner: transition, prior: &self.habit_prior };
         let transition: &dyn Transition = if self.habit_prior.is_empty() { transition } else { &habitual };
-        self.viterbi.step(timestamp_ns, transition, &self.ln_emission);
-        let result = self.filter.step(Some(transition), &self.ln_emission);
+        // Each row of the transition written once for the Viterbi step and the prediction.
+        let result =
+            self.filter.step_with_viterbi(&mut self.viterbi, timestamp_ns, transition, &self.ln_emission);
         result.unwrap_or_else(|_| self.restart())
     }
 

@@ -2,7 +2,8 @@
 //! space until the update: it cannot underflow over hours of epochs, nor when the likelihoods
 //! of a scan with a hundred transmitters sit near -1000 nats and hundreds apart.
 
-use super::transition::{predict, Transition};
+use super::transition::{predict, predict_and_viterbi_step, Transition};
+use super::viterbi::ViterbiWindow;
 
 /// Why a step could not be taken; the filter is left as it was.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -139,6 +140,33 @@ impl ForwardFilter {
             Some(t) => predict(t, &self.posterior, &mut self.predicted, &mut self.row),
             None => self.predicted.copy_from_slice(&self.posterior),
         }
+        self.update(ln_emission)
+    }
+
+    /// [`ViterbiWindow::step`] and then [`step`](Self::step) with the same transition, with
+    /// each row of the transition written once for both ([`predict_and_viterbi_step`]); the
+    /// results are exactly those of the two calls.
+    pub fn step_with_viterbi(
+        &mut self,
+        viterbi: &mut ViterbiWindow,
+        timestamp_ns: u64,
+        transition: &dyn Transition,
+        ln_emission: &[f64],
+    ) -> Result<f64, FilterError> {
+        let n = self.posterior.len();
+        if ln_emission.len() != n || viterbi.state_count() != n || viterbi.is_empty() {
+            viterbi.step(timestamp_ns, transition, ln_emission);
+            return self.step(Some(transition), ln_emission);
+        }
+        let (posterior, predicted, row) = (&self.posterior, &mut self.predicted, &mut self.row);
+        viterbi.step_with(timestamp_ns, ln_emission, |delta, out, back| {
+            predict_and_viterbi_step(transition, (posterior, predicted), (delta, out, back), row);
+        });
+        self.update(ln_emission)
+    }
+
+    /// The update of [`step`](Self::step), with the prediction in `predicted`.
+    fn update(&mut self, ln_emission: &[f64]) -> Result<f64, FilterError> {
         // Fast path, in linear space: w_j = pred_j · exp(e_j - max e), one exponential per
         // state. It underflows only when every likely state explains the observation more
         // than ~700 nats worse than the best one; then the log-space path below decides.
@@ -146,7 +174,8 @@ impl ForwardFilter {
         if max_e.is_finite() {
             let mut total = 0.0;
             for ((w, &p), &e) in self.weights.iter_mut().zip(&self.predicted).zip(ln_emission) {
-                *w = if e.is_nan() { 0.0 } else { p * (e - max_e).exp() };
+                // A state the epoch rules out (-inf) weighs 0 without an exponential.
+                *w = if e.is_nan() || e == f64::NEG_INFINITY { 0.0 } else { p * (e - max_e).exp() };
                 total += *w;
             }
             if total > 1e-250 {

@@ -12,5 +12,7 @@ mod viterbi;
 pub use estimate::{estimate, Estimate};
 pub use forward::{FilterError, ForwardFilter};
 pub use motion::{angle_between, azimuth, HipeRegion, HipeTransition, HoangTransition};
-pub use transition::{hipe_probabilities, predict, viterbi_step, Transition, UniformReach};
+pub use transition::{
+    hipe_probabilities, predict, predict_and_viterbi_step, viterbi_step, RowBounds, Transition, UniformReach,
+};
 pub use viterbi::ViterbiWindow;

@@ -1,7 +1,7 @@
 //! Transition models driven by the motion the inertial sensors measured: HIPE's high/low
 //! regions (eqs. 5-11, Table 1) and Hoang's Gaussian on the movement vector (eqs. 11, 14).
 
-use super::transition::{hipe_probabilities, Transition};
+use super::transition::{hipe_probabilities, RowBounds, Transition};
 use crate::site::{ReachTable, Site};
 use nalgebra::Vector2;
 
@@ -165,13 +165,33 @@ pub struct HoangTransition<'a> {
     pub exponent: f64,
 }
 
+/// What every entry of a row of [`HoangTransition`] shares, computed once per row: the
+/// measured movement, its direction and the normalisers.
+struct Measured {
+    v: Vector2<f64>,
+    direction: Option<Vector2<f64>>,
+    ln_normaliser: f64,
+    ln_walked_normaliser: f64,
+}
+
 impl HoangTransition<'_> {
+    fn measured(&self) -> Measured {
+        let v = self.movement_m.map_or(Vector2::zeros(), |[x, y]| Vector2::new(x, y));
+        Measured {
+            v,
+            direction: v.try_normalize(1e-9),
+            ln_normaliser: self.ln_normaliser(),
+            ln_walked_normaliser: self.ln_walked_normaliser(),
+        }
+    }
+
     /// ln N(v; Δ, Σ_v) with the capped Mahalanobis distance, times the exponent.
-    fn ln_movement(&self, delta: Vector2<f64>) -> f64 {
-        let Some([vx, vy]) = self.movement_m else { return 0.0 };
-        let v = Vector2::new(vx, vy);
-        let residual = v - delta;
-        let r2 = match v.try_normalize(1e-9) {
+    fn ln_movement(&self, m: &Measured, delta: Vector2<f64>) -> f64 {
+        if self.movement_m.is_none() {
+            return 0.0;
+        }
+        let residual = m.v - delta;
+        let r2 = match m.direction {
             Some(u) if self.across_variance_m2 != self.variance_m2 => {
                 let along = residual.dot(&u);
                 let across = residual.perp(&u);
@@ -181,7 +201,7 @@ impl HoangTransition<'_> {
             _ => residual.norm_squared() / self.variance_m2.max(self.across_variance_m2),
         }
         .min(self.mahalanobis_cap * self.mahalanobis_cap);
-        self.exponent * (-0.5 * r2 - self.ln_normaliser())
+        self.exponent * (-0.5 * r2 - m.ln_normaliser)
     }
 
     /// ln(2π √det Σ_v).
@@ -190,9 +210,9 @@ impl HoangTransition<'_> {
     }
 
     /// ln N(d; w, σ²) along the track, with the capped Mahalanobis distance, times the exponent.
-    fn ln_walked(&self, d: f64, walk_m: f64) -> f64 {
+    fn ln_walked(&self, m: &Measured, d: f64, walk_m: f64) -> f64 {
         let r2 = ((d - walk_m).powi(2) / self.variance_m2).min(self.mahalanobis_cap * self.mahalanobis_cap);
-        self.exponent * (-0.5 * r2 - self.ln_walked_normaliser())
+        self.exponent * (-0.5 * r2 - m.ln_walked_normaliser)
     }
 
     /// ln √(2π σ²).
@@ -207,32 +227,49 @@ impl Transition for HoangTransition<'_> {
         let reach = self.table.reachable(i, self.reach_m);
         let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
         let from = &states[i];
+        let m = self.measured();
         for &(j, walk_m) in reach {
             let to = &states[j as usize];
             let delta = if to.floor == from.floor {
                 to.position - from.position
             } else {
                 // Between floors the plan distance is the walk along the stairs.
-                let v = self.movement_m.map_or(Vector2::zeros(), |[x, y]| Vector2::new(x, y));
-                v.try_normalize(1e-9).unwrap_or_else(Vector2::zeros) * f64::from(walk_m)
+                m.direction.unwrap_or_else(Vector2::zeros) * f64::from(walk_m)
             };
             let ln = match (self.movement_m, self.walked_m) {
-                (None, Some(d)) => self.ln_walked(d, f64::from(walk_m)),
-                _ => self.ln_movement(delta),
+                (None, Some(d)) => self.ln_walked(&m, d, f64::from(walk_m)),
+                _ => self.ln_movement(&m, delta),
             };
             row.push((j, high * ln.exp()));
         }
-        let cap = match (self.movement_m, self.walked_m) {
-            (Some(_), _) => {
-                self.exponent * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - self.ln_normaliser())
-            }
-            (None, Some(_)) => {
-                self.exponent
-                    * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - self.ln_walked_normaliser())
-            }
-            (None, None) => 0.0,
+        low * self.ln_movement_range().0.exp()
+    }
+
+    fn bounds(&self) -> Option<RowBounds<'_>> {
+        let (cap, most) = self.ln_movement_range();
+        Some(RowBounds {
+            table: self.table,
+            rho_m: self.reach_m,
+            ratio: self.ratio,
+            floor_factor: cap.exp(),
+            ln_most_factor: most,
+        })
+    }
+}
+
+impl HoangTransition<'_> {
+    /// The movement term at the Mahalanobis cap (the floor entries' density) and the largest
+    /// any entry can have (at distance 0 or at the cap, whichever the exponent's sign makes
+    /// larger): every row entry is `high · exp` of a value between the two.
+    fn ln_movement_range(&self) -> (f64, f64) {
+        let ln_normaliser = match (self.movement_m, self.walked_m) {
+            (Some(_), _) => self.ln_normaliser(),
+            (None, Some(_)) => self.ln_walked_normaliser(),
+            (None, None) => return (0.0, 0.0),
         };
-        low * cap.exp()
+        let cap = self.exponent * (-0.5 * self.mahalanobis_cap * self.mahalanobis_cap - ln_normaliser);
+        let centre = self.exponent * (-0.5 * 0.0 - ln_normaliser);
+        (cap, cap.max(centre))
     }
 }
 
@@ -360,8 +397,16 @@ mod tests {
         let t = one_metre_east(&site, &table, [1.0, 0.25], 10.0);
         // 1 m short along the movement (staying put): 1σ along; 1 m beside the target: 2σ across.
         let normaliser = std::f64::consts::TAU * (1.0f64 * 0.25).sqrt();
-        assert_relative_eq!(t.ln_movement(Vector2::new(0.0, 0.0)), -0.5 - normaliser.ln(), epsilon = 1e-12);
-        assert_relative_eq!(t.ln_movement(Vector2::new(1.0, 1.0)), -2.0 - normaliser.ln(), epsilon = 1e-12);
+        assert_relative_eq!(
+            t.ln_movement(&t.measured(), Vector2::new(0.0, 0.0)),
+            -0.5 - normaliser.ln(),
+            epsilon = 1e-12
+        );
+        assert_relative_eq!(
+            t.ln_movement(&t.measured(), Vector2::new(1.0, 1.0)),
+            -2.0 - normaliser.ln(),
+            epsilon = 1e-12
+        );
     }
 
     #[test]
@@ -399,5 +444,111 @@ mod tests {
         assert_relative_eq!(angle_between(3.1, -3.1), std::f64::consts::TAU - 6.2, epsilon = 1e-12);
         assert_relative_eq!(angle_between(0.0, std::f64::consts::PI), std::f64::consts::PI);
         assert_relative_eq!(azimuth(Vector2::new(1.0, 0.0)), std::f64::consts::FRAC_PI_2);
+    }
+
+    /// A model with its bounds hidden (`.1` false: the Viterbi step then expands every row of
+    /// the beam), counting the rows written.
+    struct Counted<'a>(&'a dyn Transition, bool, std::cell::Cell<usize>);
+
+    impl Transition for Counted<'_> {
+        fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+            self.2.set(self.2.get() + 1);
+            self.0.row(i, row)
+        }
+
+        fn bounds(&self) -> Option<RowBounds<'_>> {
+            self.0.bounds().filter(|_| self.1)
+        }
+    }
+
+    #[test]
+    fn rows_skipped_by_their_bounds_change_no_viterbi_score_nor_back_pointer() {
+        use crate::hmm::transition::{viterbi_step, UniformReach};
+        let site = grid();
+        let table = ReachTable::build(&site, 9.0);
+        // Scores spread over 60 nats (beyond the beam for some), a few -inf, by a fixed LCG.
+        let mut seed = 7u64;
+        let mut delta = || {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            let u = (seed >> 11) as f64 / (1u64 << 53) as f64;
+            if u < 0.05 {
+                f64::NEG_INFINITY
+            } else {
+                -60.0 * u
+            }
+        };
+        let mut models: Vec<HoangTransition> = Vec::new();
+        for (movement_m, walked_m) in [(Some([1.0, 0.0]), None), (None, Some(2.0)), (None, None)] {
+            for exponent in [1.0, 0.97, -0.5] {
+                models.push(HoangTransition {
+                    movement_m,
+                    walked_m,
+                    exponent,
+                    ratio: 50.0,
+                    ..one_metre_east(&site, &table, [0.1, 0.4], 3.0)
+                });
+            }
+        }
+        let uniform = UniformReach { table: &table, rho_m: 2.0, ratio: 1000.0 };
+        let mut transitions: Vec<&dyn Transition> = models.iter().map(|m| m as &dyn Transition).collect();
+        transitions.push(&uniform);
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for (k, t) in transitions.iter().enumerate() {
+            let (bounded, unbounded) =
+                (Counted(*t, true, Default::default()), Counted(*t, false, Default::default()));
+            for trial in 0..20 {
+                let d: Vec<f64> = (0..25).map(|_| delta()).collect();
+                let (mut out, mut back) = (vec![0.0; 25], vec![0u32; 25]);
+                let (mut all_out, mut all_back) = (vec![0.0; 25], vec![0u32; 25]);
+                viterbi_step(&bounded, &d, &mut out, &mut back, &mut Vec::new());
+                viterbi_step(&unbounded, &d, &mut all_out, &mut all_back, &mut Vec::new());
+                assert_eq!(bits(&out), bits(&all_out), "model {k}, trial {trial}");
+                assert_eq!(back, all_back, "model {k}, trial {trial}");
+            }
+            assert!(bounded.2.get() < unbounded.2.get(), "model {k}: some rows skipped");
+            // The bounds are the row's own floor and at least each of its weights.
+            for i in 0..25 {
+                let mut row = Vec::new();
+                let floor = t.row(i, &mut row);
+                let bounds = t.bounds().unwrap();
+                let (bound_floor, ln_most) = (bounds.floor(i), bounds.ln_most(i));
+                assert_eq!(floor.to_bits(), bound_floor.to_bits(), "model {k}, row {i}");
+                assert!(row.iter().all(|e| e.1.ln() <= ln_most + 1e-12), "model {k}, row {i}");
+            }
+        }
+    }
+
+    #[test]
+    fn one_pass_for_the_viterbi_step_and_the_prediction_is_exactly_the_two_steps() {
+        use crate::hmm::{ForwardFilter, ViterbiWindow};
+        let site = grid();
+        let table = ReachTable::build(&site, 9.0);
+        let t = HoangTransition { exponent: 0.97, ..one_metre_east(&site, &table, [0.1, 0.4], 3.0) };
+        let (mut fused, mut fused_path) = (ForwardFilter::new(25), ViterbiWindow::new(25, 8));
+        let (mut apart, mut apart_path) = (ForwardFilter::new(25), ViterbiWindow::new(25, 8));
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for epoch in 0..12u64 {
+            // Emissions hundreds of nats apart, some states ruled out.
+            let e: Vec<f64> = (0..25u64)
+                .map(|j| {
+                    if (j + epoch) % 7 == 0 {
+                        f64::NEG_INFINITY
+                    } else {
+                        -(((j * 37 + epoch * 11) % 23) as f64) * 9.0
+                    }
+                })
+                .collect();
+            let a = fused.step_with_viterbi(&mut fused_path, epoch, &t, &e);
+            apart_path.step(epoch, &t, &e);
+            let b = apart.step(Some(&t), &e);
+            assert_eq!(a.map(f64::to_bits), b.map(f64::to_bits), "epoch {epoch}");
+            assert_eq!(bits(fused.posterior()), bits(apart.posterior()), "epoch {epoch}");
+            assert_eq!(fused_path.path(), apart_path.path(), "epoch {epoch}");
+        }
+        // A wrong-length emission: the same error, nothing changed.
+        assert_eq!(
+            fused.step_with_viterbi(&mut fused_path, 99, &t, &[0.0; 3]),
+            apart.step(Some(&t), &[0.0; 3])
+        );
     }
 }

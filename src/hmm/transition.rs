@@ -10,6 +10,48 @@ pub trait Transition {
     /// Writes the explicit entries (j, a_ij) of row `i` into `row` (cleared first by the
     /// caller) and returns the weight of every state not listed. Each j appears at most once.
     fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64;
+
+    /// What the Viterbi step may know of this epoch's rows without writing them
+    /// ([`RowBounds`]); `None` when the model cannot tell it more cheaply than by the rows.
+    fn bounds(&self) -> Option<RowBounds<'_>> {
+        None
+    }
+}
+
+/// The rows of a model whose row `i` holds `high_i · f_ij` on the states reachable within
+/// `rho_m` and `low_i · floor_factor` elsewhere, with `(high_i, low_i)` HIPE eqs. 5-6 for them
+/// and every `ln f_ij ≤ ln_most_factor`: the floor weight of a row (exactly what
+/// [`Transition::row`] returns) and a bound on its explicit weights, from the row's reachable
+/// count alone. The Viterbi step skips a row whose best explicit weight cannot beat the best
+/// path through a floor weight ([`viterbi_step`]).
+#[derive(Clone, Copy, Debug)]
+pub struct RowBounds<'a> {
+    /// Walking-distance table.
+    pub table: &'a ReachTable,
+    /// The reach of the rows, m.
+    pub rho_m: f64,
+    /// HIPE's K.
+    pub ratio: f64,
+    /// What multiplies `low_i` into the floor weight.
+    pub floor_factor: f64,
+    /// The largest `ln f_ij`.
+    pub ln_most_factor: f64,
+}
+
+impl RowBounds<'_> {
+    fn probabilities(&self, i: usize) -> (f64, f64) {
+        hipe_probabilities(self.table.reachable(i, self.rho_m).len(), self.table.state_count(), self.ratio)
+    }
+
+    /// Row `i`'s floor weight.
+    pub fn floor(&self, i: usize) -> f64 {
+        self.probabilities(i).1 * self.floor_factor
+    }
+
+    /// An upper bound on the logarithm of row `i`'s explicit weights.
+    pub fn ln_most(&self, i: usize) -> f64 {
+        self.probabilities(i).0.ln() + self.ln_most_factor
+    }
 }
 
 /// Posterior mass below which a state's row is not expanded: its mass is spread evenly
@@ -22,24 +64,19 @@ pub const PRUNE_MASS: f64 = 1e-15;
 
 /// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least `PRUNE_MASS`.
 pub fn predict(transition: &dyn Transition, prior: &[f64], out: &mut [f64], row: &mut Vec<(u32, f64)>) {
-    let mut shared = 0.0;
-    out.fill(0.0);
-    let uniform = 1.0 / prior.len().max(1) as f64;
-    for (i, &p) in prior.iter().enumerate() {
-        if p < PRUNE_MASS {
-            shared += p * uniform;
-            continue;
-        }
-        row.clear();
-        let floor = transition.row(i, row);
-        shared += p * floor;
-        for &(j, a) in row.iter() {
-            out[j as usize] += p * (a - floor);
-        }
-    }
-    for v in out.iter_mut() {
-        *v += shared;
-    }
+    expand(transition, Some((prior, out)), None, row);
+}
+
+/// [`predict`] and [`viterbi_step`] with one transition, each row written once for both: the
+/// two expand overlapping sets of rows (the states near the estimate), and writing a row is
+/// most of the cost of each. Both results are exactly those of the two calls.
+pub fn predict_and_viterbi_step(
+    transition: &dyn Transition,
+    (prior, predicted): (&[f64], &mut [f64]),
+    (delta, out, back): (&[f64], &mut [f64], &mut [u32]),
+    row: &mut Vec<(u32, f64)>,
+) {
+    expand(transition, Some((prior, predicted)), Some((delta, out, back)), row);
 }
 
 /// Log-probability below the best partial path at which a path is not extended. A row's
@@ -51,8 +88,19 @@ pub fn predict(transition: &dyn Transition, prior: &[f64], out: &mut [f64], row:
 /// tests.
 pub const VITERBI_BEAM: f64 = 50.0;
 
+/// Margin, nats, by which a row's bound must fall short of the best floor path before the
+/// Viterbi step skips it: covers any rounding of `ln` and `exp` between a weight and its
+/// bound (a few ulps, far below this), so a skipped row changes nothing.
+const BOUND_MARGIN: f64 = 1e-6;
+
 /// One max-product step in log space: `out[j] = max_i (delta[i] + ln a_ij)` and `back[j]` the
 /// maximising i.
+///
+/// Every j can be reached from the best path through a floor weight, so a row whose best
+/// explicit weight cannot beat that path (`delta[i] + ln max_j a_ij` below it) never wins an
+/// `out[j]`. When the model gives its rows' bounds ([`RowBounds`]) the floor paths
+/// are found first and only rows that can win are written; the result, back-pointers and ties
+/// included, is the same as expanding every row of the beam.
 pub fn viterbi_step(
     transition: &dyn Transition,
     delta: &[f64],
@@ -60,33 +108,111 @@ pub fn viterbi_step(
     back: &mut [u32],
     row: &mut Vec<(u32, f64)>,
 ) {
-    out.fill(f64::NEG_INFINITY);
-    // The best predecessor through the shared (floor) weight, valid for every j.
+    expand(transition, None, Some((delta, out, back)), row);
+}
+
+/// The prediction (`forward`: prior, out) and the Viterbi step (`viterbi`: delta, out, back),
+/// either or both, in one pass over the rows in state order, so each sum and maximum is taken
+/// in the same order whichever of the two run.
+#[allow(clippy::type_complexity)]
+fn expand(
+    transition: &dyn Transition,
+    forward: Option<(&[f64], &mut [f64])>,
+    viterbi: Option<(&[f64], &mut [f64], &mut [u32])>,
+    row: &mut Vec<(u32, f64)>,
+) {
+    let (prior, predicted) = match forward {
+        Some((prior, out)) => (prior, Some(out)),
+        None => (&[][..], None),
+    };
+    let (delta, mut scores, mut back) = match viterbi {
+        Some((delta, out, back)) => (delta, Some(out), Some(back)),
+        None => (&[][..], None, None),
+    };
+    let n = prior.len().max(delta.len());
+    // Prediction: the mass that rows below PRUNE_MASS and every row's floor spread evenly.
+    let mut shared = 0.0;
+    let uniform = 1.0 / prior.len().max(1) as f64;
+    let mut predicted = predicted;
+    if let Some(out) = predicted.as_deref_mut() {
+        out.fill(0.0);
+    }
+    // Viterbi: the best predecessor through the shared (floor) weight, valid for every j.
     let (mut floor_best, mut floor_arg) = (f64::NEG_INFINITY, 0u32);
     let best = delta.iter().copied().fold(f64::NEG_INFINITY, f64::max);
-    for (i, &d) in delta.iter().enumerate() {
-        if d == f64::NEG_INFINITY || d < best - VITERBI_BEAM {
+    let in_beam = |d: f64| d != f64::NEG_INFINITY && d >= best - VITERBI_BEAM;
+    if let Some(out) = scores.as_deref_mut() {
+        out.fill(f64::NEG_INFINITY);
+    }
+    let bounds = if delta.is_empty() { None } else { transition.bounds() };
+    let bounded = bounds.is_some();
+    if let Some(bounds) = &bounds {
+        for (i, &d) in delta.iter().enumerate() {
+            if !in_beam(d) {
+                continue;
+            }
+            let via_floor = d + bounds.floor(i).ln();
+            if via_floor > floor_best {
+                floor_best = via_floor;
+                floor_arg = i as u32;
+            }
+        }
+    }
+    for i in 0..n {
+        let mass = predicted.as_ref().and_then(|_| prior.get(i).copied());
+        let expand_mass = match mass {
+            Some(p) if p < PRUNE_MASS => {
+                shared += p * uniform;
+                false
+            }
+            Some(_) => true,
+            None => false,
+        };
+        let d = delta.get(i).copied().filter(|&d| in_beam(d));
+        // Skipped only when provably beaten (a NaN bound skips nothing).
+        let beaten = |d: f64, b: &RowBounds| d + b.ln_most(i) + BOUND_MARGIN < floor_best;
+        let expand_path = d.is_some_and(|d| !bounds.as_ref().is_some_and(|b| beaten(d, b)));
+        if !expand_mass && !expand_path {
             continue;
         }
         row.clear();
         let floor = transition.row(i, row);
-        let via_floor = d + floor.ln();
-        if via_floor > floor_best {
-            floor_best = via_floor;
-            floor_arg = i as u32;
+        if let (true, Some(p), Some(out)) = (expand_mass, mass, predicted.as_deref_mut()) {
+            shared += p * floor;
+            for &(j, a) in row.iter() {
+                out[j as usize] += p * (a - floor);
+            }
         }
-        for &(j, a) in row.iter() {
-            let v = d + a.ln();
-            if v > out[j as usize] {
-                out[j as usize] = v;
-                back[j as usize] = i as u32;
+        if let (true, Some(d), Some(out), Some(back)) =
+            (expand_path, d, scores.as_deref_mut(), back.as_deref_mut())
+        {
+            if !bounded {
+                let via_floor = d + floor.ln();
+                if via_floor > floor_best {
+                    floor_best = via_floor;
+                    floor_arg = i as u32;
+                }
+            }
+            for &(j, a) in row.iter() {
+                let v = d + a.ln();
+                if v > out[j as usize] {
+                    out[j as usize] = v;
+                    back[j as usize] = i as u32;
+                }
             }
         }
     }
-    for (o, b) in out.iter_mut().zip(back.iter_mut()) {
-        if floor_best > *o {
-            *o = floor_best;
-            *b = floor_arg;
+    if let Some(out) = predicted {
+        for v in out.iter_mut() {
+            *v += shared;
+        }
+    }
+    if let (Some(out), Some(back)) = (scores, back) {
+        for (o, b) in out.iter_mut().zip(back.iter_mut()) {
+            if floor_best > *o {
+                *o = floor_best;
+                *b = floor_arg;
+            }
         }
     }
 }
@@ -118,6 +244,11 @@ impl Transition for UniformReach<'_> {
         let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
         row.extend(reach.iter().map(|&(j, _)| (j, high)));
         low
+    }
+
+    fn bounds(&self) -> Option<RowBounds<'_>> {
+        let (table, rho_m, ratio) = (self.table, self.rho_m, self.ratio);
+        Some(RowBounds { table, rho_m, ratio, floor_factor: 1.0, ln_most_factor: 0.0 })
     }
 }
 

@@ -152,12 +152,33 @@ impl ViterbiWindow {
     /// window, which starts from a uniform prior) and the observation's log-likelihoods.
     /// Emissions that are NaN count as impossible.
     pub fn step(&mut self, timestamp_ns: u64, transition: &dyn Transition, ln_emission: &[f64]) {
+        let mut row = std::mem::take(&mut self.row);
+        self.step_with(timestamp_ns, ln_emission, |delta, out, back| {
+            viterbi_step(transition, delta, out, back, &mut row);
+        });
+        self.row = row;
+    }
+
+    /// States the window scores.
+    pub fn state_count(&self) -> usize {
+        self.delta.len()
+    }
+
+    /// [`step`](Self::step) with the max-product step given: `expand(delta, out, back)` writes
+    /// `out` and `back` from the scores `delta` as [`viterbi_step`] does (not called for the
+    /// window's first epoch).
+    pub(super) fn step_with(
+        &mut self,
+        timestamp_ns: u64,
+        ln_emission: &[f64],
+        expand: impl FnOnce(&[f64], &mut [f64], &mut [u32]),
+    ) {
         let n = self.delta.len();
         let mut back = self.spare.pop().unwrap_or_else(|| vec![0; n]);
         if self.epochs.is_empty() {
             self.next.copy_from_slice(ln_emission);
         } else {
-            viterbi_step(transition, &self.delta, &mut self.next, &mut back, &mut self.row);
+            expand(&self.delta, &mut self.next, &mut back);
             for (d, &e) in self.next.iter_mut().zip(ln_emission) {
                 *d += e;
             }

@@ -146,6 +146,11 @@ pub struct EvalArgs {
     /// Use only the first N walk files of each floor (by name; the split applies after).
     #[arg(long)]
     max_walks: Option<usize>,
+    /// Keep this share F (0 < F ≤ 1) of each floor's survey walks, the same ones on every run
+    /// (walk i of the floor's survey walks by name when ⌈(i+1)·F⌉ > ⌈i·F⌉); the test walks do
+    /// not change.
+    #[arg(long, default_value_t = 1.0, value_parser = calibrate::parse_survey_fraction)]
+    survey_fraction: f64,
     /// γ of Hoang eq. 14; default: calibrated by the survey.
     #[arg(long)]
     gamma: Option<f64>,
@@ -535,8 +540,14 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         Ok(f) => f,
         Err(e) => return fail("eval", e),
     };
-    let floors: Vec<FloorData> =
-        floors.into_iter().map(|f| if args.no_plan { FloorData { plan: None, ..f } } else { f }).collect();
+    let floors: Vec<FloorData> = floors
+        .into_iter()
+        .map(|f| if args.no_plan { FloorData { plan: None, ..f } } else { f })
+        .map(|mut f| {
+            f.keep_survey_fraction(args.survey_fraction);
+            f
+        })
+        .collect();
     let mut options = EvalOptions { configurations: args.configurations.clone(), ..EvalOptions::default() };
     if let Some(unknown) = options.configurations.iter().find(|c| !CONFIGURATIONS.contains(&c.as_str())) {
         return fail(
@@ -652,6 +663,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         calibration,
         pdr,
         test_walks: walks,
+        survey_fraction: args.survey_fraction,
         states: site.states().len(),
         seconds: started.elapsed().as_secs_f64(),
         habits,
@@ -660,8 +672,13 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
     } else {
+        let fraction = if args.survey_fraction < 1.0 {
+            format!(" ({} of the survey walks)", args.survey_fraction)
+        } else {
+            String::new()
+        };
         println!(
-            "{} floors, {} test walks, {} states; read {:.1} s, survey {:.1} s, replay {:.1} s",
+            "{} floors, {} test walks, {} states{fraction}; read {:.1} s, survey {:.1} s, replay {:.1} s",
             floors.len(),
             walks,
             report.states,
@@ -820,4 +837,27 @@ fn plot(
     plot_cdf(&dir.join("error-cdf.svg"), "Error CDF, all test walks", &curves).map_err(|e| e.to_string())?;
     eprintln!("{} walk plots and error-cdf.svg written to {}", results.len(), dir.display());
     Ok(())
+}
+
+#[cfg(test)]
+mod eval_args_tests {
+    use super::EvalArgs;
+    use clap::Parser;
+
+    #[derive(Parser)]
+    struct Eval {
+        #[command(flatten)]
+        args: EvalArgs,
+    }
+
+    #[test]
+    fn the_survey_fraction_is_one_by_default_and_must_be_in_zero_to_one() {
+        let parse = |extra: &[&str]| Eval::try_parse_from(["eval", "F1"].iter().chain(extra));
+        assert_eq!(parse(&[]).map(|e| e.args.survey_fraction).ok(), Some(1.0));
+        assert_eq!(parse(&["--survey-fraction", "0.25"]).map(|e| e.args.survey_fraction).ok(), Some(0.25));
+        for bad in ["0", "-0.5", "1.5", "NaN", "half"] {
+            let error = parse(&[&format!("--survey-fraction={bad}")]).err().map(|e| e.kind());
+            assert_eq!(error, Some(clap::error::ErrorKind::ValueValidation), "{bad}");
+        }
+    }
 }

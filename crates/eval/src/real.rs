@@ -184,6 +184,9 @@ pub struct EvalReport {
     pub pdr: super::pdr::PdrReport,
     /// Test walks replayed.
     pub test_walks: usize,
+    /// The share of each floor's survey walks the site was surveyed and calibrated from
+    /// (`--survey-fraction`, [`survey_subset`](waymark_survey::calibrate::survey_subset)).
+    pub survey_fraction: f64,
     /// States in the site.
     pub states: usize,
     /// Wall-clock time of the whole evaluation, s.

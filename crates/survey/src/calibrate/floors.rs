@@ -52,6 +52,43 @@ impl FloorData {
         }
         Ok(floor)
     }
+
+    /// Keeps a share `fraction` (0 < F ≤ 1) of this floor's survey walks by
+    /// [`survey_subset`]; the test walks do not change.
+    pub fn keep_survey_fraction(&mut self, fraction: f64) {
+        let keep = survey_subset(self.survey.len(), fraction);
+        let walks = std::mem::take(&mut self.survey);
+        self.survey = walks
+            .into_iter()
+            .enumerate()
+            .filter(|(i, _)| keep.binary_search(i).is_ok())
+            .map(|w| w.1)
+            .collect();
+    }
+}
+
+/// The survey walks a fraction `F` keeps of `n` (by index, in file-name order): walk i when
+/// ⌈(i+1)·F⌉ > ⌈i·F⌉, spread evenly through the floor's walks, the same on every run,
+/// ⌈n·F⌉ of them (the first walk always, so a floor keeps at least one), all of them at F = 1
+/// (`docs/results.md#survey-fraction`). The products are taken 1e-9 below their value, so
+/// that a product that is a whole number in exact arithmetic is one in floating point too.
+/// Nothing for F outside (0, 1] ([`parse_survey_fraction`] refuses it).
+pub fn survey_subset(n: usize, fraction: f64) -> Vec<usize> {
+    if !(fraction > 0.0 && fraction <= 1.0) {
+        return Vec::new();
+    }
+    let kept_before = |i: usize| (i as f64 * fraction - 1e-9).ceil();
+    (0..n).filter(|&i| kept_before(i + 1) > kept_before(i)).collect()
+}
+
+/// A survey fraction from the command line: a number with 0 < F ≤ 1.
+pub fn parse_survey_fraction(text: &str) -> Result<f64, String> {
+    let fraction: f64 = text.trim().parse().map_err(|e| format!("`{text}` is not a number: {e}"))?;
+    if fraction > 0.0 && fraction <= 1.0 {
+        Ok(fraction)
+    } else {
+        Err(format!("{fraction} is not in (0, 1]"))
+    }
 }
 
 /// The survey walks of `floors` as the survey reads them.
@@ -64,4 +101,52 @@ pub fn survey_inputs(floors: &[FloorData]) -> Vec<SurveyFloor<'_>> {
             walks: f.survey.iter().collect(),
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_survey_subset_is_deterministic_even_and_of_the_documented_size() {
+        // F = 1 keeps everything.
+        assert_eq!(survey_subset(7, 1.0), (0..7).collect::<Vec<_>>());
+        // ⌈n·F⌉ walks, the first always, spread through the list.
+        assert_eq!(survey_subset(4, 0.5), [0, 2]);
+        assert_eq!(survey_subset(8, 0.25), [0, 4]);
+        assert_eq!(survey_subset(10, 0.3), [0, 3, 6]);
+        assert_eq!(survey_subset(3, 0.1), [0]);
+        assert!(survey_subset(0, 0.5).is_empty());
+        for n in [1usize, 5, 17, 84, 101] {
+            for fraction in [0.1, 0.25, 1.0 / 3.0, 0.5, 0.7, 0.9, 1.0] {
+                let kept = survey_subset(n, fraction);
+                assert_eq!(kept.len(), (n as f64 * fraction - 1e-9).ceil() as usize, "n {n}, F {fraction}");
+                assert_eq!(kept, survey_subset(n, fraction), "the same on every call");
+                assert!(kept.windows(2).all(|w| w[0] < w[1]) && kept.iter().all(|&i| i < n));
+            }
+        }
+        // Outside (0, 1]: nothing, and the parser refuses it.
+        assert!(survey_subset(5, 0.0).is_empty() && survey_subset(5, 1.5).is_empty());
+        assert!(survey_subset(5, f64::NAN).is_empty());
+        assert_eq!(parse_survey_fraction("0.25"), Ok(0.25));
+        assert_eq!(parse_survey_fraction("1"), Ok(1.0));
+        for bad in ["0", "-0.5", "1.01", "NaN", "inf", "half", ""] {
+            assert!(parse_survey_fraction(bad).is_err(), "{bad}");
+        }
+    }
+
+    #[test]
+    fn keeping_a_fraction_leaves_the_test_walks_alone() {
+        let trace = |name: &str| crate::io::Trace { name: name.into(), ..crate::io::Trace::default() };
+        let mut floor = FloorData {
+            name: "F".into(),
+            dir: PathBuf::new(),
+            plan: None,
+            survey: ["a", "b", "c", "d"].map(trace).to_vec(),
+            test: vec![trace("e")],
+        };
+        floor.keep_survey_fraction(0.5);
+        assert_eq!(floor.survey.iter().map(|t| t.name.as_str()).collect::<Vec<_>>(), ["a", "c"]);
+        assert_eq!(floor.test.len(), 1);
+    }
 }

@@ -9,7 +9,7 @@ mod held_out;
 mod radius;
 mod report;
 
-pub use floors::{survey_inputs, FloorData};
+pub use floors::{parse_survey_fraction, survey_inputs, survey_subset, FloorData};
 pub use gamma::GAMMA_GRID;
 pub use held_out::MIN_SCENARIO_EPOCHS;
 pub use radius::{RadiusPoint, FINGERPRINT_RADIUS_FOLDS, FINGERPRINT_RADIUS_GRID};
