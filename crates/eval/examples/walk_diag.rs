@@ -1,4 +1,4 @@
-//! Per-walk look at `waymark eval`'s configurations on recorded floors, much faster than the
+//! Per-walk look at the evaluation's configurations on recorded floors, much faster than the
 //! full `eval`, which spends most of its time choosing the fingerprint radius and calibrating
 //! γ and the radius factors by leave-one-walk-out: the site is surveyed from the survey walks
 //! with the step length and north calibrated on them, but γ is given (`GAMMA`,
@@ -7,7 +7,7 @@
 //! on a wrong floor; the paired
 //! difference of consecutive configurations (in `CONFIGS` order) with its standard error over
 //! walks; and one line per test walk. Errors do not depend on the radius factors, so the means
-//! are those of `waymark eval` at the same γ and fingerprint radius (`FP_RADIUS`).
+//! are those of the evaluation ([`waymark_eval::real`]) at the same γ and fingerprint radius (`FP_RADIUS`).
 //!
 //! ```text
 //! CONFIGS=forward-distance,forward-heading-speed,forward-speed \
@@ -16,11 +16,11 @@
 //!
 //! `BEACON_WAIT_MS` replays with another beacon wait (`EventOptions::beacon_wait_ns`).
 //! `FP_RADIUS` surveys with that fingerprint radius, m (default the uncalibrated
-//! `SurveyOptions` one; `waymark eval` calibrates it);
+//! `SurveyOptions` one; the evaluation calibrates it);
 //! `ESTIMATE_STATES`, `MAX_SPEED`, `MOVEMENT_VAR`, `SPACING`, `MAX_STD` and `AGE_MS` set
 //! `EngineConfig::estimate_states`, `max_speed_mps`, `HoangConfig::movement_variance_m2`,
 //! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms);
-//! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; `waymark eval`
+//! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; the evaluation
 //! calibrates it).
 
 use std::collections::BTreeMap;

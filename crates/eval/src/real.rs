@@ -1,4 +1,4 @@
-//! `waymark eval`: the survey/test split of recorded floors, a site surveyed from the survey
+//! The evaluation on recorded floors: the survey/test split, a site surveyed from the survey
 //! walks, the test walks replayed through every configuration, and the errors at every scan
 //! (truth interpolated between waypoints) and at every waypoint.
 //!
@@ -22,7 +22,7 @@ use waymark_survey::replay::{replay, MotionMask, ReplayOptions, WaypointFeedback
 use waymark_survey::scoring::{decoded, score, score_scans, Estimate, Metrics, Scored, ZoneTruth};
 use waymark_survey::{positioned_scans, survey, PreparedSurvey, SurveyOptions, SurveyReport};
 
-/// Every configuration `waymark eval` scores, by JSON key.
+/// Every configuration the evaluation scores, by JSON key.
 pub const CONFIGURATIONS: [&str; 9] = [
     "wifi-knn",
     "wifi-mle",
@@ -150,7 +150,7 @@ impl Knn {
     }
 }
 
-/// How `waymark eval` runs.
+/// How the evaluation runs.
 #[derive(Clone, Debug, Default)]
 pub struct EvalOptions {
     /// How the site is surveyed and calibrated, and the walks replayed.
@@ -171,7 +171,7 @@ impl EvalOptions {
     }
 }
 
-/// What `waymark eval` prints.
+/// What the evaluation reports.
 #[derive(Clone, Debug, Serialize)]
 pub struct EvalReport {
     /// Per configuration key.
@@ -397,7 +397,7 @@ pub fn evaluate_on(
 /// state), so every confirmation names one to four states.
 pub const WAYPOINT_FEEDBACK_SPACINGS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
-/// The strengths `waymark eval --habits` tries on held-out survey walks: every other value of
+/// The strengths the evaluation with habits tries on held-out survey walks: every other value of
 /// the pass's grid ([`STRENGTHS`](waymark::habits::STRENGTHS)) up to 100, where the habits no
 /// longer change any configuration (`docs/tuning.md#habit-strength`). Four replays per survey
 /// walk.
@@ -425,7 +425,7 @@ impl HeldOutStrength {
     }
 }
 
-/// How `waymark eval --habits` chose the strength of the survey walks' habits.
+/// How the evaluation with habits chose the strength of the survey walks' habits.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct HabitSelection {
     /// Survey walks replayed with the other half's habits.

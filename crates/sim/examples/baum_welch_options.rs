@@ -1,5 +1,5 @@
-//! The measurement behind `FitOptions::default()`: `waymark simulate --experiment baum-welch`
-//! (El Gemayel §IV) on seeds other than the CLI's default, once per variant of one option,
+//! The measurement behind `FitOptions::default()`: the Baum-Welch experiment
+//! ([`waymark_sim::baum_welch`], El Gemayel §IV) on seeds other than the default, once per variant of one option,
 //! printing each curve's room accuracy after the last run, the mean Baum-Welch iterations per
 //! run and the CPU-bound wall time.
 //!
