@@ -70,7 +70,13 @@ fn walls_cut_edges_unless_somebody_walked_through() {
             ]],
         },
     };
-    let plan = FloorPlan { width_m: 40.0, height_m: 20.0, outline: vec![], rooms: vec![room] };
+    let plan = FloorPlan {
+        width_m: 40.0,
+        height_m: 20.0,
+        outline: vec![],
+        rooms: vec![room],
+        ..FloorPlan::default()
+    };
     let walks = [walk("a", (0.0, 0.0), (8.0, 0.0), 8), walk("b", (12.0, 0.0), (20.0, 0.0), 8)];
     let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
     let (site, report) = survey(
@@ -118,7 +124,7 @@ fn named_plan_polygons_become_zones() {
         rect("shop", 13.0, 30.0),
         rect("far", 50.0, 60.0),
     ];
-    let plan = FloorPlan { width_m: 60.0, height_m: 20.0, outline: vec![], rooms };
+    let plan = FloorPlan { width_m: 60.0, height_m: 20.0, outline: vec![], rooms, ..FloorPlan::default() };
     let walks = [walk("a", (0.0, 0.0), (20.0, 0.0), 20)];
     let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
     // The unsurveyed states around the walk join the polygons they are in, too.
@@ -236,7 +242,13 @@ fn unsurveyed_states_fill_the_floor_within_the_margin() {
             Point2::new(-30.0, 30.0),
         ]],
     };
-    let plan = FloorPlan { width_m: 54.0, height_m: 60.0, outline: vec![outline], rooms: vec![] };
+    let plan = FloorPlan {
+        width_m: 54.0,
+        height_m: 60.0,
+        outline: vec![outline],
+        rooms: vec![],
+        ..FloorPlan::default()
+    };
     let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
     let options = SurveyOptions { unsurveyed_margin_m: 8.0, ..SurveyOptions::default() };
     let (site, report) = survey("test", std::slice::from_ref(&floor), North::default(), &options).unwrap();
