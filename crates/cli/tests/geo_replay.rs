@@ -75,7 +75,7 @@ fn geojson_floor(dir: &Path) -> (i64, [[f64; 2]; 2]) {
 /// Distance between two longitude/latitude points in the plan's frame, m: the box's linear
 /// map, the frame the competition's waypoints (and the metres error) are in.
 fn plan_distance(plan: &FloorPlan, a: [f64; 2], b: [f64; 2]) -> f64 {
-    let [lo, hi] = plan.lon_lat_box;
+    let [lo, hi] = plan.lon_lat_box.expect("a plan read from GeoJSON");
     let dx = (a[0] - b[0]) / (hi[0] - lo[0]) * plan.width_m;
     let dy = (a[1] - b[1]) / (hi[1] - lo[1]) * plan.height_m;
     dx.hypot(dy)
@@ -143,7 +143,7 @@ fn site1_is_geo_referenced_and_replays_with_lat_lon() {
             };
             let num = |c: usize| row[c].parse::<f64>().unwrap();
             let metres = (num(x) - tx).hypot(num(y) - ty);
-            let truth = plan.lon_lat(tx, ty);
+            let truth = plan.lon_lat(tx, ty).unwrap();
             let geo = plan_distance(plan, [num(lon), num(lat)], truth);
             worst = worst.max((geo - metres).abs());
             sum_metres += metres;

@@ -503,6 +503,22 @@ fileprivate struct FfiConverterUInt32: FfiConverterPrimitive {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterInt32: FfiConverterPrimitive {
+    typealias FfiType = Int32
+    typealias SwiftType = Int32
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Int32 {
+        return try lift(readInt(&buf))
+    }
+
+    public static func write(_ value: Int32, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterUInt64: FfiConverterPrimitive {
     typealias FfiType = UInt64
     typealias SwiftType = UInt64
@@ -1249,7 +1265,8 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * precise fix pulls the estimate to it; a vague one barely moves it. Throws
      * `InputRejected`, changing nothing, for a time not after the last epoch, a NaN or
      * infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
-     * site for its accuracy.
+     * site for its accuracy; and for a latitude/longitude on a site that is not
+     * geo-referenced, or without its floor on a site whose floors have different frames.
      */
     func pushFix(fix: PositionFix) throws  -> PositionEstimate
     
@@ -1593,7 +1610,8 @@ open func pushAccelerometer(batch: [MotionSample])throws  -> UInt32  {
      * precise fix pulls the estimate to it; a vague one barely moves it. Throws
      * `InputRejected`, changing nothing, for a time not after the last epoch, a NaN or
      * infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
-     * site for its accuracy.
+     * site for its accuracy; and for a latitude/longitude on a site that is not
+     * geo-referenced, or without its floor on a site whose floors have different frames.
      */
 open func pushFix(fix: PositionFix)throws  -> PositionEstimate  {
     return try  FfiConverterTypePositionEstimate_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
@@ -2868,9 +2886,23 @@ public struct PositionEstimate: Equatable, Hashable {
      */
     public var floorName: String
     /**
+     * The floor's logical level as the building numbers it (-1 for the first basement), as
+     * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
+     */
+    public var floorLevel: Int32?
+    /**
      * Probability of that floor.
      */
     public var floorProbability: Double
+    /**
+     * Latitude, degrees north (WGS84), when the site file is geo-referenced (has an
+     * `anchor`); `null` / `nil` otherwise.
+     */
+    public var latitudeDeg: Double?
+    /**
+     * Longitude, degrees east (WGS84), when the site file is geo-referenced.
+     */
+    public var longitudeDeg: Double?
     /**
      * The most likely zone's name (a room, a corridor): the zone holding the most posterior
      * mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
@@ -2899,6 +2931,11 @@ public struct PositionEstimate: Equatable, Hashable {
      * One standard deviation of the heading, degrees.
      */
     public var headingAccuracyDeg: Double?
+    /**
+     * Direction of travel, degrees clockwise from true north in [0, 360) (Android's
+     * `bearing`, iOS's `course`), when the heading is known and the site is geo-referenced.
+     */
+    public var bearingDeg: Double?
     /**
      * Walking or not.
      */
@@ -2937,8 +2974,19 @@ public struct PositionEstimate: Equatable, Hashable {
          * Floor name.
          */floorName: String, 
         /**
+         * The floor's logical level as the building numbers it (-1 for the first basement), as
+         * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
+         */floorLevel: Int32? = nil, 
+        /**
          * Probability of that floor.
          */floorProbability: Double, 
+        /**
+         * Latitude, degrees north (WGS84), when the site file is geo-referenced (has an
+         * `anchor`); `null` / `nil` otherwise.
+         */latitudeDeg: Double? = nil, 
+        /**
+         * Longitude, degrees east (WGS84), when the site file is geo-referenced.
+         */longitudeDeg: Double? = nil, 
         /**
          * The most likely zone's name (a room, a corridor): the zone holding the most posterior
          * mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
@@ -2962,6 +3010,10 @@ public struct PositionEstimate: Equatable, Hashable {
          * One standard deviation of the heading, degrees.
          */headingAccuracyDeg: Double?, 
         /**
+         * Direction of travel, degrees clockwise from true north in [0, 360) (Android's
+         * `bearing`, iOS's `course`), when the heading is known and the site is geo-referenced.
+         */bearingDeg: Double? = nil, 
+        /**
          * Walking or not.
          */motionState: MotionState, 
         /**
@@ -2980,13 +3032,17 @@ public struct PositionEstimate: Equatable, Hashable {
         self.y = y
         self.floor = floor
         self.floorName = floorName
+        self.floorLevel = floorLevel
         self.floorProbability = floorProbability
+        self.latitudeDeg = latitudeDeg
+        self.longitudeDeg = longitudeDeg
         self.zone = zone
         self.zoneProbability = zoneProbability
         self.accuracyM = accuracyM
         self.accuracy95M = accuracy95M
         self.headingDeg = headingDeg
         self.headingAccuracyDeg = headingAccuracyDeg
+        self.bearingDeg = bearingDeg
         self.motionState = motionState
         self.scenario = scenario
         self.steps = steps
@@ -3014,13 +3070,17 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
                 y: FfiConverterDouble.read(from: &buf), 
                 floor: FfiConverterUInt32.read(from: &buf), 
                 floorName: FfiConverterString.read(from: &buf), 
+                floorLevel: FfiConverterOptionInt32.read(from: &buf), 
                 floorProbability: FfiConverterDouble.read(from: &buf), 
+                latitudeDeg: FfiConverterOptionDouble.read(from: &buf), 
+                longitudeDeg: FfiConverterOptionDouble.read(from: &buf), 
                 zone: FfiConverterOptionString.read(from: &buf), 
                 zoneProbability: FfiConverterDouble.read(from: &buf), 
                 accuracyM: FfiConverterDouble.read(from: &buf), 
                 accuracy95M: FfiConverterDouble.read(from: &buf), 
                 headingDeg: FfiConverterOptionDouble.read(from: &buf), 
                 headingAccuracyDeg: FfiConverterOptionDouble.read(from: &buf), 
+                bearingDeg: FfiConverterOptionDouble.read(from: &buf), 
                 motionState: FfiConverterTypeMotionState.read(from: &buf), 
                 scenario: FfiConverterTypeMotionScenario.read(from: &buf), 
                 steps: FfiConverterUInt32.read(from: &buf), 
@@ -3034,13 +3094,17 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
         FfiConverterDouble.write(value.y, into: &buf)
         FfiConverterUInt32.write(value.floor, into: &buf)
         FfiConverterString.write(value.floorName, into: &buf)
+        FfiConverterOptionInt32.write(value.floorLevel, into: &buf)
         FfiConverterDouble.write(value.floorProbability, into: &buf)
+        FfiConverterOptionDouble.write(value.latitudeDeg, into: &buf)
+        FfiConverterOptionDouble.write(value.longitudeDeg, into: &buf)
         FfiConverterOptionString.write(value.zone, into: &buf)
         FfiConverterDouble.write(value.zoneProbability, into: &buf)
         FfiConverterDouble.write(value.accuracyM, into: &buf)
         FfiConverterDouble.write(value.accuracy95M, into: &buf)
         FfiConverterOptionDouble.write(value.headingDeg, into: &buf)
         FfiConverterOptionDouble.write(value.headingAccuracyDeg, into: &buf)
+        FfiConverterOptionDouble.write(value.bearingDeg, into: &buf)
         FfiConverterTypeMotionState.write(value.motionState, into: &buf)
         FfiConverterTypeMotionScenario.write(value.scenario, into: &buf)
         FfiConverterUInt32.write(value.steps, into: &buf)
@@ -3065,7 +3129,9 @@ public func FfiConverterTypePositionEstimate_lower(_ value: PositionEstimate) ->
 
 
 /**
- * A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB.
+ * A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB. Give
+ * either `x` and `y` in the site's frame, or `latitudeDeg` and `longitudeDeg` on a
+ * geo-referenced site (its file has an `anchor`); anything else throws `InputRejected`.
  */
 public struct PositionFix: Equatable, Hashable {
     /**
@@ -3075,11 +3141,11 @@ public struct PositionFix: Equatable, Hashable {
     /**
      * x in the site's metric frame, m.
      */
-    public var x: Double
+    public var x: Double?
     /**
      * y in the site's metric frame, m.
      */
-    public var y: Double
+    public var y: Double?
     /**
      * Floor index in the site file, when the other system knows it (UWB, an RTT access
      * point's floor); `null` / `nil` for GNSS.
@@ -3089,6 +3155,14 @@ public struct PositionFix: Equatable, Hashable {
      * Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
      */
     public var accuracyM: Double
+    /**
+     * Latitude, degrees north (WGS84), in place of `x` and `y`.
+     */
+    public var latitudeDeg: Double?
+    /**
+     * Longitude, degrees east (WGS84), in place of `x` and `y`.
+     */
+    public var longitudeDeg: Double?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -3098,22 +3172,30 @@ public struct PositionFix: Equatable, Hashable {
          */timestampNs: UInt64, 
         /**
          * x in the site's metric frame, m.
-         */x: Double, 
+         */x: Double? = nil, 
         /**
          * y in the site's metric frame, m.
-         */y: Double, 
+         */y: Double? = nil, 
         /**
          * Floor index in the site file, when the other system knows it (UWB, an RTT access
          * point's floor); `null` / `nil` for GNSS.
          */floor: UInt32? = nil, 
         /**
          * Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
-         */accuracyM: Double) {
+         */accuracyM: Double, 
+        /**
+         * Latitude, degrees north (WGS84), in place of `x` and `y`.
+         */latitudeDeg: Double? = nil, 
+        /**
+         * Longitude, degrees east (WGS84), in place of `x` and `y`.
+         */longitudeDeg: Double? = nil) {
         self.timestampNs = timestampNs
         self.x = x
         self.y = y
         self.floor = floor
         self.accuracyM = accuracyM
+        self.latitudeDeg = latitudeDeg
+        self.longitudeDeg = longitudeDeg
     }
 
     
@@ -3133,19 +3215,23 @@ public struct FfiConverterTypePositionFix: FfiConverterRustBuffer {
         return
             try PositionFix(
                 timestampNs: FfiConverterUInt64.read(from: &buf), 
-                x: FfiConverterDouble.read(from: &buf), 
-                y: FfiConverterDouble.read(from: &buf), 
+                x: FfiConverterOptionDouble.read(from: &buf), 
+                y: FfiConverterOptionDouble.read(from: &buf), 
                 floor: FfiConverterOptionUInt32.read(from: &buf), 
-                accuracyM: FfiConverterDouble.read(from: &buf)
+                accuracyM: FfiConverterDouble.read(from: &buf), 
+                latitudeDeg: FfiConverterOptionDouble.read(from: &buf), 
+                longitudeDeg: FfiConverterOptionDouble.read(from: &buf)
         )
     }
 
     public static func write(_ value: PositionFix, into buf: inout [UInt8]) {
         FfiConverterUInt64.write(value.timestampNs, into: &buf)
-        FfiConverterDouble.write(value.x, into: &buf)
-        FfiConverterDouble.write(value.y, into: &buf)
+        FfiConverterOptionDouble.write(value.x, into: &buf)
+        FfiConverterOptionDouble.write(value.y, into: &buf)
         FfiConverterOptionUInt32.write(value.floor, into: &buf)
         FfiConverterDouble.write(value.accuracyM, into: &buf)
+        FfiConverterOptionDouble.write(value.latitudeDeg, into: &buf)
+        FfiConverterOptionDouble.write(value.longitudeDeg, into: &buf)
     }
 }
 
@@ -4431,6 +4517,30 @@ fileprivate struct FfiConverterOptionUInt32: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionInt32: FfiConverterRustBuffer {
+    typealias SwiftType = Int32?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterInt32.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterInt32.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionDouble: FfiConverterRustBuffer {
     typealias SwiftType = Double?
 
@@ -4941,7 +5051,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_push_accelerometer() != 46671) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_push_fix() != 20293) {
+    if (uniffi_waymark_checksum_method_positioningengine_push_fix() != 60879) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_push_gyroscope() != 67) {

@@ -176,8 +176,8 @@ pub const STOREY_HEIGHT_M: f64 = 5.0;
 /// frames its own longitude/latitude box, so the site frame is the first plan's, anchored at
 /// its south-west corner with x east and y north, scaled as that plan stretches its box; every
 /// other floor's origin is its box's south-west corner in that frame. No anchor unless every
-/// floor has a plan (a floor without one has no place on the Earth); the levels are the plans'
-/// `floor_num` either way.
+/// floor has a plan with a box of some extent (a floor without one has no place on the
+/// Earth); the levels are the plans' `floor_num` either way.
 pub fn geo_reference(plans: &[Option<&FloorPlan>]) -> (Option<Anchor>, Vec<(Option<i32>, [f64; 2])>) {
     let levels = plans.iter().map(|p| p.and_then(|p| p.level));
     let unanchored = || levels.clone().map(|l| (l, [0.0, 0.0])).collect();
@@ -187,7 +187,7 @@ pub fn geo_reference(plans: &[Option<&FloorPlan>]) -> (Option<Anchor>, Vec<(Opti
     }
     let lat_lon = |[lon, lat]: [f64; 2]| LatLon::new(lat, lon);
     let anchor = (|| {
-        let [lo, hi] = first.lon_lat_box;
+        let [lo, hi] = first.lon_lat_box?;
         let unit = Anchor::at(lat_lon(lo).ok()?);
         let mid = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
         // Ground metres across the box's middle, east-west and south-north.
@@ -196,11 +196,14 @@ pub fn geo_reference(plans: &[Option<&FloorPlan>]) -> (Option<Anchor>, Vec<(Opti
         let (s, n) =
             (unit.to_site(lat_lon([mid[0], lo[1]]).ok()?), unit.to_site(lat_lon([mid[0], hi[1]]).ok()?));
         let scale = [(e[0] - w[0]) / first.width_m, (n[1] - s[1]) / first.height_m];
+        if !scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return None;
+        }
         let anchor = Anchor { scale, ..unit };
         let origins = plans
             .iter()
             .flatten()
-            .map(|p| lat_lon(p.lon_lat_box[0]).ok().map(|sw| anchor.to_site(sw)))
+            .map(|p| lat_lon(p.lon_lat_box?[0]).ok().map(|sw| anchor.to_site(sw)))
             .collect::<Option<Vec<[f64; 2]>>>()?;
         Some((anchor, origins))
     })();

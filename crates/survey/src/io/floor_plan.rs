@@ -72,8 +72,8 @@ pub struct FloorPlan {
     /// Rooms inside it.
     pub rooms: Vec<Room>,
     /// The longitude/latitude box stretched onto `[0, width] × [0, height]`: `[[west,
-    /// south], [east, north]]`, degrees.
-    pub lon_lat_box: [[f64; 2]; 2],
+    /// south], [east, north]]`, degrees; `None` for a plan not read from GeoJSON.
+    pub lon_lat_box: Option<[[f64; 2]; 2]>,
     /// The floor's logical level: the outline's `floor_num` property (-1 for B1, 1 for F1);
     /// `None` when the plan has none.
     pub level: Option<i32>,
@@ -81,10 +81,10 @@ pub struct FloorPlan {
 
 impl FloorPlan {
     /// The plan's point (x, y), m, as (longitude, latitude): the linear map of the box, as
-    /// the competition's frame is defined.
-    pub fn lon_lat(&self, x: f64, y: f64) -> [f64; 2] {
-        let [lo, hi] = self.lon_lat_box;
-        [lo[0] + x / self.width_m * (hi[0] - lo[0]), lo[1] + y / self.height_m * (hi[1] - lo[1])]
+    /// the competition's frame is defined; `None` without a box.
+    pub fn lon_lat(&self, x: f64, y: f64) -> Option<[f64; 2]> {
+        let [lo, hi] = self.lon_lat_box?;
+        Some([lo[0] + x / self.width_m * (hi[0] - lo[0]), lo[1] + y / self.height_m * (hi[1] - lo[1])])
     }
 }
 
@@ -194,7 +194,8 @@ impl FloorPlan {
         let to_polygon = |rings: &LonLatPolygon| Polygon {
             rings: rings.iter().map(|r| r.iter().map(to_m).collect()).collect(),
         };
-        let mut plan = FloorPlan { width_m, height_m, lon_lat_box: [lo, hi], level, ..FloorPlan::default() };
+        let mut plan =
+            FloorPlan { width_m, height_m, lon_lat_box: Some([lo, hi]), level, ..FloorPlan::default() };
         for (is_floor, name, polygons) in &shapes {
             for p in polygons {
                 if *is_floor {
@@ -295,8 +296,8 @@ mod tests {
         let corner = p.rooms[0].polygon.rings[0][2];
         assert!((corner.x - 50.0).abs() < 1e-6 && (corner.y - 55.0).abs() < 1e-6);
         assert!((p.rooms[0].polygon.area() - 50.0 * 55.0).abs() < 1e-3);
-        assert_eq!(p.lon_lat_box, [[120.0, 30.0], [120.001, 30.001]]);
-        let [lon, lat] = p.lon_lat(50.0, 110.0);
+        assert_eq!(p.lon_lat_box, Some([[120.0, 30.0], [120.001, 30.001]]));
+        let [lon, lat] = p.lon_lat(50.0, 110.0).unwrap();
         assert!((lon - 120.0005).abs() < 1e-12 && (lat - 30.001).abs() < 1e-12);
     }
 
