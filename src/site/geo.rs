@@ -163,7 +163,7 @@ impl Anchor {
     }
 
     /// Site-frame metres to east/north ground metres.
-    fn to_east_north(&self, x: f64, y: f64) -> [f64; 2] {
+    fn to_east_north(self, x: f64, y: f64) -> [f64; 2] {
         let (sa, ca) = self.azimuth_rad.sin_cos();
         let (gx, gy) = (x * self.scale[0], y * self.scale[1]);
         [gx * ca + gy * sa, -gx * sa + gy * ca]

@@ -171,6 +171,9 @@ pub fn floor_rank(name: &str) -> Option<i32> {
 /// computation uses it). 5 m: a typical shopping-mall storey.
 pub const STOREY_HEIGHT_M: f64 = 5.0;
 
+/// A floor's logical level and where its frame's origin is in the site frame, m.
+pub type FloorGeo = (Option<i32>, [f64; 2]);
+
 /// The site's geo-reference from its floors' plans (docs/site-files.md#geo-reference): the
 /// anchor, and each floor's (level, frame origin in the site frame). Each competition plan
 /// frames its own longitude/latitude box, so the site frame is the first plan's, anchored at
@@ -178,7 +181,7 @@ pub const STOREY_HEIGHT_M: f64 = 5.0;
 /// other floor's origin is its box's south-west corner in that frame. No anchor unless every
 /// floor has a plan with a box of some extent (a floor without one has no place on the
 /// Earth); the levels are the plans' `floor_num` either way.
-pub fn geo_reference(plans: &[Option<&FloorPlan>]) -> (Option<Anchor>, Vec<(Option<i32>, [f64; 2])>) {
+pub fn geo_reference(plans: &[Option<&FloorPlan>]) -> (Option<Anchor>, Vec<FloorGeo>) {
     let levels = plans.iter().map(|p| p.and_then(|p| p.level));
     let unanchored = || levels.clone().map(|l| (l, [0.0, 0.0])).collect();
     let Some(Some(first)) = plans.first() else { return (None, unanchored()) };
