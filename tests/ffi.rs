@@ -334,10 +334,12 @@ fn walk_with_fixes_and_feedback(engine: &PositioningEngine, office: &Office, see
         if k % 3 == 1 {
             let fix = PositionFix {
                 timestamp_ns: t + 500_000_000,
-                x: epoch.truth.x + 1.5,
-                y: epoch.truth.y + 0.5,
+                x: Some(epoch.truth.x + 1.5),
+                y: Some(epoch.truth.y + 0.5),
                 floor: Some(0),
                 accuracy_m: 2.0,
+                latitude_deg: None,
+                longitude_deg: None,
             };
             if engine.push_fix(fix).is_ok() {
                 fixes += 1;

@@ -960,7 +960,15 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                 Some((
                     t,
                     Kind::Fix,
-                    engine.push_fix(FfiFix { timestamp_ns: t, x, y, floor, accuracy_m: *accuracy_m }),
+                    engine.push_fix(FfiFix {
+                        timestamp_ns: t,
+                        x: Some(x),
+                        y: Some(y),
+                        floor,
+                        accuracy_m: *accuracy_m,
+                        latitude_deg: None,
+                        longitude_deg: None,
+                    }),
                 ))
             }
             Call::ConfirmZone { when, zone } => {

@@ -1,6 +1,7 @@
 //! Site-file format versions: a file of a newer format than this build reads is refused as
 //! "newer format", in JSON and in the binary encoding, before any field it has that this build
-//! does not know; a version-1 file (the older schema, a subset of the current) still loads.
+//! does not know; version-1 and version-2 files (older schemas, subsets of the current) still
+//! load.
 
 use waymark::site::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
 use waymark::{Site, SiteError};
@@ -41,8 +42,23 @@ fn binary_with_version(binary: &[u8], version: u32) -> Vec<u8> {
 }
 
 #[test]
-fn the_current_version_is_2_and_reads_back_to_1() {
-    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 2));
+fn the_current_version_is_3_and_reads_back_to_1() {
+    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 3));
+}
+
+/// A version-2 file loads as before; the fields version 3 added (the anchor, floor levels and
+/// origins) are absent from it and are written only when a site has them.
+#[test]
+fn a_version_2_file_still_loads_and_version_3_adds_the_geo_fields() {
+    let site = Site::from_json(with_version(VERSION_1, 2).as_bytes()).unwrap();
+    assert_eq!(site.to_json(), Site::from_json(VERSION_1.as_bytes()).unwrap().to_json());
+    assert!(site.anchor().is_none() && site.floor_level(0).is_none());
+    let geo = with_version(VERSION_1, 3).replace(
+        r#""floors": [{"name": "G"}]"#,
+        r#""anchor": {"lat_deg": 60.17, "lon_deg": 24.94}, "floors": [{"name": "G", "level": 0}]"#,
+    );
+    let site = Site::from_json(geo.as_bytes()).unwrap();
+    assert_eq!((site.anchor().map(|a| a.lat_deg), site.floor_level(0)), (Some(60.17), Some(0)));
 }
 
 #[test]

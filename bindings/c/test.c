@@ -224,6 +224,72 @@ static char *with_address_beacon(const char *json) {
     return out;
 }
 
+/* The site geo-referenced: an anchor in Helsinki (x east, y north) and its first floor at
+ * level 2, inserted into `json`: a malloc'd copy, or NULL. */
+static char *with_anchor(const char *json) {
+    const char *floors = "\"floors\":", *anchor = "\"anchor\":{\"lat_deg\":60.17,\"lon_deg\":24.94},";
+    const char *elevation = "\"elevation_m\":", *level = "\"level\":2,";
+    const char *at = strstr(json, floors), *el = strstr(json, elevation);
+    if (!at || !el || el < at) return NULL;
+    char *out = malloc(strlen(json) + strlen(anchor) + strlen(level) + 1);
+    if (!out) return NULL;
+    size_t head = (size_t)(at - json), mid = (size_t)(el - at);
+    memcpy(out, json, head);
+    strcpy(out + head, anchor);
+    strncat(out, at, mid);
+    strcat(out, level);
+    strcat(out, el);
+    return out;
+}
+
+/* Positions carry latitude/longitude and the floor level only on a geo-referenced site, and a
+ * fix in latitude/longitude is taken there and refused elsewhere. */
+static void geo_reference(const char *site_path) {
+    size_t len = 0;
+    char *json = read_file(site_path, &len);
+    char *site = json ? with_anchor(json) : NULL;
+    CHECK(site != NULL, "the simulated site's floors");
+    if (!site) { free(json); return; }
+    waymark_engine *plain = NULL, *geo = NULL, *other = NULL;
+    CHECK(waymark_engine_new((const uint8_t *)json, len, &plain) == WAYMARK_RESULT_OK, "plain site");
+    CHECK(waymark_engine_new((const uint8_t *)site, strlen(site), &geo) == WAYMARK_RESULT_OK, "anchored site");
+    CHECK(waymark_engine_new((const uint8_t *)site, strlen(site), &other) == WAYMARK_RESULT_OK, "anchored site");
+    free(json);
+    free(site);
+    waymark_position p, q;
+    CHECK(waymark_engine_push_fix(plain, 1000000000ull, 35.5, 11.5, -1, 0.5, &p) == WAYMARK_RESULT_OK &&
+              isnan(p.latitude_deg) && isnan(p.longitude_deg) && isnan(p.bearing_deg) && !p.has_floor_level,
+          "no anchor: lat %g, level %d", p.latitude_deg, p.floor_level);
+    CHECK(waymark_engine_push_fix_lat_lon(plain, 2000000000ull, 60.17, 24.94, -1, 0.5, &p) ==
+              WAYMARK_RESULT_INPUT_REJECTED,
+          "a lat/lon fix without an anchor");
+    CHECK(waymark_engine_push_fix(geo, 1000000000ull, 35.5, 11.5, -1, 0.5, &p) == WAYMARK_RESULT_OK &&
+              p.has_floor_level && p.floor_level == 2,
+          "anchored: level %d", p.floor_level);
+    /* At 60°N a degree of latitude is 111 412 m and one of longitude 55 800 m (WGS84). */
+    CHECK(fabs(p.latitude_deg - (60.17 + p.y / 111412.0)) < 1e-6 &&
+              fabs(p.longitude_deg - (24.94 + p.x / 55800.0)) < 1e-5,
+          "anchored: (%g, %g) at %.7f, %.7f", p.x, p.y, p.latitude_deg, p.longitude_deg);
+    /* A fix at the estimate's latitude/longitude positions exactly as one at its x, y (on an
+     * engine with the same history). */
+    waymark_position r;
+    CHECK(waymark_engine_push_fix(other, 1000000000ull, 35.5, 11.5, -1, 0.5, &r) == WAYMARK_RESULT_OK, "other");
+    CHECK(waymark_engine_push_fix_lat_lon(geo, 2000000000ull, p.latitude_deg, p.longitude_deg, -1, 0.5, &q) ==
+                  WAYMARK_RESULT_OK &&
+              waymark_engine_push_fix(other, 2000000000ull, p.x, p.y, -1, 0.5, &r) == WAYMARK_RESULT_OK &&
+              fabs(q.x - r.x) < 1e-6 && fabs(q.y - r.y) < 1e-6,
+          "the same place in lat/lon: (%g, %g) and (%g, %g)", q.x, q.y, r.x, r.y);
+    CHECK(waymark_engine_push_fix_lat_lon(geo, 3000000000ull, 91, 24.94, -1, 0.5, &q) ==
+              WAYMARK_RESULT_INPUT_REJECTED,
+          "latitude out of range");
+    CHECK(waymark_engine_push_fix_lat_lon(NULL, 3000000000ull, 60.17, 24.94, -1, 0.5, &q) ==
+              WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL engine");
+    waymark_engine_free(plain);
+    waymark_engine_free(geo);
+    waymark_engine_free(other);
+}
+
 static void address_beacons(const char *site_path) {
     size_t len = 0;
     char *json = read_file(site_path, &len);
@@ -702,6 +768,7 @@ int main(int argc, char **argv) {
     error_paths(argv[1]);
     options_status_and_stats(argv[1]);
     address_beacons(argv[1]);
+    geo_reference(argv[1]);
     zones_and_feedback(argv[1]);
     geofences_and_zone_events(argv[1]);
     walk(argv[1], argv[2], NULL, 0);

@@ -402,6 +402,24 @@ typedef struct {
    */
   double floor_probability;
   /**
+   * Whether `floor_level` holds the floor's logical level (the site file gives one).
+   */
+  bool has_floor_level;
+  /**
+   * The floor's logical level as the building numbers it (-1 for the first basement);
+   * 0 when `has_floor_level` is false.
+   */
+  int32_t floor_level;
+  /**
+   * Latitude, degrees north (WGS84), when the site is geo-referenced (its file has an
+   * `anchor`); NaN otherwise.
+   */
+  double latitude_deg;
+  /**
+   * Longitude, degrees east (WGS84); NaN when the site is not geo-referenced.
+   */
+  double longitude_deg;
+  /**
    * The most likely zone (a room, a corridor), an index into the site file's zones
    * (`waymark_engine_zone_name`); -1 when the site has no zones or more posterior mass lies
    * outside every zone than in any one.
@@ -427,6 +445,11 @@ typedef struct {
    * One standard deviation of the heading, degrees; NaN when unknown.
    */
   double heading_accuracy_deg;
+  /**
+   * Direction of travel, degrees clockwise from true north in [0, 360); NaN when the
+   * heading is unknown or the site is not geo-referenced.
+   */
+  double bearing_deg;
   /**
    * 0 unknown, 1 stationary, 2 walking.
    */
@@ -640,9 +663,8 @@ typedef struct {
    */
   double site_rotation_deg;
   /**
-   * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
-   * `waymark site hash`): `site_salt_len` bytes (at least 16; the bytes the salt file's hex
-   * digits stand for), copied before the constructor returns. NULL with length 0 for a
+   * The salt of a site file whose transmitter ids are hashed (docs/privacy.md):
+   * `site_salt_len` bytes (at least 16; the bytes the salt file's hex digits stand for), copied before the constructor returns. NULL with length 0 for a
    * site with raw ids. A hashed site without it, or with another salt, returns
    * `WAYMARK_RESULT_SALT_MISMATCH`; a salt given for a site with raw ids is ignored.
    */
@@ -890,6 +912,21 @@ waymark_result waymark_engine_push_fix(waymark_engine *engine,
                                        int32_t floor,
                                        double accuracy_m,
                                        waymark_position *out);
+
+/**
+ * `waymark_engine_push_fix` with the fix at a WGS84 latitude and longitude, degrees, on a
+ * geo-referenced site (its file has an `anchor`). Besides what `waymark_engine_push_fix`
+ * rejects, returns `InputRejected`, changing nothing, on a site that is not geo-referenced,
+ * for a latitude or longitude out of range, or for a negative `floor` on a site whose floors
+ * have different frames (`floors[f].origin_m`).
+ */
+waymark_result waymark_engine_push_fix_lat_lon(waymark_engine *engine,
+                                               uint64_t timestamp_ns,
+                                               double latitude_deg,
+                                               double longitude_deg,
+                                               int32_t floor,
+                                               double accuracy_m,
+                                               waymark_position *out);
 
 /**
  * User feedback: the user says they are in the zone named `zone` (NUL-terminated UTF-8) at

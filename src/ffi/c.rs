@@ -80,7 +80,7 @@ impl Listeners for Callbacks {
             Event::Position(p) => {
                 let callback = *lock(&self.position);
                 if let Some(callback) = callback {
-                    callback.call(&position(p));
+                    callback.call(&position(p, site));
                 }
             }
             Event::Status(s) => {
@@ -267,7 +267,7 @@ fn epoch(
 ) -> waymark_result {
     with_handle(engine, |handle| match handle.epoch(f) {
         Ok(p) => {
-            write(out, position(&p));
+            write(out, position(&p, handle.site()));
             waymark_result::Ok
         }
         Err(e) => fail_with(&e),
@@ -388,7 +388,7 @@ pub extern "C" fn waymark_engine_push_scan(
         };
         match handle.push_scan(&Scan { timestamp_ns, readings }) {
             Ok(p) => {
-                write(out, position(&p));
+                write(out, position(&p, handle.site()));
                 waymark_result::Ok
             }
             Err(e) => fail_with(&e),
@@ -475,6 +475,39 @@ pub extern "C" fn waymark_engine_push_fix(
     })
 }
 
+/// `waymark_engine_push_fix` with the fix at a WGS84 latitude and longitude, degrees, on a
+/// geo-referenced site (its file has an `anchor`). Besides what `waymark_engine_push_fix`
+/// rejects, returns `InputRejected`, changing nothing, on a site that is not geo-referenced,
+/// for a latitude or longitude out of range, or for a negative `floor` on a site whose floors
+/// have different frames (`floors[f].origin_m`).
+#[no_mangle]
+pub extern "C" fn waymark_engine_push_fix_lat_lon(
+    engine: *mut waymark_engine,
+    timestamp_ns: u64,
+    latitude_deg: f64,
+    longitude_deg: f64,
+    floor: i32,
+    accuracy_m: f64,
+    out: *mut waymark_position,
+) -> waymark_result {
+    with_handle(engine, |handle| {
+        let floor = usize::try_from(floor).ok();
+        let at = crate::site::LatLon { lat_deg: latitude_deg, lon_deg: longitude_deg };
+        let p = match handle.site().site_point(floor, at) {
+            Ok(p) => p,
+            Err(e) => return fail_with(&handle.reject(PositioningError::input(e))),
+        };
+        let fix = crate::fix::PositionFix { timestamp_ns, x: p.x, y: p.y, floor, accuracy_m };
+        match handle.epoch(|e| e.push_fix(&fix)) {
+            Ok(p) => {
+                write(out, position(&p, handle.site()));
+                waymark_result::Ok
+            }
+            Err(e) => fail_with(&e),
+        }
+    })
+}
+
 /// User feedback: the user says they are in the zone named `zone` (NUL-terminated UTF-8) at
 /// `timestamp_ns`. The position is pinned to the zone's states: at the time of the latest
 /// position it corrects that position, later it is a new epoch. `*out` (may be NULL) receives
@@ -494,7 +527,7 @@ pub extern "C" fn waymark_engine_confirm_zone(
         };
         match handle.epoch(|e| e.confirm_zone_named(timestamp_ns, &zone)) {
             Ok(p) => {
-                write(out, position(&p));
+                write(out, position(&p, handle.site()));
                 waymark_result::Ok
             }
             Err(e) => fail_with(&e),
@@ -598,7 +631,7 @@ pub extern "C" fn waymark_engine_position(
     }
     read(
         engine,
-        |e| e.position().map(position),
+        |e| e.position().map(|p| position(p, e.site())),
         |p| match p {
             Some(p) => {
                 write(out, p);

@@ -266,15 +266,10 @@ impl PositioningEngine {
     /// precise fix pulls the estimate to it; a vague one barely moves it. Throws
     /// `InputRejected`, changing nothing, for a time not after the last epoch, a NaN or
     /// infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
-    /// site for its accuracy.
+    /// site for its accuracy; and for a latitude/longitude on a site that is not
+    /// geo-referenced, or without its floor on a site whose floors have different frames.
     pub fn push_fix(&self, fix: PositionFix) -> Result<PositionEstimate, PositioningError> {
-        let core = crate::fix::PositionFix {
-            timestamp_ns: fix.timestamp_ns,
-            x: fix.x,
-            y: fix.y,
-            floor: fix.floor.map(|f| f as usize),
-            accuracy_m: fix.accuracy_m,
-        };
+        let core = fix.to_core(self.handle.site()).map_err(|reason| self.reject(reason))?;
         self.epoch(|engine| engine.push_fix(&core))
     }
 

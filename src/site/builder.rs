@@ -1,7 +1,7 @@
 //! Building a site from surveyed places and their training scans: fits every transmitter's
 //! RSSI model at every state (Hoang §3) and derives the map's "unheard" model.
 
-use super::{Edge, Floor, North, Site, SiteError, State, StateKind, Zone, ZoneKind};
+use super::{Anchor, Edge, Floor, North, Site, SiteError, State, StateKind, Zone, ZoneKind};
 use crate::radio::{
     unheard_model, FitOptions, Gaussian, RadioMap, RssiModel, Scan, TransmitterId, MAX_STORED_STD_DB,
 };
@@ -20,7 +20,10 @@ pub struct SiteBuilder {
     states: Vec<(State, Vec<TrainingScan>)>,
     edges: Vec<(u32, u32, Option<f64>)>,
     north: North,
+    anchor: Option<Anchor>,
     zones: Vec<Zone>,
+    /// A floor index given to [`floor_geo`](Self::floor_geo) that does not exist.
+    unknown_floor: Option<usize>,
 }
 
 impl SiteBuilder {
@@ -46,6 +49,25 @@ impl SiteBuilder {
     /// Sets the site frame's orientation on the Earth.
     pub fn north(&mut self, north: North) {
         self.north = north;
+    }
+
+    /// Geo-references the site: where its frame sits on the Earth (checked at
+    /// [`build`](Self::build)).
+    pub fn anchor(&mut self, anchor: Anchor) {
+        self.anchor = Some(anchor);
+    }
+
+    /// Sets floor `floor`'s logical level and where its frame's origin is in the site frame
+    /// ([`Floor::level`], [`Floor::origin_m`]); checked at [`build`](Self::build). An unknown
+    /// index is refused there too.
+    pub fn floor_geo(&mut self, floor: usize, level: Option<i32>, origin_m: [f64; 2]) {
+        match self.floors.get_mut(floor) {
+            Some(f) => {
+                f.level = level;
+                f.origin_m = origin_m;
+            }
+            None => self.unknown_floor = Some(floor),
+        }
     }
 
     /// Adds a walkable edge; `length_m` `None` means the straight line (same floor only).
@@ -181,6 +203,15 @@ impl SiteBuilder {
             path: "radio.unheard".into(),
             message: "clip level and spreads must be finite".into(),
         })?;
+        if let Some(floor) = self.unknown_floor {
+            return Err(SiteError::Invalid {
+                path: "floors".into(),
+                message: format!("floor {floor} does not exist (the site has {} floors)", self.floors.len()),
+            });
+        }
+        for (i, f) in self.floors.iter().enumerate() {
+            f.check(i).map_err(|(path, message)| SiteError::Invalid { path, message })?;
+        }
         let states: Vec<State> = self.states.into_iter().map(|(s, _)| s).collect();
         for (i, s) in states.iter().enumerate() {
             if s.floor >= self.floors.len() || !(s.position.x.is_finite() && s.position.y.is_finite()) {
@@ -212,7 +243,9 @@ impl SiteBuilder {
         }
         let map = RadioMap::new(options.model, clip, unheard, ids, states.len(), triples)
             .map_err(|m| SiteError::Invalid { path: "radio".into(), message: m })?;
-        Site::from_parts(self.name, self.floors, states, edges, map, self.north).with_zones(self.zones)
+        Site::from_parts(self.name, self.floors, states, edges, map, self.north)
+            .with_anchor(self.anchor)?
+            .with_zones(self.zones)
     }
 }
 

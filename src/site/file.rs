@@ -89,12 +89,15 @@ impl Site {
             format_version: FORMAT_VERSION,
             name: self.name.clone(),
             north: self.north,
+            anchor: self.anchor,
             floors: self
                 .floors
                 .iter()
                 .map(|f| FloorFile {
                     name: f.name.clone(),
                     elevation_m: f.elevation_m,
+                    level: f.level,
+                    origin_m: (f.origin_m != [0.0, 0.0]).then_some(f.origin_m),
                     rssi_weight: f.rssi_weight,
                     rssi_weight_without_movement: f.rssi_weight_without_movement,
                 })
@@ -270,6 +273,8 @@ impl Site {
             .map(|f| Floor {
                 name: f.name,
                 elevation_m: f.elevation_m,
+                level: f.level,
+                origin_m: f.origin_m.unwrap_or([0.0, 0.0]),
                 rssi_weight: f.rssi_weight,
                 rssi_weight_without_movement: f.rssi_weight_without_movement,
             })
@@ -296,7 +301,8 @@ impl Site {
             |id| ids.get(&id).copied(),
         )?;
         let site = Site::from_parts(file.name, floors, states, edges, map, file.north);
-        Ok(Site { id_hashing, zones, zone_of, ..site.with_calibration(file.calibration)? })
+        let site = site.with_calibration(file.calibration)?.with_anchor(file.anchor)?;
+        Ok(Site { id_hashing, zones, zone_of, ..site })
     }
 
     /// The same site with every transmitter id replaced by its hash under `salt`
@@ -378,7 +384,7 @@ fn id_hashing(radio: &RadioFile) -> Result<Option<IdHashing>, SiteError> {
 mod tests {
     use super::*;
     use crate::radio::TransmitterId;
-    use crate::site::ZoneKind;
+    use crate::site::{GeoError, ZoneKind};
 
     const GOOD: &str = r#"{
       "format_version": 1,
@@ -435,8 +441,8 @@ mod tests {
     fn errors_say_what_and_where() {
         assert!(matches!(err("{\"format_version\": 1,, }"), SiteError::Syntax { line: 1, .. }));
         assert!(matches!(
-            err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 3")),
-            SiteError::NewerFormat { found: 3, supported: 2 }
+            err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 4")),
+            SiteError::NewerFormat { found: 4, supported: 3 }
         ));
         let cases = [
             (GOOD.replace("\"format_version\": 1,", ""), "format_version"),
@@ -635,6 +641,90 @@ mod tests {
         }
         let message = err(&with_zones(cases[5].0)).to_string();
         assert!(message.contains("already in zones[0]"), "{message}");
+    }
+
+    const ANCHOR: &str = r#","anchor": {"lat_deg": 30.292, "lon_deg": 120.074, "scale": [0.999, 1.004]}}"#;
+
+    #[test]
+    fn anchor_levels_and_origins_round_trip_in_both_encodings() {
+        let text = with_zones(ANCHOR).replace(
+            r#""floors": [{"name": "G"}]"#,
+            r#""floors": [{"name": "G", "level": -1, "origin_m": [2.5, -3]}]"#,
+        );
+        let site = Site::from_json(text.as_bytes()).unwrap();
+        let anchor = site.anchor().unwrap();
+        assert_eq!((anchor.lat_deg, anchor.azimuth_rad, anchor.scale), (30.292, 0.0, [0.999, 1.004]));
+        assert_eq!((site.floor_level(0), site.floor_level(1)), (Some(-1), None));
+        assert_eq!(site.floors()[0].origin_m, [2.5, -3.0]);
+        let json = site.to_json();
+        assert!(
+            json.contains(
+                r#""anchor":{"lat_deg":30.292,"lon_deg":120.074,"azimuth_rad":0.0,"scale":[0.999,1.004]}"#
+            ),
+            "{json}"
+        );
+        assert!(json.contains(r#""level":-1,"origin_m":[2.5,-3.0]"#), "{json}");
+        assert_eq!(Site::from_json(json.as_bytes()).unwrap().to_json(), json);
+        let packed = Site::from_bytes(&site.to_binary()).unwrap();
+        assert_eq!(packed.to_json(), json);
+        assert_eq!(site.with_pseudo_states(1.0).anchor(), site.anchor(), "pseudo states keep the anchor");
+        // Without them, nothing is written.
+        let plain = Site::from_json(GOOD.as_bytes()).unwrap();
+        assert!(plain.anchor().is_none() && plain.floor_level(0).is_none());
+        let json = plain.to_json();
+        assert!(!json.contains("anchor") && !json.contains("level") && !json.contains("origin_m"), "{json}");
+    }
+
+    #[test]
+    fn positions_convert_through_the_anchor_and_the_floor_origin() {
+        let text = with_zones(ANCHOR).replace(
+            r#""floors": [{"name": "G"}]"#,
+            r#""floors": [{"name": "G"}, {"name": "1", "origin_m": [10, 0]}]"#,
+        );
+        let site = Site::from_json(text.as_bytes()).unwrap();
+        let anchor = *site.anchor().unwrap();
+        assert_eq!(site.lat_lon(0, 3.0, 4.0), Some(anchor.to_lat_lon(3.0, 4.0)));
+        assert_eq!(site.lat_lon(1, 3.0, 4.0), Some(anchor.to_lat_lon(13.0, 4.0)));
+        assert_eq!(site.lat_lon(2, 3.0, 4.0), None);
+        let at = anchor.to_lat_lon(13.0, 4.0);
+        let p = site.site_point(Some(1), at).unwrap();
+        assert!((p.x - 3.0).abs() < 1e-6 && (p.y - 4.0).abs() < 1e-6, "{p}");
+        assert_eq!(site.site_point(None, at), Err(GeoError::FloorRequired));
+        assert_eq!(site.site_point(Some(2), at), Err(GeoError::UnknownFloor { floor: 2, floors: 2 }));
+        let bad = crate::site::LatLon { lat_deg: f64::NAN, lon_deg: 0.0 };
+        assert!(matches!(site.site_point(Some(0), bad), Err(GeoError::InvalidCoordinate { .. })));
+        assert_eq!(site.bearing_deg(0.0), Some(0.0));
+        let plain = Site::from_json(GOOD.as_bytes()).unwrap();
+        assert_eq!(plain.site_point(None, at), Err(GeoError::NotGeoReferenced));
+        assert_eq!((plain.lat_lon(0, 0.0, 0.0), plain.bearing_deg(0.0)), (None, None));
+        // One frame for every floor: no floor needed.
+        let one_frame = Site::from_json(with_zones(ANCHOR).as_bytes()).unwrap();
+        let p = one_frame.site_point(None, anchor.to_lat_lon(3.0, 4.0)).unwrap();
+        assert!((p.x - 3.0).abs() < 1e-6 && (p.y - 4.0).abs() < 1e-6, "{p}");
+    }
+
+    #[test]
+    fn bad_anchors_and_origins_are_named_by_path() {
+        let cases = [
+            (r#","anchor": {"lat_deg": 95, "lon_deg": 0}}"#, "anchor.lat_deg"),
+            (r#","anchor": {"lat_deg": 0, "lon_deg": 0, "scale": [1, -1]}}"#, "anchor.scale"),
+            (r#","anchor": {"lat_deg": 0}}"#, "anchor"),
+            (r#","anchor": {"lat_deg": 0, "lon_deg": 0, "height_m": 3}}"#, "anchor"),
+        ];
+        for (anchor, path) in cases {
+            match err(&with_zones(anchor)) {
+                SiteError::Invalid { path: p, message } => {
+                    assert!(p.starts_with(path), "{anchor}: expected {path}, got {p}: {message}")
+                }
+                other => panic!("{anchor}: expected Invalid at {path}, got {other:?}"),
+            }
+        }
+        let origin = GOOD.replace(r#"{"name": "G"}"#, r#"{"name": "G", "origin_m": [1e7, 0]}"#);
+        assert!(matches!(err(&origin), SiteError::Invalid { path, .. } if path == "floors[0].origin_m"));
+        let level = GOOD.replace(r#"{"name": "G"}"#, r#"{"name": "G", "level": 1.5}"#);
+        assert!(
+            matches!(err(&level), SiteError::Invalid { path, .. } if path.starts_with("floors[0].level"))
+        );
     }
 
     #[test]

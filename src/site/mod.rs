@@ -6,6 +6,7 @@ mod binary;
 mod builder;
 mod error;
 mod file;
+mod geo;
 mod pseudo;
 mod reach;
 mod schema;
@@ -16,6 +17,7 @@ pub use builder::fit_columns;
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
 pub use error::SiteError;
 pub use file::{IdHashing, MAX_COORDINATE_M};
+pub use geo::{Anchor, GeoError, LatLon, MAX_ANCHOR_LATITUDE_DEG};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
 pub use reach::ReachTable;
 pub use schema::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
@@ -34,6 +36,13 @@ pub struct Floor {
     pub name: String,
     /// Height of the floor above the site's reference, m.
     pub elevation_m: f64,
+    /// The building's own number for the floor (its logical level: -1 for the first
+    /// basement), as Core Location's `CLFloor.level`; `None` when the site file gives none.
+    pub level: Option<i32>,
+    /// Where this floor's frame has its origin in the site frame, m: (0, 0) when every floor is
+    /// drawn in the site frame; the plans of a survey that frames each floor on its own box
+    /// (the competition's) differ ([`Site::lat_lon`] adds it before the anchor).
+    pub origin_m: [f64; 2],
     /// γ of Hoang eq. 14 while the engine is on this floor (its latest estimate's floor), in
     /// epochs with a movement likelihood, chosen by leave-one-walk-out over the floor's survey
     /// walks (Hoang §6.2's jackknife). `None`: the site-wide [`Calibration::rssi_weight`].
@@ -46,6 +55,12 @@ pub struct Floor {
 impl Floor {
     /// The first γ out of (0, 1], as (path, message), the floor being `floors[index]`.
     pub(crate) fn check(&self, index: usize) -> Result<(), (String, String)> {
+        if !self.origin_m.iter().all(|v| v.is_finite() && v.abs() <= MAX_COORDINATE_M) {
+            return Err((
+                format!("floors[{index}].origin_m"),
+                format!("must be within ±{MAX_COORDINATE_M} m, got {:?}", self.origin_m),
+            ));
+        }
         for (name, gamma) in [
             ("rssi_weight", self.rssi_weight),
             ("rssi_weight_without_movement", self.rssi_weight_without_movement),
@@ -364,6 +379,8 @@ pub struct Site {
     adjacency: Vec<(u32, f64)>,
     radio: RadioMap,
     north: North,
+    /// Where the site frame sits on the Earth, when the file says.
+    anchor: Option<Anchor>,
     spacing_m: f64,
     calibration: Calibration,
     /// Set when the transmitter ids are salted hashes.
@@ -436,6 +453,7 @@ impl Site {
             adjacency,
             radio,
             north,
+            anchor: None,
             spacing_m,
             calibration: Calibration::default(),
             id_hashing: None,
@@ -543,6 +561,67 @@ impl Site {
     pub fn with_north(mut self, north: North) -> Site {
         self.north = north;
         self
+    }
+
+    /// Where the site frame sits on the Earth; `None` when the site is not geo-referenced.
+    pub fn anchor(&self) -> Option<&Anchor> {
+        self.anchor.as_ref()
+    }
+
+    /// The site with `anchor` (`None`: not geo-referenced); `Err` naming `anchor.<field>` if a
+    /// value is out of range.
+    pub fn with_anchor(mut self, anchor: Option<Anchor>) -> Result<Site, SiteError> {
+        if let Some(a) = &anchor {
+            a.check().map_err(|(field, message)| SiteError::Invalid {
+                path: format!("anchor.{field}"),
+                message,
+            })?;
+        }
+        self.anchor = anchor;
+        Ok(self)
+    }
+
+    /// The logical level of floor `floor` (an index into [`floors`](Self::floors)): -1 for
+    /// the first basement, as the building numbers it; `None` for an unknown index or a site
+    /// file that gives no level.
+    pub fn floor_level(&self, floor: usize) -> Option<i32> {
+        self.floors.get(floor).and_then(|f| f.level)
+    }
+
+    /// The point (x, y), m, of floor `floor`'s frame as latitude/longitude; `None` when the
+    /// site has no anchor or the floor index is unknown.
+    pub fn lat_lon(&self, floor: usize, x: f64, y: f64) -> Option<LatLon> {
+        let (anchor, origin) = (self.anchor.as_ref()?, self.floors.get(floor)?.origin_m);
+        Some(anchor.to_lat_lon(x + origin[0], y + origin[1]))
+    }
+
+    /// A latitude/longitude as a point of floor `floor`'s frame, m. Without a floor, the
+    /// floors must share one frame (the same `origin_m`). Fails when the site has no anchor,
+    /// the coordinates are out of range, the floor is unknown, or it is needed and missing.
+    pub fn site_point(&self, floor: Option<usize>, at: LatLon) -> Result<Point2<f64>, GeoError> {
+        let anchor = self.anchor.as_ref().ok_or(GeoError::NotGeoReferenced)?;
+        let at = LatLon::new(at.lat_deg, at.lon_deg)?;
+        let origin = match floor {
+            Some(f) => {
+                let floors = self.floors.len();
+                self.floors.get(f).ok_or(GeoError::UnknownFloor { floor: f, floors })?.origin_m
+            }
+            None => {
+                let first = self.floors[0].origin_m;
+                if self.floors.iter().any(|f| f.origin_m != first) {
+                    return Err(GeoError::FloorRequired);
+                }
+                first
+            }
+        };
+        let [x, y] = anchor.to_site(at);
+        Ok(Point2::new(x - origin[0], y - origin[1]))
+    }
+
+    /// The true bearing, degrees clockwise from north, of a heading in radians clockwise from
+    /// the site's +y axis (a position's); `None` when the site has no anchor.
+    pub fn bearing_deg(&self, heading_rad: f64) -> Option<f64> {
+        self.anchor.as_ref().map(|a| a.bearing_deg(heading_rad))
     }
 
     /// Typical distance between neighbouring states (median edge length), m: the size of the

@@ -93,6 +93,7 @@ impl Site {
             Site::from_parts(self.name.clone(), self.floors.clone(), states, edges, map, self.north);
         site.calibration = self.calibration;
         site.id_hashing = self.id_hashing.clone();
+        site.anchor = self.anchor;
         // Pseudo states come after the surveyed ones: each zone's list stays ascending.
         site.with_zones(zones).expect("pseudo states are new states, each added to at most one zone")
     }

@@ -3,15 +3,16 @@
 //! `file.rs` validates what it holds.
 
 use super::error::{invalid, json_error};
-use super::{Calibration, North, SiteError, StateKind, ZoneKind};
+use super::{Anchor, Calibration, North, SiteError, StateKind, ZoneKind};
 use crate::radio::{RssiModel, TransmitterId, LEVEL_STEP_DB};
 use serde::{Deserialize, Serialize};
 
 /// The site-file format this build writes. It reads this and every version back to
 /// [`OLDEST_FORMAT_VERSION`], and refuses a newer one ([`SiteError::NewerFormat`]). Version 2
-/// holds the optional fields added within version 1 (docs/site-files.md#versioning), so a
-/// version-1 file is a version-2 file.
-pub const FORMAT_VERSION: u32 = 2;
+/// holds the optional fields added within version 1, version 3 adds the optional geo anchor
+/// and floor levels (docs/site-files.md#versioning): each version's files are files of the
+/// next.
+pub const FORMAT_VERSION: u32 = 3;
 
 /// The oldest site-file format this build reads.
 pub const OLDEST_FORMAT_VERSION: u32 = 1;
@@ -23,6 +24,9 @@ pub(super) struct SiteFile {
     pub(super) name: String,
     #[serde(default)]
     pub(super) north: North,
+    /// Since version 3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(super) anchor: Option<Anchor>,
     pub(super) floors: Vec<FloorFile>,
     pub(super) radio: RadioFile,
     pub(super) states: Vec<StateFile>,
@@ -50,6 +54,12 @@ pub(super) struct FloorFile {
     pub(super) name: String,
     #[serde(default)]
     pub(super) elevation_m: f64,
+    /// Since version 3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(super) level: Option<i32>,
+    /// Since version 3.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(super) origin_m: Option<[f64; 2]>,
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(super) rssi_weight: Option<f64>,
     #[serde(default, skip_serializing_if = "Option::is_none")]

@@ -74,6 +74,7 @@ pub struct ReplayArgs {
     /// The walk (a competition-format text file).
     walk: PathBuf,
     /// Where to write the track: `.json` for JSON, anything else CSV. Default: CSV on stdout.
+    /// On a geo-referenced site (with an anchor) each row has `lat` and `lon`, WGS84 degrees.
     #[arg(long)]
     out: Option<PathBuf>,
     /// γ of Hoang eq. 14 (the radio likelihood's weight); default: the site's calibrated one.
@@ -262,6 +263,24 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         );
     }
     print_calibration(&calibration);
+    match site.anchor() {
+        Some(a) => {
+            let levels: Vec<String> = site
+                .floors()
+                .iter()
+                .map(|f| format!("{} {}", f.name, f.level.map_or("-".into(), |l| l.to_string())))
+                .collect();
+            println!(
+                "geo-referenced from the plans: origin {:.7}, {:.7}, scale {:.5} x {:.5}; levels {}",
+                a.lat_deg,
+                a.lon_deg,
+                a.scale[0],
+                a.scale[1],
+                levels.join(", ")
+            );
+        }
+        None => println!("not geo-referenced (a floor has no plan)"),
+    }
     println!("{} transmitters; site written to {}", report.transmitters, args.out.display());
     ExitCode::SUCCESS
 }
@@ -400,10 +419,13 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
             .positions
             .iter()
             .map(|p| {
+                let geo = site.lat_lon(p.floor, p.x, p.y);
                 serde_json::json!({
                     "timestamp_ms": p.timestamp_ns / 1_000_000,
                     "floor": floor_name(p.floor),
+                    "floor_level": site.floor_level(p.floor),
                     "x": p.x, "y": p.y,
+                    "lat": geo.map(|g| g.lat_deg), "lon": geo.map(|g| g.lon_deg),
                     "accuracy_m": p.accuracy_m, "accuracy_95_m": p.accuracy_95_m,
                     "heading_deg": p.heading_rad.map(f64::to_degrees),
                     "scenario": p.scenario, "motion_state": p.motion_state, "steps": p.steps,
@@ -412,16 +434,21 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
             .collect();
         serde_json::to_string_pretty(&rows).unwrap_or_default()
     } else {
+        // lat and lon to 1e-8° (about a millimetre), empty on a site without an anchor.
         let mut csv = String::from(
-            "timestamp_ms,floor,x,y,accuracy_m,accuracy_95_m,heading_deg,scenario,motion_state,steps\n",
+            "timestamp_ms,floor,floor_level,x,y,lat,lon,accuracy_m,accuracy_95_m,heading_deg,scenario,motion_state,steps\n",
         );
         for p in &replay.positions {
+            let geo = site.lat_lon(p.floor, p.x, p.y);
             csv += &format!(
-                "{},{},{:.2},{:.2},{:.2},{:.2},{},{:?},{:?},{}\n",
+                "{},{},{},{:.2},{:.2},{},{},{:.2},{:.2},{},{:?},{:?},{}\n",
                 p.timestamp_ns / 1_000_000,
                 floor_name(p.floor),
+                site.floor_level(p.floor).map_or(String::new(), |l| l.to_string()),
                 p.x,
                 p.y,
+                geo.map_or(String::new(), |g| format!("{:.8}", g.lat_deg)),
+                geo.map_or(String::new(), |g| format!("{:.8}", g.lon_deg)),
                 p.accuracy_m,
                 p.accuracy_95_m,
                 p.heading_rad.map_or(String::new(), |h| format!("{:.1}", h.to_degrees())),

@@ -385,6 +385,7 @@ mod tests {
                 Room { name: "shop".into(), polygon: square(0.0, 0.0, 10.0) },
                 Room { name: "broken".into(), polygon: square(f64::NAN, f64::NAN, 10.0) },
             ],
+            ..FloorPlan::default()
         }
     }
 

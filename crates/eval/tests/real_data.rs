@@ -8,40 +8,10 @@ use waymark::Site;
 use waymark_eval::real::{self, EvalOptions};
 use waymark_survey::calibrate::{self, FloorData};
 
-/// The archive of one floor of the competition's site 1: in `$WAYMARK_DATA/ilc20-site1/`, or
-/// without that variable in `data/ilc20-site1/` of a folder beside the checkout.
-fn archive(root: &Path, floor: &str) -> Option<PathBuf> {
-    let relative = Path::new("ilc20-site1").join(format!("{floor}.tar.xz"));
-    if let Some(data) = std::env::var_os("WAYMARK_DATA") {
-        return Some(Path::new(&data).join(relative)).filter(|a| a.is_file());
-    }
-    let beside = root.canonicalize().ok()?.parent()?.read_dir().ok()?;
-    beside.flatten().map(|e| e.path().join("data").join(&relative)).find(|a| a.is_file())
-}
-
-/// F1 unpacked under `target/`, or `None` (with a message) without the archive or `tar`.
+/// F1 unpacked under `target/`, or `None` (with a message) without the data.
 fn floor_dir() -> Option<PathBuf> {
     // The workspace root, two levels above this crate.
-    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let root = root.as_path();
-    let unpacked = root.join("target/ilc/site1/F1");
-    if unpacked.join("path_data_files").is_dir() {
-        return Some(unpacked);
-    }
-    let Some(archive) = archive(root, "F1") else {
-        eprintln!("skipping: ilc20-site1/F1.tar.xz not found (docs/testing.md#real-data)");
-        return None;
-    };
-    let into = root.join("target/ilc");
-    std::fs::create_dir_all(&into).ok()?;
-    let status = std::process::Command::new("tar").arg("-xJf").arg(&archive).arg("-C").arg(&into).status();
-    match status {
-        Ok(s) if s.success() => Some(unpacked),
-        _ => {
-            eprintln!("skipping: could not unpack {}", archive.display());
-            None
-        }
-    }
+    waymark_eval::data::site1_floor(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."), "F1")
 }
 
 #[test]

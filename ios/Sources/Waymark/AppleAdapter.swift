@@ -96,15 +96,67 @@ public final class BeaconAdapter: NSObject, CLLocationManagerDelegate, @unchecke
     }
 }
 
+/// A `CLFloor` with the level Waymark gives (Core Location offers no initialiser for one).
+final class WaymarkFloor: CLFloor {
+    private let logicalLevel: Int
+
+    init(level: Int) {
+        logicalLevel = level
+        super.init()
+    }
+
+    required init?(coder: NSCoder) {
+        logicalLevel = coder.decodeInteger(forKey: "waymarkLevel")
+        super.init(coder: coder)
+    }
+
+    override func encode(with coder: NSCoder) {
+        super.encode(with: coder)
+        coder.encode(logicalLevel, forKey: "waymarkLevel")
+    }
+
+    override class var supportsSecureCoding: Bool { true }
+
+    override var level: Int { logicalLevel }
+}
+
+/// A `CLLocation` that carries the floor (`CLLocation.floor` has no setter).
+final class WaymarkLocation: CLLocation {
+    private let waymarkFloor: CLFloor?
+
+    init(fields f: AppleLocationFields, timestamp: Date) {
+        waymarkFloor = f.floorLevel.map { WaymarkFloor(level: $0) }
+        super.init(
+            coordinate: CLLocationCoordinate2D(latitude: f.latitudeDeg, longitude: f.longitudeDeg),
+            altitude: 0, horizontalAccuracy: f.horizontalAccuracyM, verticalAccuracy: -1,
+            course: f.courseDeg, courseAccuracy: f.courseAccuracyDeg, speed: -1, speedAccuracy: -1,
+            timestamp: timestamp)
+    }
+
+    required init?(coder: NSCoder) {
+        waymarkFloor = coder.decodeObject(of: CLFloor.self, forKey: "waymarkFloor")
+        super.init(coder: coder)
+    }
+
+    override func encode(with coder: NSCoder) {
+        super.encode(with: coder)
+        coder.encode(waymarkFloor, forKey: "waymarkFloor")
+    }
+
+    override class var supportsSecureCoding: Bool { true }
+
+    override var floor: CLFloor? { waymarkFloor }
+}
+
 public extension PositionEstimate {
-    /// The position as a CLLocation: coordinates from `origin`, `horizontalAccuracy` the 68%
-    /// radius (as iOS defines it), course when the heading is known, the floor level.
-    func toCLLocation(origin: GeoOrigin) -> CLLocation {
-        let g = origin.geo(self)
-        return CLLocation(
-            coordinate: CLLocationCoordinate2D(latitude: g.latitudeDeg, longitude: g.longitudeDeg),
-            altitude: 0, horizontalAccuracy: accuracyM, verticalAccuracy: -1,
-            course: g.courseDeg ?? -1, speed: -1, timestamp: Date())
+    /// The position as a CLLocation, or nil when the site file is not geo-referenced (has no
+    /// anchor): coordinates from the position itself, `horizontalAccuracy` the 68% radius (as
+    /// iOS defines it), course and course accuracy when the heading is known, and `floor`
+    /// with the floor's logical level when the site file gives one. Every value comes from
+    /// `locationFields`, which the Linux test covers.
+    func toCLLocation() -> CLLocation? {
+        guard let fields = locationFields else { return nil }
+        return WaymarkLocation(fields: fields, timestamp: Date())
     }
 }
 #endif

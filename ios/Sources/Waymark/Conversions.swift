@@ -88,33 +88,34 @@ public enum AppleSensorConversion {
     }
 }
 
-/// Where the site frame sits on the Earth, and a position there as latitude/longitude
-/// (local tangent plane). Plain Swift, so the Linux test covers it; `toCLLocation` wraps it.
-public struct GeoOrigin: Sendable, Equatable {
-    /// Latitude of the site frame's origin, degrees.
+/// What a `CLLocation` takes from a position: latitude/longitude (WGS84, computed in Rust from
+/// the site file's anchor), `horizontalAccuracy` the 68% radius (as iOS defines it), course
+/// and course accuracy (-1 when the heading is unknown, as Core Location marks invalid values),
+/// and the floor's logical level when the site file gives one. Plain Swift, so the Linux test
+/// covers it; `toCLLocation` wraps it.
+public struct AppleLocationFields: Sendable, Equatable {
+    /// Degrees north.
     public let latitudeDeg: Double
-    /// Longitude of the site frame's origin, degrees.
+    /// Degrees east.
     public let longitudeDeg: Double
-    /// True azimuth of the site's +y axis (the site file's `north.site_rotation_rad`), degrees.
-    public let siteRotationDeg: Double
+    /// The 68% radius, m.
+    public let horizontalAccuracyM: Double
+    /// Degrees clockwise from true north; -1 when unknown.
+    public let courseDeg: Double
+    /// One standard deviation of the course, degrees; -1 when unknown.
+    public let courseAccuracyDeg: Double
+    /// The floor's logical level (`CLFloor.level`); nil when the site file gives none.
+    public let floorLevel: Int?
+}
 
-    /// Mean Earth radius, m (IUGG).
-    static let earthRadiusM = 6_371_008.8
-
-    public init(latitudeDeg: Double, longitudeDeg: Double, siteRotationDeg: Double) {
-        self.latitudeDeg = latitudeDeg
-        self.longitudeDeg = longitudeDeg
-        self.siteRotationDeg = siteRotationDeg
-    }
-
-    /// Latitude, longitude and true course (nil without a heading) of a position.
-    public func geo(_ position: PositionEstimate) -> (latitudeDeg: Double, longitudeDeg: Double, courseDeg: Double?) {
-        let theta = siteRotationDeg * .pi / 180
-        let east = position.x * cos(theta) + position.y * sin(theta)
-        let north = -position.x * sin(theta) + position.y * cos(theta)
-        let lat = latitudeDeg + (north / Self.earthRadiusM) * 180 / .pi
-        let lon = longitudeDeg + (east / (Self.earthRadiusM * cos(latitudeDeg * .pi / 180))) * 180 / .pi
-        let course = position.headingDeg.map { (($0 + siteRotationDeg).truncatingRemainder(dividingBy: 360) + 360).truncatingRemainder(dividingBy: 360) }
-        return (lat, lon, course)
+public extension PositionEstimate {
+    /// The `CLLocation` fields of this position; nil when the site is not geo-referenced.
+    var locationFields: AppleLocationFields? {
+        guard let lat = latitudeDeg, let lon = longitudeDeg else { return nil }
+        let course = bearingDeg
+        return AppleLocationFields(
+            latitudeDeg: lat, longitudeDeg: lon, horizontalAccuracyM: accuracyM,
+            courseDeg: course ?? -1, courseAccuracyDeg: course.flatMap { _ in headingAccuracyDeg } ?? -1,
+            floorLevel: floorLevel.map(Int.init))
     }
 }

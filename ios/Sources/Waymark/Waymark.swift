@@ -503,6 +503,22 @@ fileprivate struct FfiConverterUInt32: FfiConverterPrimitive {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterInt32: FfiConverterPrimitive {
+    typealias FfiType = Int32
+    typealias SwiftType = Int32
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Int32 {
+        return try lift(readInt(&buf))
+    }
+
+    public static func write(_ value: Int32, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterUInt64: FfiConverterPrimitive {
     typealias FfiType = UInt64
     typealias SwiftType = UInt64
@@ -1268,7 +1284,8 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * precise fix pulls the estimate to it; a vague one barely moves it. Throws
      * `InputRejected`, changing nothing, for a time not after the last epoch, a NaN or
      * infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
-     * site for its accuracy.
+     * site for its accuracy; and for a latitude/longitude on a site that is not
+     * geo-referenced, or without its floor on a site whose floors have different frames.
      */
     func pushFix(fix: PositionFix) throws  -> PositionEstimate
     
@@ -1311,6 +1328,19 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * Empty for a site without zones.
      */
     func zonePosterior() throws  -> [ZoneProbability]
+    
+    /**
+     * A tracker on the route from the latest position to `destination`, to follow it as
+     * positions arrive (`RouteTracker.update`). Throws as `routeTo`.
+     */
+    func navigateTo(destination: Destination) throws  -> RouteTracker
+    
+    /**
+     * The route from the latest position to `destination` (the position snaps within the
+     * site's spacing plus its accuracy). Throws `NoPosition` before the first epoch, else as
+     * `Site.route`.
+     */
+    func routeTo(destination: Destination) throws  -> Route
     
 }
 /**
@@ -1658,7 +1688,8 @@ open func pushAccelerometer(batch: [MotionSample])throws  -> UInt32  {
      * precise fix pulls the estimate to it; a vague one barely moves it. Throws
      * `InputRejected`, changing nothing, for a time not after the last epoch, a NaN or
      * infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
-     * site for its accuracy.
+     * site for its accuracy; and for a latitude/longitude on a site that is not
+     * geo-referenced, or without its floor on a site whose floors have different frames.
      */
 open func pushFix(fix: PositionFix)throws  -> PositionEstimate  {
     return try  FfiConverterTypePositionEstimate_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
@@ -1764,6 +1795,35 @@ open func zonePosterior()throws  -> [ZoneProbability]  {
 })
 }
     
+    /**
+     * A tracker on the route from the latest position to `destination`, to follow it as
+     * positions arrive (`RouteTracker.update`). Throws as `routeTo`.
+     */
+open func navigateTo(destination: Destination)throws  -> RouteTracker  {
+    return try  FfiConverterTypeRouteTracker_lift(try rustCallWithError(FfiConverterTypeRouteError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_navigate_to(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeDestination_lower(destination),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The route from the latest position to `destination` (the position snaps within the
+     * site's spacing plus its accuracy). Throws `NoPosition` before the first epoch, else as
+     * `Site.route`.
+     */
+open func routeTo(destination: Destination)throws  -> Route  {
+    return try  FfiConverterTypeRoute_lift(try rustCallWithError(FfiConverterTypeRouteError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_route_to(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeDestination_lower(destination),uniffiCallStatus
+    )
+})
+}
+    
 
     
 }
@@ -1815,6 +1875,211 @@ public func FfiConverterTypePositioningEngine_lower(_ value: PositioningEngine) 
 
 
 /**
+ * Follows a route as positions arrive: distance remaining, the current leg, arrival, and
+ * whether the user left the route (then call `reroute`). Thread-safe.
+ */
+public protocol RouteTrackerProtocol: AnyObject, Sendable {
+    
+    /**
+     * Plans a new route to the same destination from the latest position given to
+     * `update`, and follows it from its start. Throws `NoPosition` before the first
+     * update, else as `Site.route`; on an error the tracker keeps its route.
+     */
+    func reroute() throws  -> Route
+    
+    /**
+     * The route followed.
+     */
+    func route()  -> Route
+    
+    /**
+     * Takes a position from the engine and says where it puts the user on the route.
+     * Throws `OffGraph`, changing nothing, for a NaN or infinite value or an unknown floor.
+     */
+    func update(position: PositionEstimate) throws  -> RouteProgress
+    
+    /**
+     * As `update`, from a position given as a point and the radius of its 68% circle, m.
+     */
+    func updatePoint(point: FloorPoint, accuracyM: Double) throws  -> RouteProgress
+    
+}
+/**
+ * Follows a route as positions arrive: distance remaining, the current leg, arrival, and
+ * whether the user left the route (then call `reroute`). Thread-safe.
+ */
+open class RouteTracker: RouteTrackerProtocol, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_waymark_fn_clone_routetracker(self.handle, $0) }
+    }
+    /**
+     * A tracker on the route from `from` to `destination` on `site`; throws as `Site.route`.
+     */
+public convenience init(site: Site, from: FloorPoint, destination: Destination)throws  {
+    let handle =
+        try rustCallWithError(FfiConverterTypeRouteError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_constructor_routetracker_new(
+        FfiConverterTypeSite_lower(site),
+        FfiConverterTypeFloorPoint_lower(from),
+        FfiConverterTypeDestination_lower(destination),uniffiCallStatus
+    )
+}
+    self.init(unsafeFromHandle: handle)
+}
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_waymark_fn_free_routetracker(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * Plans a new route to the same destination from the latest position given to
+     * `update`, and follows it from its start. Throws `NoPosition` before the first
+     * update, else as `Site.route`; on an error the tracker keeps its route.
+     */
+open func reroute()throws  -> Route  {
+    return try  FfiConverterTypeRoute_lift(try rustCallWithError(FfiConverterTypeRouteError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_routetracker_reroute(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The route followed.
+     */
+open func route() -> Route  {
+    return try!  FfiConverterTypeRoute_lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_routetracker_route(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Takes a position from the engine and says where it puts the user on the route.
+     * Throws `OffGraph`, changing nothing, for a NaN or infinite value or an unknown floor.
+     */
+open func update(position: PositionEstimate)throws  -> RouteProgress  {
+    return try  FfiConverterTypeRouteProgress_lift(try rustCallWithError(FfiConverterTypeRouteError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_routetracker_update(
+            self.uniffiCloneHandle(),
+        FfiConverterTypePositionEstimate_lower(position),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * As `update`, from a position given as a point and the radius of its 68% circle, m.
+     */
+open func updatePoint(point: FloorPoint, accuracyM: Double)throws  -> RouteProgress  {
+    return try  FfiConverterTypeRouteProgress_lift(try rustCallWithError(FfiConverterTypeRouteError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_routetracker_update_point(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeFloorPoint_lower(point),
+        FfiConverterDouble.lower(accuracyM),uniffiCallStatus
+    )
+})
+}
+    
+
+    
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRouteTracker: FfiConverter {
+    typealias FfiType = UInt64
+    typealias SwiftType = RouteTracker
+
+    public static func lift(_ handle: UInt64) throws -> RouteTracker {
+        return RouteTracker(unsafeFromHandle: handle)
+    }
+
+    public static func lower(_ value: RouteTracker) -> UInt64 {
+        return value.uniffiCloneHandle()
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> RouteTracker {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: RouteTracker, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRouteTracker_lift(_ handle: UInt64) throws -> RouteTracker {
+    return try FfiConverterTypeRouteTracker.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRouteTracker_lower(_ value: RouteTracker) -> UInt64 {
+    return FfiConverterTypeRouteTracker.lower(value)
+}
+
+
+
+
+
+
+/**
  * A site file, loaded and checked once, that several engines can share
  * (`PositioningEngine.withSite`): one per user, or a new one per session, without reading the
  * file again or holding it twice in memory.
@@ -1830,6 +2095,14 @@ public protocol SiteProtocol: AnyObject, Sendable {
      * The names of the site's zones (rooms, corridors), in the site file's order.
      */
     func zoneNames()  -> [String]
+    
+    /**
+     * The shortest walkable route from `from` to `destination`, over the site's walkable
+     * graph, floor changes included where the site has stairs or lifts. `from` snaps to the
+     * nearest walkable place on its floor within the site's spacing. Throws `UnknownZone`,
+     * `OffGraph` or `Unreachable`.
+     */
+    func route(from: FloorPoint, destination: Destination) throws  -> Route
     
 }
 /**
@@ -1936,6 +2209,23 @@ open func zoneNames() -> [String]  {
         uniffiCallStatus in
     uniffi_waymark_fn_method_site_zone_names(
             self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The shortest walkable route from `from` to `destination`, over the site's walkable
+     * graph, floor changes included where the site has stairs or lifts. `from` snaps to the
+     * nearest walkable place on its floor within the site's spacing. Throws `UnknownZone`,
+     * `OffGraph` or `Unreachable`.
+     */
+open func route(from: FloorPoint, destination: Destination)throws  -> Route  {
+    return try  FfiConverterTypeRoute_lift(try rustCallWithError(FfiConverterTypeRouteError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_route(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeFloorPoint_lower(from),
+        FfiConverterTypeDestination_lower(destination),uniffiCallStatus
     )
 })
 }
@@ -2261,9 +2551,8 @@ public struct EngineOptions: Equatable, Hashable {
      */
     public var siteRotationDeg: Double?
     /**
-     * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
-     * `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
-     * Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+     * The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes
+     * the salt file's hex digits stand for, at least 16. Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
      * hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
      * site file's download and out of logs.
      */
@@ -2290,9 +2579,8 @@ public struct EngineOptions: Equatable, Hashable {
          * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
          */siteRotationDeg: Double? = nil, 
         /**
-         * The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
-         * `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
-         * Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+         * The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes
+         * the salt file's hex digits stand for, at least 16. Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
          * hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
          * site file's download and out of logs.
          */siteSalt: Data? = nil) {
@@ -2504,6 +2792,85 @@ public func FfiConverterTypeFixError_lift(_ buf: RustBuffer) throws -> FixError 
 #endif
 public func FfiConverterTypeFixError_lower(_ value: FixError) -> RustBuffer {
     return FfiConverterTypeFixError.lower(value)
+}
+
+
+/**
+ * A point of the site: a floor index and a position in the site's metric frame, m.
+ */
+public struct FloorPoint: Equatable, Hashable {
+    /**
+     * Floor index in the site file.
+     */
+    public var floor: UInt32
+    /**
+     * x in the site's metric frame, m.
+     */
+    public var x: Double
+    /**
+     * y in the site's metric frame, m.
+     */
+    public var y: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Floor index in the site file.
+         */floor: UInt32, 
+        /**
+         * x in the site's metric frame, m.
+         */x: Double, 
+        /**
+         * y in the site's metric frame, m.
+         */y: Double) {
+        self.floor = floor
+        self.x = x
+        self.y = y
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension FloorPoint: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeFloorPoint: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> FloorPoint {
+        return
+            try FloorPoint(
+                floor: FfiConverterUInt32.read(from: &buf), 
+                x: FfiConverterDouble.read(from: &buf), 
+                y: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: FloorPoint, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.floor, into: &buf)
+        FfiConverterDouble.write(value.x, into: &buf)
+        FfiConverterDouble.write(value.y, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFloorPoint_lift(_ buf: RustBuffer) throws -> FloorPoint {
+    return try FfiConverterTypeFloorPoint.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeFloorPoint_lower(_ value: FloorPoint) -> RustBuffer {
+    return FfiConverterTypeFloorPoint.lower(value)
 }
 
 
@@ -3027,9 +3394,23 @@ public struct PositionEstimate: Equatable, Hashable {
      */
     public var floorName: String
     /**
+     * The floor's logical level as the building numbers it (-1 for the first basement), as
+     * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
+     */
+    public var floorLevel: Int32?
+    /**
      * Probability of that floor.
      */
     public var floorProbability: Double
+    /**
+     * Latitude, degrees north (WGS84), when the site file is geo-referenced (has an
+     * `anchor`); `null` / `nil` otherwise.
+     */
+    public var latitudeDeg: Double?
+    /**
+     * Longitude, degrees east (WGS84), when the site file is geo-referenced.
+     */
+    public var longitudeDeg: Double?
     /**
      * The most likely zone's name (a room, a corridor): the zone holding the most posterior
      * mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
@@ -3058,6 +3439,11 @@ public struct PositionEstimate: Equatable, Hashable {
      * One standard deviation of the heading, degrees.
      */
     public var headingAccuracyDeg: Double?
+    /**
+     * Direction of travel, degrees clockwise from true north in [0, 360) (Android's
+     * `bearing`, iOS's `course`), when the heading is known and the site is geo-referenced.
+     */
+    public var bearingDeg: Double?
     /**
      * Walking or not.
      */
@@ -3096,8 +3482,19 @@ public struct PositionEstimate: Equatable, Hashable {
          * Floor name.
          */floorName: String, 
         /**
+         * The floor's logical level as the building numbers it (-1 for the first basement), as
+         * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
+         */floorLevel: Int32? = nil, 
+        /**
          * Probability of that floor.
          */floorProbability: Double, 
+        /**
+         * Latitude, degrees north (WGS84), when the site file is geo-referenced (has an
+         * `anchor`); `null` / `nil` otherwise.
+         */latitudeDeg: Double? = nil, 
+        /**
+         * Longitude, degrees east (WGS84), when the site file is geo-referenced.
+         */longitudeDeg: Double? = nil, 
         /**
          * The most likely zone's name (a room, a corridor): the zone holding the most posterior
          * mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
@@ -3121,6 +3518,10 @@ public struct PositionEstimate: Equatable, Hashable {
          * One standard deviation of the heading, degrees.
          */headingAccuracyDeg: Double?, 
         /**
+         * Direction of travel, degrees clockwise from true north in [0, 360) (Android's
+         * `bearing`, iOS's `course`), when the heading is known and the site is geo-referenced.
+         */bearingDeg: Double? = nil, 
+        /**
          * Walking or not.
          */motionState: MotionState, 
         /**
@@ -3139,13 +3540,17 @@ public struct PositionEstimate: Equatable, Hashable {
         self.y = y
         self.floor = floor
         self.floorName = floorName
+        self.floorLevel = floorLevel
         self.floorProbability = floorProbability
+        self.latitudeDeg = latitudeDeg
+        self.longitudeDeg = longitudeDeg
         self.zone = zone
         self.zoneProbability = zoneProbability
         self.accuracyM = accuracyM
         self.accuracy95M = accuracy95M
         self.headingDeg = headingDeg
         self.headingAccuracyDeg = headingAccuracyDeg
+        self.bearingDeg = bearingDeg
         self.motionState = motionState
         self.scenario = scenario
         self.steps = steps
@@ -3173,13 +3578,17 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
                 y: FfiConverterDouble.read(from: &buf), 
                 floor: FfiConverterUInt32.read(from: &buf), 
                 floorName: FfiConverterString.read(from: &buf), 
+                floorLevel: FfiConverterOptionInt32.read(from: &buf), 
                 floorProbability: FfiConverterDouble.read(from: &buf), 
+                latitudeDeg: FfiConverterOptionDouble.read(from: &buf), 
+                longitudeDeg: FfiConverterOptionDouble.read(from: &buf), 
                 zone: FfiConverterOptionString.read(from: &buf), 
                 zoneProbability: FfiConverterDouble.read(from: &buf), 
                 accuracyM: FfiConverterDouble.read(from: &buf), 
                 accuracy95M: FfiConverterDouble.read(from: &buf), 
                 headingDeg: FfiConverterOptionDouble.read(from: &buf), 
                 headingAccuracyDeg: FfiConverterOptionDouble.read(from: &buf), 
+                bearingDeg: FfiConverterOptionDouble.read(from: &buf), 
                 motionState: FfiConverterTypeMotionState.read(from: &buf), 
                 scenario: FfiConverterTypeMotionScenario.read(from: &buf), 
                 steps: FfiConverterUInt32.read(from: &buf), 
@@ -3193,13 +3602,17 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
         FfiConverterDouble.write(value.y, into: &buf)
         FfiConverterUInt32.write(value.floor, into: &buf)
         FfiConverterString.write(value.floorName, into: &buf)
+        FfiConverterOptionInt32.write(value.floorLevel, into: &buf)
         FfiConverterDouble.write(value.floorProbability, into: &buf)
+        FfiConverterOptionDouble.write(value.latitudeDeg, into: &buf)
+        FfiConverterOptionDouble.write(value.longitudeDeg, into: &buf)
         FfiConverterOptionString.write(value.zone, into: &buf)
         FfiConverterDouble.write(value.zoneProbability, into: &buf)
         FfiConverterDouble.write(value.accuracyM, into: &buf)
         FfiConverterDouble.write(value.accuracy95M, into: &buf)
         FfiConverterOptionDouble.write(value.headingDeg, into: &buf)
         FfiConverterOptionDouble.write(value.headingAccuracyDeg, into: &buf)
+        FfiConverterOptionDouble.write(value.bearingDeg, into: &buf)
         FfiConverterTypeMotionState.write(value.motionState, into: &buf)
         FfiConverterTypeMotionScenario.write(value.scenario, into: &buf)
         FfiConverterUInt32.write(value.steps, into: &buf)
@@ -3224,7 +3637,9 @@ public func FfiConverterTypePositionEstimate_lower(_ value: PositionEstimate) ->
 
 
 /**
- * A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB.
+ * A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB. Give
+ * either `x` and `y` in the site's frame, or `latitudeDeg` and `longitudeDeg` on a
+ * geo-referenced site (its file has an `anchor`); anything else throws `InputRejected`.
  */
 public struct PositionFix: Equatable, Hashable {
     /**
@@ -3234,11 +3649,11 @@ public struct PositionFix: Equatable, Hashable {
     /**
      * x in the site's metric frame, m.
      */
-    public var x: Double
+    public var x: Double?
     /**
      * y in the site's metric frame, m.
      */
-    public var y: Double
+    public var y: Double?
     /**
      * Floor index in the site file, when the other system knows it (UWB, an RTT access
      * point's floor); `null` / `nil` for GNSS.
@@ -3248,6 +3663,14 @@ public struct PositionFix: Equatable, Hashable {
      * Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
      */
     public var accuracyM: Double
+    /**
+     * Latitude, degrees north (WGS84), in place of `x` and `y`.
+     */
+    public var latitudeDeg: Double?
+    /**
+     * Longitude, degrees east (WGS84), in place of `x` and `y`.
+     */
+    public var longitudeDeg: Double?
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -3257,22 +3680,30 @@ public struct PositionFix: Equatable, Hashable {
          */timestampNs: UInt64, 
         /**
          * x in the site's metric frame, m.
-         */x: Double, 
+         */x: Double? = nil, 
         /**
          * y in the site's metric frame, m.
-         */y: Double, 
+         */y: Double? = nil, 
         /**
          * Floor index in the site file, when the other system knows it (UWB, an RTT access
          * point's floor); `null` / `nil` for GNSS.
          */floor: UInt32? = nil, 
         /**
          * Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
-         */accuracyM: Double) {
+         */accuracyM: Double, 
+        /**
+         * Latitude, degrees north (WGS84), in place of `x` and `y`.
+         */latitudeDeg: Double? = nil, 
+        /**
+         * Longitude, degrees east (WGS84), in place of `x` and `y`.
+         */longitudeDeg: Double? = nil) {
         self.timestampNs = timestampNs
         self.x = x
         self.y = y
         self.floor = floor
         self.accuracyM = accuracyM
+        self.latitudeDeg = latitudeDeg
+        self.longitudeDeg = longitudeDeg
     }
 
     
@@ -3292,19 +3723,23 @@ public struct FfiConverterTypePositionFix: FfiConverterRustBuffer {
         return
             try PositionFix(
                 timestampNs: FfiConverterUInt64.read(from: &buf), 
-                x: FfiConverterDouble.read(from: &buf), 
-                y: FfiConverterDouble.read(from: &buf), 
+                x: FfiConverterOptionDouble.read(from: &buf), 
+                y: FfiConverterOptionDouble.read(from: &buf), 
                 floor: FfiConverterOptionUInt32.read(from: &buf), 
-                accuracyM: FfiConverterDouble.read(from: &buf)
+                accuracyM: FfiConverterDouble.read(from: &buf), 
+                latitudeDeg: FfiConverterOptionDouble.read(from: &buf), 
+                longitudeDeg: FfiConverterOptionDouble.read(from: &buf)
         )
     }
 
     public static func write(_ value: PositionFix, into buf: inout [UInt8]) {
         FfiConverterUInt64.write(value.timestampNs, into: &buf)
-        FfiConverterDouble.write(value.x, into: &buf)
-        FfiConverterDouble.write(value.y, into: &buf)
+        FfiConverterOptionDouble.write(value.x, into: &buf)
+        FfiConverterOptionDouble.write(value.y, into: &buf)
         FfiConverterOptionUInt32.write(value.floor, into: &buf)
         FfiConverterDouble.write(value.accuracyM, into: &buf)
+        FfiConverterOptionDouble.write(value.latitudeDeg, into: &buf)
+        FfiConverterOptionDouble.write(value.longitudeDeg, into: &buf)
     }
 }
 
@@ -3400,6 +3835,349 @@ public func FfiConverterTypeRadioScan_lift(_ buf: RustBuffer) throws -> RadioSca
 #endif
 public func FfiConverterTypeRadioScan_lower(_ value: RadioScan) -> RustBuffer {
     return FfiConverterTypeRadioScan.lower(value)
+}
+
+
+/**
+ * A route over the site's walkable graph.
+ */
+public struct Route: Equatable, Hashable {
+    /**
+     * Its legs in walking order; empty when the start is already at the destination.
+     */
+    public var legs: [RouteLeg]
+    /**
+     * Walking length, m: the sum of the legs'.
+     */
+    public var lengthM: Double
+    /**
+     * Where it starts: the walkable place nearest the origin.
+     */
+    public var start: FloorPoint
+    /**
+     * Where it ends.
+     */
+    public var end: FloorPoint
+    /**
+     * Straight-line distance from the origin to `start`, m (not part of the route).
+     */
+    public var startSnapM: Double
+    /**
+     * Straight-line distance from a destination point to `end`, m; 0 for a zone.
+     */
+    public var endSnapM: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Its legs in walking order; empty when the start is already at the destination.
+         */legs: [RouteLeg], 
+        /**
+         * Walking length, m: the sum of the legs'.
+         */lengthM: Double, 
+        /**
+         * Where it starts: the walkable place nearest the origin.
+         */start: FloorPoint, 
+        /**
+         * Where it ends.
+         */end: FloorPoint, 
+        /**
+         * Straight-line distance from the origin to `start`, m (not part of the route).
+         */startSnapM: Double, 
+        /**
+         * Straight-line distance from a destination point to `end`, m; 0 for a zone.
+         */endSnapM: Double) {
+        self.legs = legs
+        self.lengthM = lengthM
+        self.start = start
+        self.end = end
+        self.startSnapM = startSnapM
+        self.endSnapM = endSnapM
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension Route: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRoute: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Route {
+        return
+            try Route(
+                legs: FfiConverterSequenceTypeRouteLeg.read(from: &buf), 
+                lengthM: FfiConverterDouble.read(from: &buf), 
+                start: FfiConverterTypeFloorPoint.read(from: &buf), 
+                end: FfiConverterTypeFloorPoint.read(from: &buf), 
+                startSnapM: FfiConverterDouble.read(from: &buf), 
+                endSnapM: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: Route, into buf: inout [UInt8]) {
+        FfiConverterSequenceTypeRouteLeg.write(value.legs, into: &buf)
+        FfiConverterDouble.write(value.lengthM, into: &buf)
+        FfiConverterTypeFloorPoint.write(value.start, into: &buf)
+        FfiConverterTypeFloorPoint.write(value.end, into: &buf)
+        FfiConverterDouble.write(value.startSnapM, into: &buf)
+        FfiConverterDouble.write(value.endSnapM, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRoute_lift(_ buf: RustBuffer) throws -> Route {
+    return try FfiConverterTypeRoute.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRoute_lower(_ value: Route) -> RustBuffer {
+    return FfiConverterTypeRoute.lower(value)
+}
+
+
+/**
+ * One leg of a route: a straight walk on one floor, or a change of floor (stairs, a lift).
+ */
+public struct RouteLeg: Equatable, Hashable {
+    /**
+     * The floor it starts on.
+     */
+    public var floor: UInt32
+    /**
+     * The floor it ends on: `floor` for a walk.
+     */
+    public var toFloor: UInt32
+    /**
+     * Whether it changes floor.
+     */
+    public var floorChange: Bool
+    /**
+     * Walking distance, m.
+     */
+    public var distanceM: Double
+    /**
+     * The turn onto it; `null` / `nil` for the first leg, a floor change, and the leg after
+     * one.
+     */
+    public var turn: Turn?
+    /**
+     * The signed angle of that turn, degrees, positive to the left.
+     */
+    public var turnDeg: Double?
+    /**
+     * The places it passes, first to last, for drawing (each on its own floor).
+     */
+    public var points: [FloorPoint]
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The floor it starts on.
+         */floor: UInt32, 
+        /**
+         * The floor it ends on: `floor` for a walk.
+         */toFloor: UInt32, 
+        /**
+         * Whether it changes floor.
+         */floorChange: Bool, 
+        /**
+         * Walking distance, m.
+         */distanceM: Double, 
+        /**
+         * The turn onto it; `null` / `nil` for the first leg, a floor change, and the leg after
+         * one.
+         */turn: Turn?, 
+        /**
+         * The signed angle of that turn, degrees, positive to the left.
+         */turnDeg: Double?, 
+        /**
+         * The places it passes, first to last, for drawing (each on its own floor).
+         */points: [FloorPoint]) {
+        self.floor = floor
+        self.toFloor = toFloor
+        self.floorChange = floorChange
+        self.distanceM = distanceM
+        self.turn = turn
+        self.turnDeg = turnDeg
+        self.points = points
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension RouteLeg: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRouteLeg: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> RouteLeg {
+        return
+            try RouteLeg(
+                floor: FfiConverterUInt32.read(from: &buf), 
+                toFloor: FfiConverterUInt32.read(from: &buf), 
+                floorChange: FfiConverterBool.read(from: &buf), 
+                distanceM: FfiConverterDouble.read(from: &buf), 
+                turn: FfiConverterOptionTypeTurn.read(from: &buf), 
+                turnDeg: FfiConverterOptionDouble.read(from: &buf), 
+                points: FfiConverterSequenceTypeFloorPoint.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: RouteLeg, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.floor, into: &buf)
+        FfiConverterUInt32.write(value.toFloor, into: &buf)
+        FfiConverterBool.write(value.floorChange, into: &buf)
+        FfiConverterDouble.write(value.distanceM, into: &buf)
+        FfiConverterOptionTypeTurn.write(value.turn, into: &buf)
+        FfiConverterOptionDouble.write(value.turnDeg, into: &buf)
+        FfiConverterSequenceTypeFloorPoint.write(value.points, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRouteLeg_lift(_ buf: RustBuffer) throws -> RouteLeg {
+    return try FfiConverterTypeRouteLeg.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRouteLeg_lower(_ value: RouteLeg) -> RustBuffer {
+    return FfiConverterTypeRouteLeg.lower(value)
+}
+
+
+/**
+ * Where a position puts the user on the route.
+ */
+public struct RouteProgress: Equatable, Hashable {
+    /**
+     * Walking distance from the route's start to the user's point on it, m.
+     */
+    public var alongM: Double
+    /**
+     * Walking distance left, m.
+     */
+    public var remainingM: Double
+    /**
+     * Index of the leg the user is on (at a leg's end, the next one).
+     */
+    public var leg: UInt32
+    /**
+     * Distance from the position to the route on its floor, m; infinite when the route does
+     * not visit that floor.
+     */
+    public var distanceFromRouteM: Double
+    /**
+     * The user has left the route: call `reroute`. Set when the position is well beyond the
+     * route for its accuracy, cleared when it is back near it (docs/routes.md).
+     */
+    public var offRoute: Bool
+    /**
+     * The user has reached the end; it stays set until a reroute.
+     */
+    public var arrived: Bool
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Walking distance from the route's start to the user's point on it, m.
+         */alongM: Double, 
+        /**
+         * Walking distance left, m.
+         */remainingM: Double, 
+        /**
+         * Index of the leg the user is on (at a leg's end, the next one).
+         */leg: UInt32, 
+        /**
+         * Distance from the position to the route on its floor, m; infinite when the route does
+         * not visit that floor.
+         */distanceFromRouteM: Double, 
+        /**
+         * The user has left the route: call `reroute`. Set when the position is well beyond the
+         * route for its accuracy, cleared when it is back near it (docs/routes.md).
+         */offRoute: Bool, 
+        /**
+         * The user has reached the end; it stays set until a reroute.
+         */arrived: Bool) {
+        self.alongM = alongM
+        self.remainingM = remainingM
+        self.leg = leg
+        self.distanceFromRouteM = distanceFromRouteM
+        self.offRoute = offRoute
+        self.arrived = arrived
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension RouteProgress: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRouteProgress: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> RouteProgress {
+        return
+            try RouteProgress(
+                alongM: FfiConverterDouble.read(from: &buf), 
+                remainingM: FfiConverterDouble.read(from: &buf), 
+                leg: FfiConverterUInt32.read(from: &buf), 
+                distanceFromRouteM: FfiConverterDouble.read(from: &buf), 
+                offRoute: FfiConverterBool.read(from: &buf), 
+                arrived: FfiConverterBool.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: RouteProgress, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.alongM, into: &buf)
+        FfiConverterDouble.write(value.remainingM, into: &buf)
+        FfiConverterUInt32.write(value.leg, into: &buf)
+        FfiConverterDouble.write(value.distanceFromRouteM, into: &buf)
+        FfiConverterBool.write(value.offRoute, into: &buf)
+        FfiConverterBool.write(value.arrived, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRouteProgress_lift(_ buf: RustBuffer) throws -> RouteProgress {
+    return try FfiConverterTypeRouteProgress.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRouteProgress_lower(_ value: RouteProgress) -> RustBuffer {
+    return FfiConverterTypeRouteProgress.lower(value)
 }
 
 
@@ -3719,6 +4497,93 @@ public func FfiConverterTypeZoneProbability_lift(_ buf: RustBuffer) throws -> Zo
 public func FfiConverterTypeZoneProbability_lower(_ value: ZoneProbability) -> RustBuffer {
     return FfiConverterTypeZoneProbability.lower(value)
 }
+
+
+/**
+ * Where a route goes.
+ */
+
+public enum Destination: Equatable, Hashable {
+    
+    /**
+     * A point: the route ends at the walkable place nearest it on its floor.
+     */
+    case point(
+        /**
+         * The point.
+         */point: FloorPoint
+    )
+    /**
+     * A zone of the site (`Site.zoneNames`): the route ends at its nearest place on foot.
+     */
+    case zone(
+        /**
+         * The zone's name.
+         */name: String
+    )
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension Destination: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeDestination: FfiConverterRustBuffer {
+    typealias SwiftType = Destination
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Destination {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .point(point: try FfiConverterTypeFloorPoint.read(from: &buf)
+        )
+        
+        case 2: return .zone(name: try FfiConverterString.read(from: &buf)
+        )
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: Destination, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case let .point(point):
+            writeInt(&buf, Int32(1))
+            FfiConverterTypeFloorPoint.write(point, into: &buf)
+            
+        
+        case let .zone(name):
+            writeInt(&buf, Int32(2))
+            FfiConverterString.write(name, into: &buf)
+            
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeDestination_lift(_ buf: RustBuffer) throws -> Destination {
+    return try FfiConverterTypeDestination.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeDestination_lower(_ value: Destination) -> RustBuffer {
+    return FfiConverterTypeDestination.lower(value)
+}
+
 
 
 /**
@@ -4399,6 +5264,150 @@ public func FfiConverterTypePositioningError_lower(_ value: PositioningError) ->
 
 
 /**
+ * Why no route was made, or a position was not taken.
+ */
+public 
+enum RouteError: Swift.Error, Equatable, Hashable, Foundation.LocalizedError {
+
+    
+    
+    /**
+     * The destination names a zone the site does not have.
+     */
+    case UnknownZone(
+        /**
+         * The name asked for.
+         */name: String
+    )
+    /**
+     * A point is not on the walkable graph: its floor does not exist, a coordinate or the
+     * accuracy is NaN or infinite, or no walkable place is near enough (docs/routes.md).
+     */
+    case OffGraph(
+        /**
+         * Which and why.
+         */reason: String
+    )
+    /**
+     * No walkable path joins the start to the destination (no stairs or lift between their
+     * floors, say).
+     */
+    case Unreachable(
+        /**
+         * Between what.
+         */reason: String
+    )
+    /**
+     * There is no position to start from yet (`routeTo` before the first epoch, `reroute`
+     * before the first `update`).
+     */
+    case NoPosition
+    /**
+     * A bug in Waymark; nothing changed.
+     */
+    case Internal(
+        /**
+         * What happened.
+         */reason: String
+    )
+
+    
+
+    
+
+    
+    public var errorDescription: String? {
+        String(reflecting: self)
+    }
+    
+}
+
+#if compiler(>=6)
+extension RouteError: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeRouteError: FfiConverterRustBuffer {
+    typealias SwiftType = RouteError
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> RouteError {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+
+        
+
+        
+        case 1: return .UnknownZone(
+            name: try FfiConverterString.read(from: &buf)
+            )
+        case 2: return .OffGraph(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 3: return .Unreachable(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 4: return .NoPosition
+        case 5: return .Internal(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+
+         default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: RouteError, into buf: inout [UInt8]) {
+        switch value {
+
+        
+
+        
+        
+        case let .UnknownZone(name):
+            writeInt(&buf, Int32(1))
+            FfiConverterString.write(name, into: &buf)
+            
+        
+        case let .OffGraph(reason):
+            writeInt(&buf, Int32(2))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case let .Unreachable(reason):
+            writeInt(&buf, Int32(3))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case .NoPosition:
+            writeInt(&buf, Int32(4))
+        
+        
+        case let .Internal(reason):
+            writeInt(&buf, Int32(5))
+            FfiConverterString.write(reason, into: &buf)
+            
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRouteError_lift(_ buf: RustBuffer) throws -> RouteError {
+    return try FfiConverterTypeRouteError.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeRouteError_lower(_ value: RouteError) -> RustBuffer {
+    return FfiConverterTypeRouteError.lower(value)
+}
+
+
+/**
  * Something about the session changed.
  */
 
@@ -4701,6 +5710,142 @@ public func FfiConverterTypeTransitionKind_lower(_ value: TransitionKind) -> Rus
 
 
 /**
+ * Which way to turn onto a leg, by the angle between the legs: straight under 11°, slight
+ * 11-45°, left / right 45-135°, sharp 135-160°, u-turn from 160°.
+ */
+
+public enum Turn: Equatable, Hashable {
+    
+    /**
+     * Under 11° either way.
+     */
+    case straight
+    /**
+     * 11-45° to the left.
+     */
+    case slightLeft
+    /**
+     * 11-45° to the right.
+     */
+    case slightRight
+    /**
+     * 45-135° to the left.
+     */
+    case left
+    /**
+     * 45-135° to the right.
+     */
+    case right
+    /**
+     * 135-160° to the left.
+     */
+    case sharpLeft
+    /**
+     * 135-160° to the right.
+     */
+    case sharpRight
+    /**
+     * 160° or more: back the way the user came.
+     */
+    case uTurn
+
+
+
+
+
+}
+
+#if compiler(>=6)
+extension Turn: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeTurn: FfiConverterRustBuffer {
+    typealias SwiftType = Turn
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> Turn {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+        
+        case 1: return .straight
+        
+        case 2: return .slightLeft
+        
+        case 3: return .slightRight
+        
+        case 4: return .left
+        
+        case 5: return .right
+        
+        case 6: return .sharpLeft
+        
+        case 7: return .sharpRight
+        
+        case 8: return .uTurn
+        
+        default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: Turn, into buf: inout [UInt8]) {
+        switch value {
+        
+        
+        case .straight:
+            writeInt(&buf, Int32(1))
+        
+        
+        case .slightLeft:
+            writeInt(&buf, Int32(2))
+        
+        
+        case .slightRight:
+            writeInt(&buf, Int32(3))
+        
+        
+        case .left:
+            writeInt(&buf, Int32(4))
+        
+        
+        case .right:
+            writeInt(&buf, Int32(5))
+        
+        
+        case .sharpLeft:
+            writeInt(&buf, Int32(6))
+        
+        
+        case .sharpRight:
+            writeInt(&buf, Int32(7))
+        
+        
+        case .uTurn:
+            writeInt(&buf, Int32(8))
+        
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeTurn_lift(_ buf: RustBuffer) throws -> Turn {
+    return try FfiConverterTypeTurn.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeTurn_lower(_ value: Turn) -> RustBuffer {
+    return FfiConverterTypeTurn.lower(value)
+}
+
+
+
+/**
  * What kind of place a zone is.
  */
 
@@ -4843,6 +5988,30 @@ fileprivate struct FfiConverterOptionUInt32: FfiConverterRustBuffer {
         switch try readInt(&buf) as Int8 {
         case 0: return nil
         case 1: return try FfiConverterUInt32.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterOptionInt32: FfiConverterRustBuffer {
+    typealias SwiftType = Int32?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterInt32.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterInt32.read(from: &buf)
         default: throw UniffiInternalError.unexpectedOptionalTag
         }
     }
@@ -5019,6 +6188,30 @@ fileprivate struct FfiConverterOptionTypeTransitionKind: FfiConverterRustBuffer 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypeTurn: FfiConverterRustBuffer {
+    typealias SwiftType = Turn?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeTurn.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeTurn.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypeTransmitterIdString: FfiConverterRustBuffer {
     typealias SwiftType = TransmitterIdString?
 
@@ -5093,6 +6286,31 @@ fileprivate struct FfiConverterSequenceTypeBeaconReading: FfiConverterRustBuffer
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceTypeFloorPoint: FfiConverterRustBuffer {
+    typealias SwiftType = [FloorPoint]
+
+    public static func write(_ value: [FloorPoint], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeFloorPoint.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [FloorPoint] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [FloorPoint]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeFloorPoint.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceTypeGeofence: FfiConverterRustBuffer {
     typealias SwiftType = [Geofence]
 
@@ -5135,6 +6353,31 @@ fileprivate struct FfiConverterSequenceTypeMotionSample: FfiConverterRustBuffer 
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
             seq.append(try FfiConverterTypeMotionSample.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeRouteLeg: FfiConverterRustBuffer {
+    typealias SwiftType = [RouteLeg]
+
+    public static func write(_ value: [RouteLeg], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeRouteLeg.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [RouteLeg] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [RouteLeg]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeRouteLeg.read(from: &buf))
         }
         return seq
     }
@@ -5420,7 +6663,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_push_accelerometer() != 46671) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_push_fix() != 20293) {
+    if (uniffi_waymark_checksum_method_positioningengine_push_fix() != 60879) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_push_gyroscope() != 67) {
@@ -5444,13 +6687,34 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_zone_posterior() != 14053) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_positioningengine_navigate_to() != 17105) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_route_to() != 41441) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_site_floor_names() != 36392) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_site_zone_names() != 29126) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_site_route() != 32857) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_subscription_cancel() != 31759) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_routetracker_reroute() != 56991) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_routetracker_route() != 10345) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_routetracker_update() != 13319) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_routetracker_update_point() != 60625) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_constructor_positioningengine_from_path() != 33646) {
@@ -5469,6 +6733,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_constructor_site_from_path() != 18181) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_constructor_routetracker_new() != 3039) {
         return InitializationResult.apiChecksumMismatch
     }
 

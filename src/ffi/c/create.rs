@@ -72,9 +72,10 @@ fn create(
     options: &Options,
     out: *mut *mut waymark_engine,
 ) -> waymark_result {
-    let handle = site
-        .map_err(PositioningError::from)
-        .and_then(|site| Handle::new(Arc::new(site), options, Callbacks::default()));
+    let handle = site.map_err(PositioningError::from).and_then(|site| {
+        let site = Arc::new(site);
+        Handle::new(site, options, Callbacks::default())
+    });
     match handle {
         Ok(handle) => {
             write(out, Box::into_raw(Box::new(waymark_engine { handle })));

@@ -4,6 +4,7 @@
 use crate::engine::{self, Position};
 use crate::ffi::error::{ErrorCode, PositioningError};
 use crate::sensors::{MdiScenario, MotionState};
+use crate::site::Site;
 use std::ffi::{c_char, c_void};
 
 /// What a call did.
@@ -115,9 +116,8 @@ pub struct waymark_engine_options {
     pub declination_deg: f64,
     /// True azimuth of the site's +y axis, degrees; NaN: the site file's.
     pub site_rotation_deg: f64,
-    /// The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
-    /// `waymark site hash`): `site_salt_len` bytes (at least 16; the bytes the salt file's hex
-    /// digits stand for), copied before the constructor returns. NULL with length 0 for a
+    /// The salt of a site file whose transmitter ids are hashed (docs/privacy.md):
+    /// `site_salt_len` bytes (at least 16; the bytes the salt file's hex digits stand for), copied before the constructor returns. NULL with length 0 for a
     /// site with raw ids. A hashed site without it, or with another salt, returns
     /// `WAYMARK_RESULT_SALT_MISMATCH`; a salt given for a site with raw ids is ignored.
     pub site_salt: *const u8,
@@ -205,6 +205,16 @@ pub struct waymark_position {
     pub floor: u32,
     /// Probability of that floor.
     pub floor_probability: f64,
+    /// Whether `floor_level` holds the floor's logical level (the site file gives one).
+    pub has_floor_level: bool,
+    /// The floor's logical level as the building numbers it (-1 for the first basement);
+    /// 0 when `has_floor_level` is false.
+    pub floor_level: i32,
+    /// Latitude, degrees north (WGS84), when the site is geo-referenced (its file has an
+    /// `anchor`); NaN otherwise.
+    pub latitude_deg: f64,
+    /// Longitude, degrees east (WGS84); NaN when the site is not geo-referenced.
+    pub longitude_deg: f64,
     /// The most likely zone (a room, a corridor), an index into the site file's zones
     /// (`waymark_engine_zone_name`); -1 when the site has no zones or more posterior mass lies
     /// outside every zone than in any one.
@@ -219,6 +229,9 @@ pub struct waymark_position {
     pub heading_deg: f64,
     /// One standard deviation of the heading, degrees; NaN when unknown.
     pub heading_accuracy_deg: f64,
+    /// Direction of travel, degrees clockwise from true north in [0, 360); NaN when the
+    /// heading is unknown or the site is not geo-referenced.
+    pub bearing_deg: f64,
     /// 0 unknown, 1 stationary, 2 walking.
     pub motion_state: u32,
     /// HIPE scenario: 0 distance & heading, 1 distance, 2 heading & speed, 3 speed.
@@ -423,13 +436,19 @@ pub type waymark_log_callback = Option<
     unsafe extern "C" fn(userdata: *mut c_void, level: u32, target: *const c_char, message: *const c_char),
 >;
 
-pub(crate) fn position(p: &Position) -> waymark_position {
+pub(crate) fn position(p: &Position, site: &Site) -> waymark_position {
+    let level = site.floor_level(p.floor);
+    let geo = site.lat_lon(p.floor, p.x, p.y);
     waymark_position {
         timestamp_ns: p.timestamp_ns,
         x: p.x,
         y: p.y,
         floor: p.floor as u32,
         floor_probability: p.floor_probability,
+        has_floor_level: level.is_some(),
+        floor_level: level.unwrap_or(0),
+        latitude_deg: geo.map_or(f64::NAN, |g| g.lat_deg),
+        longitude_deg: geo.map_or(f64::NAN, |g| g.lon_deg),
         // At most i32::MAX zones (`site::MAX_ZONES`).
         zone: p.zone.map_or(-1, |z| i32::try_from(z).unwrap_or(-1)),
         zone_probability: p.zone_probability,
@@ -437,6 +456,7 @@ pub(crate) fn position(p: &Position) -> waymark_position {
         accuracy_95_m: p.accuracy_95_m,
         heading_deg: p.heading_rad.map_or(f64::NAN, f64::to_degrees),
         heading_accuracy_deg: p.heading_accuracy_rad.map_or(f64::NAN, f64::to_degrees),
+        bearing_deg: p.heading_rad.and_then(|h| site.bearing_deg(h)).unwrap_or(f64::NAN),
         motion_state: motion_state(p.motion_state),
         scenario: scenario(p.scenario),
         steps: p.steps,

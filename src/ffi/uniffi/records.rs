@@ -38,9 +38,8 @@ pub struct EngineOptions {
     /// True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
     #[uniffi(default = None)]
     pub site_rotation_deg: Option<f64>,
-    /// The salt of a site file whose transmitter ids are hashed (`waymark survey --salt-file`,
-    /// `waymark site hash`): the bytes the salt file's hex digits stand for, at least 16.
-    /// Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
+    /// The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes
+    /// the salt file's hex digits stand for, at least 16. Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
     /// hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
     /// site file's download and out of logs.
     #[uniffi(default = None)]
@@ -232,8 +231,19 @@ pub struct PositionEstimate {
     pub floor: u32,
     /// Floor name.
     pub floor_name: String,
+    /// The floor's logical level as the building numbers it (-1 for the first basement), as
+    /// Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
+    #[uniffi(default = None)]
+    pub floor_level: Option<i32>,
     /// Probability of that floor.
     pub floor_probability: f64,
+    /// Latitude, degrees north (WGS84), when the site file is geo-referenced (has an
+    /// `anchor`); `null` / `nil` otherwise.
+    #[uniffi(default = None)]
+    pub latitude_deg: Option<f64>,
+    /// Longitude, degrees east (WGS84), when the site file is geo-referenced.
+    #[uniffi(default = None)]
+    pub longitude_deg: Option<f64>,
     /// The most likely zone's name (a room, a corridor): the zone holding the most posterior
     /// mass; `null` / `nil` when the site has no zones or more mass lies outside every zone
     /// than in any one. (The defaults here and below only keep code that builds estimates,
@@ -252,6 +262,10 @@ pub struct PositionEstimate {
     pub heading_deg: Option<f64>,
     /// One standard deviation of the heading, degrees.
     pub heading_accuracy_deg: Option<f64>,
+    /// Direction of travel, degrees clockwise from true north in [0, 360) (Android's
+    /// `bearing`, iOS's `course`), when the heading is known and the site is geo-referenced.
+    #[uniffi(default = None)]
+    pub bearing_deg: Option<f64>,
     /// Walking or not.
     pub motion_state: MotionState,
     /// Motion information available this epoch.
@@ -265,21 +279,31 @@ pub struct PositionEstimate {
     pub beyond_radio_m: f64,
 }
 
-/// A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB.
+/// A position from another positioning system: GNSS near an entrance, WiFi RTT, UWB. Give
+/// either `x` and `y` in the site's frame, or `latitudeDeg` and `longitudeDeg` on a
+/// geo-referenced site (its file has an `anchor`); anything else throws `InputRejected`.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
 pub struct PositionFix {
     /// When it was measured, ns, on the clock of every other input.
     pub timestamp_ns: u64,
     /// x in the site's metric frame, m.
-    pub x: f64,
+    #[uniffi(default = None)]
+    pub x: Option<f64>,
     /// y in the site's metric frame, m.
-    pub y: f64,
+    #[uniffi(default = None)]
+    pub y: Option<f64>,
     /// Floor index in the site file, when the other system knows it (UWB, an RTT access
     /// point's floor); `null` / `nil` for GNSS.
     #[uniffi(default = None)]
     pub floor: Option<u32>,
     /// Radius of the 68% circle, m, as Android's `Location.getAccuracy()`; must be > 0.
     pub accuracy_m: f64,
+    /// Latitude, degrees north (WGS84), in place of `x` and `y`.
+    #[uniffi(default = None)]
+    pub latitude_deg: Option<f64>,
+    /// Longitude, degrees east (WGS84), in place of `x` and `y`.
+    #[uniffi(default = None)]
+    pub longitude_deg: Option<f64>,
 }
 
 /// What kind of place a zone is.
@@ -563,19 +587,24 @@ pub(crate) fn track_point(p: &engine::TrackPoint) -> TrackPoint {
 }
 
 pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
+    let geo = site.lat_lon(p.floor, p.x, p.y);
     PositionEstimate {
         timestamp_ns: p.timestamp_ns,
         x: p.x,
         y: p.y,
         floor: p.floor as u32,
         floor_name: site.floors().get(p.floor).map(|f| f.name.clone()).unwrap_or_default(),
+        floor_level: site.floor_level(p.floor),
         floor_probability: p.floor_probability,
+        latitude_deg: geo.map(|g| g.lat_deg),
+        longitude_deg: geo.map(|g| g.lon_deg),
         zone: p.zone.and_then(|z| site.zones().get(z)).map(|z| z.name.clone()),
         zone_probability: p.zone_probability,
         accuracy_m: p.accuracy_m,
         accuracy_95_m: p.accuracy_95_m,
         heading_deg: p.heading_rad.map(f64::to_degrees),
         heading_accuracy_deg: p.heading_accuracy_rad.map(f64::to_degrees),
+        bearing_deg: p.heading_rad.and_then(|h| site.bearing_deg(h)),
         motion_state: motion_state(p.motion_state),
         scenario: scenario(p.scenario),
         steps: p.steps,
@@ -583,7 +612,32 @@ pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
     }
 }
 
-pub(crate) fn status_update(status: &Status, site: &crate::Site) -> StatusUpdate {
+impl PositionFix {
+    /// The core fix: `x` and `y` as given, or the latitude/longitude in the site's frame
+    /// (on the fix's floor, when the floors' frames differ). `Err` says why it is neither.
+    pub(crate) fn to_core(self, site: &Site) -> Result<crate::fix::PositionFix, String> {
+        let floor = self.floor.map(|f| f as usize);
+        let (x, y) = match (self.x, self.y, self.latitude_deg, self.longitude_deg) {
+            (Some(x), Some(y), None, None) => (x, y),
+            (None, None, Some(lat_deg), Some(lon_deg)) => {
+                let p = site
+                    .site_point(floor, crate::site::LatLon { lat_deg, lon_deg })
+                    .map_err(|e| e.to_string())?;
+                (p.x, p.y)
+            }
+            _ => return Err("a position fix needs x and y, or latitude and longitude (not both)".into()),
+        };
+        Ok(crate::fix::PositionFix {
+            timestamp_ns: self.timestamp_ns,
+            x,
+            y,
+            floor,
+            accuracy_m: self.accuracy_m,
+        })
+    }
+}
+
+pub(crate) fn status_update(status: &Status, site: &Site) -> StatusUpdate {
     match status {
         Status::ScenarioChanged { scenario: s, .. } => {
             StatusUpdate::ScenarioChanged { scenario: scenario(*s) }

@@ -487,22 +487,55 @@ final class WaymarkTests: XCTestCase {
     }
 
     // (e) The CoreMotion / CoreLocation conversions of Conversions.swift.
-    func testGeoOrigin() throws {
-        func at(_ x: Double, _ y: Double, _ heading: Double?) -> PositionEstimate {
-            PositionEstimate(timestampNs: 1, x: x, y: y, floor: 0, floorName: "G", floorProbability: 1,
-                             accuracyM: 2.5, accuracy95M: 5.0, headingDeg: heading, headingAccuracyDeg: heading.map { _ in 5 },
+    func testLocationFields() throws {
+        func at(_ lat: Double?, _ lon: Double?, bearing: Double?, level: Int32?) -> PositionEstimate {
+            PositionEstimate(timestampNs: 1, x: 3, y: 4, floor: 0, floorName: "G", floorLevel: level, floorProbability: 1,
+                             latitudeDeg: lat, longitudeDeg: lon, accuracyM: 2.5, accuracy95M: 5.0,
+                             headingDeg: bearing.map { _ in 12 }, headingAccuracyDeg: bearing.map { _ in 5 }, bearingDeg: bearing,
                              motionState: .walking, scenario: .distanceHeading, steps: 2)
         }
-        let origin = GeoOrigin(latitudeDeg: 60, longitudeDeg: 24, siteRotationDeg: 0)
-        let north = origin.geo(at(0, 111.195, 10))
-        XCTAssertEqual(north.latitudeDeg, 60.001, accuracy: 1e-6)
-        XCTAssertEqual(north.longitudeDeg, 24, accuracy: 1e-9)
-        XCTAssertEqual(north.courseDeg ?? -1, 10, accuracy: 1e-9)
-        XCTAssertEqual(origin.geo(at(55.597, 0, nil)).longitudeDeg, 24.001, accuracy: 1e-6)
-        XCTAssertNil(origin.geo(at(55.597, 0, nil)).courseDeg)
-        let rotated = GeoOrigin(latitudeDeg: 60, longitudeDeg: 24, siteRotationDeg: 90).geo(at(0, 55.597, 300))
-        XCTAssertEqual(rotated.longitudeDeg, 24.001, accuracy: 1e-6)
-        XCTAssertEqual(rotated.courseDeg ?? -1, 30, accuracy: 1e-9)
+        let walking = try XCTUnwrap(at(60.001, 24.002, bearing: 30, level: -1).locationFields)
+        XCTAssertEqual(walking, AppleLocationFields(latitudeDeg: 60.001, longitudeDeg: 24.002, horizontalAccuracyM: 2.5,
+                                                    courseDeg: 30, courseAccuracyDeg: 5, floorLevel: -1))
+        // No heading: Core Location's "invalid" course and course accuracy; no level: no floor.
+        let still = try XCTUnwrap(at(60, 24, bearing: nil, level: nil).locationFields)
+        XCTAssertEqual(still.courseDeg, -1)
+        XCTAssertEqual(still.courseAccuracyDeg, -1)
+        XCTAssertNil(still.floorLevel)
+        // A site without an anchor has no CLLocation.
+        XCTAssertNil(at(nil, nil, bearing: 30, level: 1).locationFields)
+    }
+
+    // A geo-referenced site: positions carry latitude/longitude and the floor level from Rust,
+    // and pushFix takes latitude/longitude; without an anchor that is a typed error.
+    func testGeoReferencedSite() throws {
+        let plain = try siteJson()
+        var geo = plain.replacingOccurrences(
+            of: "\"floors\":", with: "\"anchor\":{\"lat_deg\":60.17,\"lon_deg\":24.94},\"floors\":")
+        if let r = geo.range(of: "\"elevation_m\":") { geo.replaceSubrange(r, with: "\"level\":2,\"elevation_m\":") }
+        let t0: UInt64 = 1_000_000_000
+        let engine = try PositioningEngine(siteJson: geo, options: EngineOptions())
+        let inMetres = try engine.pushFix(fix: PositionFix(timestampNs: t0, x: 35.5, y: 11.5, accuracyM: 0.5))
+        XCTAssertEqual(inMetres.floorLevel, 2)
+        let here = try XCTUnwrap(inMetres.locationFields)
+        // At 60°N a degree of latitude is 111 412 m and one of longitude 55 800 m (WGS84).
+        XCTAssertEqual(here.latitudeDeg, 60.17 + inMetres.y / 111_412, accuracy: 1e-6)
+        XCTAssertEqual(here.longitudeDeg, 24.94 + inMetres.x / 55_800, accuracy: 1e-5)
+        // A fix at the estimate's latitude/longitude positions exactly as one at its x, y.
+        let other = try PositioningEngine(siteJson: geo, options: EngineOptions())
+        let inDegrees = try other.pushFix(fix: PositionFix(
+            timestampNs: t0, accuracyM: 0.5, latitudeDeg: here.latitudeDeg, longitudeDeg: here.longitudeDeg))
+        let third = try PositioningEngine(siteJson: geo, options: EngineOptions())
+        let atEstimate = try third.pushFix(fix: PositionFix(timestampNs: t0, x: inMetres.x, y: inMetres.y, accuracyM: 0.5))
+        XCTAssertEqual(inDegrees.x, atEstimate.x, accuracy: 1e-6)
+        XCTAssertEqual(inDegrees.y, atEstimate.y, accuracy: 1e-6)
+        let unanchored = try PositioningEngine(siteJson: plain, options: EngineOptions())
+        XCTAssertThrowsError(try unanchored.pushFix(fix: PositionFix(
+            timestampNs: t0, accuracyM: 0.5, latitudeDeg: here.latitudeDeg, longitudeDeg: here.longitudeDeg))) { error in
+            guard case PositioningError.InputRejected(let reason) = error else { return XCTFail("\(error)") }
+            XCTAssertTrue(reason.contains("not geo-referenced"), reason)
+        }
+        XCTAssertNil(try unanchored.pushFix(fix: PositionFix(timestampNs: t0, x: 35.5, y: 11.5, accuracyM: 0.5)).locationFields)
     }
 
     func testAppleSensorConversions() throws {

@@ -151,6 +151,14 @@ impl PreparedSurvey<'_> {
             }
             reports.push(report);
         }
+        let plans: Vec<Option<&FloorPlan>> = self.floors.iter().map(|f| f.plan).collect();
+        let (anchor, floors) = geo_reference(&plans);
+        for (f, (level, origin_m)) in floors.into_iter().enumerate() {
+            builder.floor_geo(f, level, origin_m);
+        }
+        if let Some(anchor) = anchor {
+            builder.anchor(anchor);
+        }
         let build = BuildOptions {
             fit: FitOptions { clip_dbm: fits.clip_dbm, ..options.build.fit },
             ..options.build

@@ -13,7 +13,7 @@ use nalgebra::Point2;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use waymark::radio::{FitOptions, Gaussian, Reading, Scan, TransmitterId};
-use waymark::site::{BuildOptions, North, Site, SiteBuilder, SiteError, Zone, ZoneKind};
+use waymark::site::{Anchor, BuildOptions, LatLon, North, Site, SiteBuilder, SiteError, Zone, ZoneKind};
 
 mod assemble;
 mod fit;
@@ -170,6 +170,51 @@ pub fn floor_rank(name: &str) -> Option<i32> {
 /// Nominal storey height, m, for the floors' `elevation_m` (display and ordering only: no
 /// computation uses it). 5 m: a typical shopping-mall storey.
 pub const STOREY_HEIGHT_M: f64 = 5.0;
+
+/// A floor's logical level and where its frame's origin is in the site frame, m.
+pub type FloorGeo = (Option<i32>, [f64; 2]);
+
+/// The site's geo-reference from its floors' plans (docs/site-files.md#geo-reference): the
+/// anchor, and each floor's (level, frame origin in the site frame). Each competition plan
+/// frames its own longitude/latitude box, so the site frame is the first plan's, anchored at
+/// its south-west corner with x east and y north, scaled as that plan stretches its box; every
+/// other floor's origin is its box's south-west corner in that frame. No anchor unless every
+/// floor has a plan with a box of some extent (a floor without one has no place on the
+/// Earth); the levels are the plans' `floor_num` either way.
+pub fn geo_reference(plans: &[Option<&FloorPlan>]) -> (Option<Anchor>, Vec<FloorGeo>) {
+    let levels = plans.iter().map(|p| p.and_then(|p| p.level));
+    let unanchored = || levels.clone().map(|l| (l, [0.0, 0.0])).collect();
+    let Some(Some(first)) = plans.first() else { return (None, unanchored()) };
+    if plans.iter().any(Option::is_none) {
+        return (None, unanchored());
+    }
+    let lat_lon = |[lon, lat]: [f64; 2]| LatLon::new(lat, lon);
+    let anchor = (|| {
+        let [lo, hi] = first.lon_lat_box?;
+        let unit = Anchor::at(lat_lon(lo).ok()?);
+        let mid = [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0];
+        // Ground metres across the box's middle, east-west and south-north.
+        let (w, e) =
+            (unit.to_site(lat_lon([lo[0], mid[1]]).ok()?), unit.to_site(lat_lon([hi[0], mid[1]]).ok()?));
+        let (s, n) =
+            (unit.to_site(lat_lon([mid[0], lo[1]]).ok()?), unit.to_site(lat_lon([mid[0], hi[1]]).ok()?));
+        let scale = [(e[0] - w[0]) / first.width_m, (n[1] - s[1]) / first.height_m];
+        if !scale.iter().all(|s| s.is_finite() && *s > 0.0) {
+            return None;
+        }
+        let anchor = Anchor { scale, ..unit };
+        let origins = plans
+            .iter()
+            .flatten()
+            .map(|p| lat_lon(p.lon_lat_box?[0]).ok().map(|sw| anchor.to_site(sw)))
+            .collect::<Option<Vec<[f64; 2]>>>()?;
+        Some((anchor, origins))
+    })();
+    match anchor {
+        Some((anchor, origins)) => (Some(anchor), levels.zip(origins).collect()),
+        None => (None, unanchored()),
+    }
+}
 
 /// Where a walk went: points every half metre along its waypoint polyline.
 pub(super) fn path_points(trace: &Trace) -> Vec<Point2<f64>> {

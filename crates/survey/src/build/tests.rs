@@ -70,7 +70,13 @@ fn walls_cut_edges_unless_somebody_walked_through() {
             ]],
         },
     };
-    let plan = FloorPlan { width_m: 40.0, height_m: 20.0, outline: vec![], rooms: vec![room] };
+    let plan = FloorPlan {
+        width_m: 40.0,
+        height_m: 20.0,
+        outline: vec![],
+        rooms: vec![room],
+        ..FloorPlan::default()
+    };
     let walks = [walk("a", (0.0, 0.0), (8.0, 0.0), 8), walk("b", (12.0, 0.0), (20.0, 0.0), 8)];
     let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
     let (site, report) = survey(
@@ -118,7 +124,7 @@ fn named_plan_polygons_become_zones() {
         rect("shop", 13.0, 30.0),
         rect("far", 50.0, 60.0),
     ];
-    let plan = FloorPlan { width_m: 60.0, height_m: 20.0, outline: vec![], rooms };
+    let plan = FloorPlan { width_m: 60.0, height_m: 20.0, outline: vec![], rooms, ..FloorPlan::default() };
     let walks = [walk("a", (0.0, 0.0), (20.0, 0.0), 20)];
     let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
     // The unsurveyed states around the walk join the polygons they are in, too.
@@ -236,7 +242,13 @@ fn unsurveyed_states_fill_the_floor_within_the_margin() {
             Point2::new(-30.0, 30.0),
         ]],
     };
-    let plan = FloorPlan { width_m: 54.0, height_m: 60.0, outline: vec![outline], rooms: vec![] };
+    let plan = FloorPlan {
+        width_m: 54.0,
+        height_m: 60.0,
+        outline: vec![outline],
+        rooms: vec![],
+        ..FloorPlan::default()
+    };
     let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
     let options = SurveyOptions { unsurveyed_margin_m: 8.0, ..SurveyOptions::default() };
     let (site, report) = survey("test", std::slice::from_ref(&floor), North::default(), &options).unwrap();
@@ -278,4 +290,33 @@ fn unsurveyed_states_fill_the_floor_within_the_margin() {
 fn no_walks_is_a_typed_error() {
     let floor = SurveyFloor { name: "F1".into(), plan: None, walks: vec![] };
     assert!(survey("x", &[floor], North::default(), &SurveyOptions::default()).is_err());
+}
+
+/// The anchor is the first plan's south-west corner, scaled as that plan stretches its box;
+/// every floor's origin is its own corner in that frame, and its level its `floor_num`.
+#[test]
+fn plans_geo_reference_the_site() {
+    // 0.001° of longitude at 30°N is 96.49 m on the WGS84 ellipsoid, 0.001° of latitude 110.85 m.
+    let plan = |lon: f64, lat: f64, level: i32| FloorPlan {
+        width_m: 100.0,
+        height_m: 100.0,
+        lon_lat_box: Some([[lon, lat], [lon + 0.001, lat + 0.001]]),
+        level: Some(level),
+        ..FloorPlan::default()
+    };
+    let (b1, f1) = (plan(120.0, 30.0, -1), plan(120.0005, 30.0, 1));
+    let (anchor, floors) = geo_reference(&[Some(&b1), Some(&f1)]);
+    let anchor = anchor.expect("two plans with boxes");
+    assert_eq!((anchor.lat_deg, anchor.lon_deg, anchor.azimuth_rad), (30.0, 120.0, 0.0));
+    assert!((anchor.scale[0] - 0.9649).abs() < 1e-3 && (anchor.scale[1] - 1.1085).abs() < 1e-3, "{anchor:?}");
+    assert_eq!((floors[0].0, floors[1].0), (Some(-1), Some(1)));
+    assert_eq!(floors[0].1, [0.0, 0.0]);
+    // Half the box east: 50 plan metres.
+    assert!((floors[1].1[0] - 50.0).abs() < 1e-3 && floors[1].1[1].abs() < 1e-3, "{floors:?}");
+    // A floor without a plan, or a plan without a box: levels only.
+    let (none, floors) = geo_reference(&[Some(&b1), None]);
+    assert!(none.is_none());
+    assert_eq!(floors, vec![(Some(-1), [0.0, 0.0]), (None, [0.0, 0.0])]);
+    let boxless = FloorPlan { lon_lat_box: None, ..b1.clone() };
+    assert!(geo_reference(&[Some(&boxless)]).0.is_none());
 }

@@ -1,7 +1,8 @@
 //! A floor plan from the competition's GeoJSON (longitude/latitude) and `floor_info.json`
 //! (width and height, m): the floor outline and its rooms (shops), mapped onto the metre
 //! frame the waypoints use — the outline's bounding box stretched onto `[0, width] × [0,
-//! height]`, x east, y north.
+//! height]`, x east, y north — and what geo-references it: that box in longitude/latitude,
+//! and the floor's number (`floor_num`, -1 for B1) from the outline's properties.
 
 use nalgebra::Point2;
 use serde_json::Value;
@@ -70,6 +71,21 @@ pub struct FloorPlan {
     pub outline: Vec<Polygon>,
     /// Rooms inside it.
     pub rooms: Vec<Room>,
+    /// The longitude/latitude box stretched onto `[0, width] × [0, height]`: `[[west,
+    /// south], [east, north]]`, degrees; `None` for a plan not read from GeoJSON.
+    pub lon_lat_box: Option<[[f64; 2]; 2]>,
+    /// The floor's logical level: the outline's `floor_num` property (-1 for B1, 1 for F1);
+    /// `None` when the plan has none.
+    pub level: Option<i32>,
+}
+
+impl FloorPlan {
+    /// The plan's point (x, y), m, as (longitude, latitude): the linear map of the box, as
+    /// the competition's frame is defined; `None` without a box.
+    pub fn lon_lat(&self, x: f64, y: f64) -> Option<[f64; 2]> {
+        let [lo, hi] = self.lon_lat_box?;
+        Some([lo[0] + x / self.width_m * (hi[0] - lo[0]), lo[1] + y / self.height_m * (hi[1] - lo[1])])
+    }
 }
 
 /// Why a floor plan could not be read.
@@ -126,8 +142,12 @@ impl FloorPlan {
     pub fn from_geojson(geojson: &Value, width_m: f64, height_m: f64) -> Result<FloorPlan, String> {
         let features = geojson["features"].as_array().ok_or("no `features` array")?;
         let mut shapes: Vec<(bool, String, Vec<LonLatPolygon>)> = Vec::new();
+        let mut level = None;
         for (k, f) in features.iter().enumerate() {
             let is_floor = f["properties"]["type"].as_str() == Some("floor");
+            if is_floor && level.is_none() {
+                level = f["properties"]["floor_num"].as_i64().and_then(|n| i32::try_from(n).ok());
+            }
             let name = f["properties"]["name"].as_str().unwrap_or("").to_owned();
             let coords = &f["geometry"]["coordinates"];
             let polygons = match f["geometry"]["type"].as_str() {
@@ -174,7 +194,8 @@ impl FloorPlan {
         let to_polygon = |rings: &LonLatPolygon| Polygon {
             rings: rings.iter().map(|r| r.iter().map(to_m).collect()).collect(),
         };
-        let mut plan = FloorPlan { width_m, height_m, ..FloorPlan::default() };
+        let mut plan =
+            FloorPlan { width_m, height_m, lon_lat_box: Some([lo, hi]), level, ..FloorPlan::default() };
         for (is_floor, name, polygons) in &shapes {
             for p in polygons {
                 if *is_floor {
@@ -257,7 +278,7 @@ mod tests {
         let geojson = serde_json::json!({
             "type": "FeatureCollection",
             "features": [
-                {"type": "Feature", "properties": {"type": "floor", "name": "F1"},
+                {"type": "Feature", "properties": {"type": "floor", "name": "F1", "floor_num": 1},
                  "geometry": {"type": "MultiPolygon", "coordinates": [[[[120.0, 30.0], [120.001, 30.0], [120.001, 30.001], [120.0, 30.001], [120.0, 30.0]]]]}},
                 {"type": "Feature", "properties": {"name": "shop"},
                  "geometry": {"type": "Polygon", "coordinates": [[[120.0, 30.0], [120.0005, 30.0], [120.0005, 30.0005], [120.0, 30.0005]]]}},
@@ -275,6 +296,21 @@ mod tests {
         let corner = p.rooms[0].polygon.rings[0][2];
         assert!((corner.x - 50.0).abs() < 1e-6 && (corner.y - 55.0).abs() < 1e-6);
         assert!((p.rooms[0].polygon.area() - 50.0 * 55.0).abs() < 1e-3);
+        assert_eq!(p.lon_lat_box, Some([[120.0, 30.0], [120.001, 30.001]]));
+        let [lon, lat] = p.lon_lat(50.0, 110.0).unwrap();
+        assert!((lon - 120.0005).abs() < 1e-12 && (lat - 30.001).abs() < 1e-12);
+    }
+
+    #[test]
+    fn the_level_is_the_outlines_floor_num() {
+        assert_eq!(plan().level, Some(1));
+        let mut geojson = serde_json::json!({"features": [
+            {"properties": {"type": "floor", "floor_num": -1},
+             "geometry": {"type": "Polygon", "coordinates": [[[0.0, 0.0], [1.0, 0.0], [1.0, 1.0]]]}}
+        ]});
+        assert_eq!(FloorPlan::from_geojson(&geojson, 1.0, 1.0).unwrap().level, Some(-1));
+        geojson["features"][0]["properties"] = serde_json::json!({"type": "floor"});
+        assert_eq!(FloorPlan::from_geojson(&geojson, 1.0, 1.0).unwrap().level, None);
     }
 
     #[test]

@@ -486,6 +486,16 @@ RustBuffer uniffi_waymark_fn_method_positioningengine_track(uint64_t ptr, RustCa
 RustBuffer uniffi_waymark_fn_method_positioningengine_zone_posterior(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_NAVIGATE_TO
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_NAVIGATE_TO
+uint64_t uniffi_waymark_fn_method_positioningengine_navigate_to(uint64_t ptr, RustBuffer destination, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_ROUTE_TO
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_ROUTE_TO
+RustBuffer uniffi_waymark_fn_method_positioningengine_route_to(uint64_t ptr, RustBuffer destination, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SITE
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SITE
 uint64_t uniffi_waymark_fn_clone_site(uint64_t handle, RustCallStatus *_Nonnull out_status
@@ -516,6 +526,11 @@ RustBuffer uniffi_waymark_fn_method_site_floor_names(uint64_t ptr, RustCallStatu
 RustBuffer uniffi_waymark_fn_method_site_zone_names(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ROUTE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ROUTE
+RustBuffer uniffi_waymark_fn_method_site_route(uint64_t ptr, RustBuffer from, RustBuffer destination, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SUBSCRIPTION
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SUBSCRIPTION
 uint64_t uniffi_waymark_fn_clone_subscription(uint64_t handle, RustCallStatus *_Nonnull out_status
@@ -529,6 +544,41 @@ void uniffi_waymark_fn_free_subscription(uint64_t handle, RustCallStatus *_Nonnu
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SUBSCRIPTION_CANCEL
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SUBSCRIPTION_CANCEL
 void uniffi_waymark_fn_method_subscription_cancel(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_ROUTETRACKER
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_ROUTETRACKER
+uint64_t uniffi_waymark_fn_clone_routetracker(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FREE_ROUTETRACKER
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FREE_ROUTETRACKER
+void uniffi_waymark_fn_free_routetracker(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_ROUTETRACKER_NEW
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_ROUTETRACKER_NEW
+uint64_t uniffi_waymark_fn_constructor_routetracker_new(uint64_t site, RustBuffer from, RustBuffer destination, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_ROUTETRACKER_REROUTE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_ROUTETRACKER_REROUTE
+RustBuffer uniffi_waymark_fn_method_routetracker_reroute(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_ROUTETRACKER_ROUTE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_ROUTETRACKER_ROUTE
+RustBuffer uniffi_waymark_fn_method_routetracker_route(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_ROUTETRACKER_UPDATE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_ROUTETRACKER_UPDATE
+RustBuffer uniffi_waymark_fn_method_routetracker_update(uint64_t ptr, RustBuffer position, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_ROUTETRACKER_UPDATE_POINT
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_ROUTETRACKER_UPDATE_POINT
+RustBuffer uniffi_waymark_fn_method_routetracker_update_point(uint64_t ptr, RustBuffer point, double accuracy_m, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FUNC_INIT_LOGGING
@@ -976,6 +1026,18 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_zone_posterior(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_NAVIGATE_TO
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_NAVIGATE_TO
+uint16_t uniffi_waymark_checksum_method_positioningengine_navigate_to(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_ROUTE_TO
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_ROUTE_TO
+uint16_t uniffi_waymark_checksum_method_positioningengine_route_to(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_FLOOR_NAMES
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_FLOOR_NAMES
 uint16_t uniffi_waymark_checksum_method_site_floor_names(void
@@ -988,9 +1050,39 @@ uint16_t uniffi_waymark_checksum_method_site_zone_names(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ROUTE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ROUTE
+uint16_t uniffi_waymark_checksum_method_site_route(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SUBSCRIPTION_CANCEL
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SUBSCRIPTION_CANCEL
 uint16_t uniffi_waymark_checksum_method_subscription_cancel(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_REROUTE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_REROUTE
+uint16_t uniffi_waymark_checksum_method_routetracker_reroute(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_ROUTE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_ROUTE
+uint16_t uniffi_waymark_checksum_method_routetracker_route(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_UPDATE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_UPDATE
+uint16_t uniffi_waymark_checksum_method_routetracker_update(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_UPDATE_POINT
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_UPDATE_POINT
+uint16_t uniffi_waymark_checksum_method_routetracker_update_point(void
     
 );
 #endif
@@ -1027,6 +1119,12 @@ uint16_t uniffi_waymark_checksum_constructor_site_from_bytes(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SITE_FROM_PATH
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SITE_FROM_PATH
 uint16_t uniffi_waymark_checksum_constructor_site_from_path(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_ROUTETRACKER_NEW
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_ROUTETRACKER_NEW
+uint16_t uniffi_waymark_checksum_constructor_routetracker_new(void
     
 );
 #endif

@@ -3,8 +3,6 @@ package dev.waymark.android
 import dev.waymark.MotionSample
 import dev.waymark.PositionEstimate
 import dev.waymark.WifiReading
-import kotlin.math.cos
-import kotlin.math.sin
 
 /**
  * Plain-Kotlin conversions from Android's sensor and WiFi types to Waymark's records. They use
@@ -34,29 +32,32 @@ object Conversions {
     /** The time of a scan: the newest result's timestamp, µs since boot, in ns. */
     fun scanTimeNs(resultTimestampsUs: List<Long>): Long = (resultTimestampsUs.maxOrNull() ?: 0L) * 1_000L
 
-    /** Mean Earth radius, m (IUGG). */
-    private const val EARTH_RADIUS_M = 6_371_008.8
-
     /**
-     * Where the site frame sits on the Earth: the latitude/longitude of its origin and the
-     * true azimuth of its +y axis (the site file's `north.site_rotation_rad`), in degrees.
+     * What an Android `Location` takes from a position: latitude/longitude (WGS84, computed in
+     * Rust from the site file's anchor), `accuracy` the 68% radius (as Android defines it),
+     * the true bearing and its one-σ accuracy when the heading is known, and the floor's
+     * logical level when the site file gives one.
      */
-    data class GeoOrigin(val latitudeDeg: Double, val longitudeDeg: Double, val siteRotationDeg: Double)
+    data class LocationFields(
+        val latitudeDeg: Double,
+        val longitudeDeg: Double,
+        val accuracyM: Double,
+        val bearingDeg: Double?,
+        val bearingAccuracyDeg: Double?,
+        val floorLevel: Int?,
+    )
 
-    /** Latitude, longitude, bearing and accuracy for an Android `Location`. */
-    data class Geo(val latitudeDeg: Double, val longitudeDeg: Double, val bearingDeg: Double?, val accuracyM: Double)
-
-    /**
-     * A position in the site frame as latitude/longitude (local tangent plane; metres of error
-     * per kilometre from the origin are negligible inside a building).
-     */
-    fun geo(position: PositionEstimate, origin: GeoOrigin): Geo {
-        val theta = Math.toRadians(origin.siteRotationDeg)
-        val east = position.x * cos(theta) + position.y * sin(theta)
-        val north = -position.x * sin(theta) + position.y * cos(theta)
-        val lat = origin.latitudeDeg + Math.toDegrees(north / EARTH_RADIUS_M)
-        val lon = origin.longitudeDeg + Math.toDegrees(east / (EARTH_RADIUS_M * cos(Math.toRadians(origin.latitudeDeg))))
-        val bearing = position.headingDeg?.let { ((it + origin.siteRotationDeg) % 360.0 + 360.0) % 360.0 }
-        return Geo(lat, lon, bearing, position.accuracyM)
+    /** The `Location` fields of a position; `null` when the site is not geo-referenced. */
+    fun locationFields(position: PositionEstimate): LocationFields? {
+        val lat = position.latitudeDeg ?: return null
+        val lon = position.longitudeDeg ?: return null
+        return LocationFields(
+            latitudeDeg = lat,
+            longitudeDeg = lon,
+            accuracyM = position.accuracyM,
+            bearingDeg = position.bearingDeg,
+            bearingAccuracyDeg = position.bearingDeg?.let { position.headingAccuracyDeg },
+            floorLevel = position.floorLevel,
+        )
     }
 }

@@ -3,6 +3,7 @@ package dev.waymark
 import dev.waymark.android.Conversions
 import org.junit.Assert.assertEquals
 import org.junit.Assert.assertThrows
+import org.junit.Assert.assertTrue
 import org.junit.Test
 
 /** The Android adapter's plain-Kotlin conversions (android/src/main/kotlin/.../Conversions.kt). */
@@ -33,29 +34,81 @@ class ConversionsTest {
     }
 }
 
+/**
+ * Positions on a geo-referenced site: latitude/longitude, bearing and floor level come from
+ * Rust (the site file's anchor and levels), `pushFix` takes latitude/longitude, and the
+ * Android adapter's `Location` fields are read from the position as it is.
+ */
 class GeoConversionsTest {
-    private fun position(x: Double, y: Double, heading: Double?) = PositionEstimate(
-        timestampNs = 1UL, x = x, y = y, floor = 0U, floorName = "G", floorProbability = 1.0, accuracyM = 2.5, accuracy95M = 5.0,
-        headingDeg = heading, headingAccuracyDeg = heading?.let { 5.0 }, motionState = MotionState.WALKING,
-        scenario = MotionScenario.DISTANCE_HEADING, steps = 2U,
+    private fun position(lat: Double?, lon: Double?, bearing: Double?, level: Int?) = PositionEstimate(
+        timestampNs = 1UL, x = 3.0, y = 4.0, floor = 0U, floorName = "G", floorLevel = level, floorProbability = 1.0,
+        latitudeDeg = lat, longitudeDeg = lon, accuracyM = 2.5, accuracy95M = 5.0,
+        headingDeg = bearing?.let { 12.0 }, headingAccuracyDeg = bearing?.let { 5.0 }, bearingDeg = bearing,
+        motionState = MotionState.WALKING, scenario = MotionScenario.DISTANCE_HEADING, steps = 2U,
     )
 
     @Test
-    fun siteMetresBecomeLatitudeAndLongitude() {
-        val origin = Conversions.GeoOrigin(60.0, 24.0, 0.0)
-        // 111.2 m north is 0.001°; at 60°N, 55.6 m east is 0.001° of longitude.
-        val north = Conversions.geo(position(0.0, 111.195, 10.0), origin)
-        org.junit.Assert.assertEquals(60.001, north.latitudeDeg, 1e-6)
-        org.junit.Assert.assertEquals(24.0, north.longitudeDeg, 1e-9)
-        org.junit.Assert.assertEquals(10.0, north.bearingDeg!!, 1e-9)
-        org.junit.Assert.assertEquals(2.5, north.accuracyM, 0.0)
-        val east = Conversions.geo(position(55.597, 0.0, null), origin)
-        org.junit.Assert.assertEquals(24.001, east.longitudeDeg, 1e-6)
-        org.junit.Assert.assertNull(east.bearingDeg)
-        // A site whose +y points east: +y metres go east, headings turn by 90°.
-        val rotated = Conversions.geo(position(0.0, 55.597, 300.0), Conversions.GeoOrigin(60.0, 24.0, 90.0))
-        org.junit.Assert.assertEquals(24.001, rotated.longitudeDeg, 1e-6)
-        org.junit.Assert.assertEquals(60.0, rotated.latitudeDeg, 1e-9)
-        org.junit.Assert.assertEquals(30.0, rotated.bearingDeg!!, 1e-9)
+    fun locationFieldsComeFromThePositionItself() {
+        val fields = Conversions.locationFields(position(60.001, 24.002, 30.0, -1))!!
+        assertEquals(60.001, fields.latitudeDeg, 0.0)
+        assertEquals(24.002, fields.longitudeDeg, 0.0)
+        assertEquals(2.5, fields.accuracyM, 0.0)
+        assertEquals(30.0, fields.bearingDeg!!, 0.0)
+        assertEquals(5.0, fields.bearingAccuracyDeg!!, 0.0)
+        assertEquals(-1, fields.floorLevel)
+        val still = Conversions.locationFields(position(60.0, 24.0, null, null))!!
+        org.junit.Assert.assertNull(still.bearingDeg)
+        org.junit.Assert.assertNull(still.bearingAccuracyDeg)
+        org.junit.Assert.assertNull(still.floorLevel)
+        // A site without an anchor has no Location.
+        org.junit.Assert.assertNull(Conversions.locationFields(position(null, null, 30.0, 1)))
+    }
+
+    @Test
+    fun aGeoReferencedSiteGivesLatitudeLongitudeAndLevelAndTakesLatLonFixes() {
+        val plain = java.io.File(System.getProperty("waymark.site") ?: System.getenv("WAYMARK_SITE")).readText()
+        // The simulated site, anchored in Helsinki with +y due north, its first floor level 2.
+        val geo = plain
+            .replaceFirst("\"floors\":", "\"anchor\":{\"lat_deg\":60.17,\"lon_deg\":24.94},\"floors\":")
+            .replaceFirst("\"elevation_m\":", "\"level\":2,\"elevation_m\":")
+        val t0 = 1_000_000_000UL
+        // A precise fix at a place of the simulated office (WaymarkTest's), in metres.
+        val engine = PositioningEngine(geo, EngineOptions())
+        val inMetres = engine.pushFix(PositionFix(timestampNs = t0, x = 35.5, y = 11.5, accuracyM = 0.5))
+        assertEquals(2, inMetres.floorLevel)
+        val here = Conversions.locationFields(inMetres)!!
+        // At 60°N a degree of latitude is 111 412 m and one of longitude 55 800 m (WGS84).
+        assertEquals(60.17 + inMetres.y / 111_412.0, here.latitudeDeg, 1e-6)
+        assertEquals(24.94 + inMetres.x / 55_800.0, here.longitudeDeg, 1e-5)
+        // A fix at the estimate's latitude/longitude positions exactly as one at its x, y.
+        val other = PositioningEngine(geo, EngineOptions())
+        val inDegrees = other.pushFix(
+            PositionFix(timestampNs = t0, latitudeDeg = here.latitudeDeg, longitudeDeg = here.longitudeDeg, accuracyM = 0.5),
+        )
+        val third = PositioningEngine(geo, EngineOptions())
+        val atEstimate = third.pushFix(PositionFix(timestampNs = t0, x = inMetres.x, y = inMetres.y, accuracyM = 0.5))
+        assertEquals(atEstimate.x, inDegrees.x, 1e-6)
+        assertEquals(atEstimate.y, inDegrees.y, 1e-6)
+        val lat = here.latitudeDeg
+        // x and y and latitude/longitude together, or neither: rejected.
+        assertThrows(PositioningException.InputRejected::class.java) {
+            engine.pushFix(PositionFix(timestampNs = t0 + 1UL, x = 1.0, y = 1.0, latitudeDeg = lat, longitudeDeg = here.longitudeDeg, accuracyM = 1.0))
+        }
+        assertThrows(PositioningException.InputRejected::class.java) {
+            engine.pushFix(PositionFix(timestampNs = t0 + 2UL, accuracyM = 1.0))
+        }
+        // The same fix on the site without an anchor: a typed error, and no lat/lon in positions.
+        val unanchored = PositioningEngine(plain, EngineOptions())
+        val e = assertThrows(PositioningException.InputRejected::class.java) {
+            unanchored.pushFix(PositionFix(timestampNs = t0, latitudeDeg = lat, longitudeDeg = here.longitudeDeg, accuracyM = 0.5))
+        }
+        assertTrue(e.message!!, e.message!!.contains("not geo-referenced"))
+        val local = unanchored.pushFix(PositionFix(timestampNs = t0, x = 35.5, y = 11.5, accuracyM = 0.5))
+        org.junit.Assert.assertNull(local.latitudeDeg)
+        org.junit.Assert.assertNull(Conversions.locationFields(local))
+        engine.close()
+        other.close()
+        third.close()
+        unanchored.close()
     }
 }
