@@ -664,9 +664,10 @@ typedef struct {
   double site_rotation_deg;
   /**
    * The salt of a site file whose transmitter ids are hashed (docs/privacy.md):
-   * `site_salt_len` bytes (at least 16; the bytes the salt file's hex digits stand for), copied before the constructor returns. NULL with length 0 for a
-   * site with raw ids. A hashed site without it, or with another salt, returns
-   * `WAYMARK_RESULT_SALT_MISMATCH`; a salt given for a site with raw ids is ignored.
+   * `site_salt_len` bytes (at least 16; the bytes the salt file's hex digits stand for),
+   * copied before the constructor returns. NULL with length 0 for a site with raw ids. A
+   * hashed site without it, or with another salt, returns `WAYMARK_RESULT_SALT_MISMATCH`; a
+   * salt given for a site with raw ids is ignored.
    */
   const uint8_t *site_salt;
   /**

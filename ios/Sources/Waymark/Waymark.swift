@@ -2552,9 +2552,10 @@ public struct EngineOptions: Equatable, Hashable {
     public var siteRotationDeg: Double?
     /**
      * The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes
-     * the salt file's hex digits stand for, at least 16. Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
-     * hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
-     * site file's download and out of logs.
+     * the salt file's hex digits stand for, at least 16. Scans are hashed with it before
+     * matching. `null` / `nil` for a site with raw ids. A hashed site without it, or with
+     * another salt, throws `SaltMismatch`. Keep it out of the site file's download and out of
+     * logs.
      */
     public var siteSalt: Data?
 
@@ -2580,9 +2581,10 @@ public struct EngineOptions: Equatable, Hashable {
          */siteRotationDeg: Double? = nil, 
         /**
          * The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes
-         * the salt file's hex digits stand for, at least 16. Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
-         * hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
-         * site file's download and out of logs.
+         * the salt file's hex digits stand for, at least 16. Scans are hashed with it before
+         * matching. `null` / `nil` for a site with raw ids. A hashed site without it, or with
+         * another salt, throws `SaltMismatch`. Keep it out of the site file's download and out of
+         * logs.
          */siteSalt: Data? = nil) {
         self.transition = transition
         self.stepLengthM = stepLengthM

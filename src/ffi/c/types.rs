@@ -117,9 +117,10 @@ pub struct waymark_engine_options {
     /// True azimuth of the site's +y axis, degrees; NaN: the site file's.
     pub site_rotation_deg: f64,
     /// The salt of a site file whose transmitter ids are hashed (docs/privacy.md):
-    /// `site_salt_len` bytes (at least 16; the bytes the salt file's hex digits stand for), copied before the constructor returns. NULL with length 0 for a
-    /// site with raw ids. A hashed site without it, or with another salt, returns
-    /// `WAYMARK_RESULT_SALT_MISMATCH`; a salt given for a site with raw ids is ignored.
+    /// `site_salt_len` bytes (at least 16; the bytes the salt file's hex digits stand for),
+    /// copied before the constructor returns. NULL with length 0 for a site with raw ids. A
+    /// hashed site without it, or with another salt, returns `WAYMARK_RESULT_SALT_MISMATCH`; a
+    /// salt given for a site with raw ids is ignored.
     pub site_salt: *const u8,
     /// Bytes at `site_salt`.
     pub site_salt_len: usize,

@@ -39,9 +39,10 @@ pub struct EngineOptions {
     #[uniffi(default = None)]
     pub site_rotation_deg: Option<f64>,
     /// The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes
-    /// the salt file's hex digits stand for, at least 16. Scans are hashed with it before matching. `null` / `nil` for a site with raw ids. A
-    /// hashed site without it, or with another salt, throws `SaltMismatch`. Keep it out of the
-    /// site file's download and out of logs.
+    /// the salt file's hex digits stand for, at least 16. Scans are hashed with it before
+    /// matching. `null` / `nil` for a site with raw ids. A hashed site without it, or with
+    /// another salt, throws `SaltMismatch`. Keep it out of the site file's download and out of
+    /// logs.
     #[uniffi(default = None)]
     pub site_salt: Option<Vec<u8>>,
 }
