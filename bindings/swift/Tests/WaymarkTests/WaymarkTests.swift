@@ -257,6 +257,43 @@ final class WaymarkTests: XCTestCase {
         subscription.cancel()
     }
 
+    // Routes through the bindings (docs/routes.md): legs with turns, a tracker that notices a
+    // detour and reroutes, typed errors.
+    func testRoutes() throws {
+        let site = try Site.fromPath(path: Self.simDir.appendingPathComponent("site.json").path)
+        // From room 1's far corner to room 10, across the aisle.
+        let route = try site.route(from: FloorPoint(floor: 0, x: 4.9, y: 2), destination: .zone(name: "room 10"))
+        XCTAssertGreaterThanOrEqual(route.legs.count, 3)
+        XCTAssertEqual(route.lengthM, route.legs.reduce(0) { $0 + $1.distanceM }, accuracy: 1e-9)
+        XCTAssertGreaterThanOrEqual(route.lengthM, hypot(route.end.x - route.start.x, route.end.y - route.start.y))
+        XCTAssertNil(route.legs[0].turn)
+        XCTAssertTrue(route.legs.dropFirst().allSatisfy { $0.turn != nil })
+        XCTAssertEqual(route.legs.last?.points.last, route.end)
+
+        let tracker = try RouteTracker(
+            site: site, from: FloorPoint(floor: 0, x: 1.9, y: 9), destination: .zone(name: "stair hall"))
+        let planned = tracker.route()
+        let first = try tracker.updatePoint(point: planned.start, accuracyM: 2)
+        XCTAssertFalse(first.offRoute)
+        XCTAssertEqual(first.remainingM, planned.lengthM, accuracy: 1e-9)
+        // Deep in room 2, off the aisle: off the route; a reroute leads on from there.
+        XCTAssertTrue(try tracker.updatePoint(point: FloorPoint(floor: 0, x: 10, y: 3), accuracyM: 2).offRoute)
+        let again = try tracker.reroute()
+        XCTAssertEqual(again.end, planned.end)
+        XCTAssertTrue(try tracker.updatePoint(point: again.end, accuracyM: 1).arrived)
+
+        XCTAssertThrowsError(
+            try site.route(from: FloorPoint(floor: 0, x: 4.9, y: 2), destination: .zone(name: "kitchen"))
+        ) {
+            guard case RouteError.UnknownZone = $0 else { return XCTFail("expected UnknownZone, got \($0)") }
+        }
+        XCTAssertThrowsError(
+            try site.route(from: FloorPoint(floor: 7, x: 1, y: 1), destination: .point(point: FloorPoint(floor: 0, x: 4.9, y: 2)))
+        ) {
+            guard case RouteError.OffGraph = $0 else { return XCTFail("expected OffGraph, got \($0)") }
+        }
+    }
+
     // Habits: learned from the walk with position fixes and the user's feedback, exported,
     // imported into a second engine, refused with a typed error when they do not fit, cleared.
     func testHabitsLearnExportImport() throws {
