@@ -661,6 +661,53 @@ static void geofences_and_zone_events(const char *site_path) {
     waymark_engine_free(engine);
 }
 
+/* Routes (docs/routes.md) on the simulated office: room 1's far corner to room 10 as legs,
+ * a tracker that notices a detour and reroutes, typed errors, and the route outliving its
+ * engine. */
+static void routes(const char *site_path) {
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "site");
+    waymark_floor_point from = {0, 4.9, 2.0};
+    waymark_route *route = NULL;
+    CHECK(waymark_engine_route_to_zone(engine, &from, "room 10", &route) == WAYMARK_RESULT_OK && route, "route");
+    waymark_route_info info;
+    CHECK(waymark_route_get_info(route, &info) == WAYMARK_RESULT_OK && info.leg_count >= 3, "%zu legs",
+          info.leg_count);
+    double sum = 0;
+    for (size_t k = 0; k < info.leg_count; k++) {
+        waymark_route_leg leg;
+        CHECK(waymark_route_get_leg(route, k, &leg) == WAYMARK_RESULT_OK && leg.distance_m >= 0, "leg %zu", k);
+        sum += leg.distance_m;
+    }
+    CHECK(fabs(sum - info.length_m) < 1e-9, "legs sum to %g, route %g", sum, info.length_m);
+    CHECK(info.length_m >= hypot(info.end.x - info.start.x, info.end.y - info.start.y), "never under the line");
+    waymark_route_leg leg;
+    CHECK(waymark_route_get_leg(route, info.leg_count, &leg) == WAYMARK_RESULT_INPUT_REJECTED, "leg out of range");
+    waymark_route_progress progress;
+    CHECK(waymark_route_update(route, &info.start, 2.0, &progress) == WAYMARK_RESULT_OK && !progress.off_route &&
+              fabs(progress.remaining_m - info.length_m) < 1e-9,
+          "at the start: %g left", progress.remaining_m);
+    /* Deep in room 2, off the aisle. */
+    waymark_floor_point detour = {0, 10.0, 3.0};
+    CHECK(waymark_route_update(route, &detour, 2.0, &progress) == WAYMARK_RESULT_OK && progress.off_route,
+          "a detour is off the route");
+    CHECK(waymark_route_reroute(route, &detour) == WAYMARK_RESULT_OK, "reroute");
+    CHECK(waymark_route_update(route, &detour, 2.0, &progress) == WAYMARK_RESULT_OK && !progress.off_route,
+          "on the new route");
+    waymark_route *none = NULL;
+    CHECK(waymark_engine_route_to_zone(engine, &from, "kitchen", &none) == WAYMARK_RESULT_UNKNOWN_ZONE && !none,
+          "unknown zone");
+    waymark_floor_point upstairs = {7, 1.0, 1.0};
+    CHECK(waymark_engine_route_to_point(engine, &upstairs, &from, &none) == WAYMARK_RESULT_OFF_GRAPH && !none,
+          "no floor 7");
+    CHECK(waymark_engine_route_to_zone(engine, &from, NULL, &none) == WAYMARK_RESULT_NULL_PARAMETER, "NULL zone");
+    waymark_engine_free(engine);
+    /* The route keeps its own reference to the site. */
+    CHECK(waymark_route_get_info(route, &info) == WAYMARK_RESULT_OK, "after the engine is freed");
+    waymark_route_free(route);
+    waymark_route_free(NULL);
+}
+
 /* What the status callback heard. */
 typedef struct {
     int no_coverage, errors, other;
@@ -771,6 +818,7 @@ int main(int argc, char **argv) {
     geo_reference(argv[1]);
     zones_and_feedback(argv[1]);
     geofences_and_zone_events(argv[1]);
+    routes(argv[1]);
     walk(argv[1], argv[2], NULL, 0);
     habits(argv[1], argv[2]);
     walk(argv[5], argv[2], NULL, 0);
