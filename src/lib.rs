@@ -12,12 +12,14 @@ mod history;
 
 // The building blocks under the engine, public for Rust apps and for the tools that build site
 // files: the site model and its file formats, radio fingerprints, the motion pipeline, the HMM,
-// habit models, routes on the walkable graph, and the binding surface Kotlin, Swift and C see.
+// habit models, routes on the walkable graph, the survey recorder, and the binding surface
+// Kotlin, Swift and C see.
 pub mod ffi;
 pub mod geofence;
 pub mod habits;
 pub mod hmm;
 pub mod radio;
+pub mod recorder;
 pub mod route;
 pub mod sensors;
 pub mod site;
@@ -32,6 +34,7 @@ pub use fix::PositionFix;
 pub use geofence::{Geofence, GeofenceError, GeofenceShape};
 pub use history::{EpochInput, EpochRecord};
 pub use radio::{Reading, Salt, Scan, TransmitterId};
+pub use recorder::{RecorderError, RecorderOptions, RecordingStats, SurveyRecorder};
 pub use route::{Destination, FloorPoint, Progress, Route, RouteError, RouteTracker};
 pub use site::{Site, SiteError, Zone, ZoneKind};
 

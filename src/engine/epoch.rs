@@ -17,17 +17,7 @@ impl Engine {
     ) -> Result<Epoch, InputError> {
         self.check_time(scan.timestamp_ns)?;
         motion.map_or(Ok(()), check_motion)?;
-        if scan.readings.is_empty() {
-            return Err(InputError::EmptyScan);
-        }
-        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !plausible_rssi(r.rssi_dbm))
-        {
-            return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
-        }
-        if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| r.rssi_dbm > MAX_RSSI_DBM) {
-            let transmitter = r.transmitter.to_string();
-            return Err(InputError::RssiTooHigh { index, transmitter, rssi_dbm: r.rssi_dbm });
-        }
+        check_readings(scan)?;
         let max_age_ns = self.config.max_reading_age_ns;
         let resolved = match &mut self.id_hasher {
             Some(hasher) => self.site.radio().resolve(hasher.hash_scan(scan), max_age_ns),
@@ -236,6 +226,23 @@ impl Engine {
 /// scans on the map, so one scan in twenty on the map falls below it
 /// (docs/tuning.md#unsurveyed-states).
 const UNSURVEYED_AFTER_SCANS: u32 = 2;
+
+/// The checks a scan's readings pass before anything is done with them (an engine's epoch, a
+/// survey recording): at least one reading, every RSSI plausible and not above
+/// [`MAX_RSSI_DBM`].
+pub(crate) fn check_readings(scan: &Scan) -> Result<(), InputError> {
+    if scan.readings.is_empty() {
+        return Err(InputError::EmptyScan);
+    }
+    if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !plausible_rssi(r.rssi_dbm)) {
+        return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
+    }
+    if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| r.rssi_dbm > MAX_RSSI_DBM) {
+        let transmitter = r.transmitter.to_string();
+        return Err(InputError::RssiTooHigh { index, transmitter, rssi_dbm: r.rssi_dbm });
+    }
+    Ok(())
+}
 
 /// Whether an RSSI can be a measurement, as far as its lower end goes: finite and not below
 /// -1000 dBm (receivers report about -120 to +20). Below that it is a corrupt producer, as NaN

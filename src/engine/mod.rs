@@ -21,6 +21,7 @@ use crate::sensors::{MotionStats, MotionTracker};
 use crate::site::{ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
+pub(crate) use epoch::check_readings;
 pub use types::{EngineSnapshot, Epoch, InputStats, Position, ScanTiming, StatusEvent, TrackPoint};
 
 /// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and

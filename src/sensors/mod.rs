@@ -44,6 +44,18 @@ pub struct SensorSample {
     pub z: f64,
 }
 
+/// Largest magnitude a sensor value may have in any unit used here (m/s², rad/s, µT).
+const ABSURD: f64 = 1e6;
+
+impl SensorSample {
+    /// Whether every axis is finite and no larger than any sensor reports (1e6 in m/s², rad/s
+    /// or µT): what the motion tracker and the survey recorder take; other samples are dropped
+    /// and counted.
+    pub fn is_plausible(&self) -> bool {
+        [self.x, self.y, self.z].iter().all(|v| v.is_finite() && v.abs() <= ABSURD)
+    }
+}
+
 /// Whether the person is walking.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]

@@ -91,8 +91,6 @@ struct StepTag {
 const ACCEL: usize = 0;
 const GYRO: usize = 1;
 const MAG: usize = 2;
-/// Largest magnitude a sensor value may have in any unit used here (m/s², rad/s, µT).
-const ABSURD: f64 = 1e6;
 
 /// Turns raw accelerometer, gyroscope and magnetometer batches into one [`MotionUpdate`] per
 /// epoch. Streams arrive in separate batches in any interleaving; `update(until_ns)` processes
@@ -186,8 +184,7 @@ impl MotionTracker {
     fn push(&mut self, stream: usize, batch: &[SensorSample]) -> BatchReport {
         let mut report = BatchReport::default();
         for s in batch {
-            let sane = |v: f64| v.is_finite() && v.abs() <= ABSURD;
-            if !(sane(s.x) && sane(s.y) && sane(s.z)) {
+            if !s.is_plausible() {
                 report.non_finite += 1;
                 continue;
             }

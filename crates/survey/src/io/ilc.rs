@@ -13,10 +13,16 @@
 //!   be told apart by iBeacon identity, so they are identified by their MAC address.
 //! - Unknown line types, malformed numbers and non-finite values are skipped and counted in
 //!   [`ReadStats`], never fatal: a walk with one waypoint, or none, still reads.
+//!
+//! A walk the SDK's survey recorder wrote (`waymark::recorder`) says so in its header
+//! ([`RECORDER_HEADER`]): its times are ns rather than ms, and the WiFi and beacon lines at one
+//! time are one scan as the app pushed it, each reading with its own last-seen time, so nothing
+//! is folded or rounded.
 
 use std::collections::BTreeMap;
 use std::path::Path;
 use waymark::radio::{Reading, Scan, TransmitterId};
+use waymark::recorder::RECORDER_HEADER;
 use waymark::sensors::SensorSample;
 
 const NS_PER_MS: u64 = 1_000_000;
@@ -66,10 +72,13 @@ pub struct Trace {
     pub gyroscope: Vec<SensorSample>,
     /// µT, in time order.
     pub magnetometer: Vec<SensorSample>,
-    /// WiFi scans, in time order; readings carry their age.
+    /// WiFi scans, in time order; readings carry their age. In a recorder's walk
+    /// ([`Trace::grouped_scans`]), the scans as pushed, beacons included.
     pub wifi_scans: Vec<Scan>,
-    /// Beacon readings with the time each was heard, in time order.
+    /// Beacon readings with the time each was heard, in time order (none in a recorder's walk).
     pub beacons: Vec<(u64, Reading)>,
+    /// Written by the SDK's survey recorder: scans are whole as pushed, not folded.
+    pub grouped_scans: bool,
     /// What was skipped.
     pub stats: ReadStats,
 }
@@ -152,6 +161,9 @@ impl Trace {
         let mut trace = Trace { name: name.to_owned(), ..Trace::default() };
         let mut wifi: BTreeMap<u64, Vec<Reading>> = BTreeMap::new();
         let mut stats = ReadStats::default();
+        // ns per unit of the file's times: ms, or ns in a recorder's walk (its header comes
+        // before its data).
+        let mut unit_ns = NS_PER_MS;
         for line in text.lines() {
             let line = line.trim_end_matches('\r');
             if line.is_empty() {
@@ -159,6 +171,9 @@ impl Trace {
             }
             if let Some(header) = line.strip_prefix('#') {
                 trace.read_header(header);
+                if trace.grouped_scans {
+                    unit_ns = 1;
+                }
                 continue;
             }
             stats.lines += 1;
@@ -167,7 +182,7 @@ impl Trace {
                 stats.malformed += 1;
                 continue;
             };
-            let t = time_ms.saturating_mul(NS_PER_MS);
+            let t = time_ms.saturating_mul(unit_ns);
             let kind = fields.get(1).copied().unwrap_or("");
             let values = &fields[fields.len().min(2)..];
             let ok = match kind {
@@ -177,9 +192,12 @@ impl Trace {
                 "TYPE_GYROSCOPE" => push_sample(&mut trace.gyroscope, t, values),
                 "TYPE_MAGNETIC_FIELD" => push_sample(&mut trace.magnetometer, t, values),
                 "TYPE_WIFI" => {
-                    wifi_reading(t, values, &mut stats).map(|r| wifi.entry(t).or_default().push(r))
+                    wifi_reading(t, unit_ns, values, &mut stats).map(|r| wifi.entry(t).or_default().push(r))
                 }
-                "TYPE_BEACON" => beacon_reading(values).map(|r| trace.beacons.push((t, r))),
+                "TYPE_BEACON" if trace.grouped_scans => {
+                    beacon_reading(t, unit_ns, values).map(|r| wifi.entry(t).or_default().push(r))
+                }
+                "TYPE_BEACON" => beacon_reading(t, 0, values).map(|r| trace.beacons.push((t, r))),
                 _ => {
                     stats.ignored += 1;
                     Some(())
@@ -201,6 +219,9 @@ impl Trace {
     }
 
     fn read_header(&mut self, header: &str) {
+        if header.trim_start_matches('\t').starts_with(RECORDER_HEADER) {
+            self.grouped_scans = true;
+        }
         let mut brand = None;
         let mut model = None;
         for field in header.split('\t') {
@@ -266,17 +287,26 @@ impl Trace {
             (&self.gyroscope, Event::Gyroscope),
             (&self.magnetometer, Event::Magnetometer),
         ];
+        // A recorder's walk replays as the app pushed it: each stream's samples up to a scan
+        // before the scan. Elsewhere a batch may straddle a scan, as an app's would.
+        let scans = self.scans(options);
+        let scan_times: Vec<u64> =
+            if self.grouped_scans { scans.iter().map(|s| s.timestamp_ns).collect() } else { Vec::new() };
         for (samples, make) in streams {
             let mut start = 0;
             while start < samples.len() {
-                let end_ns = samples[start].timestamp_ns.saturating_add(options.batch_ns);
+                let mut end_ns = samples[start].timestamp_ns.saturating_add(options.batch_ns);
+                let next_scan = scan_times.partition_point(|&t| t < samples[start].timestamp_ns);
+                if let Some(&t) = scan_times.get(next_scan) {
+                    end_ns = end_ns.min(t.saturating_add(1));
+                }
                 // At least one sample per batch: with `batch_ns` 0 none is before `end_ns`.
                 let end = start + samples[start..].partition_point(|s| s.timestamp_ns < end_ns).max(1);
                 events.push(make(samples[start..end].to_vec()));
                 start = end;
             }
         }
-        events.extend(self.scans(options).into_iter().map(Event::Scan));
+        events.extend(scans.into_iter().map(Event::Scan));
         // Stable: at equal times sensors (pushed first) precede the scan.
         events.sort_by_key(Event::timestamp_ns);
         events
@@ -285,6 +315,9 @@ impl Trace {
     /// The radio epochs: WiFi scans with the beacons heard since the previous one, and
     /// beacon-only scans where no WiFi scan followed within the wait.
     pub fn scans(&self, options: &EventOptions) -> Vec<Scan> {
+        if self.grouped_scans {
+            return self.grouped(options);
+        }
         let wifi: &[Scan] = if options.wifi { &self.wifi_scans } else { &[] };
         let beacons: &[(u64, Reading)] = if options.beacons { &self.beacons } else { &[] };
         let mut out = Vec::with_capacity(wifi.len());
@@ -332,6 +365,24 @@ impl Trace {
     }
 }
 
+impl Trace {
+    /// A recorder's scans as pushed, less the kinds of reading `options` leaves out.
+    fn grouped(&self, options: &EventOptions) -> Vec<Scan> {
+        let keep = |r: &Reading| match r.transmitter {
+            TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. } => options.wifi,
+            _ => options.beacons,
+        };
+        self.wifi_scans
+            .iter()
+            .map(|s| Scan {
+                timestamp_ns: s.timestamp_ns,
+                readings: s.readings.iter().filter(|r| keep(r)).cloned().collect(),
+            })
+            .filter(|s| !s.readings.is_empty())
+            .collect()
+    }
+}
+
 /// Sorts `items` by `key` (stably) and returns how many were out of order.
 fn sort_by_time<T>(items: &mut [T], key: impl Fn(&T) -> u64) -> usize {
     let out_of_order = items.windows(2).filter(|w| key(&w[1]) < key(&w[0])).count();
@@ -356,8 +407,9 @@ fn push_sample(stream: &mut Vec<SensorSample>, timestamp_ns: u64, values: &[&str
     Some(())
 }
 
-/// `ssid bssid rssi frequency last_seen_ms`; the SSID may be empty or contain anything.
-fn wifi_reading(timestamp_ns: u64, values: &[&str], stats: &mut ReadStats) -> Option<Reading> {
+/// `ssid bssid rssi frequency last_seen`; the SSID may be empty or contain anything. Times are
+/// in units of `unit_ns`.
+fn wifi_reading(timestamp_ns: u64, unit_ns: u64, values: &[&str], stats: &mut ReadStats) -> Option<Reading> {
     // Count from the end: an SSID could in principle contain a tab.
     let n = values.len();
     if n < 4 {
@@ -371,7 +423,7 @@ fn wifi_reading(timestamp_ns: u64, values: &[&str], stats: &mut ReadStats) -> Op
     let transmitter = TransmitterId::wifi(bssid).ok()?;
     let rssi_dbm = rssi.trim().parse::<f64>().ok().filter(|r| r.is_finite())?;
     let age_ns = match last_seen.and_then(|s| s.trim().parse::<u64>().ok()) {
-        Some(ms) => timestamp_ns.saturating_sub(ms.saturating_mul(NS_PER_MS)),
+        Some(seen) => timestamp_ns.saturating_sub(seen.saturating_mul(unit_ns)),
         None => 0,
     };
     if age_ns > 2_000 * NS_PER_MS {
@@ -380,18 +432,26 @@ fn wifi_reading(timestamp_ns: u64, values: &[&str], stats: &mut ReadStats) -> Op
     Some(Reading { transmitter, rssi_dbm, age_ns })
 }
 
-/// `uuid major minor tx_power rssi distance mac [timestamp]`.
-fn beacon_reading(values: &[&str]) -> Option<Reading> {
+/// `uuid major minor tx_power rssi distance mac [last_seen]`. A beacon at major = minor = 0 is
+/// known by its address, or by its UUID when it has none. With `unit_ns` > 0 (a recorder's
+/// walk) the age is the line's time less the last-seen time; otherwise 0 (the line's time is
+/// when the beacon was heard).
+fn beacon_reading(timestamp_ns: u64, unit_ns: u64, values: &[&str]) -> Option<Reading> {
     let uuid = values.first()?;
     let major = values.get(1)?.trim().parse::<u16>().ok()?;
     let minor = values.get(2)?.trim().parse::<u16>().ok()?;
     let rssi_dbm = values.get(4)?.trim().parse::<f64>().ok().filter(|r| r.is_finite())?;
-    let transmitter = if major == 0 && minor == 0 {
-        TransmitterId::ble_address(values.get(6)?).ok()?
+    let mac = values.get(6).map(|m| m.trim()).unwrap_or("");
+    let transmitter = if major == 0 && minor == 0 && !(mac.is_empty() && unit_ns > 0) {
+        TransmitterId::ble_address(mac).ok()?
     } else {
         TransmitterId::ble(uuid, major, minor).ok()?
     };
-    Some(Reading { transmitter, rssi_dbm, age_ns: 0 })
+    let age_ns = match values.get(7).and_then(|s| s.trim().parse::<u64>().ok()) {
+        Some(seen) if unit_ns > 0 => timestamp_ns.saturating_sub(seen.saturating_mul(unit_ns)),
+        _ => 0,
+    };
+    Some(Reading { transmitter, rssi_dbm, age_ns })
 }
 
 #[cfg(test)]
