@@ -4,6 +4,7 @@
  * with its transmitter ids hashed, with the salt; without it or with another one the engine
  * refuses to start. Habits are learned from the walk, exported, imported into another engine,
  * refused when they do not fit, and cleared. Run under valgrind by test.sh. */
+#define _DEFAULT_SOURCE /* mkdtemp */
 #include <math.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -804,6 +805,72 @@ static void options_status_and_stats(const char *site_path) {
     CHECK(waymark_set_log_callback(WAYMARK_LOG_LEVEL_WARN, NULL, NULL) == WAYMARK_RESULT_OK, "log hook off");
 }
 
+/* The survey recorder: a short walk on two floors written as walk files, bad input refused
+ * with the right codes, the files' paths, and nothing written without a waypoint. */
+static void survey_recorder(void) {
+    char dir[] = "/tmp/waymark-recorder-XXXXXX";
+    CHECK(mkdtemp(dir) != NULL, "mkdtemp");
+    waymark_recorder *rec = NULL;
+    CHECK(waymark_recorder_new(dir, "bad/name", NULL, NULL, &rec) == WAYMARK_RESULT_INPUT_REJECTED && rec == NULL,
+          "a walk name that is not a file name");
+    CHECK(waymark_recorder_new(NULL, "walk", NULL, NULL, &rec) == WAYMARK_RESULT_NULL_PARAMETER, "NULL directory");
+    CHECK(waymark_recorder_new(dir, "walk", "office", "Test Phone", &rec) == WAYMARK_RESULT_OK && rec, "new");
+    waymark_sample accel[3] = {{1000, 0.1, 0.2, 9.8}, {2000, NAN, 0.0, 9.8}, {3000, 0.1, 0.2, 9.7}};
+    size_t accepted = 0;
+    CHECK(waymark_recorder_push_accelerometer(rec, accel, 3, &accepted) == WAYMARK_RESULT_OK && accepted == 2,
+          "NaN dropped: %zu", accepted);
+    waymark_wifi_reading ap = {"aa:bb:cc:dd:ee:01", -61.5, 250};
+    waymark_beacon_reading beacon = {"fda50693-a4e2-4fb1-afcf-c6eb07647825", 7, 9, -80.0, 0, NULL};
+    CHECK(waymark_recorder_push_scan(rec, 5000000000ull, &ap, 1, &beacon, 1) == WAYMARK_RESULT_OK, "scan");
+    CHECK(waymark_recorder_push_scan(rec, 5000000000ull, &ap, 1, NULL, 0) == WAYMARK_RESULT_INPUT_REJECTED, "duplicate scan");
+    CHECK(waymark_recorder_push_scan(rec, 5100000000ull, NULL, 0, NULL, 0) == WAYMARK_RESULT_INPUT_REJECTED, "empty scan");
+    CHECK(waymark_recorder_mark_waypoint(rec, 6000000000ull, NAN, 1.0, "F1") == WAYMARK_RESULT_INPUT_REJECTED, "NaN waypoint");
+    CHECK(waymark_recorder_mark_waypoint(rec, 6000000000ull, 1.0, 2.0, "../F1") == WAYMARK_RESULT_INPUT_REJECTED, "bad floor");
+    CHECK(waymark_recorder_mark_waypoint(rec, 6000000000ull, 1.0, 2.0, "F1") == WAYMARK_RESULT_OK, "waypoint F1");
+    CHECK(waymark_recorder_mark_waypoint(rec, 9000000000ull, 3.0, 2.0, "F2") == WAYMARK_RESULT_OK, "waypoint F2");
+    waymark_recording_summary summary;
+    CHECK(waymark_recorder_finish(rec, &summary) == WAYMARK_RESULT_OK, "finish");
+    CHECK(summary.samples == 2 && summary.samples_dropped == 1 && summary.scans == 1 && summary.scans_rejected == 2 &&
+              summary.waypoints == 2 && summary.files == 2,
+          "summary %llu %llu %llu %llu %llu %llu", (unsigned long long)summary.samples,
+          (unsigned long long)summary.samples_dropped, (unsigned long long)summary.scans,
+          (unsigned long long)summary.scans_rejected, (unsigned long long)summary.waypoints,
+          (unsigned long long)summary.files);
+    CHECK(waymark_recorder_push_accelerometer(rec, accel, 1, NULL) == WAYMARK_RESULT_FINISHED, "after finish");
+    size_t len = 0;
+    char small[4];
+    CHECK(waymark_recorder_file_path(rec, 0, small, sizeof small, &len) == WAYMARK_RESULT_BUFFER_TOO_SMALL &&
+              small[0] == 0 && len > 4,
+          "small buffer");
+    char path[512];
+    CHECK(waymark_recorder_file_path(rec, 0, path, sizeof path, &len) == WAYMARK_RESULT_OK && strlen(path) == len,
+          "path");
+    CHECK(strstr(path, "/F1/path_data_files/walk-1.txt") != NULL, "first file %s", path);
+    CHECK(waymark_recorder_file_path(rec, 2, path, sizeof path, NULL) == WAYMARK_RESULT_INPUT_REJECTED, "no third file");
+    CHECK(waymark_recorder_file_path(rec, 0, path, sizeof path, NULL) == WAYMARK_RESULT_OK, "path again");
+    size_t n = 0;
+    char *text = read_file(path, &n);
+    CHECK(text != NULL, "read %s", path);
+    if (text) {
+        CHECK(strstr(text, "Recorder:waymark\tTimeUnit:ns") != NULL, "the recorder's header");
+        CHECK(strstr(text, "3000\tTYPE_ACCELEROMETER\t0.1\t0.2\t9.7\n") != NULL, "a sample line");
+        CHECK(strstr(text, "5000000000\tTYPE_WIFI\t\taa:bb:cc:dd:ee:01\t-61.5\t0\t4750000000\n") != NULL,
+              "a WiFi line, last seen 250 ms before its scan");
+        CHECK(strstr(text, "5000000000\tTYPE_BEACON\tfda50693-a4e2-4fb1-afcf-c6eb07647825\t7\t9\t0\t-80\t0\t\t5000000000\n") != NULL,
+              "a beacon line");
+        CHECK(strstr(text, "6000000000\tTYPE_WAYPOINT\t1\t2\n") != NULL, "the waypoint");
+        free(text);
+    }
+    waymark_recorder_free(rec);
+    waymark_recorder_free(NULL);
+
+    waymark_recorder *empty = NULL;
+    CHECK(waymark_recorder_new(dir, "empty", NULL, NULL, &empty) == WAYMARK_RESULT_OK, "new");
+    CHECK(waymark_recorder_push_gyroscope(empty, accel, 1, NULL) == WAYMARK_RESULT_OK, "gyro");
+    CHECK(waymark_recorder_finish(empty, NULL) == WAYMARK_RESULT_NO_WAYPOINTS, "no waypoint, no file");
+    waymark_recorder_free(empty);
+}
+
 int main(int argc, char **argv) {
     if (argc != 6) {
         fprintf(stderr, "usage: %s site.json walk.txt site-hashed.json salt.hex site.wmsite\n", argv[0]);
@@ -819,6 +886,7 @@ int main(int argc, char **argv) {
     zones_and_feedback(argv[1]);
     geofences_and_zone_events(argv[1]);
     routes(argv[1]);
+    survey_recorder();
     walk(argv[1], argv[2], NULL, 0);
     habits(argv[1], argv[2]);
     walk(argv[5], argv[2], NULL, 0);

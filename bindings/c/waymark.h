@@ -93,6 +93,20 @@ enum waymark_result
    */
   WAYMARK_RESULT_UNREACHABLE = 12,
   /**
+   * A survey recorder could not create or write a walk file, or the file exists already (a
+   * recording never overwrites one); `waymark_last_error` names it.
+   */
+  WAYMARK_RESULT_IO = 13,
+  /**
+   * `waymark_recorder_finish` before any waypoint: nothing had a position, no file was
+   * written.
+   */
+  WAYMARK_RESULT_NO_WAYPOINTS = 14,
+  /**
+   * The recording was finished.
+   */
+  WAYMARK_RESULT_FINISHED = 15,
+  /**
    * Waymark panicked, or refused its own data (a bug). An epoch (a scan, an advance, a fix,
    * feedback) or a read that panicked had no effect: the engine is as it was before the
    * call, no callback hears of it, and it stays usable. Any other call that panicked may
@@ -294,6 +308,13 @@ typedef uint32_t waymark_log_level;
  * `waymark_engine_free`. Thread-safe: any thread may call any function on it.
  */
 typedef struct waymark_engine waymark_engine;
+
+/**
+ * A survey walk being recorded. Opaque; create with `waymark_recorder_new`, free with
+ * `waymark_recorder_free` (after `waymark_recorder_finish`, or the last file has no end
+ * line). Thread-safe.
+ */
+typedef struct waymark_recorder waymark_recorder;
 
 /**
  * A route and its progress. Opaque; create with `waymark_engine_route_to_point` or
@@ -729,6 +750,37 @@ typedef void (*waymark_log_callback)(void *userdata,
                                      uint32_t level,
                                      const char *target,
                                      const char *message);
+
+/**
+ * What a recording took and dropped (`waymark_recorder_get_summary`, `_finish`).
+ */
+typedef struct {
+  /**
+   * Sensor samples written.
+   */
+  uint64_t samples;
+  /**
+   * Samples dropped for a NaN, infinite or absurd value, or a time not after their
+   * stream's previous sample.
+   */
+  uint64_t samples_dropped;
+  /**
+   * Scans written.
+   */
+  uint64_t scans;
+  /**
+   * Scans rejected (each call returned `INPUT_REJECTED`).
+   */
+  uint64_t scans_rejected;
+  /**
+   * Waypoints written.
+   */
+  uint64_t waypoints;
+  /**
+   * Walk files begun: `DIR/FLOOR/path_data_files/WALK-K.txt`, K from 1.
+   */
+  uint64_t files;
+} waymark_recording_summary;
 
 /**
  * A point of the site: a floor index and a position in the site's metric frame, m.
@@ -1171,6 +1223,98 @@ waymark_result waymark_engine_fix_error(const waymark_engine *engine, waymark_fi
 waymark_result waymark_set_log_callback(uint32_t level,
                                         waymark_log_callback callback,
                                         void *userdata);
+
+/**
+ * Begins a recording into the folder `directory` (created if missing); nothing is written
+ * before the first waypoint. `walk_name` names its files (letters, digits, `-`, `_`, `.`,
+ * spaces); `site_id` and `device` (may be NULL) go into their headers. On success `*out`
+ * holds the recorder. Fails with `INPUT_REJECTED` for a name that cannot be used.
+ */
+waymark_result waymark_recorder_new(const char *directory,
+                                    const char *walk_name,
+                                    const char *site_id,
+                                    const char *device,
+                                    waymark_recorder **out);
+
+/**
+ * Frees a recorder, closing its file (without its end line if `_finish` was not called). NULL
+ * is ignored.
+ */
+void waymark_recorder_free(waymark_recorder *recorder);
+
+/**
+ * Accelerometer samples, oldest first; as `waymark_engine_push_accelerometer` (bad samples
+ * dropped and counted; `*accepted`, may be NULL, receives how many were written).
+ */
+waymark_result waymark_recorder_push_accelerometer(const waymark_recorder *recorder,
+                                                   const waymark_sample *samples,
+                                                   size_t count,
+                                                   size_t *accepted);
+
+/**
+ * Gyroscope samples; as `waymark_recorder_push_accelerometer`.
+ */
+waymark_result waymark_recorder_push_gyroscope(const waymark_recorder *recorder,
+                                               const waymark_sample *samples,
+                                               size_t count,
+                                               size_t *accepted);
+
+/**
+ * Magnetometer samples; as `waymark_recorder_push_accelerometer`.
+ */
+waymark_result waymark_recorder_push_magnetometer(const waymark_recorder *recorder,
+                                                  const waymark_sample *samples,
+                                                  size_t count,
+                                                  size_t *accepted);
+
+/**
+ * A scan, as `waymark_engine_push_scan` takes it. Returns `INPUT_REJECTED` (and counts it)
+ * where an engine would reject it, but for unknown transmitters: a survey records them all.
+ */
+waymark_result waymark_recorder_push_scan(const waymark_recorder *recorder,
+                                          uint64_t timestamp_ns,
+                                          const waymark_wifi_reading *wifi,
+                                          size_t wifi_count,
+                                          const waymark_beacon_reading *beacons,
+                                          size_t beacon_count);
+
+/**
+ * The surveyor stands at (`x`, `y`) m on the plan of the floor named `floor` ("F1", "B1": its
+ * folder's name). A waypoint on another floor than the previous one begins that floor's
+ * file. `INPUT_REJECTED` for a NaN or infinite coordinate, a time before the previous
+ * waypoint's or a floor name that cannot name a folder; `IO` if the file cannot be created.
+ */
+waymark_result waymark_recorder_mark_waypoint(const waymark_recorder *recorder,
+                                              uint64_t timestamp_ns,
+                                              double x,
+                                              double y,
+                                              const char *floor);
+
+/**
+ * What was taken and dropped so far, into `*out`.
+ */
+waymark_result waymark_recorder_get_summary(const waymark_recorder *recorder,
+                                            waymark_recording_summary *out);
+
+/**
+ * Closes the files; `*out` (may be NULL) receives what was recorded. `NO_WAYPOINTS` when no
+ * waypoint was marked (nothing was written); later calls return `FINISHED`.
+ */
+waymark_result waymark_recorder_finish(const waymark_recorder *recorder,
+                                       waymark_recording_summary *out);
+
+/**
+ * The path of walk file `index` (0 for the first) into `buf` of `len` bytes, NUL-terminated,
+ * and its length in bytes without the NUL into `*path_len` (may be NULL). Never truncated:
+ * when it does not fit, `buf` receives an empty string (when `len` > 0) and the call returns
+ * `BUFFER_TOO_SMALL`; `buf` may be NULL with `len` 0 to ask the length. `INPUT_REJECTED` for
+ * an index past the files begun (`waymark_recording_summary.files`).
+ */
+waymark_result waymark_recorder_file_path(const waymark_recorder *recorder,
+                                          size_t index,
+                                          char *buf,
+                                          size_t len,
+                                          size_t *path_len);
 
 /**
  * The shortest walkable route on the engine's site from `from` (NULL: the engine's latest

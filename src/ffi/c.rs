@@ -14,9 +14,11 @@ mod create;
 mod geofence;
 mod habits;
 mod log_hook;
+mod recorder;
 mod route;
 mod types;
 
+pub use recorder::*;
 pub use route::*;
 pub use types::*;
 

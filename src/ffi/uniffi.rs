@@ -4,19 +4,20 @@
 //! for apps (CHANGELOG, "Breaking changes").
 
 mod geofence;
+mod recorder;
 mod records;
 mod route;
 
 pub use super::error::{ErrorCode, ErrorReport, PositioningError};
 pub use super::handle::{FAULT_INJECTION_HABITS_JSON, FAULT_INJECTION_TIMESTAMP_NS};
 pub use geofence::{Geofence, GeofenceShape, SitePoint};
+pub use recorder::*;
 pub use records::*;
 pub use route::*;
 
 use super::delivery::lock;
 use super::handle::{Event, Handle, Listeners};
 use crate::engine;
-use crate::radio::{Reading, Scan, TransmitterId};
 use crate::site::Site as CoreSite;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex, Weak};
@@ -232,25 +233,7 @@ impl PositioningEngine {
     /// first. Returns the new position; a rejected scan throws `InputRejected` and changes
     /// nothing.
     pub fn push_scan(&self, scan: RadioScan) -> Result<PositionEstimate, PositioningError> {
-        let mut readings = Vec::with_capacity(scan.wifi.len() + scan.beacons.len());
-        for w in &scan.wifi {
-            let transmitter = TransmitterId::wifi(&w.bssid).map_err(|reason| self.reject(reason))?;
-            readings.push(Reading {
-                transmitter,
-                rssi_dbm: w.rssi_dbm,
-                age_ns: w.age_ms.saturating_mul(1_000_000),
-            });
-        }
-        for b in &scan.beacons {
-            let transmitter = super::beacon_id(&b.uuid, b.major, b.minor, b.address.as_deref())
-                .map_err(|reason| self.reject(reason))?;
-            readings.push(Reading {
-                transmitter,
-                rssi_dbm: b.rssi_dbm,
-                age_ns: b.age_ms.saturating_mul(1_000_000),
-            });
-        }
-        let core = Scan { timestamp_ns: scan.timestamp_ns, readings };
+        let core = scan.to_core().map_err(|reason| self.reject(reason))?;
         let position = self.handle.push_scan(&core)?;
         Ok(estimate(&position, self.handle.site()))
     }

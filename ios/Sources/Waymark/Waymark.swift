@@ -2406,6 +2406,265 @@ public func FfiConverterTypeSubscription_lower(_ value: Subscription) -> UInt64 
 
 
 
+
+
+/**
+ * Records a survey walk: push the same sensor batches and scans as to a `PositioningEngine`,
+ * and `markWaypoint` where the surveyor stands; `finish` closes the files, which
+ * `waymark survey` turns into a site file (docs/surveying.md). Thread-safe.
+ */
+public protocol SurveyRecorderProtocol: AnyObject, Sendable {
+    
+    /**
+     * Closes the files and returns what was recorded; later calls throw `Finished`.
+     */
+    func finish() throws  -> SurveySummary
+    
+    /**
+     * The surveyor stands at (`x`, `y`) m on the plan of `floor` (the floor's name, as its
+     * folder is named: "F1", "B1"). A waypoint on another floor begins that floor's file.
+     */
+    func markWaypoint(timestampNs: UInt64, x: Double, y: Double, floor: String) throws 
+    
+    /**
+     * Accelerometer samples, oldest first; returns how many were taken (the others are
+     * dropped and counted, as an engine drops them).
+     */
+    func pushAccelerometer(batch: [MotionSample]) throws  -> UInt32
+    
+    /**
+     * Gyroscope samples; as `pushAccelerometer`.
+     */
+    func pushGyroscope(batch: [MotionSample]) throws  -> UInt32
+    
+    /**
+     * Magnetometer samples; as `pushAccelerometer`.
+     */
+    func pushMagnetometer(batch: [MotionSample]) throws  -> UInt32
+    
+    /**
+     * A WiFi / BLE scan. Throws `InputRejected` (and counts it) where an engine would.
+     */
+    func pushScan(scan: RadioScan) throws 
+    
+    /**
+     * What was taken and dropped so far.
+     */
+    func summary() throws  -> SurveySummary
+    
+}
+/**
+ * Records a survey walk: push the same sensor batches and scans as to a `PositioningEngine`,
+ * and `markWaypoint` where the surveyor stands; `finish` closes the files, which
+ * `waymark survey` turns into a site file (docs/surveying.md). Thread-safe.
+ */
+open class SurveyRecorder: SurveyRecorderProtocol, @unchecked Sendable {
+    fileprivate let handle: UInt64
+
+    /// Used to instantiate a [FFIObject] without an actual handle, for fakes in tests, mostly.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public struct NoHandle {
+        public init() {}
+    }
+
+    // TODO: We'd like this to be `private` but for Swifty reasons,
+    // we can't implement `FfiConverter` without making this `required` and we can't
+    // make it `required` without making it `public`.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    required public init(unsafeFromHandle handle: UInt64) {
+        self.handle = handle
+    }
+
+    // This constructor can be used to instantiate a fake object.
+    // - Parameter noHandle: Placeholder value so we can have a constructor separate from the default empty one that may be implemented for classes extending [FFIObject].
+    //
+    // - Warning:
+    //     Any object instantiated with this constructor cannot be passed to an actual Rust-backed object. Since there isn't a backing handle the FFI lower functions will crash.
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public init(noHandle: NoHandle) {
+        self.handle = 0
+    }
+
+#if swift(>=5.8)
+    @_documentation(visibility: private)
+#endif
+    public func uniffiCloneHandle() -> UInt64 {
+        return try! rustCall { uniffi_waymark_fn_clone_surveyrecorder(self.handle, $0) }
+    }
+    /**
+     * A recording into `directory` (created if missing); nothing is written before the first
+     * waypoint. Throws `InputRejected` for a walk name or site id that cannot be used.
+     */
+public convenience init(directory: String, options: SurveyOptions)throws  {
+    let handle =
+        try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_constructor_surveyrecorder_new(
+        FfiConverterString.lower(directory),
+        FfiConverterTypeSurveyOptions_lower(options),uniffiCallStatus
+    )
+}
+    self.init(unsafeFromHandle: handle)
+}
+
+    deinit {
+        if handle == 0 {
+            // Mock objects have handle=0 don't try to free them
+            return
+        }
+
+        try! rustCall { uniffi_waymark_fn_free_surveyrecorder(handle, $0) }
+    }
+
+    
+
+    
+    /**
+     * Closes the files and returns what was recorded; later calls throw `Finished`.
+     */
+open func finish()throws  -> SurveySummary  {
+    return try  FfiConverterTypeSurveySummary_lift(try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_surveyrecorder_finish(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The surveyor stands at (`x`, `y`) m on the plan of `floor` (the floor's name, as its
+     * folder is named: "F1", "B1"). A waypoint on another floor begins that floor's file.
+     */
+open func markWaypoint(timestampNs: UInt64, x: Double, y: Double, floor: String)throws   {try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_surveyrecorder_mark_waypoint(
+            self.uniffiCloneHandle(),
+        FfiConverterUInt64.lower(timestampNs),
+        FfiConverterDouble.lower(x),
+        FfiConverterDouble.lower(y),
+        FfiConverterString.lower(floor),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * Accelerometer samples, oldest first; returns how many were taken (the others are
+     * dropped and counted, as an engine drops them).
+     */
+open func pushAccelerometer(batch: [MotionSample])throws  -> UInt32  {
+    return try  FfiConverterUInt32.lift(try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_surveyrecorder_push_accelerometer(
+            self.uniffiCloneHandle(),
+        FfiConverterSequenceTypeMotionSample.lower(batch),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Gyroscope samples; as `pushAccelerometer`.
+     */
+open func pushGyroscope(batch: [MotionSample])throws  -> UInt32  {
+    return try  FfiConverterUInt32.lift(try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_surveyrecorder_push_gyroscope(
+            self.uniffiCloneHandle(),
+        FfiConverterSequenceTypeMotionSample.lower(batch),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Magnetometer samples; as `pushAccelerometer`.
+     */
+open func pushMagnetometer(batch: [MotionSample])throws  -> UInt32  {
+    return try  FfiConverterUInt32.lift(try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_surveyrecorder_push_magnetometer(
+            self.uniffiCloneHandle(),
+        FfiConverterSequenceTypeMotionSample.lower(batch),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * A WiFi / BLE scan. Throws `InputRejected` (and counts it) where an engine would.
+     */
+open func pushScan(scan: RadioScan)throws   {try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_surveyrecorder_push_scan(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeRadioScan_lower(scan),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * What was taken and dropped so far.
+     */
+open func summary()throws  -> SurveySummary  {
+    return try  FfiConverterTypeSurveySummary_lift(try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_surveyrecorder_summary(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+
+    
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSurveyRecorder: FfiConverter {
+    typealias FfiType = UInt64
+    typealias SwiftType = SurveyRecorder
+
+    public static func lift(_ handle: UInt64) throws -> SurveyRecorder {
+        return SurveyRecorder(unsafeFromHandle: handle)
+    }
+
+    public static func lower(_ value: SurveyRecorder) -> UInt64 {
+        return value.uniffiCloneHandle()
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SurveyRecorder {
+        let handle: UInt64 = try readInt(&buf)
+        return try lift(handle)
+    }
+
+    public static func write(_ value: SurveyRecorder, into buf: inout [UInt8]) {
+        writeInt(&buf, lower(value))
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSurveyRecorder_lift(_ handle: UInt64) throws -> SurveyRecorder {
+    return try FfiConverterTypeSurveyRecorder.lift(handle)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSurveyRecorder_lower(_ value: SurveyRecorder) -> UInt64 {
+    return FfiConverterTypeSurveyRecorder.lower(value)
+}
+
+
+
+
 /**
  * A BLE beacon heard in a scan: an iBeacon by its UUID, major and minor, or any beacon
  * (Eddystone, an iBeacon left at major = minor = 0) by its advertiser address.
@@ -4253,6 +4512,198 @@ public func FfiConverterTypeSitePoint_lower(_ value: SitePoint) -> RustBuffer {
 
 
 /**
+ * Who and what is being recorded; written into every walk file's header.
+ */
+public struct SurveyOptions: Equatable, Hashable {
+    /**
+     * The walk's name: its files are `WALK-1.txt`, `WALK-2.txt`, ... (one per floor walked).
+     * Letters, digits, `-`, `_`, `.` and spaces.
+     */
+    public var walkName: String
+    /**
+     * The site's id, for the header; may be empty.
+     */
+    public var siteId: String
+    /**
+     * The phone, e.g. "Google Pixel 8", for the header; may be empty.
+     */
+    public var device: String
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The walk's name: its files are `WALK-1.txt`, `WALK-2.txt`, ... (one per floor walked).
+         * Letters, digits, `-`, `_`, `.` and spaces.
+         */walkName: String, 
+        /**
+         * The site's id, for the header; may be empty.
+         */siteId: String = "", 
+        /**
+         * The phone, e.g. "Google Pixel 8", for the header; may be empty.
+         */device: String = "") {
+        self.walkName = walkName
+        self.siteId = siteId
+        self.device = device
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension SurveyOptions: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSurveyOptions: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SurveyOptions {
+        return
+            try SurveyOptions(
+                walkName: FfiConverterString.read(from: &buf), 
+                siteId: FfiConverterString.read(from: &buf), 
+                device: FfiConverterString.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: SurveyOptions, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.walkName, into: &buf)
+        FfiConverterString.write(value.siteId, into: &buf)
+        FfiConverterString.write(value.device, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSurveyOptions_lift(_ buf: RustBuffer) throws -> SurveyOptions {
+    return try FfiConverterTypeSurveyOptions.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSurveyOptions_lower(_ value: SurveyOptions) -> RustBuffer {
+    return FfiConverterTypeSurveyOptions.lower(value)
+}
+
+
+/**
+ * What a recording took and dropped, and the files it wrote.
+ */
+public struct SurveySummary: Equatable, Hashable {
+    /**
+     * Sensor samples written.
+     */
+    public var samples: UInt64
+    /**
+     * Samples dropped for a NaN, infinite or absurd value, or a time not after their
+     * stream's previous sample.
+     */
+    public var samplesDropped: UInt64
+    /**
+     * Scans written.
+     */
+    public var scans: UInt64
+    /**
+     * Scans rejected (each call threw `InputRejected`).
+     */
+    public var scansRejected: UInt64
+    /**
+     * Waypoints written.
+     */
+    public var waypoints: UInt64
+    /**
+     * The walk files, in order: `DIR/FLOOR/path_data_files/WALK-K.txt`.
+     */
+    public var files: [String]
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Sensor samples written.
+         */samples: UInt64, 
+        /**
+         * Samples dropped for a NaN, infinite or absurd value, or a time not after their
+         * stream's previous sample.
+         */samplesDropped: UInt64, 
+        /**
+         * Scans written.
+         */scans: UInt64, 
+        /**
+         * Scans rejected (each call threw `InputRejected`).
+         */scansRejected: UInt64, 
+        /**
+         * Waypoints written.
+         */waypoints: UInt64, 
+        /**
+         * The walk files, in order: `DIR/FLOOR/path_data_files/WALK-K.txt`.
+         */files: [String]) {
+        self.samples = samples
+        self.samplesDropped = samplesDropped
+        self.scans = scans
+        self.scansRejected = scansRejected
+        self.waypoints = waypoints
+        self.files = files
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension SurveySummary: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSurveySummary: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SurveySummary {
+        return
+            try SurveySummary(
+                samples: FfiConverterUInt64.read(from: &buf), 
+                samplesDropped: FfiConverterUInt64.read(from: &buf), 
+                scans: FfiConverterUInt64.read(from: &buf), 
+                scansRejected: FfiConverterUInt64.read(from: &buf), 
+                waypoints: FfiConverterUInt64.read(from: &buf), 
+                files: FfiConverterSequenceString.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: SurveySummary, into buf: inout [UInt8]) {
+        FfiConverterUInt64.write(value.samples, into: &buf)
+        FfiConverterUInt64.write(value.samplesDropped, into: &buf)
+        FfiConverterUInt64.write(value.scans, into: &buf)
+        FfiConverterUInt64.write(value.scansRejected, into: &buf)
+        FfiConverterUInt64.write(value.waypoints, into: &buf)
+        FfiConverterSequenceString.write(value.files, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSurveySummary_lift(_ buf: RustBuffer) throws -> SurveySummary {
+    return try FfiConverterTypeSurveySummary.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSurveySummary_lower(_ value: SurveySummary) -> RustBuffer {
+    return FfiConverterTypeSurveySummary.lower(value)
+}
+
+
+/**
  * One point of the smoothed track.
  */
 public struct TrackPoint: Equatable, Hashable {
@@ -5627,6 +6078,145 @@ public func FfiConverterTypeStatusUpdate_lower(_ value: StatusUpdate) -> RustBuf
 
 
 /**
+ * Why a recorder call failed. The recording goes on after any of them but `Io` on a full or
+ * missing disk.
+ */
+public 
+enum SurveyError: Swift.Error, Equatable, Hashable, Foundation.LocalizedError {
+
+    
+    
+    /**
+     * A walk file could not be created or written, or exists already (a recording never
+     * overwrites one).
+     */
+    case Io(
+        /**
+         * Which file and why.
+         */reason: String
+    )
+    /**
+     * A scan or waypoint was refused, as an engine refuses input (a time running backwards,
+     * an empty scan, an implausible RSSI, a malformed transmitter id, a NaN coordinate), or a
+     * walk name, floor name or site id cannot be used.
+     */
+    case InputRejected(
+        /**
+         * Why.
+         */reason: String
+    )
+    /**
+     * `finish` was called before any waypoint: nothing in the walk has a position, so no
+     * file was written.
+     */
+    case NoWaypoints
+    /**
+     * The recording was finished.
+     */
+    case Finished
+    /**
+     * A bug in Waymark; the files may lack what the failed call pushed.
+     */
+    case Internal(
+        /**
+         * What happened.
+         */reason: String
+    )
+
+    
+
+    
+
+    
+    public var errorDescription: String? {
+        String(reflecting: self)
+    }
+    
+}
+
+#if compiler(>=6)
+extension SurveyError: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSurveyError: FfiConverterRustBuffer {
+    typealias SwiftType = SurveyError
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SurveyError {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+
+        
+
+        
+        case 1: return .Io(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 2: return .InputRejected(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 3: return .NoWaypoints
+        case 4: return .Finished
+        case 5: return .Internal(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+
+         default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: SurveyError, into buf: inout [UInt8]) {
+        switch value {
+
+        
+
+        
+        
+        case let .Io(reason):
+            writeInt(&buf, Int32(1))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case let .InputRejected(reason):
+            writeInt(&buf, Int32(2))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case .NoWaypoints:
+            writeInt(&buf, Int32(3))
+        
+        
+        case .Finished:
+            writeInt(&buf, Int32(4))
+        
+        
+        case let .Internal(reason):
+            writeInt(&buf, Int32(5))
+            FfiConverterString.write(reason, into: &buf)
+            
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSurveyError_lift(_ buf: RustBuffer) throws -> SurveyError {
+    return try FfiConverterTypeSurveyError.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSurveyError_lower(_ value: SurveyError) -> RustBuffer {
+    return FfiConverterTypeSurveyError.lower(value)
+}
+
+
+/**
  * Which transition model the engine uses.
  */
 
@@ -6707,6 +7297,27 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_subscription_cancel() != 31759) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_surveyrecorder_finish() != 40858) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_surveyrecorder_mark_waypoint() != 51739) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_surveyrecorder_push_accelerometer() != 35326) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_surveyrecorder_push_gyroscope() != 18382) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_surveyrecorder_push_magnetometer() != 48772) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_surveyrecorder_push_scan() != 3498) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_surveyrecorder_summary() != 36859) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_routetracker_reroute() != 56991) {
         return InitializationResult.apiChecksumMismatch
     }
@@ -6735,6 +7346,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_constructor_site_from_path() != 18181) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_constructor_surveyrecorder_new() != 43661) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_constructor_routetracker_new() != 3039) {

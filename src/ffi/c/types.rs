@@ -57,6 +57,14 @@ pub enum waymark_result {
     OffGraph = 11,
     /// No walkable path joins a route's start to its destination.
     Unreachable = 12,
+    /// A survey recorder could not create or write a walk file, or the file exists already (a
+    /// recording never overwrites one); `waymark_last_error` names it.
+    Io = 13,
+    /// `waymark_recorder_finish` before any waypoint: nothing had a position, no file was
+    /// written.
+    NoWaypoints = 14,
+    /// The recording was finished.
+    Finished = 15,
     /// Waymark panicked, or refused its own data (a bug). An epoch (a scan, an advance, a fix,
     /// feedback) or a read that panicked had no effect: the engine is as it was before the
     /// call, no callback hears of it, and it stays usable. Any other call that panicked may

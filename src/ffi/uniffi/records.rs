@@ -195,6 +195,29 @@ pub struct RadioScan {
     pub beacons: Vec<BeaconReading>,
 }
 
+impl RadioScan {
+    /// The scan as the core takes it, or why a transmitter id does not parse.
+    pub(crate) fn to_core(&self) -> Result<crate::radio::Scan, String> {
+        use crate::radio::{Reading, TransmitterId};
+        let mut readings = Vec::with_capacity(self.wifi.len() + self.beacons.len());
+        for w in &self.wifi {
+            readings.push(Reading {
+                transmitter: TransmitterId::wifi(&w.bssid)?,
+                rssi_dbm: w.rssi_dbm,
+                age_ns: w.age_ms.saturating_mul(1_000_000),
+            });
+        }
+        for b in &self.beacons {
+            readings.push(Reading {
+                transmitter: crate::ffi::beacon_id(&b.uuid, b.major, b.minor, b.address.as_deref())?,
+                rssi_dbm: b.rssi_dbm,
+                age_ns: b.age_ms.saturating_mul(1_000_000),
+            });
+        }
+        Ok(crate::radio::Scan { timestamp_ns: self.timestamp_ns, readings })
+    }
+}
+
 /// Walking or not.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
 pub enum MotionState {

@@ -546,6 +546,56 @@ void uniffi_waymark_fn_free_subscription(uint64_t handle, RustCallStatus *_Nonnu
 void uniffi_waymark_fn_method_subscription_cancel(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SURVEYRECORDER
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_SURVEYRECORDER
+uint64_t uniffi_waymark_fn_clone_surveyrecorder(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FREE_SURVEYRECORDER
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_FREE_SURVEYRECORDER
+void uniffi_waymark_fn_free_surveyrecorder(uint64_t handle, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_SURVEYRECORDER_NEW
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CONSTRUCTOR_SURVEYRECORDER_NEW
+uint64_t uniffi_waymark_fn_constructor_surveyrecorder_new(RustBuffer directory, RustBuffer options, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_FINISH
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_FINISH
+RustBuffer uniffi_waymark_fn_method_surveyrecorder_finish(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_MARK_WAYPOINT
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_MARK_WAYPOINT
+void uniffi_waymark_fn_method_surveyrecorder_mark_waypoint(uint64_t ptr, uint64_t timestamp_ns, double x, double y, RustBuffer floor, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_PUSH_ACCELEROMETER
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_PUSH_ACCELEROMETER
+uint32_t uniffi_waymark_fn_method_surveyrecorder_push_accelerometer(uint64_t ptr, RustBuffer batch, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_PUSH_GYROSCOPE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_PUSH_GYROSCOPE
+uint32_t uniffi_waymark_fn_method_surveyrecorder_push_gyroscope(uint64_t ptr, RustBuffer batch, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_PUSH_MAGNETOMETER
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_PUSH_MAGNETOMETER
+uint32_t uniffi_waymark_fn_method_surveyrecorder_push_magnetometer(uint64_t ptr, RustBuffer batch, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_PUSH_SCAN
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_PUSH_SCAN
+void uniffi_waymark_fn_method_surveyrecorder_push_scan(uint64_t ptr, RustBuffer scan, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_SUMMARY
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_SUMMARY
+RustBuffer uniffi_waymark_fn_method_surveyrecorder_summary(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_ROUTETRACKER
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_CLONE_ROUTETRACKER
 uint64_t uniffi_waymark_fn_clone_routetracker(uint64_t handle, RustCallStatus *_Nonnull out_status
@@ -1062,6 +1112,48 @@ uint16_t uniffi_waymark_checksum_method_subscription_cancel(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_FINISH
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_FINISH
+uint16_t uniffi_waymark_checksum_method_surveyrecorder_finish(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_MARK_WAYPOINT
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_MARK_WAYPOINT
+uint16_t uniffi_waymark_checksum_method_surveyrecorder_mark_waypoint(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_ACCELEROMETER
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_ACCELEROMETER
+uint16_t uniffi_waymark_checksum_method_surveyrecorder_push_accelerometer(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_GYROSCOPE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_GYROSCOPE
+uint16_t uniffi_waymark_checksum_method_surveyrecorder_push_gyroscope(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_MAGNETOMETER
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_MAGNETOMETER
+uint16_t uniffi_waymark_checksum_method_surveyrecorder_push_magnetometer(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_SCAN
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_SCAN
+uint16_t uniffi_waymark_checksum_method_surveyrecorder_push_scan(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_SUMMARY
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_SUMMARY
+uint16_t uniffi_waymark_checksum_method_surveyrecorder_summary(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_REROUTE
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_ROUTETRACKER_REROUTE
 uint16_t uniffi_waymark_checksum_method_routetracker_reroute(void
@@ -1119,6 +1211,12 @@ uint16_t uniffi_waymark_checksum_constructor_site_from_bytes(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SITE_FROM_PATH
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SITE_FROM_PATH
 uint16_t uniffi_waymark_checksum_constructor_site_from_path(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SURVEYRECORDER_NEW
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_CONSTRUCTOR_SURVEYRECORDER_NEW
+uint16_t uniffi_waymark_checksum_constructor_surveyrecorder_new(void
     
 );
 #endif
