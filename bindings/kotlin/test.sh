@@ -113,6 +113,7 @@ java -Djna.library.path="$TARGET/debug" \
     -Dwaymark.site="$SIM/site.json" -Dwaymark.walk="$SIM/walk.json" \
     -Dwaymark.hashedSite="$SIM/site-hashed.json" -Dwaymark.salt="$SIM/salt.hex" \
     -Dwaymark.packedSite="$SIM/site.wmsite" \
+    -Dwaymark.surveyWalks="$SIM/survey" -Dwaymark.cli="$TARGET/debug/waymark" \
     -cp "$OUT/classes:$run_cp" dev.waymark.RunTests 2>&1 | tee "$OUT/junit.log"
 status=${PIPESTATUS[0]}
 set -e

@@ -86,7 +86,7 @@ unshare --mount --fork /bin/bash -euo pipefail -c '
     mount -t proc proc "$root/proc"
     mount --rbind /dev "$root/dev"
     exec chroot "$root" /usr/bin/env -i PATH=/usr/bin:/bin HOME=/root LANG=C.UTF-8 \
-        WAYMARK_SIM_DIR="$target/sim-export" LD_LIBRARY_PATH="$target/debug" \
+        WAYMARK_SIM_DIR="$target/sim-export" WAYMARK_CLI="$target/debug/waymark" LD_LIBRARY_PATH="$target/debug" \
         /usr/bin/swift test --disable-swift-testing \
             --package-path "$package" --scratch-path "$target/swift-build" \
             -Xlinker -L -Xlinker "$target/debug" -Xlinker -rpath -Xlinker "$target/debug"

@@ -67,7 +67,15 @@ struct SimExportArgs {
     /// Length of the walk, m.
     #[arg(long, default_value_t = 60.0)]
     walk_length_m: f64,
-    /// Folder to write `site.json` and `walk.json` into.
+    /// Survey walks to write into `survey/`: what a surveyor's phone would record, with a
+    /// waypoint at every state passed. Twelve of 150 m cover the office well enough for a site
+    /// surveyed from them to position like the office's own (docs/surveying.md).
+    #[arg(long, default_value_t = 12)]
+    survey_walks: u64,
+    /// Length of each survey walk, m.
+    #[arg(long, default_value_t = 150.0)]
+    survey_length_m: f64,
+    /// Folder to write `site.json`, `walk.json` and `survey/walk-K.json` into.
     #[arg(long)]
     out: std::path::PathBuf,
 }
@@ -708,11 +716,35 @@ fn recovery(args: &SimulateArgs) -> ExitCode {
 }
 
 fn sim_export(args: &SimExportArgs) -> ExitCode {
-    use waymark::sensors::SensorSample;
     let office =
         sim::Office::generate(&sim::OfficeConfig { seed: args.seed, ..sim::OfficeConfig::default() });
     let walk = office.walk(sim::walk_seed(args.seed, 0), args.walk_length_m);
-    let imu = sim::imu::synthesize(&walk.trajectory, &sim::imu::ImuConfig::default(), args.seed);
+    let write = |name: &str, text: String| std::fs::write(args.out.join(name), text);
+    let result = std::fs::create_dir_all(args.out.join("survey"))
+        .and_then(|_| write("site.json", office.site.to_json()))
+        .and_then(|_| write("walk.json", walk_json(&walk, args.seed, false).to_string()));
+    // Survey walks: other seeds than the test walk's, so the survey never saw it.
+    let result = (1..=args.survey_walks).try_fold((), |(), k| {
+        result.as_ref().map_err(|e| std::io::Error::new(e.kind(), e.to_string()))?;
+        let seed = args.seed.wrapping_add(1000 + k);
+        let survey = office.walk(sim::walk_seed(seed, 0), args.survey_length_m);
+        write(&format!("survey/walk-{k}.json"), walk_json(&survey, seed, true).to_string())
+    });
+    match result {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("waymark sim-export: {}: {e}", args.out.display());
+            ExitCode::FAILURE
+        }
+    }
+}
+
+/// A simulated walk as the binding tests replay it: per scan epoch the truth, the IMU batches
+/// since the previous epoch and the WiFi readings; with `waypoints`, the surveyor's taps at
+/// every state passed.
+fn walk_json(walk: &sim::Walk, seed: u64, waypoints: bool) -> serde_json::Value {
+    use waymark::sensors::SensorSample;
+    let imu = sim::imu::synthesize(&walk.trajectory, &sim::imu::ImuConfig::default(), seed);
     let rows =
         |v: &[SensorSample]| v.iter().map(|s| [s.timestamp_ns as f64, s.x, s.y, s.z]).collect::<Vec<_>>();
     let mut previous = 0u64;
@@ -745,20 +777,19 @@ fn sim_export(args: &SimExportArgs) -> ExitCode {
             value
         })
         .collect();
-    let walk_json = serde_json::json!({
-        "seed": args.seed,
-        "note": "IMU rows are [timestamp_ns, x, y, z] in the phone frame: m/s², rad/s, µT. Each epoch's batches cover (previous epoch, this epoch].",
+    let mut json = serde_json::json!({
+        "seed": seed,
+        "note": "IMU rows are [timestamp_ns, x, y, z] in the phone frame: m/s², rad/s, µT. Each epoch's batches cover (previous epoch, this epoch]. Waypoints, in a survey walk, are [timestamp_ns, x, y]: the states passed.",
         "epochs": epochs,
     });
-    let write = |name: &str, text: String| std::fs::write(args.out.join(name), text);
-    let result = std::fs::create_dir_all(&args.out)
-        .and_then(|_| write("site.json", office.site.to_json()))
-        .and_then(|_| write("walk.json", walk_json.to_string()));
-    match result {
-        Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
-            eprintln!("waymark sim-export: {}: {e}", args.out.display());
-            ExitCode::FAILURE
-        }
+    if waypoints {
+        let taps: Vec<serde_json::Value> = walk
+            .trajectory
+            .vertices()
+            .iter()
+            .map(|(t, p)| serde_json::json!([*t as f64, p.x, p.y]))
+            .collect();
+        json["waypoints"] = serde_json::Value::Array(taps);
     }
+    json
 }

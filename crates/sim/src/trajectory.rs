@@ -52,6 +52,18 @@ impl Trajectory {
         Self { start_ns, speed_mps, route, pauses }
     }
 
+    /// The route's vertices, each with the time the walker reaches it: where a surveyor
+    /// walking this route would tap waypoints.
+    pub fn vertices(&self) -> Vec<(u64, Point2<f64>)> {
+        self.route
+            .iter()
+            .map(|&(p, walked)| {
+                let paused: f64 = self.pauses.iter().filter(|q| q.0 < walked).map(|q| q.1).sum();
+                (self.start_ns + ((walked / self.speed_mps + paused) * 1e9) as u64, p)
+            })
+            .collect()
+    }
+
     /// When the walk starts, ns.
     pub fn start_ns(&self) -> u64 {
         self.start_ns

@@ -65,6 +65,8 @@ struct Walk: Decodable {
         }
     }
     let epochs: [Epoch]
+    /// A survey walk's taps, `[timestamp_ns, x, y]`: the states the surveyor passed.
+    let waypoints: [[Double]]?
 }
 
 /// A salt file's hex digits as bytes, as an app would hold its venue's salt.

@@ -15,10 +15,27 @@ class Epoch(
     fun scan(): RadioScan = RadioScan(timestampNs, wifi, emptyList())
 }
 
+/** A surveyor's tap: at (x, y) m at [timestampNs]. */
+class Tap(val timestampNs: ULong, val x: Double, val y: Double)
+
+/** A survey walk of `survey/walk-K.json` (from `waymark sim-export`): its epochs and taps. */
+class SurveyWalk(val name: String, val epochs: List<Epoch>, val taps: List<Tap>)
+
 /** Reads the walk exported by `waymark sim-export` (JVM has no JSON library: [MiniJson]). */
 object Walk {
-    fun load(path: String): List<Epoch> {
-        val root = MiniJson(File(path).readText()).parse() as Map<*, *>
+    fun load(path: String): List<Epoch> = epochs(MiniJson(File(path).readText()).parse() as Map<*, *>)
+
+    /** A survey walk, with the waypoints the surveyor taps. */
+    fun loadSurvey(file: File): SurveyWalk {
+        val root = MiniJson(file.readText()).parse() as Map<*, *>
+        val taps = (root["waypoints"] as List<*>).map { w ->
+            val v = w as List<*>
+            Tap((v[0] as Double).toLong().toULong(), v[1] as Double, v[2] as Double)
+        }
+        return SurveyWalk(file.nameWithoutExtension, epochs(root), taps)
+    }
+
+    private fun epochs(root: Map<*, *>): List<Epoch> {
         return (root["epochs"] as List<*>).map { e ->
             e as Map<*, *>
             val truth = e["truth"] as List<*>
