@@ -116,14 +116,22 @@ public enum WaymarkLocationStatus: Sendable, Equatable, CustomStringConvertible 
         }
     }
 
+    /// The code and what happened, for logs.
     public var description: String {
+        let text: String
         switch self {
-        case .rangingFailed(let uuid, let message): return "\(code) ranging \(uuid) failed: \(message)"
-        case .motionUnavailable(let sensor): return "\(code) no \(sensor.rawValue)"
-        case .engineError(let code, let message): return "\(self.code) engine \(code): \(message)"
-        case .scanRejected(let reason, let total): return "\(code) scan rejected (\(total) so far): \(reason)"
-        default: return "\(code) \(String(describing: self))"
+        case .authorizationNotDetermined: text = "location authorization not determined"
+        case .authorizationDenied: text = "location authorization denied"
+        case .authorizationRestricted: text = "location authorization restricted"
+        case .authorizedWhenInUse: text = "location authorized when in use"
+        case .authorizedAlways: text = "location authorized always"
+        case .rangingUnavailable: text = "beacon ranging unavailable"
+        case .rangingFailed(let uuid, let message): text = "ranging \(uuid) failed: \(message)"
+        case .motionUnavailable(let sensor): text = "no \(sensor.rawValue)"
+        case .engineError(let code, let message): text = "engine error \(code): \(message)"
+        case .scanRejected(let reason, let total): text = "scan rejected (\(total) so far): \(reason)"
         }
+        return "\(code) \(text)"
     }
 }
 

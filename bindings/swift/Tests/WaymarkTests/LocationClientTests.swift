@@ -388,7 +388,8 @@ final class LocationClientTests: XCTestCase {
         XCTAssertEqual(positions.count, scans.count - Int(h.manager.rejectedScanCount))
         XCTAssertGreaterThan(positions.count, walk.epochs.count * 9 / 10)
         let truth = Dictionary(uniqueKeysWithValues: walk.epochs.map { ($0.timestampNs, $0.truth) })
-        let errors = positions.map { p in hypot(p.x - truth[p.timestampNs]![0], p.y - truth[p.timestampNs]![1]) }
+        let errors = positions.compactMap { p in truth[p.timestampNs].map { hypot(p.x - $0[0], p.y - $0[1]) } }
+        XCTAssertEqual(errors.count, positions.count, "every position at a scan's time")
         let mean = errors.reduce(0, +) / Double(errors.count)
         XCTAssertLessThan(mean, 1.5, "mean error \(mean) m over \(errors.count) epochs")
         XCTAssertEqual(h.delegate.queues, ["delegate"])
@@ -417,6 +418,8 @@ final class LocationClientTests: XCTestCase {
             h.motion.emit(readings)
             h.clock.set(epoch.timestampNs)
             h.ranger.send(.ranged([], uuid: beaconUUID))  // nothing in range: no scan
+            // Heard but not measured (rssi 0): no scan either.
+            h.ranger.send(.ranged([WaymarkRangedBeacon(uuid: beaconUUID, major: 1, minor: 2, rssi: 0)], uuid: beaconUUID))
             h.scheduler.fire()
         }
         // Two ranging results at the same instant with a beacon the site does not know: two
@@ -741,6 +744,20 @@ final class LocationClientTests: XCTestCase {
         XCTAssertEqual(onQueue.value, 7)
         Thread.sleep(forTimeInterval: 0.1)  // the cancelled timer's time passes
         timer.cancel()
+    }
+
+    func testStatusCodesAndDescriptions() {
+        let all: [WaymarkLocationStatus] = [
+            .authorizationNotDetermined, .authorizationDenied, .authorizationRestricted, .authorizedWhenInUse,
+            .authorizedAlways, .rangingUnavailable, .rangingFailed(uuid: beaconUUID, message: "m"),
+            .motionUnavailable(.accelerometer), .motionUnavailable(.gyroscope), .motionUnavailable(.magnetometer),
+            .engineError(code: .internal, message: "m"), .scanRejected(reason: "r", total: 3),
+        ]
+        XCTAssertEqual(all.map(\.code), [100, 101, 102, 103, 104, 200, 201, 300, 301, 302, 400, 401])
+        for status in all { XCTAssertTrue(status.description.hasPrefix("\(status.code) "), status.description) }
+        XCTAssertEqual(WaymarkLocationStatus.scanRejected(reason: "no known transmitter", total: 3).description,
+                       "401 scan rejected (3 so far): no known transmitter")
+        XCTAssertEqual(WaymarkLocationStatus(.denied), .authorizationDenied)
     }
 
     func testUptimeToDate() {
