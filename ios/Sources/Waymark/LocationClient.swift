@@ -13,13 +13,13 @@ public struct WaymarkLocationRequest: Sendable, Equatable {
     /// location authorization needed.
     public var beaconUUIDs: [UUID]
     /// Seconds between two readings of each inertial sensor: 0.01 (100 Hz), CoreMotion's
-    /// fastest rate; step detection needs 50 Hz or more.
+    /// fastest rate (the step detector is tuned from 20 to 200 Hz, docs/tuning.md#step-detector).
     public var motionInterval: TimeInterval
     /// Readings per sensor sent in one engine call: 50 (half a second at 100 Hz). Pending
     /// readings are also sent before every epoch.
     public var motionBatchSize: Int
-    /// Seconds without an epoch after which the manager calls `advance`: 2, as the engine's
-    /// sparse-scan figures assume (docs/accuracy.md#sparse-scans).
+    /// Seconds without an epoch after which the manager calls `advance`: 2, one unthrottled
+    /// scan interval, as the evaluation's replay timer (docs/tuning.md#replay-timer).
     public var advanceInterval: TimeInterval
     /// Whether `start` shows the "while using the app" prompt when the user was never asked:
     /// true. Set it to false to ask at a moment of the app's choosing.
@@ -255,6 +255,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     /// authorized; it asks when the user was never asked) and the `advance` timer. Does
     /// nothing when running. Call it from any thread but the manager's own.
     public func start() {
+        dispatchPrecondition(condition: .notOnQueue(queue))
         queue.sync {
             startedExplicitly = true
             startSession()
@@ -264,6 +265,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     /// Stops the sensors, ranging and the timer, cancels the engine subscription and ends
     /// every `locations()` stream. `start()` resumes on the same engine.
     public func stop() {
+        dispatchPrecondition(condition: .notOnQueue(queue))
         queue.sync { stopSession() }
     }
 
@@ -278,6 +280,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
             guard let manager = self else { return }
             manager.queue.async { manager.locationStreamEnded(id) }
         }
+        dispatchPrecondition(condition: .notOnQueue(queue))
         queue.sync {
             locationStreams[id] = continuation
             startSession()
