@@ -124,7 +124,8 @@ public final class CoreLocationBeaconRanger: NSObject, WaymarkBeaconRanger, CLLo
 
     public func locationManager(_ manager: CLLocationManager, didFailRangingFor constraint: CLBeaconIdentityConstraint,
                                 error: Error) {
-        send(.failed(uuid: constraint.uuid, message: error.localizedDescription))
+        let failure = error as NSError
+        send(.failed(uuid: constraint.uuid, code: failure.code, message: failure.localizedDescription))
     }
 
     public func locationManagerDidChangeAuthorization(_ manager: CLLocationManager) {

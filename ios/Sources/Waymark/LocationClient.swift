@@ -75,9 +75,10 @@ public enum WaymarkLocationStatus: Sendable, Equatable, CustomStringConvertible 
     case authorizedAlways
     /// 200: this device cannot range beacons (`CLLocationManager.isRangingAvailable()`).
     case rangingUnavailable
-    /// 201: ranging the beacons of `uuid` failed; ranging stays off until authorization
-    /// changes or the manager is started again.
-    case rangingFailed(uuid: UUID, message: String)
+    /// 201: ranging the beacons of `uuid` failed with Core Location's error `code`
+    /// (`CLError.Code`) and `message`; ranging stays off until authorization changes or the
+    /// manager is started again.
+    case rangingFailed(uuid: UUID, code: Int, message: String)
     /// 300, 301, 302: the device has no accelerometer, gyroscope or magnetometer.
     case motionUnavailable(WaymarkMotionSensor)
     /// 400: an engine call failed with something other than a rejected scan, or the engine's
@@ -126,7 +127,7 @@ public enum WaymarkLocationStatus: Sendable, Equatable, CustomStringConvertible 
         case .authorizedWhenInUse: text = "location authorized when in use"
         case .authorizedAlways: text = "location authorized always"
         case .rangingUnavailable: text = "beacon ranging unavailable"
-        case .rangingFailed(let uuid, let message): text = "ranging \(uuid) failed: \(message)"
+        case .rangingFailed(let uuid, let code, let message): text = "ranging \(uuid) failed (\(code)): \(message)"
         case .motionUnavailable(let sensor): text = "no \(sensor.rawValue)"
         case .engineError(let code, let message): text = "engine error \(code): \(message)"
         case .scanRejected(let reason, let total): text = "scan rejected (\(total) so far): \(reason)"
@@ -443,10 +444,10 @@ public final class WaymarkLocationManager: @unchecked Sendable {
             guard active, !request.beaconUUIDs.isEmpty else { return }
             report(WaymarkLocationStatus(new))
             updateRanging()
-        case .failed(let uuid, let message):
+        case .failed(let uuid, let code, let message):
             guard active, ranging else { return }
             rangingFailed = true
-            report(.rangingFailed(uuid: uuid, message: message))
+            report(.rangingFailed(uuid: uuid, code: code, message: message))
             updateRanging()
         case .ranged(let beacons, _):
             guard active, ranging else { return }

@@ -99,8 +99,9 @@ public enum WaymarkRangingEvent: Sendable {
     /// `locationManager(_:didRange:satisfying:)`: the beacons of one proximity UUID heard in
     /// the last second (often none).
     case ranged([WaymarkRangedBeacon], uuid: UUID)
-    /// `locationManager(_:didFailRangingFor:error:)`.
-    case failed(uuid: UUID, message: String)
+    /// `locationManager(_:didFailRangingFor:error:)`: the error's `CLError.Code` raw value
+    /// (16 ranging unavailable, 17 ranging failure) and description.
+    case failed(uuid: UUID, code: Int, message: String)
     /// `locationManagerDidChangeAuthorization(_:)`, with the new authorization.
     case authorizationChanged(WaymarkAuthorization)
 }

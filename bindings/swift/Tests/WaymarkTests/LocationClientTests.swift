@@ -578,9 +578,9 @@ final class LocationClientTests: XCTestCase {
 
         let h = try Harness(siteJson: try siteJson())
         h.manager.start()
-        h.ranger.send(.failed(uuid: beaconUUID, message: "kCLErrorDomain error 16"))
+        h.ranger.send(.failed(uuid: beaconUUID, code: 17, message: "kCLErrorDomain error 17"))
         h.settle()
-        XCTAssertEqual(h.delegate.statuses.last, .rangingFailed(uuid: beaconUUID, message: "kCLErrorDomain error 16"))
+        XCTAssertEqual(h.delegate.statuses.last, .rangingFailed(uuid: beaconUUID, code: 17, message: "kCLErrorDomain error 17"))
         XCTAssertEqual(h.delegate.statuses.last?.code, 201)
         XCTAssertNil(h.ranger.ranging)
         XCTAssertEqual(h.manager.state, .degraded)
@@ -589,7 +589,7 @@ final class LocationClientTests: XCTestCase {
         XCTAssertEqual(h.ranger.ranging, [beaconUUID])
         XCTAssertEqual(h.manager.state, .running)
         // So does starting again.
-        h.ranger.send(.failed(uuid: beaconUUID, message: "again"))
+        h.ranger.send(.failed(uuid: beaconUUID, code: 17, message: "again"))
         h.manager.stop()
         h.manager.start()
         XCTAssertEqual(h.ranger.ranging, [beaconUUID])
@@ -749,7 +749,7 @@ final class LocationClientTests: XCTestCase {
     func testStatusCodesAndDescriptions() {
         let all: [WaymarkLocationStatus] = [
             .authorizationNotDetermined, .authorizationDenied, .authorizationRestricted, .authorizedWhenInUse,
-            .authorizedAlways, .rangingUnavailable, .rangingFailed(uuid: beaconUUID, message: "m"),
+            .authorizedAlways, .rangingUnavailable, .rangingFailed(uuid: beaconUUID, code: 17, message: "m"),
             .motionUnavailable(.accelerometer), .motionUnavailable(.gyroscope), .motionUnavailable(.magnetometer),
             .engineError(code: .internal, message: "m"), .scanRejected(reason: "r", total: 3),
         ]
