@@ -70,8 +70,19 @@ if (( stale )); then
     exit 1
 fi
 
-# --- 4. The README's Swift quickstart, compiled into the test target (not committed).
-python3 "$REPO/scripts/readme-snippet.py" swift-quickstart > "$REPO/bindings/swift/Tests/WaymarkTests/ReadmeQuickstart.swift"
+# --- 4. The README's Swift quickstart and the Swift snippets of docs/ios.md (every block between
+# `<!-- snippet: NAME -->` and `<!-- /snippet -->`), compiled into the test target (not committed).
+{
+    python3 "$REPO/scripts/readme-snippet.py" swift-quickstart
+    python3 - "$REPO/docs/ios.md" <<'PY'
+import re, sys
+guide = open(sys.argv[1]).read()
+blocks = re.findall(r"<!-- snippet: [\w-]+ -->\n```swift\n(.*?)```\n<!-- /snippet -->", guide, re.S)
+if not blocks:
+    sys.exit("test.sh: no Swift snippet in docs/ios.md")
+sys.stdout.write("".join(blocks))
+PY
+} > "$REPO/bindings/swift/Tests/WaymarkTests/ReadmeQuickstart.swift"
 
 # --- 5. XCTest in the chroot. The checkout (and the target dir, if elsewhere) is bind-mounted
 # at the same path inside, so every path resolves identically.

@@ -1,98 +1,163 @@
-// The thin iOS shell: CoreMotion device motion and magnetometer, CoreLocation beacon ranging,
-// and CLLocation output. Every conversion is in Conversions.swift (plain Swift, tested on
-// Linux); this file only wires Apple's callbacks to them and compiles only on Apple platforms.
+// The thin iOS shell: CoreMotion and CoreLocation behind the ports of LocationPorts.swift, and
+// CLLocation output. WaymarkLocationManager (LocationClient.swift) holds every decision and
+// Conversions.swift every unit and clock; this file only passes Apple's callbacks and numbers
+// on, and compiles only on Apple platforms (the Linux tests cover the rest against fakes).
 #if canImport(CoreMotion) && canImport(CoreLocation)
 import CoreLocation
 import CoreMotion
 import Foundation
 
-/// Feeds an engine from CoreMotion at ~100 Hz, batching samples per FFI call.
-public final class MotionAdapter: @unchecked Sendable {
-    private let engine: PositioningEngine
-    private let manager = CMMotionManager()
-    private let queue = OperationQueue()
-    private let batchSize: Int
-    private var accel: [MotionSample] = []
-    private var gyro: [MotionSample] = []
-    private var mag: [MotionSample] = []
+/// The inertial sensors through one `CMMotionManager` (Apple: one per app). Readings are
+/// delivered on the manager's queue through an `OperationQueue` over it.
+public final class CoreMotionSource: WaymarkMotionSource {
+    private let manager: CMMotionManager
+    private let operations = OperationQueue()
 
-    public init(engine: PositioningEngine, batchSize: Int = 50) {
-        self.engine = engine
-        self.batchSize = batchSize
-        queue.maxConcurrentOperationCount = 1
+    /// Reads `manager` (the app's own, if it has one).
+    public init(manager: CMMotionManager = CMMotionManager()) {
+        self.manager = manager
+        operations.maxConcurrentOperationCount = 1
     }
 
-    /// Starts the raw accelerometer (in g, converted to m/s²), gyroscope and magnetometer.
-    public func start() {
-        manager.accelerometerUpdateInterval = 0.01
-        manager.gyroUpdateInterval = 0.01
-        manager.magnetometerUpdateInterval = 0.01
-        manager.startAccelerometerUpdates(to: queue) { [weak self] data, _ in
-            guard let self, let d = data,
-                  let s = AppleSensorConversion.accelerometer(timestamp: d.timestamp, x: d.acceleration.x,
-                                                             y: d.acceleration.y, z: d.acceleration.z) else { return }
-            self.accel.append(s)
-            if self.accel.count >= self.batchSize { _ = try? self.engine.pushAccelerometer(batch: self.accel); self.accel.removeAll() }
-        }
-        manager.startGyroUpdates(to: queue) { [weak self] data, _ in
-            guard let self, let d = data,
-                  let s = AppleSensorConversion.gyroscope(timestamp: d.timestamp, x: d.rotationRate.x,
-                                                         y: d.rotationRate.y, z: d.rotationRate.z) else { return }
-            self.gyro.append(s)
-            if self.gyro.count >= self.batchSize { _ = try? self.engine.pushGyroscope(batch: self.gyro); self.gyro.removeAll() }
-        }
-        manager.startMagnetometerUpdates(to: queue) { [weak self] data, _ in
-            guard let self, let d = data,
-                  let s = AppleSensorConversion.magnetometer(timestamp: d.timestamp, x: d.magneticField.x,
-                                                            y: d.magneticField.y, z: d.magneticField.z) else { return }
-            self.mag.append(s)
-            if self.mag.count >= self.batchSize { _ = try? self.engine.pushMagnetometer(batch: self.mag); self.mag.removeAll() }
+    public func isAvailable(_ sensor: WaymarkMotionSensor) -> Bool {
+        switch sensor {
+        case .accelerometer: return manager.isAccelerometerAvailable
+        case .gyroscope: return manager.isGyroAvailable
+        case .magnetometer: return manager.isMagnetometerAvailable
         }
     }
 
-    /// Stops the sensors.
+    public func start(
+        _ sensors: [WaymarkMotionSensor], interval: TimeInterval, queue: DispatchQueue,
+        handler: @escaping (WaymarkMotionReading) -> Void
+    ) {
+        operations.underlyingQueue = queue
+        for sensor in sensors {
+            switch sensor {
+            case .accelerometer:
+                manager.accelerometerUpdateInterval = interval
+                manager.startAccelerometerUpdates(to: operations) { data, _ in
+                    guard let d = data else { return }
+                    handler(WaymarkMotionReading(sensor: .accelerometer, timestamp: d.timestamp,
+                                                 x: d.acceleration.x, y: d.acceleration.y, z: d.acceleration.z))
+                }
+            case .gyroscope:
+                manager.gyroUpdateInterval = interval
+                manager.startGyroUpdates(to: operations) { data, _ in
+                    guard let d = data else { return }
+                    handler(WaymarkMotionReading(sensor: .gyroscope, timestamp: d.timestamp,
+                                                 x: d.rotationRate.x, y: d.rotationRate.y, z: d.rotationRate.z))
+                }
+            case .magnetometer:
+                manager.magnetometerUpdateInterval = interval
+                manager.startMagnetometerUpdates(to: operations) { data, _ in
+                    guard let d = data else { return }
+                    handler(WaymarkMotionReading(sensor: .magnetometer, timestamp: d.timestamp,
+                                                 x: d.magneticField.x, y: d.magneticField.y, z: d.magneticField.z))
+                }
+            }
+        }
+    }
+
     public func stop() {
         manager.stopAccelerometerUpdates()
         manager.stopGyroUpdates()
         manager.stopMagnetometerUpdates()
+        operations.cancelAllOperations()
     }
 }
 
-/// Ranges iBeacons with CoreLocation and pushes one scan per ranging callback.
-public final class BeaconAdapter: NSObject, CLLocationManagerDelegate, @unchecked Sendable {
-    private let engine: PositioningEngine
-    private let manager = CLLocationManager()
-    private let constraints: [CLBeaconIdentityConstraint]
+/// Beacon ranging and location authorization through a `CLLocationManager`. Make it on the
+/// main thread: Core Location calls its delegate on the run loop of the thread that made it,
+/// and every call here goes to the main queue.
+public final class CoreLocationBeaconRanger: NSObject, WaymarkBeaconRanger, CLLocationManagerDelegate, @unchecked Sendable {
+    private let manager: CLLocationManager
+    private let lock = NSLock()
+    private var current: WaymarkAuthorization
+    private var target: (queue: DispatchQueue, handler: (WaymarkRangingEvent) -> Void)?
+    private var constraints: [CLBeaconIdentityConstraint] = []
 
-    /// Ranges the beacons of the given proximity UUIDs (the site's beacons).
-    public init(engine: PositioningEngine, uuids: [UUID]) {
-        self.engine = engine
-        self.constraints = uuids.map { CLBeaconIdentityConstraint(uuid: $0) }
+    /// A ranger with its own `CLLocationManager`.
+    override public init() {
+        let manager = CLLocationManager()
+        self.manager = manager
+        current = CoreLocationBeaconRanger.authorization(manager.authorizationStatus)
         super.init()
         manager.delegate = self
     }
 
-    /// Asks for permission and starts ranging.
-    public func start() {
-        manager.requestWhenInUseAuthorization()
-        constraints.forEach { manager.startRangingBeacons(satisfying: $0) }
+    public var authorization: WaymarkAuthorization { lock.lock(); defer { lock.unlock() }; return current }
+
+    public var isRangingAvailable: Bool { CLLocationManager.isRangingAvailable() }
+
+    public func setEventHandler(queue: DispatchQueue, handler: @escaping (WaymarkRangingEvent) -> Void) {
+        lock.lock(); defer { lock.unlock() }
+        target = (queue, handler)
     }
 
-    /// Stops ranging.
-    public func stop() {
-        constraints.forEach { manager.stopRangingBeacons(satisfying: $0) }
+    public func requestWhenInUseAuthorization() {
+        DispatchQueue.main.async { self.manager.requestWhenInUseAuthorization() }
+    }
+
+    public func startRanging(uuids: [UUID]) {
+        DispatchQueue.main.async {
+            self.constraints = uuids.map { CLBeaconIdentityConstraint(uuid: $0) }
+            self.constraints.forEach { self.manager.startRangingBeacons(satisfying: $0) }
+        }
+    }
+
+    public func stopRanging() {
+        DispatchQueue.main.async {
+            self.constraints.forEach { self.manager.stopRangingBeacons(satisfying: $0) }
+            self.constraints = []
+        }
     }
 
     public func locationManager(_ manager: CLLocationManager, didRange beacons: [CLBeacon],
                                 satisfying constraint: CLBeaconIdentityConstraint) {
-        let readings = beacons.compactMap {
-            AppleSensorConversion.beacon(uuid: $0.uuid, major: $0.major.intValue, minor: $0.minor.intValue,
-                                         rssi: $0.rssi, measuredAt: $0.timestamp)
+        let ranged = beacons.map {
+            WaymarkRangedBeacon(uuid: $0.uuid, major: $0.major.intValue, minor: $0.minor.intValue,
+                                rssi: $0.rssi, timestamp: $0.timestamp)
         }
-        guard !readings.isEmpty,
-              let scan = AppleSensorConversion.scan(uptime: ProcessInfo.processInfo.systemUptime, beacons: readings)
-        else { return }
-        _ = try? engine.pushScan(scan: scan)
+        send(.ranged(ranged, uuid: constraint.uuid))
+    }
+
+    public func locationManager(_ manager: CLLocationManager, didFailRangingFor constraint: CLBeaconIdentityConstraint,
+                                error: Error) {
+        let failure = error as NSError
+        send(.failed(uuid: constraint.uuid, code: failure.code, message: failure.localizedDescription))
+    }
+
+    public func locationManagerDidChangeAuthorization(_ manager: CLLocationManager) {
+        let new = CoreLocationBeaconRanger.authorization(manager.authorizationStatus)
+        lock.lock()
+        current = new
+        lock.unlock()
+        send(.authorizationChanged(new))
+    }
+
+    private func send(_ event: WaymarkRangingEvent) {
+        lock.lock()
+        let target = self.target
+        lock.unlock()
+        guard let target else { return }
+        target.queue.async { target.handler(event) }
+    }
+
+    private static func authorization(_ status: CLAuthorizationStatus) -> WaymarkAuthorization {
+        WaymarkAuthorization(rawValue: status.rawValue) ?? .notDetermined
+    }
+}
+
+public extension WaymarkLocationManager {
+    /// A manager reading CoreMotion and ranging with CoreLocation, on the uptime clock, with
+    /// a `DispatchSourceTimer` for `advance`. Make it on the main thread.
+    convenience init(
+        engine: PositioningEngine, request: WaymarkLocationRequest = WaymarkLocationRequest(),
+        delegateQueue: DispatchQueue = .main
+    ) throws {
+        try self.init(engine: engine, request: request, motion: CoreMotionSource(),
+                      ranger: CoreLocationBeaconRanger(), delegateQueue: delegateQueue)
     }
 }
 
@@ -153,10 +218,13 @@ public extension PositionEstimate {
     /// anchor): coordinates from the position itself, `horizontalAccuracy` the 68% radius (as
     /// iOS defines it), course and course accuracy when the heading is known, and `floor`
     /// with the floor's logical level when the site file gives one. Every value comes from
-    /// `locationFields`, which the Linux test covers.
+    /// `locationFields`, which the Linux test covers. `timestamp` is when the position was
+    /// (its `timestampNs` on the uptime clock, as a `Date`).
     func toCLLocation() -> CLLocation? {
         guard let fields = locationFields else { return nil }
-        return WaymarkLocation(fields: fields, timestamp: Date())
+        let at = AppleSensorConversion.date(
+            ofUptimeNs: timestampNs, uptimeNow: ProcessInfo.processInfo.systemUptime, now: Date())
+        return WaymarkLocation(fields: fields, timestamp: at)
     }
 }
 #endif

@@ -76,6 +76,12 @@ public enum AppleSensorConversion {
             ageMs: ageMs(measuredAt: measuredAt, now: now))
     }
 
+    /// The wall-clock time of `timestampNs` (a position's time, on the uptime clock), given
+    /// the uptime and the wall clock read together now: `Date` for `CLLocation.timestamp`.
+    public static func date(ofUptimeNs timestampNs: UInt64, uptimeNow: Double, now: Date) -> Date {
+        now.addingTimeInterval(Double(timestampNs) / 1e9 - uptimeNow)
+    }
+
     /// One positioning epoch from what `locationManager(_:didRange:satisfying:)` delivered.
     /// `uptime` is `ProcessInfo.processInfo.systemUptime` at delivery: the same clock as
     /// CoreMotion's timestamps, so scans and motion samples order correctly. Unmeasured
