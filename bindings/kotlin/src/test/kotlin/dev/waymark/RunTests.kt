@@ -34,7 +34,7 @@ object RunTests {
         val classes = arrayOf(
             WaymarkTest::class.java, ConversionsTest::class.java, GeoConversionsTest::class.java,
             ConcurrencyTest::class.java, RobustnessTest::class.java, SiteFormatsTest::class.java,
-            HabitsTest::class.java, RouteTest::class.java,
+            HabitsTest::class.java, RouteTest::class.java, LocationClientTest::class.java,
         )
         val result = core.run(*classes)
         // A failure in @BeforeClass fails the class without running any test: count each test.
