@@ -98,12 +98,14 @@ mapfile -t ANDROID_PLAIN < <(grep -L '^import android\.' "$REPO"/android/src/mai
 # kotlinx-coroutines: the client's Flow (and the generated code's async functions, if any).
 compile_cp=$JNA:$JUNIT:$COROUTINES
 run_cp=$STDLIB:$JNA:$JUNIT:$HAMCREST:$COROUTINES
-step "kotlinc (with the README's Kotlin quickstart)"
+step "kotlinc (with the README's Kotlin quickstart and the Android guide's code)"
 rm -rf "$OUT"
 mkdir -p "$OUT/classes"
 python3 "$REPO/scripts/readme-snippet.py" kotlin-quickstart > "$OUT/ReadmeQuickstart.kt"
+python3 "$REPO/scripts/readme-snippet.py" android-statuses docs/android.md > "$OUT/AndroidGuideStatuses.kt"
 "$KOTLINC" -nowarn -jvm-target 17 -cp "$compile_cp" -d "$OUT/classes" \
-    "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt "$OUT/ReadmeQuickstart.kt" "${ANDROID_PLAIN[@]}"
+    "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt "$OUT/ReadmeQuickstart.kt" \
+    "$OUT/AndroidGuideStatuses.kt" "${ANDROID_PLAIN[@]}"
 
 step "JUnit 4"
 set +e
