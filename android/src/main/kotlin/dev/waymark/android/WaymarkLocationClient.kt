@@ -54,6 +54,7 @@ class WaymarkLocationClient(
     private var ticker: Cancellable? = null
 
     private val sensorsOn = EnumSet.noneOf(MotionSensor::class.java)
+    private val sensorsRefused = EnumSet.noneOf(MotionSensor::class.java)
     private var sensorSettings: Pair<Int, Int>? = null
     private val batches = EnumMap<MotionSensor, ArrayList<MotionSample>>(MotionSensor::class.java)
     private var newestAccelerometerNs = Long.MIN_VALUE
@@ -219,7 +220,7 @@ class WaymarkLocationClient(
             bleMayRun = positioning && scan && on && bleFailure == null
         }
         for (sensor in MotionSensor.values()) {
-            if (!platform.sensors.has(sensor)) now += LocationStatus.SensorMissing(sensor)
+            if (!platform.sensors.has(sensor) || sensor in sensorsRefused) now += LocationStatus.SensorMissing(sensor)
         }
 
         for (c in now) if (c !in holding) emit(c)
@@ -270,8 +271,12 @@ class WaymarkLocationClient(
         sensorSettings = settings
         motionStartedNs = platform.clock.nowNs()
         for (sensor in MotionSensor.values()) {
-            if (platform.sensors.has(sensor) && platform.sensors.start(sensor, settings.first, settings.second, motionSink)) {
+            if (!platform.sensors.has(sensor)) continue
+            if (platform.sensors.start(sensor, settings.first, settings.second, motionSink)) {
                 sensorsOn += sensor
+                sensorsRefused -= sensor
+            } else if (sensorsRefused.add(sensor)) {
+                reconcileAgain = true // reported as missing by the next pass
             }
         }
     }

@@ -68,11 +68,13 @@ class FakeScheduler(private val clock: FakeClock) : Scheduler {
 class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values().toSet()) : MotionSensors {
     val running = EnumMap<MotionSensor, MotionSink>(MotionSensor::class.java)
     val registrations = ArrayList<Triple<MotionSensor, Int, Int>>()
+    /** Present, but registerListener returns false. */
+    val refused = HashSet<MotionSensor>()
 
     override fun has(sensor: MotionSensor) = sensor in present
 
     override fun start(sensor: MotionSensor, periodUs: Int, maxReportLatencyUs: Int, sink: MotionSink): Boolean {
-        if (sensor !in present) return false
+        if (sensor !in present || sensor in refused) return false
         registrations += Triple(sensor, periodUs, maxReportLatencyUs)
         running[sensor] = sink
         return true

@@ -475,6 +475,15 @@ class LocationClientTest {
         phone.replay(walk.take(10), passive = { true })
         assertTrue(callback.positions.size >= 9)
         client.close()
+        // A sensor the phone has but refuses to register is missing too.
+        val refusing = FakePhone()
+        refusing.sensors.refused += MotionSensor.MAGNETOMETER
+        val heard = RecordingCallback()
+        val second = WaymarkLocationClient(engine, refusing.platform)
+        second.requestLocationUpdates(LocationRequest(), direct, heard)
+        assertEquals(listOf<LocationStatus>(LocationStatus.SensorMissing(MotionSensor.MAGNETOMETER)), heard.statuses)
+        assertEquals(2, refusing.sensors.running.size)
+        second.close()
         engine.close()
     }
 
