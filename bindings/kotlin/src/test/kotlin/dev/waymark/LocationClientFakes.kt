@@ -27,7 +27,7 @@ import kotlin.math.roundToInt
  */
 
 class FakeClock : Clock {
-    var now = 0L
+    @Volatile var now = 0L
     override fun nowNs(): Long = now
 }
 
@@ -42,27 +42,28 @@ class FakeScheduler(private val clock: FakeClock) : Scheduler {
 
     override fun schedule(delayMs: Long, task: Runnable): Cancellable = at(clock.now + delayMs * 1_000_000L, task)
 
-    fun at(atNs: Long, task: Runnable): Cancellable {
+    fun at(atNs: Long, task: Runnable): Cancellable = synchronized(queue) {
         val t = Task(atNs, seq++, task)
         queue += t
-        return Cancellable { t.cancelled = true }
+        Cancellable { synchronized(queue) { t.cancelled = true } }
     }
 
     /** Runs every task due up to [tNs], moving the clock to each task's time, then to [tNs]. */
     fun runUntil(tNs: Long) {
         while (true) {
-            val head = queue.peek() ?: break
-            if (head.atNs > tNs) break
-            queue.poll()
-            if (head.cancelled) continue
-            clock.now = maxOf(clock.now, head.atNs)
-            head.run.run()
+            val next = synchronized(queue) {
+                val head = queue.peek()
+                if (head == null || head.atNs > tNs) null else queue.poll()
+            } ?: break
+            if (synchronized(queue) { next.cancelled }) continue
+            clock.now = maxOf(clock.now, next.atNs)
+            next.run.run()
         }
         clock.now = maxOf(clock.now, tNs)
     }
 
     /** Tasks scheduled and not cancelled. */
-    val pending: Int get() = queue.count { !it.cancelled }
+    val pending: Int get() = synchronized(queue) { queue.count { !it.cancelled } }
 }
 
 class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values().toSet()) : MotionSensors {
@@ -98,8 +99,8 @@ class FakeWifi(private val clock: FakeClock) : WifiRadio {
     val startCalls = ArrayList<Long>()
     /** A scan started and not yet answered. */
     var pending = false
-    var results: List<WifiResult> = emptyList()
-    var sink: WifiSink? = null
+    @Volatile var results: List<WifiResult> = emptyList()
+    @Volatile var sink: WifiSink? = null
 
     override fun isScanAvailable() = available
     override fun isScanThrottleEnabled() = throttleEnabled
@@ -130,7 +131,7 @@ class FakeWifi(private val clock: FakeClock) : WifiRadio {
 
 class FakeBle : BleScanner {
     var enabled = true
-    var sink: BleSink? = null
+    @Volatile var sink: BleSink? = null
     var starts = 0
     var lowPower = false
     /** Fails the next start with this code, as onScanFailed from inside startScan. */

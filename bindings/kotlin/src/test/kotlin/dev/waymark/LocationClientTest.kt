@@ -487,6 +487,47 @@ class LocationClientTest {
         engine.close()
     }
 
+    @Test
+    fun sensorsRadiosAndTheTimerOnTheirOwnThreadsAtOnce() {
+        val phone = FakePhone()
+        val engine = engine()
+        val client = WaymarkLocationClient(engine, phone.platform)
+        val callback = RecordingCallback()
+        client.requestLocationUpdates(LocationRequest(), direct, callback)
+        val part = walk.take(20)
+        val failures = java.util.concurrent.ConcurrentLinkedQueue<Throwable>()
+        val record = iBeaconRecord("fda50693-a4e2-4fb1-afcf-c6eb07647825", 1, 7, -59)
+        fun thread(body: () -> Unit) = Thread { try { body() } catch (t: Throwable) { failures += t } }.apply { start() }
+        val sensorsThread = thread {
+            for (epoch in part) for (s in epoch.accelerometer) phone.sensors.emit(MotionSensor.ACCELEROMETER, s)
+        }
+        val gyroThread = thread {
+            for (epoch in part) for (s in epoch.gyroscope) phone.sensors.emit(MotionSensor.GYROSCOPE, s)
+        }
+        val wifiThread = thread {
+            for (epoch in part) {
+                val t = epoch.timestampNs.toLong()
+                phone.wifi.broadcast(epoch.wifi.map { WifiResult(it.bssid, it.rssiDbm.toInt(), t / 1_000L) })
+            }
+        }
+        val bleThread = thread {
+            for (i in 0 until 2_000) phone.ble.sink?.onAdvertisement("C0:00:00:00:00:01", -70, phone.clock.now, record)
+        }
+        // The timer, on this thread, across the walk's time.
+        for (epoch in part) phone.scheduler.runUntil(epoch.timestampNs.toLong())
+        listOf(sensorsThread, gyroThread, wifiThread, bleThread).forEach { it.join() }
+        phone.scheduler.runUntil(part.last().timestampNs.toLong() + 5 * S)
+        client.close()
+        assertTrue("no thread threw: $failures", failures.isEmpty())
+        val times = callback.positions.map { it.timestampNs.toLong() }
+        assertTrue("${times.size} positions", times.isNotEmpty())
+        assertTrue("positions in time order", times.zipWithNext().all { (a, b) -> b > a })
+        // The client only makes epochs after the last one: the engine refused no advance.
+        assertEquals(0UL, engine.inputStats().advancesRejected)
+        assertEquals(0UL, engine.inputStats().scansOutOfOrder)
+        engine.close()
+    }
+
     /** Flags, then Apple manufacturer data with an iBeacon. */
     private fun iBeaconRecord(uuid: String, major: Int, minor: Int, txPower: Int): ByteArray {
         val id = uuid.replace("-", "").chunked(2).map { it.toInt(16).toByte() }
