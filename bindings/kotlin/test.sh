@@ -92,20 +92,20 @@ GENERATED=$BINDINGS/dev/waymark/waymark.kt
 [ -f "$GENERATED" ] || { echo "test.sh: uniffi-bindgen wrote no $GENERATED" >&2; exit 1; }
 
 # --- Compile and run -----------------------------------------------------------------------------
-# The generated code needs kotlinx-coroutines only for async functions (none today).
-compile_cp=$JNA:$JUNIT
-run_cp=$STDLIB:$JNA:$JUNIT:$HAMCREST
-if grep -q 'kotlinx\.coroutines' "$GENERATED"; then
-    compile_cp=$compile_cp:$COROUTINES
-    run_cp=$run_cp:$COROUTINES
-fi
-step "kotlinc (with the README's Kotlin quickstart)"
+# The Android library's plain Kotlin (every file without an android.* import: the location
+# client, its ports, the conversions); the files that do import android.* are its thin shell.
+mapfile -t ANDROID_PLAIN < <(grep -L '^import android\.' "$REPO"/android/src/main/kotlin/dev/waymark/android/*.kt)
+# kotlinx-coroutines: the client's Flow (and the generated code's async functions, if any).
+compile_cp=$JNA:$JUNIT:$COROUTINES
+run_cp=$STDLIB:$JNA:$JUNIT:$HAMCREST:$COROUTINES
+step "kotlinc (with the README's Kotlin quickstart and the Android guide's code)"
 rm -rf "$OUT"
 mkdir -p "$OUT/classes"
 python3 "$REPO/scripts/readme-snippet.py" kotlin-quickstart > "$OUT/ReadmeQuickstart.kt"
+python3 "$REPO/scripts/readme-snippet.py" android-statuses docs/android.md > "$OUT/AndroidGuideStatuses.kt"
 "$KOTLINC" -nowarn -jvm-target 17 -cp "$compile_cp" -d "$OUT/classes" \
     "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt "$OUT/ReadmeQuickstart.kt" \
-    "$HERE"/../../android/src/main/kotlin/dev/waymark/android/Conversions.kt
+    "$OUT/AndroidGuideStatuses.kt" "${ANDROID_PLAIN[@]}"
 
 step "JUnit 4"
 set +e

@@ -6,7 +6,7 @@ import dev.waymark.WifiReading
 
 /**
  * Plain-Kotlin conversions from Android's sensor and WiFi types to Waymark's records. They use
- * no Android classes, so the JVM test covers them; [SensorAdapter] is the thin platform shell.
+ * no Android classes, so the JVM test covers them; [WaymarkLocationClient] uses them.
  */
 object Conversions {
     /** A `SensorEvent` (timestamp in ns since boot, values in SI units) as a Waymark sample. */

@@ -35,6 +35,7 @@ object RunTests {
             WaymarkTest::class.java, ConversionsTest::class.java, GeoConversionsTest::class.java,
             ConcurrencyTest::class.java, RobustnessTest::class.java, SiteFormatsTest::class.java,
             HabitsTest::class.java, RouteTest::class.java, SurveyRecorderTest::class.java,
+            LocationClientTest::class.java,
         )
         val result = core.run(*classes)
         // A failure in @BeforeClass fails the class without running any test: count each test.

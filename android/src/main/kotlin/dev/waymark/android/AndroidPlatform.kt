@@ -1,0 +1,202 @@
+package dev.waymark.android
+
+import android.annotation.SuppressLint
+import android.bluetooth.BluetoothAdapter
+import android.bluetooth.BluetoothManager
+import android.bluetooth.le.ScanCallback
+import android.bluetooth.le.ScanFilter
+import android.bluetooth.le.ScanResult
+import android.bluetooth.le.ScanSettings
+import android.content.BroadcastReceiver
+import android.content.Context
+import android.content.Intent
+import android.content.IntentFilter
+import android.content.pm.PackageManager
+import android.hardware.Sensor
+import android.hardware.SensorEvent
+import android.hardware.SensorEventListener
+import android.hardware.SensorManager
+import android.location.LocationManager
+import android.net.wifi.WifiManager
+import android.os.Build
+import android.os.Handler
+import android.os.Looper
+import android.os.ParcelUuid
+import android.os.SystemClock
+import dev.waymark.PositioningEngineInterface
+
+/*
+ * The Android shell of WaymarkLocationClient: each port of Platform.kt over the platform call
+ * it names, and nothing else. Every decision (rates, budgets, dedupe, statuses) is in the
+ * plain-Kotlin client, which the JVM test covers; this file is compiled by the AAR build only.
+ */
+
+/**
+ * A location client on this phone, on [looper]'s thread (sensor events, broadcasts and the
+ * timer all run there): `WaymarkLocationClient(context, engine)`.
+ */
+fun WaymarkLocationClient(
+    context: Context,
+    engine: PositioningEngineInterface,
+    looper: Looper = Looper.getMainLooper(),
+): WaymarkLocationClient = WaymarkLocationClient(engine, AndroidPlatform.create(context.applicationContext, looper))
+
+internal object AndroidPlatform {
+    fun create(context: Context, looper: Looper): Platform {
+        val handler = Handler(looper)
+        return Platform(
+            clock = Clock { SystemClock.elapsedRealtimeNanos() },
+            scheduler = Scheduler { delayMs, task ->
+                val posted = Runnable { task.run() } // its own instance, so only it is removed
+                handler.postDelayed(posted, delayMs)
+                Cancellable { handler.removeCallbacks(posted) }
+            },
+            sensors = AndroidSensors(context, handler),
+            wifi = AndroidWifi(context, handler),
+            ble = AndroidBle(context),
+            availability = AndroidAvailability(context, handler),
+        )
+    }
+
+    fun register(context: Context, receiver: BroadcastReceiver, filter: IntentFilter, handler: Handler) {
+        if (Build.VERSION.SDK_INT >= 33) {
+            context.registerReceiver(receiver, filter, null, handler, Context.RECEIVER_NOT_EXPORTED)
+        } else {
+            context.registerReceiver(receiver, filter, null, handler)
+        }
+    }
+}
+
+private class AndroidSensors(context: Context, private val handler: Handler) : MotionSensors {
+    private val manager = context.getSystemService(Context.SENSOR_SERVICE) as SensorManager
+    private val listeners = HashMap<MotionSensor, SensorEventListener>()
+
+    private fun type(sensor: MotionSensor) = when (sensor) {
+        MotionSensor.ACCELEROMETER -> Sensor.TYPE_ACCELEROMETER
+        MotionSensor.GYROSCOPE -> Sensor.TYPE_GYROSCOPE
+        MotionSensor.MAGNETOMETER -> Sensor.TYPE_MAGNETIC_FIELD
+    }
+
+    override fun has(sensor: MotionSensor) = manager.getDefaultSensor(type(sensor)) != null
+
+    override fun start(sensor: MotionSensor, periodUs: Int, maxReportLatencyUs: Int, sink: MotionSink): Boolean {
+        val hardware = manager.getDefaultSensor(type(sensor)) ?: return false
+        val listener = object : SensorEventListener {
+            override fun onSensorChanged(event: SensorEvent) = sink.onSample(sensor, event.timestamp, event.values)
+            override fun onAccuracyChanged(s: Sensor, accuracy: Int) = Unit
+        }
+        if (!manager.registerListener(listener, hardware, periodUs, maxReportLatencyUs, handler)) return false
+        listeners[sensor] = listener
+        return true
+    }
+
+    override fun stop(sensor: MotionSensor) {
+        listeners.remove(sensor)?.let { manager.unregisterListener(it) }
+    }
+}
+
+@SuppressLint("MissingPermission") // the client checks ACCESS_FINE_LOCATION / NEARBY_WIFI_DEVICES first
+private class AndroidWifi(private val context: Context, private val handler: Handler) : WifiRadio {
+    private val manager = context.getSystemService(Context.WIFI_SERVICE) as WifiManager
+    private var receiver: BroadcastReceiver? = null
+
+    @Suppress("DEPRECATION") // isScanAlwaysAvailable: still the switch that lets scans run with WiFi off
+    override fun isScanAvailable() = manager.isWifiEnabled || manager.isScanAlwaysAvailable
+
+    override fun isScanThrottleEnabled() = Build.VERSION.SDK_INT < 30 || manager.isScanThrottleEnabled
+
+    @Suppress("DEPRECATION") // startScan: deprecated without a replacement; throttled, not removed
+    override fun startScan() = manager.startScan()
+
+    override fun scanResults() = manager.scanResults.map { WifiResult(it.BSSID, it.level, it.timestamp) }
+
+    override fun listen(sink: WifiSink) {
+        val r = object : BroadcastReceiver() {
+            override fun onReceive(c: Context, intent: Intent) =
+                sink.onScanResults(intent.getBooleanExtra(WifiManager.EXTRA_RESULTS_UPDATED, false))
+        }
+        AndroidPlatform.register(context, r, IntentFilter(WifiManager.SCAN_RESULTS_AVAILABLE_ACTION), handler)
+        receiver = r
+    }
+
+    override fun stopListening() {
+        receiver?.let { context.unregisterReceiver(it) }
+        receiver = null
+    }
+}
+
+@SuppressLint("MissingPermission") // the client checks BLUETOOTH_SCAN / ACCESS_FINE_LOCATION first
+private class AndroidBle(context: Context) : BleScanner {
+    private val adapter: BluetoothAdapter? = (context.getSystemService(Context.BLUETOOTH_SERVICE) as BluetoothManager?)?.adapter
+    private var callback: ScanCallback? = null
+
+    override fun isEnabled() = adapter?.isEnabled == true
+
+    override fun start(lowPower: Boolean, sink: BleSink) {
+        val scanner = adapter?.bluetoothLeScanner ?: return sink.onScanFailed(ScanCallback.SCAN_FAILED_INTERNAL_ERROR)
+        val cb = object : ScanCallback() {
+            override fun onScanResult(callbackType: Int, result: ScanResult) = deliver(result)
+            override fun onBatchScanResults(results: MutableList<ScanResult>) = results.forEach { deliver(it) }
+            override fun onScanFailed(errorCode: Int) = sink.onScanFailed(errorCode)
+
+            fun deliver(r: ScanResult) = sink.onAdvertisement(r.device.address, r.rssi, r.timestampNanos, r.scanRecord?.bytes)
+        }
+        // Filters: Android 8.1+ delivers nothing with the screen off to an unfiltered scan.
+        val filters = listOf(
+            ScanFilter.Builder()
+                .setManufacturerData(BleAdvertisements.APPLE_COMPANY_ID, byteArrayOf(0x02, 0x15), byteArrayOf(-1, -1))
+                .build(),
+            ScanFilter.Builder().setServiceUuid(ParcelUuid.fromString(EDDYSTONE_UUID)).build(),
+        )
+        val settings = ScanSettings.Builder()
+            .setScanMode(if (lowPower) ScanSettings.SCAN_MODE_LOW_POWER else ScanSettings.SCAN_MODE_LOW_LATENCY)
+            .build()
+        callback = cb
+        scanner.startScan(filters, settings, cb)
+    }
+
+    override fun stop() {
+        val cb = callback ?: return
+        callback = null
+        // With Bluetooth already off there is no scanner, and no scan left to stop.
+        adapter?.bluetoothLeScanner?.stopScan(cb)
+    }
+
+    private companion object {
+        const val EDDYSTONE_UUID = "0000feaa-0000-1000-8000-00805f9b34fb"
+    }
+}
+
+private class AndroidAvailability(private val context: Context, private val handler: Handler) : Availability {
+    private val location = context.getSystemService(Context.LOCATION_SERVICE) as LocationManager
+    private var receiver: BroadcastReceiver? = null
+
+    override fun sdkInt() = Build.VERSION.SDK_INT
+
+    override fun isGranted(permission: Permission) =
+        context.checkSelfPermission(permission.manifestName) == PackageManager.PERMISSION_GRANTED
+
+    override fun isLocationEnabled() = if (Build.VERSION.SDK_INT >= 28) {
+        location.isLocationEnabled
+    } else {
+        location.isProviderEnabled(LocationManager.GPS_PROVIDER) || location.isProviderEnabled(LocationManager.NETWORK_PROVIDER)
+    }
+
+    override fun watch(onChange: Runnable) {
+        val r = object : BroadcastReceiver() {
+            override fun onReceive(c: Context, intent: Intent) = onChange.run()
+        }
+        val filter = IntentFilter().apply {
+            addAction(LocationManager.MODE_CHANGED_ACTION)
+            addAction(WifiManager.WIFI_STATE_CHANGED_ACTION)
+            addAction(BluetoothAdapter.ACTION_STATE_CHANGED)
+        }
+        AndroidPlatform.register(context, r, filter, handler)
+        receiver = r
+    }
+
+    override fun unwatch() {
+        receiver?.let { context.unregisterReceiver(it) }
+        receiver = null
+    }
+}

@@ -1,0 +1,119 @@
+package dev.waymark.android
+
+/*
+ * The platform ports of [WaymarkLocationClient]. Each is what the client needs of Android, in
+ * plain Kotlin, so all the client's logic runs (and is tested) on the JVM; AndroidPlatform.kt
+ * adapts them to SensorManager, WifiManager, BluetoothLeScanner, Handler and Context.
+ */
+
+/** Everything the client runs on. */
+class Platform(
+    val clock: Clock,
+    val scheduler: Scheduler,
+    val sensors: MotionSensors,
+    val wifi: WifiRadio,
+    val ble: BleScanner,
+    val availability: Availability,
+)
+
+/** The monotonic clock of every input: `SystemClock.elapsedRealtimeNanos()` on Android, the
+ *  clock of `SensorEvent.timestamp`, `ScanResult.timestamp` (in µs) and BLE `timestampNanos`. */
+fun interface Clock {
+    fun nowNs(): Long
+}
+
+/** Runs a task later on the client's thread: a `Handler` on Android. */
+fun interface Scheduler {
+    fun schedule(delayMs: Long, task: Runnable): Cancellable
+}
+
+/** A scheduled task or a registration, cancelled at most once. */
+fun interface Cancellable {
+    fun cancel()
+}
+
+/** The accelerometer, gyroscope and magnetometer: `SensorManager`. */
+interface MotionSensors {
+    /** Whether the phone has [sensor]. */
+    fun has(sensor: MotionSensor): Boolean
+
+    /** `registerListener(listener, sensor, periodUs, maxReportLatencyUs)`; false if refused. */
+    fun start(sensor: MotionSensor, periodUs: Int, maxReportLatencyUs: Int, sink: MotionSink): Boolean
+
+    /** Unregisters [sensor]. */
+    fun stop(sensor: MotionSensor)
+}
+
+/** One `SensorEvent`: ns on the shared clock, values in SI units. */
+fun interface MotionSink {
+    fun onSample(sensor: MotionSensor, timestampNs: Long, values: FloatArray)
+}
+
+/** One `ScanResult` of `WifiManager.getScanResults()`. */
+data class WifiResult(val bssid: String, val levelDbm: Int, val timestampUs: Long)
+
+/** `WifiManager` and its `SCAN_RESULTS_AVAILABLE_ACTION` receiver. */
+interface WifiRadio {
+    /** WiFi is on, or off with "scanning always available". */
+    fun isScanAvailable(): Boolean
+
+    /** Android throttles scans (`isScanThrottleEnabled()`; developer options turn it off). */
+    fun isScanThrottleEnabled(): Boolean
+
+    /** `startScan()`. */
+    fun startScan(): Boolean
+
+    /** `getScanResults()`: the last scan's results, whoever asked for the scan. */
+    fun scanResults(): List<WifiResult>
+
+    /** Registers the receiver: [sink] hears every scan's end, this app's or another's. */
+    fun listen(sink: WifiSink)
+
+    /** Unregisters it. */
+    fun stopListening()
+}
+
+/** `SCAN_RESULTS_AVAILABLE_ACTION` with its `EXTRA_RESULTS_UPDATED`. */
+fun interface WifiSink {
+    fun onScanResults(updated: Boolean)
+}
+
+/** `BluetoothLeScanner`. */
+interface BleScanner {
+    /** Bluetooth is on. */
+    fun isEnabled(): Boolean
+
+    /** `startScan(filters, settings, callback)`, low-power mode when [lowPower]. */
+    fun start(lowPower: Boolean, sink: BleSink)
+
+    /** `stopScan(callback)`. */
+    fun stop()
+}
+
+/** A `ScanCallback`. */
+interface BleSink {
+    /** One advertisement: its address, RSSI, `timestampNanos` and raw `scanRecord.bytes`. */
+    fun onAdvertisement(address: String, rssiDbm: Int, timestampNs: Long, scanRecord: ByteArray?)
+
+    /** `onScanFailed(errorCode)`. */
+    fun onScanFailed(errorCode: Int)
+}
+
+/** Permissions and switches, and a way to hear when they change. */
+interface Availability {
+    /** `Build.VERSION.SDK_INT`. */
+    fun sdkInt(): Int
+
+    /** `checkSelfPermission(permission) == PERMISSION_GRANTED`. */
+    fun isGranted(permission: Permission): Boolean
+
+    /** `LocationManager.isLocationEnabled()`. */
+    fun isLocationEnabled(): Boolean
+
+    /** Calls [onChange] when location, WiFi or Bluetooth is switched (broadcasts). Permission
+     *  grants have no broadcast: the client re-checks on its timer. */
+    fun watch(onChange: Runnable)
+
+    /** Stops watching. */
+    fun unwatch()
+}
