@@ -103,9 +103,10 @@ rm -rf "$OUT"
 mkdir -p "$OUT/classes"
 python3 "$REPO/scripts/readme-snippet.py" kotlin-quickstart > "$OUT/ReadmeQuickstart.kt"
 python3 "$REPO/scripts/readme-snippet.py" android-statuses docs/android.md > "$OUT/AndroidGuideStatuses.kt"
+python3 "$REPO/scripts/readme-snippet.py" kotlin-survey docs/surveying.md > "$OUT/SurveyingGuide.kt"
 "$KOTLINC" -nowarn -jvm-target 17 -cp "$compile_cp" -d "$OUT/classes" \
     "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt "$OUT/ReadmeQuickstart.kt" \
-    "$OUT/AndroidGuideStatuses.kt" "${ANDROID_PLAIN[@]}"
+    "$OUT/AndroidGuideStatuses.kt" "$OUT/SurveyingGuide.kt" "${ANDROID_PLAIN[@]}"
 
 step "JUnit 4"
 set +e

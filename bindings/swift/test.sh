@@ -70,17 +70,19 @@ if (( stale )); then
     exit 1
 fi
 
-# --- 4. The README's Swift quickstart and the Swift snippets of docs/ios.md (every block between
-# `<!-- snippet: NAME -->` and `<!-- /snippet -->`), compiled into the test target (not committed).
+# --- 4. The README's Swift quickstart and the Swift snippets of docs/ios.md and
+# docs/surveying.md (every block between `<!-- snippet: NAME -->` and `<!-- /snippet -->`),
+# compiled into the test target (not committed).
 {
     python3 "$REPO/scripts/readme-snippet.py" swift-quickstart
-    python3 - "$REPO/docs/ios.md" <<'PY'
+    python3 - "$REPO/docs/ios.md" "$REPO/docs/surveying.md" <<'PY'
 import re, sys
-guide = open(sys.argv[1]).read()
-blocks = re.findall(r"<!-- snippet: [\w-]+ -->\n```swift\n(.*?)```\n<!-- /snippet -->", guide, re.S)
-if not blocks:
-    sys.exit("test.sh: no Swift snippet in docs/ios.md")
-sys.stdout.write("".join(blocks))
+for path in sys.argv[1:]:
+    guide = open(path).read()
+    blocks = re.findall(r"<!-- snippet: [\w-]+ -->\n```swift\n(.*?)```\n<!-- /snippet -->", guide, re.S)
+    if not blocks:
+        sys.exit(f"test.sh: no Swift snippet in {path}")
+    sys.stdout.write("".join(blocks))
 PY
 } > "$REPO/bindings/swift/Tests/WaymarkTests/ReadmeQuickstart.swift"
 
