@@ -444,7 +444,11 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
     // Walking on past the map's end, hearing nothing the map explains. One such scan could be
     // a bad one on the map: the estimate stays on it, moved by the motion alone.
     let p = engine.push_scan_with_motion(&scan(4 * SECOND, &unexplained), &walked_east(4)).unwrap().position;
-    pinned.push_scan_with_motion(&scan(4 * SECOND, &unexplained), &walked_east(4)).unwrap();
+    let q = pinned.push_scan_with_motion(&scan(4 * SECOND, &unexplained), &walked_east(4)).unwrap().position;
+    // The fit is the fingerprinted map's: unsurveyed states, which score the no-fingerprint
+    // baseline, neither raise it to 0 nor keep a site whose floor is 0 from finding it out.
+    assert_eq!(p.radio_fit, q.radio_fit);
+    assert!(p.radio_fit.is_some_and(|f| f < 0.0), "{p:?}");
     assert_eq!(unsurveyed_mass(&engine), 0.0, "{p:?}");
     let same =
         engine.posterior()[..5].iter().zip(&pinned.posterior()[..5]).all(|(a, b)| (a - b).abs() <= 1e-12);

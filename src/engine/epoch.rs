@@ -27,7 +27,11 @@ impl Engine {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
         let ln_unheard = self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
-        let best = self.ln_emission.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        // The fit of the map: the best fingerprinted state against none. Unsurveyed states score
+        // the "no fingerprint" baseline itself, so counting them would never let the fit fall
+        // below 0, and a site whose held-out fits reach 0 would never find a scan unexplained
+        // (docs/accuracy.md#off-the-map).
+        let best = best_fingerprinted(&self.ln_emission, &self.unsurveyed);
         let radio_fit = (best - ln_unheard) / resolved.observations.len() as f64;
         // Only with an estimate to carry on from: the first scan, unexplained or not, is all
         // there is to go on.
@@ -226,6 +230,18 @@ impl Engine {
 /// scans on the map, so one scan in twenty on the map falls below it
 /// (docs/tuning.md#unsurveyed-states).
 const UNSURVEYED_AFTER_SCANS: u32 = 2;
+
+/// The largest of `ln_emission` over the states not in `unsurveyed` (sorted indices).
+fn best_fingerprinted(ln_emission: &[f64], unsurveyed: &[usize]) -> f64 {
+    let mut skip = unsurveyed.iter().peekable();
+    let mut best = f64::NEG_INFINITY;
+    for (i, &e) in ln_emission.iter().enumerate() {
+        if skip.next_if_eq(&&i).is_none() {
+            best = best.max(e);
+        }
+    }
+    best
+}
 
 /// The checks a scan's readings pass before anything is done with them (an engine's epoch, a
 /// survey recording): at least one reading, every RSSI plausible and not above

@@ -45,8 +45,9 @@ pub struct Position {
     /// ln p(scan | earlier input): how well the radio map explains this scan; `None` for an
     /// epoch without a scan. Very low values mean the phone hears what the map does not expect.
     pub radio_log_evidence: Option<f64>,
-    /// How much better, per reading, the state that best explains this scan does than a state
-    /// with no fingerprint, nats; `None` for an epoch without a scan. Below the site's
+    /// How much better, per reading, the fingerprinted state that best explains this scan does
+    /// than a state with no fingerprint, nats (negative when none does better); `None` for an
+    /// epoch without a scan. Below the site's
     /// [`radio_fit_floor`](crate::site::Calibration::radio_fit_floor) the map does not explain
     /// the scan and the engine positions by the motion alone.
     pub radio_fit: Option<f64>,
