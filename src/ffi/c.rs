@@ -284,6 +284,11 @@ fn samples<'a>(batch: *const waymark_sample, count: usize) -> Option<&'a [waymar
     (!batch.is_null()).then(|| unsafe { std::slice::from_raw_parts(batch, count) })
 }
 
+/// C samples as the core takes them (engines and survey recorders).
+fn sensor_samples(batch: &[waymark_sample]) -> Vec<SensorSample> {
+    batch.iter().map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z }).collect()
+}
+
 fn push_samples(
     engine: *mut waymark_engine,
     batch: *const waymark_sample,
@@ -295,10 +300,7 @@ fn push_samples(
         let Some(batch) = samples(batch, count) else {
             return fail(waymark_result::NullParameter, "samples must not be NULL when count > 0");
         };
-        let converted: Vec<SensorSample> = batch
-            .iter()
-            .map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z })
-            .collect();
+        let converted = sensor_samples(batch);
         match handle.call(|e| Ok(push(e, &converted).accepted)) {
             Ok(n) => {
                 write(accepted, n);

@@ -65,6 +65,12 @@ fn mean_error(site: Site, walk: &Value) -> f64 {
     errors.iter().sum::<f64>() / errors.len() as f64
 }
 
+/// The surveyor's tap `[timestamp_ns, x, y]` on F1.
+fn mark(recorder: &mut SurveyRecorder, tap: &Value) {
+    let v = |k: usize| tap[k].as_f64().unwrap();
+    recorder.mark_waypoint(v(0) as u64, v(1), v(2), "F1").unwrap();
+}
+
 #[test]
 fn a_recorded_survey_of_the_office_positions_its_test_walk_like_the_demo() {
     let dir = tempfile::tempdir().unwrap();
@@ -85,14 +91,7 @@ fn a_recorded_survey_of_the_office_positions_its_test_walk_like_the_demo() {
             let t = epoch["timestamp_ns"].as_u64().unwrap();
             // The surveyor taps each state as they pass it, between the scans.
             while let Some(tap) = taps.next_if(|w| w[0].as_f64().unwrap() as u64 <= t) {
-                recorder
-                    .mark_waypoint(
-                        tap[0].as_f64().unwrap() as u64,
-                        tap[1].as_f64().unwrap(),
-                        tap[2].as_f64().unwrap(),
-                        "F1",
-                    )
-                    .unwrap();
+                mark(&mut recorder, tap);
             }
             recorder.push_accelerometer(&samples(&epoch["accelerometer"])).unwrap();
             recorder.push_gyroscope(&samples(&epoch["gyroscope"])).unwrap();
@@ -100,14 +99,7 @@ fn a_recorded_survey_of_the_office_positions_its_test_walk_like_the_demo() {
             recorder.push_scan(&scan(epoch)).unwrap();
         }
         for tap in taps {
-            recorder
-                .mark_waypoint(
-                    tap[0].as_f64().unwrap() as u64,
-                    tap[1].as_f64().unwrap(),
-                    tap[2].as_f64().unwrap(),
-                    "F1",
-                )
-                .unwrap();
+            mark(&mut recorder, tap);
         }
         let stats = recorder.finish().unwrap();
         assert_eq!((stats.files.len(), stats.samples_non_finite + stats.samples_out_of_order), (1, 0));

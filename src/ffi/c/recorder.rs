@@ -2,8 +2,8 @@
 //! engine's, plus waypoint taps, written as walk files `waymark survey` reads.
 
 use super::{
-    boundary, copy_string, fail, readings, samples, string_arg, waymark_beacon_reading, waymark_result,
-    waymark_sample, waymark_wifi_reading, write, Rejected,
+    boundary, copy_string, fail, readings, samples, sensor_samples, string_arg, waymark_beacon_reading,
+    waymark_result, waymark_sample, waymark_wifi_reading, write, Rejected,
 };
 use crate::ffi::delivery::lock;
 use crate::radio::Scan;
@@ -139,10 +139,7 @@ fn push_samples(
         let Some(batch) = samples(batch, count) else {
             return fail(waymark_result::NullParameter, "samples must not be NULL when count > 0");
         };
-        let converted: Vec<SensorSample> = batch
-            .iter()
-            .map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z })
-            .collect();
+        let converted = sensor_samples(batch);
         match push(r, &converted) {
             Ok(report) => {
                 write(accepted, report.accepted);
