@@ -3,7 +3,7 @@
 //!
 //! Entries are 4-byte words: the step from the previous entry's state, the mean in 0.01 dB
 //! above the map's lowest and an index into the map's table of distinct standard deviations
-//! (also in 0.01 dB), with field widths fitted to the map ([`Layout`]), so that a large site's
+//! (also in 0.01 dB), with field widths fitted to the map (`Layout`), so that a large site's
 //! engine keeps within its memory budget (docs/tuning.md#engine-speed). ln p(absent) is
 //! computed when a transmitter is heard, by [`LnCdfTable`].
 
@@ -32,9 +32,8 @@ pub const MAX_STORED_STD_DB: f64 = 650.0;
 /// entry's state, the mean's 0.01 dB steps above the map's lowest mean, and the spread index,
 /// each as wide as the map needs. The mean and the spread need at most 16 bits each; whatever
 /// is left holds the step, and an entry whose step does not fit starts a new run with its
-/// state written out ([`RadioMap`]'s `runs`). On the five-floor mall the mean spans 13 bits
-/// and the spreads 10, and nine bits of step leave one run in 270 entries
-/// (docs/tuning.md#engine-speed).
+/// state written out ([`RadioMap`]'s `runs`). On a surveyed site most entries are one state
+/// after the previous one, so runs are rare (docs/tuning.md#engine-speed).
 #[derive(Clone, Copy, Debug)]
 struct Layout {
     /// The map's lowest mean, in [`LEVEL_STEP_DB`].
