@@ -162,7 +162,7 @@ impl HabitModel {
                     let train_row = rows.get(&i);
                     let count = |k: u32| train_row.and_then(|r| r.get(&k).copied()).unwrap_or(0.0);
                     let rings = Rings::of(reach, i as usize, site.spacing_m(), count);
-                    let Some(&(_, d)) =
+                    let Some((_, d)) =
                         reach.reachable(i as usize, reach.radius_m()).iter().find(|e| e.0 == j)
                     else {
                         continue;
@@ -304,7 +304,7 @@ impl Segment {
                 let mut to: Vec<u32> = reach
                     .reachable(g as usize, reach.radius_m())
                     .iter()
-                    .filter_map(|&(j, _)| local(j))
+                    .filter_map(|(j, _)| local(j))
                     .collect();
                 to.sort_unstable();
                 to.dedup();

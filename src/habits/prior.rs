@@ -45,7 +45,7 @@ impl HabitPrior {
             let mut entries: Vec<(u32, f64)> = reach
                 .reachable(i as usize, reach.radius_m())
                 .iter()
-                .map(|&(j, d)| (j, rings.probability(d, count(j), kappa) * rings.size(d)))
+                .map(|(j, d)| (j, rings.probability(d, count(j), kappa) * rings.size(d)))
                 .collect();
             entries.sort_unstable_by_key(|e| e.0);
             entries.dedup_by_key(|e| e.0);
@@ -108,7 +108,7 @@ pub(super) struct Rings {
 impl Rings {
     pub(super) fn of(reach: &ReachTable, i: usize, spacing_m: f64, count: impl Fn(u32) -> f64) -> Self {
         let mut rings: BTreeMap<u32, (f64, f64)> = BTreeMap::new();
-        for &(j, d) in reach.reachable(i, reach.radius_m()) {
+        for (j, d) in reach.reachable(i, reach.radius_m()).iter() {
             let ring = rings.entry(Self::ring(f64::from(d), spacing_m)).or_default();
             ring.0 += 1.0;
             ring.1 += count(j);

@@ -3,7 +3,7 @@
 //! of a scan with a hundred transmitters sit near -1000 nats and hundreds apart.
 
 use super::transition::{predict, predict_and_viterbi_step, Transition};
-use super::viterbi::ViterbiWindow;
+use super::viterbi::{BackPointers, ViterbiWindow};
 
 /// Why a step could not be taken; the filter is left as it was.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, thiserror::Error)]
@@ -159,8 +159,13 @@ impl ForwardFilter {
             return self.step(Some(transition), ln_emission);
         }
         let (posterior, predicted, row) = (&self.posterior, &mut self.predicted, &mut self.row);
-        viterbi.step_with(timestamp_ns, ln_emission, |delta, out, back| {
-            predict_and_viterbi_step(transition, (posterior, predicted), (delta, out, back), row);
+        viterbi.step_with(timestamp_ns, ln_emission, |delta, out, back| match back {
+            BackPointers::Narrow(back) => {
+                predict_and_viterbi_step(transition, (posterior, predicted), (delta, out, back), row)
+            }
+            BackPointers::Wide(back) => {
+                predict_and_viterbi_step(transition, (posterior, predicted), (delta, out, back), row)
+            }
         });
         self.update(ln_emission)
     }

@@ -13,6 +13,7 @@ pub use estimate::{estimate, Estimate};
 pub use forward::{FilterError, ForwardFilter};
 pub use motion::{angle_between, azimuth, HipeRegion, HipeTransition, HoangTransition};
 pub use transition::{
-    hipe_probabilities, predict, predict_and_viterbi_step, viterbi_step, RowBounds, Transition, UniformReach,
+    hipe_probabilities, predict, predict_and_viterbi_step, viterbi_step, BackPointer, RowBounds, Transition,
+    UniformReach,
 };
-pub use viterbi::ViterbiWindow;
+pub use viterbi::{BackPointers, ViterbiWindow};

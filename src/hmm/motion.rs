@@ -108,7 +108,7 @@ impl Transition for HipeTransition<'_> {
         let outer = self.region.outer_radius_m();
         let candidates = self.table.reachable(i, outer);
         let near = self.table.near_count(i);
-        for (k, &(j, walk_m)) in candidates.iter().enumerate() {
+        for (k, (j, walk_m)) in candidates.iter().enumerate() {
             if self.in_region(i, j, f64::from(walk_m), k < near) {
                 row.push((j, 0.0));
             }
@@ -116,7 +116,7 @@ impl Transition for HipeTransition<'_> {
         if row.is_empty() {
             // No state in the ring (the grid is coarser than the tolerance there): fall back to
             // the disc it bounds, so that the measured motion still limits the move.
-            row.extend(candidates.iter().map(|&(j, _)| (j, 0.0)));
+            row.extend(candidates.iter().map(|(j, _)| (j, 0.0)));
         }
         let (high, low) = hipe_probabilities(row.len(), self.table.state_count(), self.ratio);
         for entry in row.iter_mut() {
@@ -228,7 +228,7 @@ impl Transition for HoangTransition<'_> {
         let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
         let from = &states[i];
         let m = self.measured();
-        for &(j, walk_m) in reach {
+        for (j, walk_m) in reach.iter() {
             let to = &states[j as usize];
             let delta = if to.floor == from.floor {
                 to.position - from.position

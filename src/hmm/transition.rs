@@ -62,18 +62,38 @@ impl RowBounds<'_> {
 /// at building scale (docs/tuning.md#engine-speed).
 pub const PRUNE_MASS: f64 = 1e-15;
 
+/// A Viterbi back-pointer: a state index, stored in 16 bits on a site of at most 65 536 states
+/// ([`ViterbiWindow`](super::ViterbiWindow)) and in 32 beyond.
+pub trait BackPointer: Copy {
+    /// The back-pointer to state `i`, which must fit.
+    fn to_state(i: u32) -> Self;
+}
+
+impl BackPointer for u16 {
+    fn to_state(i: u32) -> Self {
+        debug_assert!(i <= u32::from(u16::MAX));
+        i as u16
+    }
+}
+
+impl BackPointer for u32 {
+    fn to_state(i: u32) -> Self {
+        i
+    }
+}
+
 /// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least `PRUNE_MASS`.
 pub fn predict(transition: &dyn Transition, prior: &[f64], out: &mut [f64], row: &mut Vec<(u32, f64)>) {
-    expand(transition, Some((prior, out)), None, row);
+    expand::<u32>(transition, Some((prior, out)), None, row);
 }
 
 /// [`predict`] and [`viterbi_step`] with one transition, each row written once for both: the
 /// two expand overlapping sets of rows (the states near the estimate), and writing a row is
 /// most of the cost of each. Both results are exactly those of the two calls.
-pub fn predict_and_viterbi_step(
+pub fn predict_and_viterbi_step<B: BackPointer>(
     transition: &dyn Transition,
     (prior, predicted): (&[f64], &mut [f64]),
-    (delta, out, back): (&[f64], &mut [f64], &mut [u32]),
+    (delta, out, back): (&[f64], &mut [f64], &mut [B]),
     row: &mut Vec<(u32, f64)>,
 ) {
     expand(transition, Some((prior, predicted)), Some((delta, out, back)), row);
@@ -101,11 +121,11 @@ const BOUND_MARGIN: f64 = 1e-6;
 /// `out[j]`. When the model gives its rows' bounds ([`RowBounds`]) the floor paths
 /// are found first and only rows that can win are written; the result, back-pointers and ties
 /// included, is the same as expanding every row of the beam.
-pub fn viterbi_step(
+pub fn viterbi_step<B: BackPointer>(
     transition: &dyn Transition,
     delta: &[f64],
     out: &mut [f64],
-    back: &mut [u32],
+    back: &mut [B],
     row: &mut Vec<(u32, f64)>,
 ) {
     expand(transition, None, Some((delta, out, back)), row);
@@ -115,10 +135,10 @@ pub fn viterbi_step(
 /// either or both, in one pass over the rows in state order, so each sum and maximum is taken
 /// in the same order whichever of the two run.
 #[allow(clippy::type_complexity)]
-fn expand(
+fn expand<B: BackPointer>(
     transition: &dyn Transition,
     forward: Option<(&[f64], &mut [f64])>,
-    viterbi: Option<(&[f64], &mut [f64], &mut [u32])>,
+    viterbi: Option<(&[f64], &mut [f64], &mut [B])>,
     row: &mut Vec<(u32, f64)>,
 ) {
     let (prior, predicted) = match forward {
@@ -197,7 +217,7 @@ fn expand(
                 let v = d + a.ln();
                 if v > out[j as usize] {
                     out[j as usize] = v;
-                    back[j as usize] = i as u32;
+                    back[j as usize] = B::to_state(i as u32);
                 }
             }
         }
@@ -211,7 +231,7 @@ fn expand(
         for (o, b) in out.iter_mut().zip(back.iter_mut()) {
             if floor_best > *o {
                 *o = floor_best;
-                *b = floor_arg;
+                *b = B::to_state(floor_arg);
             }
         }
     }
@@ -242,7 +262,7 @@ impl Transition for UniformReach<'_> {
     fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
         let reach = self.table.reachable(i, self.rho_m);
         let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
-        row.extend(reach.iter().map(|&(j, _)| (j, high)));
+        row.extend(reach.iter().map(|(j, _)| (j, high)));
         low
     }
 

@@ -1,6 +1,6 @@
 //! Viterbi over a bounded window of epochs (HIPE §4.1: the Viterbi algorithm for tracking),
 //! in log space, with back-pointers kept for the last `capacity` epochs only, so memory is
-//! capacity × N × 4 bytes however long the session runs.
+//! capacity × N × 2 bytes (4 beyond 65 536 states) however long the session runs.
 
 use super::transition::{viterbi_step, Transition};
 use std::collections::VecDeque;
@@ -18,8 +18,8 @@ pub struct ViterbiWindow {
     next: Vec<f64>,
     /// Per epoch in the window (oldest first): timestamp and back-pointers into the previous
     /// epoch (unused for the window's first epoch).
-    epochs: VecDeque<(u64, Vec<u32>)>,
-    spare: Vec<Vec<u32>>,
+    epochs: VecDeque<(u64, BackPointers)>,
+    spare: Vec<BackPointers>,
     row: Vec<(u32, f64)>,
     undo: Undo,
 }
@@ -31,10 +31,48 @@ struct Undo {
     /// How many of the checkpoint's epochs are still in the window (its oldest were dropped).
     kept: usize,
     /// The checkpoint's epochs dropped since, oldest first.
-    dropped: Vec<(u64, Vec<u32>)>,
+    dropped: Vec<(u64, BackPointers)>,
     /// The checkpoint's scores, once a step replaced them (`delta_saved`).
     delta: Vec<f64>,
     delta_saved: bool,
+}
+
+/// One epoch's back-pointers into the epoch before: state indices in 16 bits on a site of at
+/// most 65 536 states, half the window's memory at building scale
+/// (docs/tuning.md#engine-speed), and in 32 bits beyond.
+#[derive(Clone, Debug, PartialEq)]
+pub enum BackPointers {
+    /// 16-bit state indices.
+    Narrow(Vec<u16>),
+    /// 32-bit state indices.
+    Wide(Vec<u32>),
+}
+
+impl BackPointers {
+    /// Back-pointers for `n` states, all to state 0.
+    pub fn new(n: usize) -> Self {
+        if n <= 1 << 16 {
+            BackPointers::Narrow(vec![0; n])
+        } else {
+            BackPointers::Wide(vec![0; n])
+        }
+    }
+
+    /// The state that state `j`'s best path came from.
+    pub fn get(&self, j: usize) -> usize {
+        match self {
+            BackPointers::Narrow(back) => usize::from(back[j]),
+            BackPointers::Wide(back) => back[j] as usize,
+        }
+    }
+
+    /// Bytes held.
+    fn bytes(&self) -> usize {
+        match self {
+            BackPointers::Narrow(back) => back.len() * 2,
+            BackPointers::Wide(back) => back.len() * 4,
+        }
+    }
 }
 
 /// The state only: the scratch buffers hold nothing a later step reads.
@@ -144,8 +182,8 @@ impl ViterbiWindow {
 
     /// Bytes held by back-pointers and scores, for memory accounting.
     pub fn memory_bytes(&self) -> usize {
-        let n = self.delta.len();
-        (self.epochs.len() + self.spare.len() + self.undo.dropped.len()) * n * 4 + 3 * n * 8
+        let epochs = self.epochs.iter().chain(&self.undo.dropped).map(|e| &e.1);
+        epochs.chain(&self.spare).map(BackPointers::bytes).sum::<usize>() + 3 * self.delta.len() * 8
     }
 
     /// Adds an epoch: `transition` from the previous one (ignored for the first epoch of the
@@ -153,8 +191,9 @@ impl ViterbiWindow {
     /// Emissions that are NaN count as impossible.
     pub fn step(&mut self, timestamp_ns: u64, transition: &dyn Transition, ln_emission: &[f64]) {
         let mut row = std::mem::take(&mut self.row);
-        self.step_with(timestamp_ns, ln_emission, |delta, out, back| {
-            viterbi_step(transition, delta, out, back, &mut row);
+        self.step_with(timestamp_ns, ln_emission, |delta, out, back| match back {
+            BackPointers::Narrow(back) => viterbi_step(transition, delta, out, back, &mut row),
+            BackPointers::Wide(back) => viterbi_step(transition, delta, out, back, &mut row),
         });
         self.row = row;
     }
@@ -171,10 +210,10 @@ impl ViterbiWindow {
         &mut self,
         timestamp_ns: u64,
         ln_emission: &[f64],
-        expand: impl FnOnce(&[f64], &mut [f64], &mut [u32]),
+        expand: impl FnOnce(&[f64], &mut [f64], &mut BackPointers),
     ) {
         let n = self.delta.len();
-        let mut back = self.spare.pop().unwrap_or_else(|| vec![0; n]);
+        let mut back = self.spare.pop().unwrap_or_else(|| BackPointers::new(n));
         if self.epochs.is_empty() {
             self.next.copy_from_slice(ln_emission);
         } else {
@@ -253,7 +292,7 @@ impl ViterbiWindow {
             scratch.resize(n, 0.0);
             for (j, &w) in out.iter().enumerate() {
                 if w > 0.0 {
-                    scratch[back[j] as usize] += w;
+                    scratch[back.get(j)] += w;
                 }
             }
             std::mem::swap(out, scratch);
@@ -272,7 +311,7 @@ impl ViterbiWindow {
         for (k, (timestamp, back)) in self.epochs.iter().enumerate().rev() {
             path.push((*timestamp, state));
             if k > 0 {
-                state = back[state as usize];
+                state = back.get(state as usize) as u32;
             }
         }
         path.reverse();

@@ -1,10 +1,11 @@
 //! The radio map: every state's fingerprint, stored by transmitter so that a scan costs
 //! O(states + fingerprint entries of the transmitters heard), not O(states × transmitters).
 //!
-//! Entries are 8 bytes: the state, the mean in 0.01 dB and an index into the map's table of
-//! distinct standard deviations (also in 0.01 dB), so that a large site's engine keeps within
-//! its memory budget (docs/tuning.md#engine-speed). ln p(absent) is computed when a
-//! transmitter is heard, by [`LnCdfTable`].
+//! Entries are 4-byte words: the step from the previous entry's state, the mean in 0.01 dB
+//! above the map's lowest and an index into the map's table of distinct standard deviations
+//! (also in 0.01 dB), with field widths fitted to the map (`Layout`), so that a large site's
+//! engine keeps within its memory budget (docs/tuning.md#engine-speed). ln p(absent) is
+//! computed when a transmitter is heard, by [`LnCdfTable`].
 
 use super::{ln_std_normal_pdf, Gaussian, LnCdfTable, RssiModel, Scan, TransmitterId};
 use std::collections::HashMap;
@@ -13,8 +14,8 @@ use std::collections::HashMap;
 /// phones report RSSI in, so storing it changes no likelihood a reading can tell apart.
 pub const LEVEL_STEP_DB: f64 = 0.01;
 
-/// Largest |mean| of a fingerprint model, dBm: the 0.01 dB steps are stored in an `i16`
-/// (±327.67 dBm). Phones report about -130 to +20 dBm.
+/// Largest |mean| of a fingerprint model, dBm: the 0.01 dB steps fit an `i16` (±327.67 dBm).
+/// Phones report about -130 to +20 dBm.
 pub const MAX_ABS_LEVEL_DBM: f64 = 320.0;
 
 /// Smallest standard deviation of a fingerprint model, dB: one [`LEVEL_STEP_DB`]. Found with
@@ -23,18 +24,64 @@ pub const MAX_ABS_LEVEL_DBM: f64 = 320.0;
 /// whole dBm and the survey's fits stop at 1 dB.
 pub const MIN_STD_DB: f64 = LEVEL_STEP_DB;
 
-/// Largest standard deviation of a fingerprint model, dB: the steps are stored in a `u16`
-/// (655.35 dB). The survey caps its fits far below.
+/// Largest standard deviation of a fingerprint model, dB: the steps fit a `u16` (655.35 dB).
+/// The survey caps its fits far below.
 pub const MAX_STORED_STD_DB: f64 = 650.0;
 
-/// One transmitter's model at one state: 8 bytes.
+/// How an entry's fields share its 32-bit word: from the top, the step from the previous
+/// entry's state, the mean's 0.01 dB steps above the map's lowest mean, and the spread index,
+/// each as wide as the map needs. The mean and the spread need at most 16 bits each; whatever
+/// is left holds the step, and an entry whose step does not fit starts a new run with its
+/// state written out ([`RadioMap`]'s `runs`). On a surveyed site most entries are one state
+/// after the previous one, so runs are rare (docs/tuning.md#engine-speed).
 #[derive(Clone, Copy, Debug)]
-struct Entry {
-    state: u32,
-    /// Mean, in [`LEVEL_STEP_DB`].
-    mean: i16,
-    /// Index into [`RadioMap::spreads`].
-    spread: u16,
+struct Layout {
+    /// The map's lowest mean, in [`LEVEL_STEP_DB`].
+    lowest_mean: i32,
+    mean_shift: u32,
+    mean_mask: u32,
+    spread_mask: u32,
+    step_shift: u32,
+    step_mask: u32,
+}
+
+impl Layout {
+    /// The narrowest fields for means in `lowest..=highest` steps and `spreads` distinct spreads
+    /// (at least one).
+    fn fit(lowest: i32, highest: i32, spreads: usize) -> Self {
+        let bits = |largest: u32| u32::BITS - largest.leading_zeros();
+        let mean_bits = bits((highest - lowest) as u32);
+        let spread_bits = bits(spreads.saturating_sub(1) as u32);
+        let step_bits = u32::BITS - mean_bits - spread_bits;
+        let mask = |width: u32| if width == 0 { 0 } else { u32::MAX >> (u32::BITS - width) };
+        Layout {
+            lowest_mean: lowest,
+            mean_shift: spread_bits,
+            mean_mask: mask(mean_bits),
+            spread_mask: mask(spread_bits),
+            // Shifts stay below 32; a field of no bits reads 0 through its mask.
+            step_shift: (mean_bits + spread_bits).min(u32::BITS - 1),
+            step_mask: mask(step_bits),
+        }
+    }
+
+    /// The word of an entry `step` states after the previous one, if the step fits.
+    fn encode(&self, step: u32, mean: i16, spread: u16) -> Option<u32> {
+        let mean = (i32::from(mean) - self.lowest_mean) as u32;
+        debug_assert!(mean & !self.mean_mask == 0 && u32::from(spread) & !self.spread_mask == 0);
+        (step <= self.step_mask).then(|| {
+            let step = if self.step_mask == 0 { 0 } else { step << self.step_shift };
+            step | mean << self.mean_shift | u32::from(spread)
+        })
+    }
+
+    /// (step, mean in [`LEVEL_STEP_DB`], spread index) of a word.
+    #[inline]
+    fn decode(&self, word: u32) -> (usize, i32, usize) {
+        let step = (word >> self.step_shift) & self.step_mask;
+        let mean = (word >> self.mean_shift) & self.mean_mask;
+        (step as usize, self.lowest_mean + mean as i32, (word & self.spread_mask) as usize)
+    }
 }
 
 /// A standard deviation that entries share, with what scoring needs of it.
@@ -76,9 +123,14 @@ pub struct RadioMap {
     unheard_ln_absent: f64,
     ids: Vec<TransmitterId>,
     index: HashMap<TransmitterId, u32>,
-    /// Entries of transmitter `t` are `entries[starts[t]..starts[t + 1]]`.
-    starts: Vec<usize>,
-    entries: Vec<Entry>,
+    /// The entries' words, by transmitter and, within one, by state.
+    words: Vec<u32>,
+    /// (first word, its state) of each run of words; a run's later words step on from the
+    /// state before. The runs of transmitter `t` are `runs[run_starts[t]..run_starts[t + 1]]`,
+    /// and a last run marks where the words end.
+    runs: Vec<(usize, u32)>,
+    run_starts: Vec<usize>,
+    layout: Layout,
     /// The distinct standard deviations of the entries (a few hundred on a real site).
     spreads: Vec<Spread>,
     /// Per radio kind (WiFi, BLE), per state: ln p(every transmitter of that kind absent |
@@ -174,7 +226,9 @@ impl RadioMap {
         }
         let mut fill = starts.clone();
         let table = LnCdfTable::get();
-        let mut entries = vec![Entry { state: 0, mean: 0, spread: 0 }; quantised.len()];
+        let (mut lowest, mut highest) = (i32::MAX, i32::MIN);
+        // (state, mean, spread index), bucketed, until the words are written.
+        let mut entries = vec![(0u32, 0i16, 0u16); quantised.len()];
         for (state, tx, mean, std) in quantised {
             // ln p(absent) by the table, as scoring takes it: the exact ln Φ per entry was
             // half the load time of a 10 000-state site.
@@ -184,20 +238,44 @@ impl RadioMap {
                 RssiModel::NaiveGaussian => model.ln_absent(&Gaussian { mean_dbm, std_db }, clip_dbm),
             };
             all_absent[kinds[tx as usize] as usize][state as usize] += ln_absent - unheard_ln_absent;
-            entries[fill[tx as usize]] = Entry { state, mean, spread: spread_of[usize::from(std)] };
+            entries[fill[tx as usize]] = (state, mean, spread_of[usize::from(std)]);
             fill[tx as usize] += 1;
+            (lowest, highest) = (lowest.min(i32::from(mean)), highest.max(i32::from(mean)));
         }
         // Site files list entries state by state, so buckets come out sorted; any other
         // order is sorted here. Then a repeated state is a transmitter modelled twice.
         for t in 0..ids.len() {
             let bucket = &mut entries[starts[t]..starts[t + 1]];
-            if !bucket.windows(2).all(|w| w[0].state <= w[1].state) {
-                bucket.sort_by_key(|e| e.state);
+            if !bucket.windows(2).all(|w| w[0].0 <= w[1].0) {
+                bucket.sort_by_key(|e| e.0);
             }
-            if let Some(w) = bucket.windows(2).find(|w| w[0].state == w[1].state) {
-                return Err(format!("state {} models transmitter {} twice", w[0].state, ids[t]));
+            if let Some(w) = bucket.windows(2).find(|w| w[0].0 == w[1].0) {
+                return Err(format!("state {} models transmitter {} twice", w[0].0, ids[t]));
             }
         }
+        let (lowest, highest) = if entries.is_empty() { (0, 0) } else { (lowest, highest) };
+        let layout = Layout::fit(lowest, highest, spreads.len());
+        let mut words = Vec::with_capacity(entries.len());
+        let (mut runs, mut run_starts) = (Vec::new(), Vec::with_capacity(ids.len() + 1));
+        for t in 0..ids.len() {
+            run_starts.push(runs.len());
+            let mut previous = None;
+            for &(state, mean, spread) in &entries[starts[t]..starts[t + 1]] {
+                let step = previous.map_or(0, |p| state - p);
+                let word = match previous.and_then(|_| layout.encode(step, mean, spread)) {
+                    Some(word) => word,
+                    None => {
+                        runs.push((words.len(), state));
+                        layout.encode(0, mean, spread).expect("a step of 0 always fits")
+                    }
+                };
+                words.push(word);
+                previous = Some(state);
+            }
+        }
+        run_starts.push(runs.len());
+        runs.push((words.len(), 0));
+        runs.shrink_to_fit();
         Ok(Self {
             model,
             clip_dbm,
@@ -205,8 +283,10 @@ impl RadioMap {
             unheard_ln_absent,
             ids,
             index,
-            starts,
-            entries,
+            words,
+            runs,
+            run_starts,
+            layout,
             spreads,
             all_absent,
             kinds,
@@ -241,22 +321,39 @@ impl RadioMap {
     /// Every `(state, transmitter, model)` of the map, by transmitter.
     pub fn fingerprints(&self) -> impl Iterator<Item = (u32, u32, Gaussian)> + '_ {
         (0..self.ids.len()).flat_map(move |t| {
-            self.entries[self.starts[t]..self.starts[t + 1]]
-                .iter()
-                .map(move |e| (e.state, t as u32, self.gaussian(e)))
+            self.entries(t as u32).map(move |(state, mean, spread)| {
+                let std_db = level(self.spreads[spread].steps);
+                (state as u32, t as u32, Gaussian { mean_dbm: level(mean), std_db })
+            })
         })
     }
 
-    /// The stored model of an entry.
-    fn gaussian(&self, e: &Entry) -> Gaussian {
-        Gaussian { mean_dbm: level(e.mean), std_db: level(self.spreads[usize::from(e.spread)].steps) }
+    /// The entries of transmitter `t` as (state, mean in [`LEVEL_STEP_DB`], spread index), by
+    /// state.
+    fn entries(&self, t: u32) -> impl Iterator<Item = (usize, i32, usize)> + '_ {
+        self.runs(t).flat_map(move |(first, words)| {
+            let mut state = first as usize;
+            words.iter().map(move |&word| {
+                let (step, mean, spread) = self.layout.decode(word);
+                state += step;
+                (state, mean, spread)
+            })
+        })
+    }
+
+    /// The runs of transmitter `t`: (the state of the first word, whose step is 0, the words).
+    #[inline]
+    fn runs(&self, t: u32) -> impl Iterator<Item = (u32, &[u32])> + '_ {
+        let runs = &self.runs[self.run_starts[t as usize]..=self.run_starts[t as usize + 1]];
+        runs.windows(2).map(|run| (run[0].1, &self.words[run[0].0..run[1].0]))
     }
 
     /// Heap bytes of the fingerprint entries and their tables (what grows with the site).
     pub fn memory_bytes(&self) -> usize {
-        self.entries.capacity() * std::mem::size_of::<Entry>()
+        self.words.capacity() * std::mem::size_of::<u32>()
+            + self.runs.capacity() * std::mem::size_of::<(usize, u32)>()
+            + self.run_starts.capacity() * std::mem::size_of::<usize>()
             + self.spreads.capacity() * std::mem::size_of::<Spread>()
-            + self.starts.capacity() * std::mem::size_of::<usize>()
             + self.all_absent.iter().map(|v| v.capacity() * 8).sum::<usize>()
     }
 
@@ -319,25 +416,32 @@ impl RadioMap {
             if rssi <= self.clip_dbm {
                 continue;
             }
-            let entries = &self.entries[self.starts[t as usize]..self.starts[t as usize + 1]];
-            match self.model {
-                RssiModel::CensoredGaussian => {
-                    let table = LnCdfTable::get();
-                    for e in entries {
-                        let spread = &self.spreads[usize::from(e.spread)];
-                        let mean = f64::from(e.mean) * LEVEL_STEP_DB;
-                        let heard = ln_std_normal_pdf((rssi - mean) * spread.inverse) - spread.ln;
-                        let absent = table.ln_cdf((self.clip_dbm - mean) * spread.inverse);
-                        out[e.state as usize] += heard - absent - unheard_delta;
+            let layout = self.layout;
+            for (first, words) in self.runs(t) {
+                let mut state = first as usize;
+                match self.model {
+                    RssiModel::CensoredGaussian => {
+                        let table = LnCdfTable::get();
+                        for &word in words {
+                            let (step, mean, spread) = layout.decode(word);
+                            state += step;
+                            let spread = &self.spreads[spread];
+                            let mean = f64::from(mean) * LEVEL_STEP_DB;
+                            let heard = ln_std_normal_pdf((rssi - mean) * spread.inverse) - spread.ln;
+                            let absent = table.ln_cdf((self.clip_dbm - mean) * spread.inverse);
+                            out[state] += heard - absent - unheard_delta;
+                        }
                     }
-                }
-                RssiModel::NaiveGaussian => {
-                    for e in entries {
-                        let spread = &self.spreads[usize::from(e.spread)];
-                        let mean = f64::from(e.mean) * LEVEL_STEP_DB;
-                        let (z, z_clip) =
-                            ((rssi - mean) * spread.inverse, (self.clip_dbm - mean) * spread.inverse);
-                        out[e.state as usize] += 0.5 * (z_clip * z_clip - z * z) - unheard_delta;
+                    RssiModel::NaiveGaussian => {
+                        for &word in words {
+                            let (step, mean, spread) = layout.decode(word);
+                            state += step;
+                            let spread = &self.spreads[spread];
+                            let mean = f64::from(mean) * LEVEL_STEP_DB;
+                            let (z, z_clip) =
+                                ((rssi - mean) * spread.inverse, (self.clip_dbm - mean) * spread.inverse);
+                            out[state] += 0.5 * (z_clip * z_clip - z * z) - unheard_delta;
+                        }
                     }
                 }
             }
@@ -453,6 +557,67 @@ mod tests {
         let expected = ln_pdf_at_mean + 3.167_124_183_311_992e-5f64.ln() + 0.202_328_380_963_643_03f64.ln();
         // Transmitter 0's ln p(absent) is tabled (≤ 2e-6 off).
         assert_relative_eq!(out[0], expected, epsilon = 1e-5);
+    }
+
+    #[test]
+    fn layouts_fit_the_map_and_round_trip() {
+        // Means over the whole i16 range and 65 536 spreads leave no bits for the step.
+        let full = Layout::fit(-32_767, 32_767, 65_536);
+        assert_eq!(full.step_mask, 0);
+        assert_eq!(full.encode(1, 5, 7), None);
+        let word = full.encode(0, -32_767, 65_535).unwrap();
+        assert_eq!(full.decode(word), (0, -32_767, 65_535));
+        // One mean and one spread: the step has every bit.
+        let single = Layout::fit(-6000, -6000, 1);
+        let word = single.encode(u32::MAX, -6000, 0).unwrap();
+        assert_eq!(single.decode(word), (u32::MAX as usize, -6000, 0));
+        let mall = Layout::fit(-11_250, -3_943, 697);
+        assert_eq!(mall.step_mask, 511);
+        let word = mall.encode(511, -3_943, 696).unwrap();
+        assert_eq!(mall.decode(word), (511, -3_943, 696));
+        assert_eq!(mall.encode(512, -3_943, 696), None);
+    }
+
+    /// Means far apart and many spreads leave a few bits of step, so entries far apart in
+    /// state start runs: the map still returns every model and scores as the dense product.
+    #[test]
+    fn entries_far_apart_start_runs() {
+        let states = 3000;
+        // 503 spreads (9 bits) and means 600 dB apart (16 bits) leave 7 bits of step.
+        let fingerprints: Vec<(u32, u32, Gaussian)> = (0..states)
+            .filter(|s| (s % 3 == 0 && *s < 1500) || [2000, 2500, 2999].contains(s))
+            .flat_map(|s| {
+                let mean = if s % 2 == 0 { -300.0 + f64::from(s % 50) } else { 300.0 - f64::from(s % 13) };
+                let std = 1.0 + 0.01 * f64::from(s / 3);
+                [(s, 0, g(mean, std)), (s, 1, g(mean / 3.0, std))]
+            })
+            .collect();
+        let map = RadioMap::new(
+            RssiModel::CensoredGaussian,
+            -100.0,
+            g(-115.0, 5.0),
+            vec![wifi(0), wifi(1)],
+            states as usize,
+            fingerprints.clone(),
+        )
+        .unwrap();
+        assert_eq!(map.layout.step_mask, 127);
+        // Per transmitter, the first entry and the three after a gap of 500.
+        assert_eq!(map.runs.len(), 2 * 4 + 1);
+        let mut stored: Vec<(u32, u32, Gaussian)> = map.fingerprints().collect();
+        stored.sort_by_key(|e| (e.0, e.1));
+        assert_eq!(stored.len(), fingerprints.len());
+        for (a, b) in stored.iter().zip(&fingerprints) {
+            assert_eq!((a.0, a.1), (b.0, b.1));
+            assert_relative_eq!(a.2.mean_dbm, b.2.mean_dbm, epsilon = 0.005);
+            assert_relative_eq!(a.2.std_db, b.2.std_db, epsilon = 0.005);
+        }
+        let heard = [(0, -90.0), (1, -40.0)];
+        let mut out = vec![0.0; states as usize];
+        map.ln_likelihood(&heard, &mut out);
+        for s in [0, 3, 4, 1497, 2000, 2500, 2999] {
+            assert_relative_eq!(out[s as usize], brute_force(&map, &heard, s), epsilon = 1e-5);
+        }
     }
 
     #[test]

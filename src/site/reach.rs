@@ -13,13 +13,156 @@ use std::collections::BinaryHeap;
 /// itself and its direct neighbours (always reachable: the walker may stand on the boundary
 /// between two cells, however far apart their centres are), then the others by increasing
 /// walking distance.
+///
+/// An entry takes 3 bytes where the site allows, against 8 for a `(u32, f32)`: the state in
+/// 16 bits on a site of at most 65 536 states, and the distance as an index into the table's
+/// distinct distances when it has at most 256 of them (a grid's few edge lengths make few
+/// sums within the radius); both exact (docs/tuning.md#engine-speed).
 #[derive(Clone, Debug)]
 pub struct ReachTable {
     radius_m: f64,
     starts: Vec<usize>,
     /// Index where the distance-sorted part of state `i` begins.
     sorted_from: Vec<usize>,
-    entries: Vec<(u32, f32)>,
+    targets: Targets,
+    distances: Distances,
+}
+
+/// The entries' states.
+#[derive(Clone, Debug)]
+enum Targets {
+    /// On a site of at most 65 536 states.
+    Narrow(Vec<u16>),
+    Wide(Vec<u32>),
+}
+
+/// The entries' walking distances, m.
+#[derive(Clone, Debug)]
+enum Distances {
+    /// Indices into `values`, the distinct distances in increasing order, so that the codes of
+    /// a distance-sorted run increase too.
+    Coded {
+        codes: Vec<u8>,
+        values: Vec<f32>,
+    },
+    Plain(Vec<f32>),
+}
+
+impl Targets {
+    fn push(&mut self, j: u32) {
+        match self {
+            Targets::Narrow(v) => v.push(j as u16),
+            Targets::Wide(v) => v.push(j),
+        }
+    }
+
+    #[inline]
+    fn get(&self, k: usize) -> u32 {
+        match self {
+            Targets::Narrow(v) => u32::from(v[k]),
+            Targets::Wide(v) => v[k],
+        }
+    }
+
+    fn len(&self) -> usize {
+        match self {
+            Targets::Narrow(v) => v.len(),
+            Targets::Wide(v) => v.len(),
+        }
+    }
+}
+
+impl Distances {
+    /// Appends a distance, coding it while the table has at most 256 distinct ones.
+    fn push(&mut self, d: f32, code_of: &mut Vec<(u32, u8)>) {
+        if let Distances::Coded { codes, values } = self {
+            let code = match code_of.binary_search_by_key(&d.to_bits(), |c| c.0) {
+                Ok(at) => Some(code_of[at].1),
+                Err(at) if values.len() < 256 => {
+                    code_of.insert(at, (d.to_bits(), values.len() as u8));
+                    values.push(d);
+                    Some((values.len() - 1) as u8)
+                }
+                Err(_) => None,
+            };
+            match code {
+                Some(code) => return codes.push(code),
+                None => *self = Distances::Plain(codes.iter().map(|&c| values[usize::from(c)]).collect()),
+            }
+        }
+        if let Distances::Plain(v) = self {
+            v.push(d);
+        }
+    }
+
+    /// Renumbers the codes so that they follow the distances' order.
+    fn finish(&mut self) {
+        if let Distances::Coded { codes, values } = self {
+            let mut order: Vec<u8> = (0..values.len() as u8).collect();
+            order.sort_by(|&a, &b| values[usize::from(a)].total_cmp(&values[usize::from(b)]));
+            let mut rank = [0u8; 256];
+            for (r, &c) in order.iter().enumerate() {
+                rank[usize::from(c)] = r as u8;
+            }
+            codes.iter_mut().for_each(|c| *c = rank[usize::from(*c)]);
+            *values = order.iter().map(|&c| values[usize::from(c)]).collect();
+        }
+    }
+
+    #[inline]
+    fn get(&self, k: usize) -> f32 {
+        match self {
+            Distances::Coded { codes, values } => values[usize::from(codes[k])],
+            Distances::Plain(v) => v[k],
+        }
+    }
+
+    /// How many of the distance-sorted entries `from..to` are within `rho_m`.
+    fn within(&self, from: usize, to: usize, rho_m: f64) -> usize {
+        match self {
+            Distances::Coded { codes, values } => {
+                let below = values.partition_point(|&d| f64::from(d) <= rho_m);
+                codes[from..to].partition_point(|&c| usize::from(c) < below)
+            }
+            Distances::Plain(v) => v[from..to].partition_point(|&d| f64::from(d) <= rho_m),
+        }
+    }
+}
+
+/// The states reachable from one state with their walking distances, m
+/// ([`ReachTable::reachable`]).
+#[derive(Clone, Copy, Debug)]
+pub struct Reach<'a> {
+    table: &'a ReachTable,
+    from: usize,
+    to: usize,
+}
+
+impl<'a> Reach<'a> {
+    /// Number of states.
+    pub fn len(&self) -> usize {
+        self.to - self.from
+    }
+
+    /// Whether there are none (never: a state reaches itself).
+    pub fn is_empty(&self) -> bool {
+        self.to == self.from
+    }
+
+    /// The `k`-th (state, walking distance).
+    #[inline]
+    pub fn get(&self, k: usize) -> (u32, f32) {
+        let at = self.from + k;
+        debug_assert!(at < self.to);
+        (self.table.targets.get(at), self.table.distances.get(at))
+    }
+
+    /// (state, walking distance), in the table's order.
+    #[inline]
+    pub fn iter(&self) -> impl ExactSizeIterator<Item = (u32, f32)> + 'a {
+        let table = self.table;
+        (self.from..self.to).map(move |at| (table.targets.get(at), table.distances.get(at)))
+    }
 }
 
 #[derive(PartialEq)]
@@ -58,14 +201,19 @@ impl ReachTable {
         let n = site.states().len();
         let mut starts = Vec::with_capacity(n + 1);
         let mut sorted_from = Vec::with_capacity(n);
-        let mut entries = Vec::new();
+        let mut targets = if n <= 1 << 16 { Targets::Narrow(Vec::new()) } else { Targets::Wide(Vec::new()) };
+        let mut distances = Distances::Coded { codes: Vec::new(), values: Vec::new() };
+        let mut code_of = Vec::new();
+        // One state's entries before they are written into the table.
+        let mut entries: Vec<(u32, f32)> = Vec::new();
         let mut dist = vec![f64::INFINITY; n];
         let mut touched: Vec<u32> = Vec::new();
         let mut heap = BinaryHeap::new();
         let unsurveyed: Vec<bool> = site.states().iter().map(|s| s.kind == StateKind::Unsurveyed).collect();
         let none: &[(u32, f64)] = &[];
         for source in 0..n {
-            starts.push(entries.len());
+            starts.push(targets.len());
+            entries.clear();
             let neighbours = |u: usize| {
                 if surveyed_only && unsurveyed[u] {
                     none
@@ -105,22 +253,35 @@ impl ReachTable {
             // Self and neighbours first (a neighbour beyond the radius gets its edge length).
             entries.push((source as u32, 0.0));
             for &(v, length) in near.iter().filter(|&&(v, _)| !skip(v)) {
-                if !entries[starts[source]..].iter().any(|&(j, _)| j == v) {
+                if !entries.iter().any(|&(j, _)| j == v) {
                     let d = dist[v as usize].min(length);
                     entries.push((v, d as f32));
                 }
             }
-            sorted_from.push(entries.len());
+            sorted_from.push(starts[source] + entries.len());
             let from = entries.len();
             entries.extend(touched.iter().filter(|&&j| !is_near(j)).map(|&j| (j, dist[j as usize] as f32)));
             entries[from..].sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+            for &(j, d) in &entries {
+                targets.push(j);
+                distances.push(d, &mut code_of);
+            }
             for &j in &touched {
                 dist[j as usize] = f64::INFINITY;
             }
             touched.clear();
         }
-        starts.push(entries.len());
-        Self { radius_m, starts, sorted_from, entries }
+        starts.push(targets.len());
+        distances.finish();
+        match &mut targets {
+            Targets::Narrow(t) => t.shrink_to_fit(),
+            Targets::Wide(t) => t.shrink_to_fit(),
+        }
+        match &mut distances {
+            Distances::Coded { codes, .. } => codes.shrink_to_fit(),
+            Distances::Plain(d) => d.shrink_to_fit(),
+        }
+        Self { radius_m, starts, sorted_from, targets, distances }
     }
 
     /// The radius the table was built for, m.
@@ -130,10 +291,9 @@ impl ReachTable {
 
     /// States reachable from `i` within `rho_m` (at most the table radius), with their walking
     /// distance: the state itself, its neighbours, and every state within `rho_m`.
-    pub fn reachable(&self, i: usize, rho_m: f64) -> &[(u32, f32)] {
-        let sorted = &self.entries[self.sorted_from[i]..self.starts[i + 1]];
-        let within = sorted.partition_point(|&(_, d)| f64::from(d) <= rho_m);
-        &self.entries[self.starts[i]..self.sorted_from[i] + within]
+    pub fn reachable(&self, i: usize, rho_m: f64) -> Reach<'_> {
+        let within = self.distances.within(self.sorted_from[i], self.starts[i + 1], rho_m);
+        Reach { table: self, from: self.starts[i], to: self.sorted_from[i] + within }
     }
 
     /// How many of the first entries of state `i`'s [`reachable`](Self::reachable) slice are the
@@ -149,12 +309,12 @@ impl ReachTable {
 
     /// Entries stored, for memory accounting.
     pub fn len(&self) -> usize {
-        self.entries.len()
+        self.targets.len()
     }
 
     /// Whether the table is empty (a site always has states, so never in practice).
     pub fn is_empty(&self) -> bool {
-        self.entries.is_empty()
+        self.len() == 0
     }
 }
 
@@ -183,14 +343,68 @@ mod tests {
     fn distances_follow_the_graph() {
         let site = corridor();
         let table = ReachTable::build(&site, 5.0);
-        let from0: Vec<(u32, f32)> = table.reachable(0, 5.0).to_vec();
+        assert!(matches!(table.distances, Distances::Coded { .. }));
+        let from0: Vec<(u32, f32)> = table.reachable(0, 5.0).iter().collect();
         assert_eq!(from0, vec![(0, 0.0), (1, 2.0), (2, 4.0)]);
         assert_eq!(table.reachable(0, 3.0).len(), 2);
         // State 4 is 1 m away in a straight line but 13 m on foot: not within 5 m.
         assert!(!from0.iter().any(|&(j, _)| j == 4));
         // A neighbour beyond the radius is still reachable (its edge is 7 m).
-        assert_eq!(table.reachable(3, 1.0), &[(3, 0.0), (2, 2.0), (4, 7.0)]);
+        assert_eq!(table.reachable(3, 1.0).iter().collect::<Vec<_>>(), [(3, 0.0), (2, 2.0), (4, 7.0)]);
         assert!(ReachTable::build_surveyed(&site, 5.0).is_none(), "no unsurveyed states");
+    }
+
+    /// A corridor with 400 different edge lengths has more than 256 distinct walking
+    /// distances: they are written out, and read back the same as the coded ones.
+    #[test]
+    fn many_distinct_distances_are_written_out() {
+        let mut b = SiteBuilder::new("irregular");
+        let f = b.floor("G", 0.0);
+        let lengths: Vec<f64> = (0..400).map(|k| 1.0 + 0.001 * f64::from(k)).collect();
+        let mut x = 0.0;
+        let mut ids = vec![b.state(f, Point2::new(0.0, 0.0), Vec::<TrainingScan>::new())];
+        for &length in &lengths {
+            x += length;
+            ids.push(b.state(f, Point2::new(x, 0.0), Vec::<TrainingScan>::new()));
+            b.edge(ids[ids.len() - 2], ids[ids.len() - 1], Some(length));
+        }
+        let site = b.build(Default::default()).unwrap();
+        let table = ReachTable::build(&site, 1000.0);
+        assert!(matches!(table.distances, Distances::Plain(_)));
+        let few = ReachTable::build(&site, 2.5);
+        for (table, rho) in [(&table, 1000.0f64), (&table, 7.5), (&few, 2.5), (&few, 1.5)] {
+            for i in [0usize, 17, 399] {
+                // Walking distances along the corridor, summed as the Dijkstra sums them.
+                let mut expected = vec![(i as u32, 0.0f32)];
+                let near: Vec<u32> = [i.checked_sub(1), Some(i + 1).filter(|&j| j <= 400)]
+                    .into_iter()
+                    .flatten()
+                    .map(|j| j as u32)
+                    .collect();
+                expected.extend(near.iter().map(|&j| (j, lengths[i.min(j as usize)] as f32)));
+                let mut far = Vec::new();
+                for dir in [-1i64, 1] {
+                    let (mut j, mut d) = (i as i64, 0.0f64);
+                    while (0..=400).contains(&(j + dir)) {
+                        d += lengths[(j.min(j + dir)) as usize];
+                        j += dir;
+                        if d > rho.min(table.radius_m()) {
+                            break;
+                        }
+                        if !near.contains(&(j as u32)) {
+                            far.push((j as u32, d as f32));
+                        }
+                    }
+                }
+                far.sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
+                expected.extend(far);
+                assert_eq!(
+                    table.reachable(i, rho).iter().collect::<Vec<_>>(),
+                    expected,
+                    "from {i} within {rho}"
+                );
+            }
+        }
     }
 
     /// Surveyed states 0-1-2-3 around three sides of a square (4 m sides), unsurveyed 4 and 5
@@ -224,7 +438,7 @@ mod tests {
         let map = ReachTable::build_surveyed(&site, 20.0).unwrap();
         assert_eq!(at(&map, 0, 3), Some(12.0));
         assert!(map.reachable(0, 20.0).iter().all(|e| !u.contains(&e.0)));
-        assert_eq!(map.reachable(u[0] as usize, 20.0), &[(u[0], 0.0)]);
+        assert_eq!(map.reachable(u[0] as usize, 20.0).iter().collect::<Vec<_>>(), [(u[0], 0.0)]);
         // The site hands out the same tables to every engine.
         let (a, a_map) = site.reach_tables(20.0);
         let (b, _) = site.reach_tables(20.0);

@@ -156,8 +156,9 @@ pub struct LongRunReport {
     pub states: usize,
     /// The Viterbi window's capacity, epochs (`EngineConfig::track_window_epochs`).
     pub track_window_capacity: usize,
-    /// Its bound in bytes: (capacity + 1 spare) × states × 4 (back-pointers) + 3 × states × 8
-    /// (scores: current, next, and the previous ones kept while an epoch runs).
+    /// Its bound in bytes: (capacity + 1 spare) × states × 2 (back-pointers; 4 beyond 65 536
+    /// states) + 3 × states × 8 (scores: current, next, and the previous ones kept while an
+    /// epoch runs).
     pub track_memory_bound_bytes: usize,
     /// Fixed lag, epochs (read from the window; no memory of its own).
     pub fixed_lag_epochs: usize,
@@ -393,7 +394,10 @@ pub fn run(
         hours: config.hours,
         states,
         track_window_capacity,
-        track_memory_bound_bytes: (track_window_capacity + 1) * states * 4 + 3 * states * 8,
+        track_memory_bound_bytes: (track_window_capacity + 1)
+            * states
+            * if states <= 1 << 16 { 2 } else { 4 }
+            + 3 * states * 8,
         fixed_lag_epochs: engine_config.fixed_lag_epochs,
         rss_1h_kb,
         rss_end_kb,
