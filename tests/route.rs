@@ -97,7 +97,8 @@ fn check(site: &Site, route: &Route, from: &FloorPoint) {
     // floors), walked at its length.
     let states = route.states();
     for (k, w) in states.windows(2).enumerate() {
-        let edge = site.neighbours(w[0] as usize).iter().find(|n| n.0 == w[1]);
+        let mut edges = site.neighbours(w[0] as usize);
+        let edge = edges.find(|n| n.0 == w[1]);
         let length = edge.unwrap_or_else(|| panic!("{} - {} is not an edge", w[0], w[1])).1;
         let step = route.distances_m()[k + 1] - route.distances_m()[k];
         assert!((step - length).abs() < 1e-9);

@@ -218,9 +218,8 @@ impl Route {
         for w in path.windows(2) {
             let length = site
                 .neighbours(w[0] as usize)
-                .iter()
-                .filter(|&&(v, _)| v == w[1])
-                .map(|&(_, l)| edge_cost(site, w[0], w[1], l))
+                .filter(|&(v, _)| v == w[1])
+                .map(|(_, l)| edge_cost(site, w[0], w[1], l))
                 .fold(f64::INFINITY, f64::min);
             total += length;
             along.push(total);

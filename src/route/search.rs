@@ -59,7 +59,7 @@ pub(super) fn shortest_path(
             path.reverse();
             return Some(path);
         }
-        for &(v, length) in site.neighbours(u as usize) {
+        for (v, length) in site.neighbours(u as usize) {
             let next = cost[u as usize] + edge_cost(site, u, v, length);
             if next < cost[v as usize] {
                 cost[v as usize] = next;

@@ -409,7 +409,7 @@ mod tests {
         let site = Site::from_json(GOOD.as_bytes()).unwrap();
         assert_eq!(site.states().len(), 2);
         assert_eq!(site.edges()[0].length_m, 5.0);
-        assert_eq!(site.neighbours(1), &[(0, 5.0)]);
+        assert_eq!(site.neighbours(1).collect::<Vec<_>>(), [(0, 5.0)]);
         let again = Site::from_json(site.to_json().as_bytes()).unwrap();
         assert_eq!(again.to_json(), site.to_json());
         assert_eq!(again.states(), site.states());

@@ -130,6 +130,28 @@ pub struct Edge {
     pub length_m: f64,
 }
 
+/// The walkable neighbours of a state with their edge lengths, (state, m), in the order of the
+/// site's edges ([`Site::neighbours`]); the default is no neighbour.
+#[derive(Clone, Debug, Default)]
+pub struct Neighbours<'a> {
+    edges: &'a [Edge],
+    slots: std::slice::Iter<'a, (u32, u32)>,
+}
+
+impl Iterator for Neighbours<'_> {
+    type Item = (u32, f64);
+
+    fn next(&mut self) -> Option<(u32, f64)> {
+        self.slots.next().map(|&(v, k)| (v, self.edges[k as usize].length_m))
+    }
+
+    fn size_hint(&self) -> (usize, Option<usize>) {
+        self.slots.size_hint()
+    }
+}
+
+impl ExactSizeIterator for Neighbours<'_> {}
+
 /// What the survey measured about how this site's radio and walkers behave, applied by
 /// engines unless their configuration says otherwise (see
 /// [`EngineConfig::site_calibration`](crate::EngineConfig::site_calibration)). Every field is
@@ -374,9 +396,11 @@ pub struct Site {
     floors: Vec<Floor>,
     states: Vec<State>,
     edges: Vec<Edge>,
-    /// Neighbours of state `i` are `adjacency[adjacency_starts[i]..adjacency_starts[i + 1]]`.
+    /// Neighbours of state `i` are `adjacency[adjacency_starts[i]..adjacency_starts[i + 1]]`,
+    /// each as (neighbour, index of the edge in `edges`): the length stays in the edge, so the
+    /// graph holds each length once (docs/tuning.md#engine-speed).
     adjacency_starts: Vec<usize>,
-    adjacency: Vec<(u32, f64)>,
+    adjacency: Vec<(u32, u32)>,
     radio: RadioMap,
     north: North,
     /// Where the site frame sits on the Earth, when the file says.
@@ -436,11 +460,11 @@ impl Site {
         }
         let adjacency_starts = degree.clone();
         let mut fill = degree;
-        let mut adjacency = vec![(0u32, 0.0f64); 2 * edges.len()];
-        for e in &edges {
-            adjacency[fill[e.a as usize]] = (e.b, e.length_m);
+        let mut adjacency = vec![(0u32, 0u32); 2 * edges.len()];
+        for (k, e) in edges.iter().enumerate() {
+            adjacency[fill[e.a as usize]] = (e.b, k as u32);
             fill[e.a as usize] += 1;
-            adjacency[fill[e.b as usize]] = (e.a, e.length_m);
+            adjacency[fill[e.b as usize]] = (e.a, k as u32);
             fill[e.b as usize] += 1;
         }
         let spacing_m = median_edge_length(&edges);
@@ -504,8 +528,11 @@ impl Site {
     }
 
     /// Walkable neighbours of state `i` with the edge length.
-    pub fn neighbours(&self, i: usize) -> &[(u32, f64)] {
-        &self.adjacency[self.adjacency_starts[i]..self.adjacency_starts[i + 1]]
+    pub fn neighbours(&self, i: usize) -> Neighbours<'_> {
+        Neighbours {
+            edges: &self.edges,
+            slots: self.adjacency[self.adjacency_starts[i]..self.adjacency_starts[i + 1]].iter(),
+        }
     }
 
     /// The radio map.

@@ -2,7 +2,7 @@
 //! ("shortest accessible distance ... stored as a look-up table"), by bounded Dijkstra on the
 //! walkable graph, so nobody walks through a wall.
 
-use super::{Site, StateKind};
+use super::{Neighbours, Site, StateKind};
 use std::cmp::Ordering;
 use std::collections::BinaryHeap;
 
@@ -210,13 +210,12 @@ impl ReachTable {
         let mut touched: Vec<u32> = Vec::new();
         let mut heap = BinaryHeap::new();
         let unsurveyed: Vec<bool> = site.states().iter().map(|s| s.kind == StateKind::Unsurveyed).collect();
-        let none: &[(u32, f64)] = &[];
         for source in 0..n {
             starts.push(targets.len());
             entries.clear();
             let neighbours = |u: usize| {
                 if surveyed_only && unsurveyed[u] {
-                    none
+                    Neighbours::default()
                 } else {
                     site.neighbours(u)
                 }
@@ -234,7 +233,7 @@ impl ReachTable {
                 if d > dist[u as usize] {
                     continue;
                 }
-                for &(v, length) in neighbours(u as usize) {
+                for (v, length) in neighbours(u as usize) {
                     if skip(v) || blocked(u, v) {
                         continue;
                     }
@@ -249,10 +248,10 @@ impl ReachTable {
                 }
             }
             let near = neighbours(source);
-            let is_near = |j: u32| j as usize == source || near.iter().any(|&(v, _)| v == j);
+            let is_near = |j: u32| j as usize == source || near.clone().any(|(v, _)| v == j);
             // Self and neighbours first (a neighbour beyond the radius gets its edge length).
             entries.push((source as u32, 0.0));
-            for &(v, length) in near.iter().filter(|&&(v, _)| !skip(v)) {
+            for (v, length) in near.clone().filter(|&(v, _)| !skip(v)) {
                 if !entries.iter().any(|&(j, _)| j == v) {
                     let d = dist[v as usize].min(length);
                     entries.push((v, d as f32));
