@@ -26,8 +26,8 @@ pub mod site;
 
 pub use config::{EngineConfig, HipeConfig, HoangConfig, TransitionModel, ZoneHysteresis};
 pub use engine::{
-    Engine, EngineSnapshot, Epoch, InputStats, Position, ScanTiming, StatusEvent, TrackPoint,
-    FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,
+    Engine, EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent,
+    TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,
 };
 pub use error::{Error, InputError};
 pub use fix::PositionFix;

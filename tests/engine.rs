@@ -563,3 +563,33 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
     let (a, b) = (run(&plain, explicit(), &throttled), run(&gamma, explicit(), &throttled));
     assert!(a.iter().zip(&b).all(|(a, b)| a.1 == b.1));
 }
+
+/// Engines sharing scan likelihoods (the calibration's replays) give the positions of engines
+/// computing their own, to the bit, whatever γ each runs at; a memo of another site, even an
+/// equal one, is refused.
+#[test]
+fn shared_scan_likelihoods_change_no_position() {
+    use waymark::SharedEmissions;
+    let site = Arc::new(two_floor_site());
+    let walk: Vec<_> = (0..12u64)
+        .map(|k| scan((k + 1) * 2 * SECOND, &readings_at((k / 6) as usize, 2.0 * (k % 6) as f64)))
+        .collect();
+    let shared = SharedEmissions::new(&site);
+    for gamma in [1.0, 0.3, 0.03] {
+        let config = EngineConfig { rssi_weight: Some(gamma), ..EngineConfig::default() };
+        let mut own = Engine::new(Arc::clone(&site), config.clone()).unwrap();
+        let mut sharing = Engine::new(Arc::clone(&site), config).unwrap();
+        sharing.share_emissions(Arc::clone(&shared)).unwrap();
+        for s in walk.iter().chain(&walk[..3]) {
+            // The last three scans again, later: the memo answers for them.
+            let s = waymark::Scan {
+                timestamp_ns: s.timestamp_ns.max(own.position().map_or(0, |p| p.timestamp_ns) + SECOND),
+                ..s.clone()
+            };
+            assert_eq!(own.push_scan(&s).map(|e| e.position), sharing.push_scan(&s).map(|e| e.position));
+            assert_eq!(own.posterior(), sharing.posterior());
+        }
+    }
+    let mut other = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
+    assert!(other.share_emissions(shared).is_err());
+}

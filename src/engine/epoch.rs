@@ -26,7 +26,11 @@ impl Engine {
         if resolved.observations.is_empty() {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
-        let ln_unheard = self.site.radio().ln_likelihood(&resolved.observations, &mut self.ln_emission);
+        let radio = self.site.radio();
+        let ln_unheard = match &self.shared_emissions {
+            Some(shared) => shared.ln_likelihood(radio, &resolved.observations, &mut self.ln_emission),
+            None => radio.ln_likelihood(&resolved.observations, &mut self.ln_emission),
+        };
         // The fit of the map: the best fingerprinted state against none. Unsurveyed states score
         // the "no fingerprint" baseline itself, so counting them would never let the fit fall
         // below 0, and a site whose held-out fits reach 0 would never find a scan unexplained

@@ -22,7 +22,9 @@ use crate::site::{ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
 pub(crate) use epoch::check_readings;
-pub use types::{EngineSnapshot, Epoch, InputStats, Position, ScanTiming, StatusEvent, TrackPoint};
+pub use types::{
+    EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent, TrackPoint,
+};
 
 /// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
 /// BLE transmit at most +36 dBm EIRP. A higher value is a corrupt producer, and one far higher
@@ -94,6 +96,9 @@ pub struct Engine {
     presence: presence::Presence,
     /// When the latest accepted scan came, and how long after the one before.
     scan_timing: ScanTiming,
+    /// Scan likelihoods shared with the other engines of an evaluation on this site
+    /// ([`Engine::share_emissions`]); `None` in an app.
+    shared_emissions: Option<Arc<SharedEmissions>>,
 }
 
 /// What an epoch changes besides the filter and the Viterbi window, which keep their own
@@ -162,9 +167,23 @@ impl Engine {
             sparse_scans,
             presence: presence::Presence::new(site_zones),
             scan_timing: ScanTiming::default(),
+            shared_emissions: None,
             config,
             undo: Undo::default(),
         })
+    }
+
+    /// For the survey's calibration, not apps: takes each scan's likelihoods from `shared`,
+    /// which the other engines replaying walks on this same site fill, instead of computing
+    /// them again ([`SharedEmissions`]). The positions are the same to the bit. `Err` when
+    /// `shared` is of another site (another allocation, even if equal).
+    #[doc(hidden)]
+    pub fn share_emissions(&mut self, shared: Arc<SharedEmissions>) -> Result<(), Error> {
+        if !shared.is_of(&self.site) {
+            return Err(Error::InvalidConfig("scan likelihoods shared from another site".into()));
+        }
+        self.shared_emissions = Some(shared);
+        Ok(())
     }
 
     /// The site.

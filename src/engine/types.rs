@@ -4,8 +4,11 @@
 #[allow(unused_imports)] // doc links
 use super::{Engine, MAX_RSSI_DBM};
 use crate::history::EpochRecord;
+use crate::radio::RadioMap;
 use crate::sensors::{MdiScenario, MotionState};
-use crate::site::{SparseScans, SPARSE_SCAN_GAP_S};
+use crate::site::{Site, SparseScans, SPARSE_SCAN_GAP_S};
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex, Weak};
 
 /// Where the phone is, after one epoch.
 #[derive(Clone, Debug, PartialEq)]
@@ -244,6 +247,60 @@ impl ScanTiming {
         let last = self.last_ns?;
         let sparse = self.gap_ns.is_none_or(|gap| gap as f64 * 1e-9 > SPARSE_SCAN_GAP_S);
         sparse.then(|| SparseScans::band(timestamp_ns.saturating_sub(last) as f64 * 1e-9))
+    }
+}
+
+/// Scan likelihoods shared by the engines an evaluation runs on one site: the survey's
+/// calibration replays each held-out walk at every γ and motion mask (`waymark-survey`,
+/// `calibrate`), and ln p(o | s) of a scan (Hoang eqs. 9-10) depends on the site and the
+/// resolved scan only, so the engines of one site compute it once per scan and copy it
+/// thereafter (`docs/tuning.md#evaluation-speed`). Not for apps: an app runs one engine per
+/// site, which never sees a scan twice. Hand it to engines with
+/// [`Engine::share_emissions`]; it holds every distinct scan's likelihoods (8 bytes per
+/// state each) until dropped.
+#[doc(hidden)]
+#[derive(Debug)]
+pub struct SharedEmissions {
+    /// The site the likelihoods are of, held weakly so that its address names it.
+    site: Weak<Site>,
+    /// Per resolved scan (its observations, RSSI as bits): ln p(o | s) per state and the
+    /// likelihood of hearing nothing, as `RadioMap::ln_likelihood` returned them.
+    memo: Mutex<HashMap<Vec<(u32, u64)>, ScanLikelihoods>>,
+}
+
+/// One scan's ln p(o | s) per state and its likelihood of hearing nothing.
+type ScanLikelihoods = Arc<(Box<[f64]>, f64)>;
+
+impl SharedEmissions {
+    /// An empty memo for the engines on `site`.
+    pub fn new(site: &Arc<Site>) -> Arc<Self> {
+        Arc::new(Self { site: Arc::downgrade(site), memo: Mutex::default() })
+    }
+
+    /// Whether these are the likelihoods of `site` (the same allocation, not an equal site).
+    pub(super) fn is_of(&self, site: &Arc<Site>) -> bool {
+        std::ptr::eq(self.site.as_ptr(), Arc::as_ptr(site))
+    }
+
+    /// ln p(o | s) of `observations` into `out`, and the likelihood of hearing nothing: from the
+    /// memo when a scan with the same observations was seen, else from `radio` and memoised.
+    pub(super) fn ln_likelihood(
+        &self,
+        radio: &RadioMap,
+        observations: &[(u32, f64)],
+        out: &mut [f64],
+    ) -> f64 {
+        let key: Vec<(u32, u64)> = observations.iter().map(|&(t, rssi)| (t, rssi.to_bits())).collect();
+        let seen = self.memo.lock().ok().and_then(|memo| memo.get(&key).cloned());
+        if let Some(seen) = seen {
+            out.copy_from_slice(&seen.0);
+            return seen.1;
+        }
+        let ln_unheard = radio.ln_likelihood(observations, out);
+        if let Ok(mut memo) = self.memo.lock() {
+            memo.insert(key, Arc::new((out.into(), ln_unheard)));
+        }
+        ln_unheard
     }
 }
 

@@ -14,8 +14,10 @@ use waymark::site::{Site, StateKind};
 use waymark::Engine;
 use waymark::EngineConfig;
 use waymark::EpochRecord;
+use waymark::SharedEmissions;
 use waymark_survey::calibrate::{
-    parallel_map, survey_inputs, CalibrationError, CalibrationOptions, CalibrationReport, FloorData,
+    parallel_map, parallel_map_by_cost, replay_cost, survey_inputs, CalibrationError, CalibrationOptions,
+    CalibrationReport, FloorData,
 };
 use waymark_survey::io::Trace;
 use waymark_survey::replay::{replay, MotionMask, ReplayOptions, WaypointFeedback};
@@ -337,6 +339,8 @@ pub fn evaluate_on(
             ("forward-heading-speed", MotionMask::HeadingSpeed),
             ("forward-speed", MotionMask::Speed),
         ];
+        // The walk's scan likelihoods on the site, computed by its first run.
+        let shared = SharedEmissions::new(site);
         for (key, mask) in engine_runs {
             let smoothing = key == "forward-auto" && (wanted("viterbi-auto") || wanted("fixed-lag-auto"));
             if !wanted(key) && !smoothing {
@@ -347,10 +351,14 @@ pub fn evaluate_on(
                 config.track_window_epochs = longest;
             }
             let Ok(mut engine) = Engine::new(Arc::clone(site), config) else { continue };
+            // Of this very site: cannot fail.
+            let _ = engine.share_emissions(Arc::clone(&shared));
             if let Some(habits) = &options.habits {
                 engine.set_habits(HabitModel::clone(habits));
             }
-            let r = replay(&mut engine, trace, &ReplayOptions { mask, ..options.calibration.replay });
+            // Fixed-lag estimates only where they are scored.
+            let replay_options = ReplayOptions { mask, fixed_lag: smoothing, ..options.calibration.replay };
+            let r = replay(&mut engine, trace, &replay_options);
             let [live, lagged, viterbi] = decoded(site, &r);
             if smoothing {
                 if wanted("viterbi-auto") {
@@ -367,7 +375,8 @@ pub fn evaluate_on(
         progress();
         result
     };
-    let results: Vec<WalkResult> = parallel_map(&jobs, options.calibration.threads, run_walk);
+    let cost = |&(_, trace): &(usize, &Trace)| replay_cost(trace);
+    let results: Vec<WalkResult> = parallel_map_by_cost(&jobs, options.calibration.threads, cost, run_walk);
     let mut reports = BTreeMap::new();
     for key in CONFIGURATIONS.iter().filter(|k| wanted(k)) {
         let mut pooled = Vec::new();

@@ -101,6 +101,9 @@ pub struct ReplayOptions {
     /// ([`Engine::confirm_position`]): a surveyor confirming where they are. Only for walks
     /// the engine may learn from (survey walks), never for walks that are scored.
     pub feedback: Option<WaypointFeedback>,
+    /// Ask the engine for the fixed-lag estimate after each epoch ([`Replay::fixed_lag`]); off
+    /// where only the live positions are scored, as the smoothing costs an estimate per epoch.
+    pub fixed_lag: bool,
 }
 
 /// Waypoints as feedback: the walk's floor in the site, and the radius of the circle confirmed.
@@ -120,6 +123,7 @@ impl Default for ReplayOptions {
             min_scan_interval_ns: None,
             mask: MotionMask::Auto,
             feedback: None,
+            fixed_lag: true,
         }
     }
 }
@@ -214,7 +218,9 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
         if let Some(Ok(waymark::Epoch { position, .. })) = result {
             last_epoch = Some(position.timestamp_ns);
             out.positions.push(position);
-            out.fixed_lag.extend(engine.fixed_lag_position());
+            if options.fixed_lag {
+                out.fixed_lag.extend(engine.fixed_lag_position());
+            }
         }
     }
     out.track = engine.track();

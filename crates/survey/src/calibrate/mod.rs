@@ -28,7 +28,7 @@ use radius::calibrate_fingerprint_radius;
 use std::sync::Arc;
 use waymark::sensors::MdiScenario;
 use waymark::site::{Calibration, North, Site, SPARSE_BANDS};
-use waymark::{Engine, EngineConfig};
+use waymark::{Engine, EngineConfig, SharedEmissions};
 
 /// Why a site could not be read or calibrated.
 #[derive(Debug, thiserror::Error)]
@@ -92,9 +92,19 @@ impl CalibrationOptions {
 
     /// How the calibration replays its held-out walks: as `replay`, but with every scan (the
     /// site a phone gets is surveyed from unthrottled walks, and its calibration replays them
-    /// both ways, see [`SparseScans`](waymark::site::SparseScans)).
+    /// both ways, see [`SparseScans`](waymark::site::SparseScans)), and without fixed-lag
+    /// estimates: the calibration scores the live positions.
     pub fn calibration_replay(&self) -> ReplayOptions {
-        ReplayOptions { min_scan_interval_ns: None, ..self.replay }
+        ReplayOptions { min_scan_interval_ns: None, fixed_lag: false, ..self.replay }
+    }
+
+    /// [`calibration_replay`](Self::calibration_replay) with the scans throttled as
+    /// [`throttled_replay`](Self::throttled_replay) throttles them.
+    fn calibration_throttled_replay(&self) -> ReplayOptions {
+        ReplayOptions {
+            min_scan_interval_ns: self.throttled_replay().min_scan_interval_ns,
+            ..self.calibration_replay()
+        }
     }
 
     /// `replay` with the scans throttled as Android 9+ throttles a foreground app
@@ -116,6 +126,45 @@ impl CalibrationOptions {
 
 /// `f` over `items` on `threads` worker threads, results in input order.
 pub fn parallel_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    let order: Vec<usize> = (0..items.len()).collect();
+    parallel_map_in(items, &order, threads, f)
+}
+
+/// [`parallel_map`], taking the items of greatest `cost` first: the workers then end
+/// together, where in input order the last long item may run alone (longest processing time
+/// first, Graham 1969). Results in input order.
+pub fn parallel_map_by_cost<T: Sync, R: Send>(
+    items: &[T],
+    threads: usize,
+    cost: impl Fn(&T) -> u64,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
+    let mut order: Vec<usize> = (0..items.len()).collect();
+    // Stable: equal costs keep input order.
+    order.sort_by_key(|&k| std::cmp::Reverse(cost(&items[k])));
+    parallel_map_in(items, &order, threads, f)
+}
+
+/// The cost of replaying `trace`, for [`parallel_map_by_cost`]: its duration in
+/// seconds (an epoch per scan or per timer tick) and its scans.
+pub fn replay_cost(trace: &Trace) -> u64 {
+    let times = trace
+        .accelerometer
+        .iter()
+        .map(|s| s.timestamp_ns)
+        .chain(trace.wifi_scans.iter().map(|s| s.timestamp_ns));
+    let (first, last) = times.fold((u64::MAX, 0), |(a, b), t| (a.min(t), b.max(t)));
+    last.saturating_sub(first) / 1_000_000_000 + trace.wifi_scans.len() as u64
+}
+
+/// `f` over `items` taken in `order` (a permutation of their indices) on `threads` worker
+/// threads, results in input order.
+fn parallel_map_in<T: Sync, R: Send>(
+    items: &[T],
+    order: &[usize],
+    threads: usize,
+    f: impl Fn(&T) -> R + Sync,
+) -> Vec<R> {
     let threads = threads.max(1).min(items.len().max(1));
     if threads == 1 {
         return items.iter().map(f).collect();
@@ -127,9 +176,9 @@ pub fn parallel_map<T: Sync, R: Send>(items: &[T], threads: usize, f: impl Fn(&T
                 scope.spawn(|| {
                     let mut mine = Vec::new();
                     loop {
-                        let k = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
-                        let Some(item) = items.get(k) else { break };
-                        mine.push((k, f(item)));
+                        let n = next.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+                        let Some(&k) = order.get(n) else { break };
+                        mine.push((k, f(&items[k])));
                     }
                     mine
                 })
@@ -216,13 +265,16 @@ pub fn survey_calibrated(
         .enumerate()
         .flat_map(|(f, floor)| (0..floor.survey.len()).map(move |w| (f, w)))
         .collect();
+    let cost = |&(f, w): &(usize, usize)| replay_cost(&floors[f].survey[w]);
     let held_out: Vec<Option<(HeldOut, usize, Vec<Tagged>)>> =
-        parallel_map(&jobs, options.threads, |&(f, w)| {
+        parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
             let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
             let fits = prepared.fit(&keep, Some(&full), 1);
             let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
             let result = site.map(|site| {
                 let site = Arc::new(site);
+                // The scan likelihoods of this walk on this site, computed by its first replay.
+                let shared = SharedEmissions::new(&site);
                 let trace = &floors[f].survey[w];
                 let mapped = OnMap::new(&site, f);
                 let mut tagged = Vec::with_capacity(GAMMA_GRID.len());
@@ -234,9 +286,11 @@ pub fn survey_calibrated(
                             let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
                                 return Vec::new();
                             };
+                            // Of this very site: cannot fail.
+                            let _ = engine.share_emissions(Arc::clone(&shared));
                             let replay_options = match masks.get(run) {
                                 Some(&mask) => ReplayOptions { mask, ..options.calibration_replay() },
-                                None => options.throttled_replay(),
+                                None => options.calibration_throttled_replay(),
                             };
                             let r = replay(&mut engine, trace, &replay_options);
                             tag(trace, f, &mapped, &r.positions)
@@ -390,7 +444,7 @@ pub fn survey_calibrated(
         radio_fit_floor: None,
         ..calibration
     };
-    let shipped: Vec<(Vec<Tag>, Vec<Tag>)> = parallel_map(&jobs, options.threads, |&(f, w)| {
+    let shipped: Vec<(Vec<Tag>, Vec<Tag>)> = parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
         let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
         let fits = prepared.fit(&keep, Some(&full), 1);
         let site = prepared.assemble(&fits).ok().map(|(s, _)| s);
@@ -407,7 +461,7 @@ pub fn survey_calibrated(
             };
             Some((
                 run(calibration, &options.calibration_replay())?,
-                run(unscaled, &options.throttled_replay())?,
+                run(unscaled, &options.calibration_throttled_replay())?,
             ))
         });
         progress();

@@ -1,14 +1,16 @@
 //! The fingerprint radius, chosen per site by cross-validation on the survey walks.
 
 use super::gamma::GAMMA_GRID;
-use super::{parallel_map, survey_inputs, CalibrationError, CalibrationOptions, FloorData};
+use super::{
+    parallel_map_by_cost, replay_cost, survey_inputs, CalibrationError, CalibrationOptions, FloorData,
+};
 use crate::replay::replay;
 use crate::scoring::{live_estimates, score_scans, Scored};
 use crate::{PreparedSurvey, SurveyOptions};
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use waymark::site::{Calibration, North};
-use waymark::{Engine, EngineConfig};
+use waymark::{Engine, EngineConfig, SharedEmissions};
 
 /// One radius of the fingerprint radius's search: (radius m, held-out mean error m, scans).
 pub type RadiusPoint = (f64, f64, usize);
@@ -53,11 +55,14 @@ pub(super) fn calibrate_fingerprint_radius(
     let held_out_error = |radius: f64| -> Result<Option<(f64, usize)>, CalibrationError> {
         let survey = SurveyOptions { fingerprint_radius_m: radius, ..options.survey.clone() };
         let prepared = PreparedSurvey::new("eval", &inputs, north, &survey)?;
+        // The states of every walk, for each fold to reuse where none of its walks trained
+        // them: the same scans fit the same fingerprints.
+        let all = prepared.fit(&|_, _| true, None, options.threads);
         // Per γ: (Σ error, scans).
         let mut sums = vec![(0.0, 0usize); GAMMA_GRID.len()];
         for fold in 0..FINGERPRINT_RADIUS_FOLDS {
             let keep = |_: usize, w: usize| w % FINGERPRINT_RADIUS_FOLDS != fold;
-            let fits = prepared.fit(&keep, None, options.threads);
+            let fits = prepared.fit(&keep, Some(&all), options.threads);
             // A fold that leaves a floor without states is skipped: it cannot be scored.
             let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
             let Some(site) = site.map(Arc::new) else {
@@ -65,11 +70,16 @@ pub(super) fn calibrate_fingerprint_radius(
                 continue;
             };
             let jobs: Vec<(usize, usize)> = held.iter().copied().filter(|&(f, w)| !keep(f, w)).collect();
-            let walks = parallel_map(&jobs, options.threads, |&(f, w)| {
+            let cost = |&(f, w): &(usize, usize)| replay_cost(&floors[f].survey[w]);
+            let walks = parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
                 let trace = &floors[f].survey[w];
+                // The walk's scan likelihoods on the fold's site, computed at the first γ.
+                let shared = SharedEmissions::new(&site);
                 GAMMA_GRID.map(|gamma| {
                     let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine_config() };
                     let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else { return (0.0, 0) };
+                    // Of this very site: cannot fail.
+                    let _ = engine.share_emissions(Arc::clone(&shared));
                     let r = replay(&mut engine, trace, &options.calibration_replay());
                     let scored = score_scans(trace, f, &live_estimates(&r.positions), None).0;
                     (scored.iter().map(Scored::penalised_m).sum::<f64>(), scored.len())
