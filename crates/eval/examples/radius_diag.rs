@@ -50,7 +50,9 @@ impl Map {
     }
 
     fn within(&self, floor: usize, (x, y): (f64, f64), r: f64) -> usize {
-        self.states.get(floor).map_or(0, |s| s.iter().filter(|&&(sx, sy)| (sx - x).hypot(sy - y) <= r).count())
+        self.states
+            .get(floor)
+            .map_or(0, |s| s.iter().filter(|&&(sx, sy)| (sx - x).hypot(sy - y) <= r).count())
     }
 }
 
