@@ -56,17 +56,15 @@ impl Map {
     }
 }
 
-/// Rows of one replay: at each position's own time (`at_scans` false) or, as `eval` scores, at
-/// each WiFi scan of the walk with the latest position before it.
+/// Rows of one replay: a held-out walk at each position's own time, as the calibration scores
+/// it; a test walk, as `eval` scores it, at each WiFi scan with the latest position before it.
 fn rows(
     set: &str,
     throttled: bool,
     floor: usize,
-    walk: &str,
     trace: &Trace,
     positions: &[Position],
     map: &Map,
-    at_scans: bool,
 ) -> Vec<String> {
     // Per position: the latest scan's fit and the sparse band.
     let mut timing = ScanTiming::default();
@@ -83,7 +81,7 @@ fn rows(
             (fit, timing.sparse_band(p.timestamp_ns).map_or(-1, |b| b as i64))
         })
         .collect();
-    let instants: Vec<u64> = if at_scans {
+    let instants: Vec<u64> = if set == "test" {
         trace.wifi_scans.iter().map(|s| s.timestamp_ns).collect()
     } else {
         positions.iter().map(|p| p.timestamp_ns).collect()
@@ -97,8 +95,9 @@ fn rows(
             let (fit, band) = features[k];
             let error = (p.x - truth.0).hypot(p.y - truth.1);
             Some(format!(
-                "{set},{},{floor},{walk},{error:.3},{:.3},{:.3},{:.3},{},{fit:.4},{band},{:.3},{},{}",
+                "{set},{},{floor},{},{error:.3},{:.3},{:.3},{:.3},{},{fit:.4},{band},{:.3},{},{}",
                 throttled as u8,
+                trace.name,
                 p.accuracy_m - p.beyond_radio_m,
                 p.accuracy_95_m - p.beyond_radio_m,
                 p.beyond_radio_m,
@@ -163,7 +162,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut out = Vec::new();
         for (t, opts) in [(false, &steady), (true, &throttled)] {
             if let Some(p) = run(&held_site, trace, opts) {
-                out.extend(rows("held", t, f, &trace.name, trace, &p, &map, false));
+                out.extend(rows("held", t, f, trace, &p, &map));
             }
         }
         out
@@ -179,7 +178,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut out = Vec::new();
         for (t, opts) in [(false, &steady), (true, &throttled)] {
             if let Some(p) = run(&site, trace, opts) {
-                out.extend(rows("test", t, f, &trace.name, trace, &p, &map, true));
+                out.extend(rows("test", t, f, trace, &p, &map));
             }
         }
         out
