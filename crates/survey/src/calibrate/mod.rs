@@ -372,8 +372,8 @@ pub fn survey_calibrated(
     // first scan's without a movement likelihood, and the floor's, which the calibration's
     // runs above, each at one γ throughout, do not give it), for the radius factors of the
     // scenarios it positions epochs in and of the sparse bands; and how it does off the map.
-    // Fitted on the runs above instead, F3's factor with steps and heading was 0.80 where the
-    // engine as shipped needed 0.97 (`docs/tuning.md#radius-factors`).
+    // Fitted on the runs above instead, the factors did not hold on the engine as shipped
+    // (`docs/tuning.md#radius-factors`).
     let unscaled = Calibration {
         accuracy_scale: None,
         accuracy_scale_by_scenario: Default::default(),
