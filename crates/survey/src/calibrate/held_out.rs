@@ -2,9 +2,9 @@
 //! scored and tagged with what the calibration sorts them by.
 
 use crate::io::Trace;
-use crate::scoring::{live_estimates, score, Scored};
+use crate::scoring::{live_estimates, quantile, score, Scored};
 use waymark::sensors::MdiScenario;
-use waymark::site::StateKind;
+use waymark::site::{Calibration, StateKind};
 use waymark::{ScanTiming, Site};
 
 /// Per walk, per γ, per run of the calibration (`survey_calibrated`'s `masks`, then
@@ -22,10 +22,25 @@ pub(super) const RUNS: usize = 5;
 /// app ([`ANDROID_THROTTLE_NS`](crate::replay::ANDROID_THROTTLE_NS)).
 pub(super) const THROTTLED: usize = 4;
 
-/// A held-out epoch: its score, how far its truth was beyond the held-out site's map (0 on it,
-/// `OnMap`), the scenario the engine positioned it in, the radio fit of its scan and, in the
-/// sparse regime, its band of time since the sparse scan ([`ScanTiming::sparse_band`]).
-pub(super) type Tag = (Scored, f64, MdiScenario, Option<f64>, Option<usize>);
+/// A held-out epoch, with what the calibration sorts it by.
+#[derive(Clone, Debug)]
+pub(super) struct Tag {
+    /// Its score.
+    pub scored: Scored,
+    /// How far its truth was beyond the held-out site's map, m (0 on it, `OnMap`).
+    pub beyond_map_m: f64,
+    /// The scenario the engine positioned it in.
+    pub scenario: MdiScenario,
+    /// The radio fit of its scan.
+    pub radio_fit: Option<f64>,
+    /// In the sparse regime, its band of time since the sparse scan
+    /// ([`ScanTiming::sparse_band`]).
+    pub band: Option<usize>,
+    /// What the engine added to both radii for the walking since the radio last explained a
+    /// scan ([`Position::beyond_radio_m`](waymark::Position::beyond_radio_m)), m: not the
+    /// posterior's, so no factor applies to it.
+    pub beyond_radio_m: f64,
+}
 
 /// The live positions of a replay of `trace` (on floor `floor`), scored and tagged.
 pub(super) fn tag(trace: &Trace, floor: usize, mapped: &OnMap, positions: &[waymark::Position]) -> Vec<Tag> {
@@ -50,7 +65,14 @@ pub(super) fn tag(trace: &Trace, floor: usize, mapped: &OnMap, positions: &[waym
     scored
         .into_iter()
         .zip(scored_positions)
-        .map(|(s, (p, band, truth))| (s, mapped.beyond_m(truth), p.scenario, p.radio_fit, band))
+        .map(|(scored, (p, band, truth))| Tag {
+            scored,
+            beyond_map_m: mapped.beyond_m(truth),
+            scenario: p.scenario,
+            radio_fit: p.radio_fit,
+            band,
+            beyond_radio_m: p.beyond_radio_m,
+        })
         .collect()
 }
 
@@ -90,5 +112,75 @@ impl OnMap {
         let nearest =
             self.states.iter().map(|&(sx, sy)| (sx - x).hypot(sy - y)).fold(f64::INFINITY, f64::min);
         (nearest - self.radius_m).max(0.0)
+    }
+}
+
+/// The radius factors (68%, 95%) that make `points`' radii hold their truth at those shares:
+/// the 68th percentile of (error − `beyond_radio_m`) ÷ the posterior's 68% radius, and the 95th
+/// of the same over its 95% radius. `beyond_radio_m` is taken off first because the engine
+/// adds it after the factor (`Engine::locate`). `None` without points or with a factor that is
+/// not finite and positive.
+pub(super) fn radius_factors(points: &[&Tag]) -> Option<[f64; 2]> {
+    let ratio = |q: f64, radius: fn(&Tag) -> f64| {
+        let mut r: Vec<f64> = points
+            .iter()
+            .map(|t| (t.scored.error_m - t.beyond_radio_m) / (radius(t) - t.beyond_radio_m).max(1e-9))
+            .collect();
+        r.sort_by(f64::total_cmp);
+        quantile(&r, q)
+    };
+    let scale = [ratio(0.68, |t| t.scored.accuracy_m), ratio(0.95, |t| t.scored.accuracy_95_m)];
+    scale.iter().all(|s| s.is_finite() && *s > 0.0).then_some(scale)
+}
+
+impl Tag {
+    /// Whether the 68% and 95% radii hold the truth with `calibration`'s factors applied as
+    /// the engine applies them (`Engine::locate`) to this epoch's radii, replayed without
+    /// factors.
+    pub(super) fn holds(&self, calibration: &Calibration) -> [bool; 2] {
+        let scale = self
+            .band
+            .and_then(|band| calibration.sparse_scans.accuracy_scale_by_since[band])
+            .unwrap_or(calibration.accuracy_scale_in(self.scenario));
+        let r68 = (self.scored.accuracy_m - self.beyond_radio_m) * scale[0];
+        let r95 = ((self.scored.accuracy_95_m - self.beyond_radio_m) * scale[1]).max(r68);
+        [r68, r95].map(|r| self.scored.error_m <= r + self.beyond_radio_m)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn tag(error_m: f64, accuracy_m: f64, beyond_radio_m: f64) -> Tag {
+        Tag {
+            scored: Scored {
+                error_m,
+                accuracy_m: accuracy_m + beyond_radio_m,
+                accuracy_95_m: 2.0 * accuracy_m + beyond_radio_m,
+                floor_correct: true,
+                zone_correct: None,
+                in_zone: None,
+            },
+            beyond_map_m: 0.0,
+            scenario: MdiScenario::DistanceHeading,
+            radio_fit: None,
+            band: None,
+            beyond_radio_m,
+        }
+    }
+
+    /// The fitted factors make the radii hold the truth at 68% and 95% of the epochs they were
+    /// fitted on, as the engine applies them: on the posterior's radius, `beyond_radio_m` added
+    /// after.
+    #[test]
+    fn fitted_factors_hold_their_shares_with_the_walked_distance_added_after() {
+        let tags: Vec<Tag> = (0..100).map(|k| tag(f64::from(k) * 0.1, 2.0, f64::from(k % 3))).collect();
+        let points: Vec<&Tag> = tags.iter().collect();
+        let scale = radius_factors(&points).unwrap();
+        let calibration = Calibration { accuracy_scale: Some(scale), ..Calibration::default() };
+        let held = |k: usize| tags.iter().filter(|t| t.holds(&calibration)[k]).count();
+        assert!((68..=70).contains(&held(0)), "{scale:?} {}", held(0));
+        assert!((95..=97).contains(&held(1)), "{scale:?} {}", held(1));
     }
 }

@@ -20,14 +20,14 @@ pub use report::{
 
 use crate::io::Trace;
 use crate::replay::{replay, MotionMask, ReplayOptions};
-use crate::scoring::{quantile, Scored};
+use crate::scoring::quantile;
 use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
 use gamma::{gamma_curve, own_gamma};
-use held_out::{tag, HeldOut, OnMap, Tag, Tagged, RUNS, THROTTLED};
+use held_out::{radius_factors, tag, HeldOut, OnMap, Tag, Tagged, RUNS, THROTTLED};
 use radius::calibrate_fingerprint_radius;
 use std::sync::Arc;
 use waymark::sensors::MdiScenario;
-use waymark::site::{Calibration, North, Site, SPARSE_BANDS};
+use waymark::site::{Calibration, North, Site, SparseScans, SPARSE_BANDS};
 use waymark::{Engine, EngineConfig, SharedEmissions};
 
 /// Why a site could not be read or calibrated.
@@ -215,9 +215,10 @@ const RADIO_FIT_FLOOR_QUANTILE: f64 = 0.05;
 /// replayed, at each γ of [`GAMMA_GRID`] with the motion and with it withheld, on the site
 /// surveyed from every other walk (all floors), and each floor takes the γ of least mean
 /// held-out error over its walks. The pooled curve gives the site-wide γ. The radius factors
-/// are the 68th and 95th percentiles of error ÷ radius over every held-out epoch at its
-/// floor's γ: pooled, because a percentile needs many epochs and the engine applies one
-/// factor whatever floor it believes. Test walks are never read.
+/// are the 68th and 95th percentiles of error ÷ radius over the held-out epochs on the map,
+/// replayed again with the engine as shipped but without factors: pooled over the floors,
+/// because a percentile needs many epochs and the engine applies one factor whatever floor
+/// it believes. Test walks are never read.
 pub fn calibrate(
     floors: &[FloorData],
     options: &CalibrationOptions,
@@ -295,7 +296,7 @@ pub fn survey_calibrated(
                             let r = replay(&mut engine, trace, &replay_options);
                             tag(trace, f, &mapped, &r.positions)
                         });
-                        let plain = std::array::from_fn(|m| runs[m].iter().map(|t| t.0).collect());
+                        let plain = std::array::from_fn(|m| runs[m].iter().map(|t| t.scored).collect());
                         tagged.push(runs);
                         plain
                     })
@@ -327,9 +328,8 @@ pub fn survey_calibrated(
     }
     // Per floor.
     let mut weights = Vec::with_capacity(floors.len());
-    let mut at_chosen: Vec<&Scored> = Vec::new();
-    let mut by_scenario: [Vec<&Scored>; 4] = Default::default();
-    let mut off_map: Vec<(&Scored, f64, MdiScenario)> = Vec::new();
+    let mut by_scenario: [Vec<&Tag>; 4] = Default::default();
+    let mut off_map: Vec<&Tag> = Vec::new();
     let mut fits_on_map: Vec<f64> = Vec::new();
     for (f, floor) in floors.iter().enumerate() {
         let mine: Vec<&HeldOut> = jobs
@@ -364,19 +364,18 @@ pub fn survey_calibrated(
             let Some(chosen) = chosen[scenario.index()] else { continue };
             for walk in &mine_tagged {
                 for (m, run) in walk[chosen].iter().take(THROTTLED).enumerate() {
-                    for (p, beyond_m, _, fit, _) in run.iter().filter(|t| t.2 == scenario) {
-                        if *beyond_m > 0.0 {
+                    for t in run.iter().filter(|t| t.scenario == scenario) {
+                        if t.beyond_map_m > 0.0 {
                             if m == 0 {
                                 report.epochs_off_map += 1;
-                                off_map.push((p, *beyond_m, scenario));
+                                off_map.push(t);
                             }
                             continue;
                         }
                         if m == 0 {
-                            fits_on_map.extend(*fit);
-                            at_chosen.push(p);
+                            fits_on_map.extend(t.radio_fit);
                         }
-                        by_scenario[scenario.index()].push(p);
+                        by_scenario[scenario.index()].push(t);
                     }
                 }
             }
@@ -399,23 +398,15 @@ pub fn survey_calibrated(
         weights.push([floor_report.rssi_weight, floor_report.rssi_weight_without_movement]);
         report.floors.push(floor_report);
     }
-    let scales = |points: &[&Scored]| -> Option<[f64; 2]> {
-        let ratio = |q: f64, radius: fn(&Scored) -> f64| {
-            let mut r: Vec<f64> = points.iter().map(|p| p.error_m / radius(p).max(1e-9)).collect();
-            r.sort_by(f64::total_cmp);
-            quantile(&r, q)
-        };
-        let scale = [ratio(0.68, |p| p.accuracy_m), ratio(0.95, |p| p.accuracy_95_m)];
-        scale.iter().all(|s| s.is_finite() && *s > 0.0).then_some(scale)
-    };
-    calibration.accuracy_scale = scales(&at_chosen);
+    // The forced scenarios' factors, from the runs with the motion withheld at each γ; the
+    // scenarios the engine as shipped positions enough epochs in get theirs from its own
+    // replays below.
     for scenario in MdiScenario::ALL {
         let points = &by_scenario[scenario.index()];
         report.scenario_epochs[scenario.index()] = points.len();
-        let scale = if points.len() >= MIN_SCENARIO_EPOCHS { scales(points) } else { None };
+        let scale = if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points) } else { None };
         calibration.accuracy_scale_by_scenario.set(scenario, scale);
     }
-    report.epochs = at_chosen.len();
     // Sparse scans: their own γ when it beats the site-wide one on the throttled replays by
     // more than its standard error.
     let (sparse_curve, sparse_best) = gamma_curve(&walks, THROTTLED);
@@ -426,22 +417,21 @@ pub fn survey_calibrated(
         (fits_on_map.len() >= MIN_SCENARIO_EPOCHS).then(|| quantile(&fits_on_map, RADIO_FIT_FLOOR_QUANTILE));
     report.radio_fit_floor = calibration.radio_fit_floor;
     report.radio_fit_scans = fits_on_map.len();
-    report.off_map_without_floor = OffMapReport::of(&off_map, &calibration);
     report.rssi_weight = calibration.rssi_weight;
     report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
     report.rssi_weight_by_scenario = calibration.rssi_weight_by_scenario;
-    report.accuracy_scale = calibration.accuracy_scale;
-    report.accuracy_scale_by_scenario = calibration.accuracy_scale_by_scenario;
     // The held-out walks again with the engine as shipped (every calibrated value, the radio
-    // fit floor included): how it does off the map, and what the floor costs on it. And with
-    // throttled scans, every γ as shipped but no radius factor and no radio fit floor: the
-    // posterior's own radii in the sparse regime, each epoch at the γ the engine gives it (the
-    // first scan's without a movement likelihood, which the calibration's runs above, each
-    // at one γ throughout, do not give it), for the sparse radius factors.
+    // fit floor included) but no radius factor, steady and throttled: the posterior's own
+    // radii as the engine will report them, each epoch at the γ the engine gives it (the
+    // first scan's without a movement likelihood, and the floor's, which the calibration's
+    // runs above, each at one γ throughout, do not give it), for the radius factors of the
+    // scenarios it positions epochs in and of the sparse bands; and how it does off the map.
+    // Fitted on the runs above instead, the factors did not hold on the engine as shipped
+    // (`docs/tuning.md#radius-factors`).
     let unscaled = Calibration {
         accuracy_scale: None,
         accuracy_scale_by_scenario: Default::default(),
-        radio_fit_floor: None,
+        sparse_scans: SparseScans { accuracy_scale_by_since: Default::default(), ..calibration.sparse_scans },
         ..calibration
     };
     let shipped: Vec<(Vec<Tag>, Vec<Tag>)> = parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
@@ -460,32 +450,42 @@ pub fn survey_calibrated(
                 Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
             };
             Some((
-                run(calibration, &options.calibration_replay())?,
+                run(unscaled, &options.calibration_replay())?,
                 run(unscaled, &options.calibration_throttled_replay())?,
             ))
         });
         progress();
         tags.unwrap_or_default()
     });
-    let mut by_band: [Vec<&Scored>; SPARSE_BANDS] = Default::default();
-    for (p, beyond_m, _, _, band) in shipped.iter().flat_map(|s| &s.1) {
-        if let (Some(band), true) = (band, *beyond_m == 0.0) {
-            by_band[*band].push(p);
+    let tags: Vec<&Tag> = shipped.iter().flat_map(|s| &s.0).collect();
+    let on: Vec<&Tag> = tags.iter().copied().filter(|t| t.beyond_map_m == 0.0).collect();
+    calibration.accuracy_scale = radius_factors(&on);
+    report.epochs = on.len();
+    for scenario in MdiScenario::ALL {
+        let points: Vec<&Tag> = on.iter().copied().filter(|t| t.scenario == scenario).collect();
+        if points.len() >= MIN_SCENARIO_EPOCHS {
+            report.scenario_epochs[scenario.index()] = points.len();
+            calibration.accuracy_scale_by_scenario.set(scenario, radius_factors(&points));
+        }
+    }
+    let mut by_band: [Vec<&Tag>; SPARSE_BANDS] = Default::default();
+    for t in shipped.iter().flat_map(|s| &s.1) {
+        if let (Some(band), true) = (t.band, t.beyond_map_m == 0.0) {
+            by_band[band].push(t);
         }
     }
     for (band, points) in by_band.iter().enumerate() {
         report.sparse_scans.epochs_by_since[band] = points.len();
         calibration.sparse_scans.accuracy_scale_by_since[band] =
-            if points.len() >= MIN_SCENARIO_EPOCHS { scales(points) } else { None };
+            if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points) } else { None };
     }
     report.sparse_scans.calibration = calibration.sparse_scans;
-    let tags: Vec<&Tag> = shipped.iter().flat_map(|s| &s.0).collect();
-    let off: Vec<(&Scored, f64, MdiScenario)> =
-        tags.iter().filter(|t| t.1 > 0.0).map(|t| (&t.0, t.1, t.2)).collect();
-    let on: Vec<&Scored> = tags.iter().filter(|t| t.1 == 0.0).map(|t| &t.0).collect();
-    // Radii as the engine reported them: the factors are already in.
-    report.off_map = OffMapReport::of(&off, &Calibration::default());
-    report.on_map = OffMapReport::of_on_map(&on);
+    report.accuracy_scale = calibration.accuracy_scale;
+    report.accuracy_scale_by_scenario = calibration.accuracy_scale_by_scenario;
+    report.off_map_without_floor = OffMapReport::of(&off_map, &calibration);
+    let off: Vec<&Tag> = tags.iter().copied().filter(|t| t.beyond_map_m > 0.0).collect();
+    report.off_map = OffMapReport::of(&off, &calibration);
+    report.on_map = OffMapReport::of_on_map(&on, &calibration);
     let site = site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?;
     Ok((site, survey, report))
 }

@@ -1,9 +1,8 @@
 //! What the survey's calibration measured.
 
+use super::held_out::Tag;
 use super::radius::RadiusPoint;
-use crate::scoring::Scored;
 use serde::Serialize;
-use waymark::sensors::MdiScenario;
 use waymark::site::{Calibration, SPARSE_BANDS};
 
 /// One γ of [`GAMMA_GRID`](super::GAMMA_GRID) on one floor's held-out walks.
@@ -67,28 +66,32 @@ pub struct CalibrationReport {
     /// Per floor, in site order: the γ each floor gets.
     pub floors: Vec<FloorCalibrationReport>,
     /// The radius factors chosen (68%, 95%), over the held-out epochs on the map (`OnMap`)
-    /// with the motion as the sensors give it, each at the γ the engine gives it on its floor:
-    /// the fallback for a scenario without its own.
+    /// replayed with the engine as shipped (every calibrated value but the factors, the motion
+    /// as the sensors give it): the fallback for a scenario without its own.
     pub accuracy_scale: Option<[f64; 2]>,
-    /// The factors per motion scenario: over the held-out epochs (on the map) the engine
-    /// positioned in that scenario, with the motion as the sensors give it, withheld, distance
-    /// only and heading only, at each floor's γ; a scenario with fewer than
-    /// [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) has none.
+    /// The factors per motion scenario, over the held-out epochs on the map the engine
+    /// positioned in that scenario: from the replays with the engine as shipped when they have
+    /// at least [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) in it, else from the
+    /// calibration's replays with the motion as the sensors give it, withheld, distance only
+    /// and heading only, at each floor's γ; a scenario with fewer than that in both has none.
     pub accuracy_scale_by_scenario: waymark::site::ScenarioScales,
     /// Those epochs per scenario ([`MdiScenario::ALL`](waymark::sensors::MdiScenario::ALL) order).
     pub scenario_epochs: [usize; 4],
-    /// Held-out epochs the radius factors were fitted on.
+    /// Held-out epochs on the map replayed with the engine as shipped: what
+    /// `accuracy_scale` was fitted on.
     pub epochs: usize,
     /// Held-out epochs left out of the radius factors: their truth was off the held-out
     /// site's map (`OnMap`).
     pub epochs_off_map: usize,
     /// How the engine did on those epochs as shipped (every calibrated value, the radio fit
-    /// floor included): what a walk that leaves the surveyed area gets.
+    /// floor included, radii with the chosen factors): what a walk that leaves the surveyed
+    /// area gets.
     pub off_map: OffMapReport,
-    /// The same from the calibration's own replays, without the radio fit floor (radii scaled
-    /// by the chosen factors).
+    /// The same from the calibration's own replays, without the radio fit floor (radii with
+    /// the chosen factors).
     pub off_map_without_floor: OffMapReport,
-    /// The held-out epochs on the map, replayed with the engine as shipped, as one band.
+    /// The held-out epochs on the map, replayed with the engine as shipped, as one band: by
+    /// construction their radii hold the truth at about 68% and 95%.
     pub on_map: OffMapReport,
     /// The radio fit floor chosen ([`Calibration::radio_fit_floor`]), nats per reading: none
     /// from fewer than [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) scans (a 5% percentile then rests on ten below).
@@ -146,8 +149,8 @@ pub struct OffMapBand {
     pub epochs: usize,
     /// Mean horizontal error, m (no floor penalty).
     pub mean_error_m: f64,
-    /// Share whose 68% radius holds the truth: as the engine reported it in the shipped pass,
-    /// times the chosen factors in the calibration's own replays.
+    /// Share whose 68% radius holds the truth: the replay's own radius with the chosen factors
+    /// applied as the engine applies them.
     pub accuracy_68_hit: f64,
     /// The same for the 95% radius.
     pub accuracy_95_hit: f64,
@@ -159,24 +162,22 @@ pub struct OffMapBand {
 const OFF_MAP_BANDS: [f64; 5] = [0.0, 2.0, 5.0, 10.0, f64::INFINITY];
 
 impl OffMapReport {
-    /// Epochs on the map as one band from 0 to 0 m, their radii as reported.
-    pub(super) fn of_on_map(points: &[&Scored]) -> Self {
-        let points: Vec<(&Scored, [f64; 2])> = points.iter().map(|&p| (p, [1.0, 1.0])).collect();
-        Self { bands: OffMapBand::of(0.0, 0.0, &points).into_iter().collect() }
+    /// Epochs on the map as one band from 0 to 0 m, their radii with `calibration`'s factors.
+    pub(super) fn of_on_map(points: &[&Tag], calibration: &Calibration) -> Self {
+        Self { bands: OffMapBand::of(0.0, 0.0, points, calibration).into_iter().collect() }
     }
 
-    /// Epochs beyond the map by band, their radii times `calibration`'s factors for their
-    /// scenario.
-    pub(super) fn of(points: &[(&Scored, f64, MdiScenario)], calibration: &Calibration) -> Self {
+    /// Epochs beyond the map by band, their radii with `calibration`'s factors.
+    pub(super) fn of(points: &[&Tag], calibration: &Calibration) -> Self {
         let bands = OFF_MAP_BANDS
             .windows(2)
             .filter_map(|w| {
-                let inside: Vec<(&Scored, [f64; 2])> = points
+                let inside: Vec<&Tag> = points
                     .iter()
-                    .filter(|p| p.1 > w[0] && p.1 <= w[1])
-                    .map(|p| (p.0, calibration.accuracy_scale_in(p.2)))
+                    .copied()
+                    .filter(|t| t.beyond_map_m > w[0] && t.beyond_map_m <= w[1])
                     .collect();
-                OffMapBand::of(w[0], w[1], &inside)
+                OffMapBand::of(w[0], w[1], &inside, calibration)
             })
             .collect();
         Self { bands }
@@ -184,19 +185,18 @@ impl OffMapReport {
 }
 
 impl OffMapBand {
-    /// The band of `points` (each with its radius factors); `None` without points.
-    fn of(from_m: f64, to_m: f64, points: &[(&Scored, [f64; 2])]) -> Option<Self> {
+    /// The band of `points`, their radii with `calibration`'s factors; `None` without points.
+    fn of(from_m: f64, to_m: f64, points: &[&Tag], calibration: &Calibration) -> Option<Self> {
         let n = points.len();
-        let share = |hit: fn(&Scored, [f64; 2]) -> bool| {
-            points.iter().filter(|&&(p, s)| hit(p, s)).count() as f64 / n as f64
-        };
+        let holds: Vec<[bool; 2]> = points.iter().map(|t| t.holds(calibration)).collect();
+        let share = |k: usize| holds.iter().filter(|h| h[k]).count() as f64 / n as f64;
         (n > 0).then(|| OffMapBand {
             from_m,
             to_m,
             epochs: n,
-            mean_error_m: points.iter().map(|p| p.0.error_m).sum::<f64>() / n as f64,
-            accuracy_68_hit: share(|p, s| p.error_m <= s[0] * p.accuracy_m),
-            accuracy_95_hit: share(|p, s| p.error_m <= s[1] * p.accuracy_95_m),
+            mean_error_m: points.iter().map(|t| t.scored.error_m).sum::<f64>() / n as f64,
+            accuracy_68_hit: share(0),
+            accuracy_95_hit: share(1),
         })
     }
 }

@@ -1,0 +1,190 @@
+//! Why the radius factors the survey's calibration fits on held-out survey walks hold the
+//! truth more or less often on the test walks: surveys and calibrates the site as `eval`
+//! does, then replays every survey walk held out (on the site surveyed without it) and every
+//! test walk (on the site of all survey walks), both with the engine as shipped but without
+//! radius factors, steady and throttled, and prints one CSV row per scored epoch with what a
+//! radius could be predicted from.
+//!
+//! ```text
+//! FRACTION=0.25 cargo run --release -p waymark-eval --example radius_diag -- \
+//!   target/ilc/site1/{B1,F1,F2,F3,F4} > rows.csv
+//! ```
+//!
+//! Columns: `set` (held: a held-out survey walk scored at each of its positions, as the
+//! calibration scores them; test: a test walk scored at its WiFi scans, as `eval` does),
+//! `throttled`, `floor`, `walk`, `error_m` (horizontal), `r68`, `r95` (the posterior's radii,
+//! without factors or `beyond_radio_m`), `beyond_radio_m`, `scenario` (index in
+//! `MdiScenario::ALL`), `fit` (radio fit of the latest scan), `band` (sparse band, -1 none),
+//! `off_map_m` (how far the truth is beyond the map the walk was replayed on), `floor_ok`,
+//! `states_8m` (fingerprinted states of the estimate's floor within 8 m of it).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use waymark::site::{Calibration, StateKind};
+use waymark::{Engine, Position, ScanTiming, Site};
+use waymark_eval::real::EvalOptions;
+use waymark_survey::calibrate::{parallel_map, survey_calibrated, survey_inputs, FloorData};
+use waymark_survey::io::ilc::Trace;
+use waymark_survey::replay::{replay, ReplayOptions};
+use waymark_survey::PreparedSurvey;
+
+/// Fingerprinted states per floor, and the radius of a cell.
+struct Map {
+    states: Vec<Vec<(f64, f64)>>,
+    cell_m: f64,
+}
+
+impl Map {
+    fn new(site: &Site, floors: usize) -> Map {
+        let mut states = vec![Vec::new(); floors];
+        for s in site.states().iter().filter(|s| s.kind != StateKind::Unsurveyed) {
+            states[s.floor].push((s.position.x, s.position.y));
+        }
+        Map { states, cell_m: site.spacing_m() * std::f64::consts::FRAC_1_SQRT_2 + 1e-9 }
+    }
+
+    fn beyond_m(&self, floor: usize, (x, y): (f64, f64)) -> f64 {
+        let nearest =
+            self.states[floor].iter().map(|&(sx, sy)| (sx - x).hypot(sy - y)).fold(f64::INFINITY, f64::min);
+        (nearest - self.cell_m).max(0.0)
+    }
+
+    fn within(&self, floor: usize, (x, y): (f64, f64), r: f64) -> usize {
+        self.states
+            .get(floor)
+            .map_or(0, |s| s.iter().filter(|&&(sx, sy)| (sx - x).hypot(sy - y) <= r).count())
+    }
+}
+
+/// Rows of one replay: a held-out walk at each position's own time, as the calibration scores
+/// it; a test walk, as `eval` scores it, at each WiFi scan with the latest position before it.
+fn rows(
+    set: &str,
+    throttled: bool,
+    floor: usize,
+    trace: &Trace,
+    positions: &[Position],
+    map: &Map,
+) -> Vec<String> {
+    // Per position: the latest scan's fit and the sparse band.
+    let mut timing = ScanTiming::default();
+    let mut fit = f64::NAN;
+    let features: Vec<(f64, i64)> = positions
+        .iter()
+        .map(|p| {
+            if p.radio_log_evidence.is_some() {
+                timing = timing.after_scan(p.timestamp_ns);
+            }
+            if let Some(f) = p.radio_fit {
+                fit = f;
+            }
+            (fit, timing.sparse_band(p.timestamp_ns).map_or(-1, |b| b as i64))
+        })
+        .collect();
+    let instants: Vec<u64> = if set == "test" {
+        trace.wifi_scans.iter().map(|s| s.timestamp_ns).collect()
+    } else {
+        positions.iter().map(|p| p.timestamp_ns).collect()
+    };
+    instants
+        .into_iter()
+        .filter_map(|t| {
+            let truth = trace.position_at(t)?;
+            let k = positions.partition_point(|p| p.timestamp_ns <= t).checked_sub(1)?;
+            let p = &positions[k];
+            let (fit, band) = features[k];
+            let error = (p.x - truth.0).hypot(p.y - truth.1);
+            Some(format!(
+                "{set},{},{floor},{},{error:.3},{:.3},{:.3},{:.3},{},{fit:.4},{band},{:.3},{},{}",
+                throttled as u8,
+                trace.name,
+                p.accuracy_m - p.beyond_radio_m,
+                p.accuracy_95_m - p.beyond_radio_m,
+                p.beyond_radio_m,
+                p.scenario.index(),
+                map.beyond_m(floor, truth),
+                (p.floor == floor) as u8,
+                map.within(p.floor, (p.x, p.y), 8.0),
+            ))
+        })
+        .collect()
+}
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let dirs: Vec<PathBuf> = std::env::args().skip(1).map(PathBuf::from).collect();
+    let fraction: f64 = std::env::var("FRACTION").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0);
+    let mut floors = dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?;
+    for f in &mut floors {
+        f.keep_survey_fraction(fraction);
+    }
+    let mut options = EvalOptions::default();
+    options.calibration.threads = 2;
+    let (site, _, report) = survey_calibrated(&floors, &options.calibration, &|| {})?;
+    eprintln!(
+        "factors {:?} by scenario {:?} sparse {:?}",
+        report.accuracy_scale, report.accuracy_scale_by_scenario, report.sparse_scans.calibration
+    );
+    let options = options.surveyed_with(&report);
+    let weights: Vec<[Option<f64>; 2]> =
+        report.floors.iter().map(|f| [f.rssi_weight, f.rssi_weight_without_movement]).collect();
+    let unscaled = Calibration {
+        accuracy_scale: None,
+        accuracy_scale_by_scenario: Default::default(),
+        sparse_scans: waymark::site::SparseScans {
+            accuracy_scale_by_since: Default::default(),
+            ..site.calibration().sparse_scans
+        },
+        ..*site.calibration()
+    };
+    let engine_config = options.calibration.engine_config();
+    let steady = options.calibration.calibration_replay();
+    let throttled = options.calibration.throttled_replay();
+    let run = |site: &Site, trace: &Trace, replay_options: &ReplayOptions| -> Option<Vec<Position>> {
+        let site = site.clone().with_calibration(unscaled).ok()?.with_floor_rssi_weights(&weights).ok()?;
+        let mut engine = Engine::new(Arc::new(site), engine_config.clone()).ok()?;
+        Some(replay(&mut engine, trace, replay_options).positions)
+    };
+    println!(
+        "set,throttled,floor,walk,error_m,r68,r95,beyond_radio_m,scenario,fit,band,off_map_m,floor_ok,states_8m"
+    );
+    // Held out.
+    let inputs = survey_inputs(&floors);
+    let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &options.calibration.survey)?;
+    let full = prepared.fit(&|_, _| true, None, 2);
+    let jobs: Vec<(usize, usize)> =
+        floors.iter().enumerate().flat_map(|(f, fl)| (0..fl.survey.len()).map(move |w| (f, w))).collect();
+    let held = parallel_map(&jobs, 2, |&(f, w)| {
+        let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
+        let fits = prepared.fit(&keep, Some(&full), 1);
+        let Ok((held_site, _)) = prepared.assemble(&fits) else { return Vec::new() };
+        let map = Map::new(&held_site, floors.len());
+        let trace = &floors[f].survey[w];
+        let mut out = Vec::new();
+        for (t, opts) in [(false, &steady), (true, &throttled)] {
+            if let Some(p) = run(&held_site, trace, opts) {
+                out.extend(rows("held", t, f, trace, &p, &map));
+            }
+        }
+        out
+    });
+    for r in held.iter().flatten() {
+        println!("{r}");
+    }
+    // Test walks, on the site of every survey walk.
+    let map = Map::new(&site, floors.len());
+    let tests: Vec<(usize, &Trace)> =
+        floors.iter().enumerate().flat_map(|(f, fl)| fl.test.iter().map(move |t| (f, t))).collect();
+    let test = parallel_map(&tests, 2, |&(f, trace)| {
+        let mut out = Vec::new();
+        for (t, opts) in [(false, &steady), (true, &throttled)] {
+            if let Some(p) = run(&site, trace, opts) {
+                out.extend(rows("test", t, f, trace, &p, &map));
+            }
+        }
+        out
+    });
+    for r in test.iter().flatten() {
+        println!("{r}");
+    }
+    Ok(())
+}
