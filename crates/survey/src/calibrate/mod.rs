@@ -92,7 +92,7 @@ impl CalibrationOptions {
 
     /// How the calibration replays its held-out walks: as `replay`, but with every scan (the
     /// site a phone gets is surveyed from unthrottled walks, and its calibration replays them
-    /// both ways, see [`SparseScans`](waymark::site::SparseScans)), and without fixed-lag
+    /// both ways, see [`SparseScans`]), and without fixed-lag
     /// estimates: the calibration scores the live positions.
     pub fn calibration_replay(&self) -> ReplayOptions {
         ReplayOptions { min_scan_interval_ns: None, fixed_lag: false, ..self.replay }
