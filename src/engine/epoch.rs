@@ -7,7 +7,7 @@ use crate::history::{EpochInput, EpochRecord, History};
 use crate::hmm::estimate;
 use crate::radio::Scan;
 use crate::sensors::MotionUpdate;
-use crate::site::most_likely_zone;
+use crate::site::{most_likely_zone, scaled_radii};
 
 impl Engine {
     pub(super) fn scan_epoch(
@@ -139,6 +139,7 @@ impl Engine {
         let scale = sparse
             .and_then(|band| self.sparse_scans.accuracy_scale_by_since[band])
             .unwrap_or(self.accuracy_scale[position.scenario.index()]);
+        let radii = scaled_radii([e.accuracy_m, e.accuracy_95_m], scale, position.beyond_radio_m);
         let (zone, zone_probability) = if self.site.zones().is_empty() {
             (None, 1.0)
         } else {
@@ -152,9 +153,8 @@ impl Engine {
             zone_probability,
             x: e.position.x,
             y: e.position.y,
-            accuracy_m: e.accuracy_m * scale[0] + position.beyond_radio_m,
-            accuracy_95_m: (e.accuracy_95_m * scale[1]).max(e.accuracy_m * scale[0])
-                + position.beyond_radio_m,
+            accuracy_m: radii[0],
+            accuracy_95_m: radii[1],
             ..position
         }
     }

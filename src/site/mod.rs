@@ -320,6 +320,16 @@ impl Calibration {
     }
 }
 
+/// The 68% and 95% radii an engine reports, m, from the posterior's own (`posterior`) and the
+/// factors in effect (`scale`: the sparse band's, else the scenario's): each radius times its
+/// factor, the 95% never inside the 68%, plus `beyond_radio_m`, the walking since the radio
+/// last explained a scan, which no factor scales (docs/accuracy.md). The engine reports with
+/// it and the survey's calibration scores its held-out epochs with it.
+pub fn scaled_radii(posterior: [f64; 2], scale: [f64; 2], beyond_radio_m: f64) -> [f64; 2] {
+    let r68 = posterior[0] * scale[0];
+    [r68 + beyond_radio_m, (posterior[1] * scale[1]).max(r68) + beyond_radio_m]
+}
+
 /// Radius factors (68%, 95%) per motion scenario; `None`: not fitted.
 pub type ScenarioScales = PerScenario<[f64; 2]>;
 

@@ -4,7 +4,7 @@
 use crate::io::Trace;
 use crate::scoring::{live_estimates, quantile, score, Scored};
 use waymark::sensors::MdiScenario;
-use waymark::site::{Calibration, StateKind};
+use waymark::site::{scaled_radii, Calibration, StateKind};
 use waymark::{ScanTiming, Site};
 
 /// Per walk, per γ, per run of the calibration (`survey_calibrated`'s `masks`, then
@@ -142,9 +142,8 @@ impl Tag {
             .band
             .and_then(|band| calibration.sparse_scans.accuracy_scale_by_since[band])
             .unwrap_or(calibration.accuracy_scale_in(self.scenario));
-        let r68 = (self.scored.accuracy_m - self.beyond_radio_m) * scale[0];
-        let r95 = ((self.scored.accuracy_95_m - self.beyond_radio_m) * scale[1]).max(r68);
-        [r68, r95].map(|r| self.scored.error_m <= r + self.beyond_radio_m)
+        let posterior = [self.scored.accuracy_m, self.scored.accuracy_95_m].map(|r| r - self.beyond_radio_m);
+        scaled_radii(posterior, scale, self.beyond_radio_m).map(|r| self.scored.error_m <= r)
     }
 }
 
