@@ -33,14 +33,19 @@ impl Engine {
         };
         // The fit of the map: the best fingerprinted state against none. Unsurveyed states score
         // the "no fingerprint" baseline itself, so counting them would never let the fit fall
-        // below 0, and a site whose held-out fits reach 0 would never find a scan unexplained
-        // (docs/accuracy.md#off-the-map).
-        let best = best_fingerprinted(&self.ln_emission, &self.unsurveyed);
+        // below 0, and a site whose held-out fits reach 0 would never find a scan unexplained;
+        // a state that models none of the transmitters heard is, for this scan, one with no
+        // fingerprint too (docs/accuracy.md#off-the-map).
+        let silent: Vec<bool> = radio.silent_states(&resolved.observations, &self.ln_emission).collect();
+        let best = best_fingerprinted(&self.ln_emission, &self.unsurveyed, &silent);
         let radio_fit = (best - ln_unheard) / resolved.observations.len() as f64;
+        let below_floor = self.radio_fit_floor.is_some_and(|floor| radio_fit < floor);
         // Only with an estimate to carry on from: the first scan, unexplained or not, is all
-        // there is to go on.
-        let unexplained =
-            self.latest.is_some() && self.radio_fit_floor.is_some_and(|floor| radio_fit < floor);
+        // there is to go on, and then only the states whose fingerprints speak to it place the
+        // estimate. A state fitted from near-empty survey scans scores about the baseline for
+        // any scan, and when nothing on the map explains a scan it would win, wherever it is.
+        let unexplained = self.latest.is_some() && below_floor;
+        let first_unexplained = self.latest.is_none() && below_floor && silent.contains(&false);
         let dropped = [resolved.unknown, resolved.duplicates, resolved.stale].map(|n| n as u64);
         // Accepted from here on: the state changes.
         Ok(self.atomically(motion.is_none(), |engine| {
@@ -60,6 +65,11 @@ impl Engine {
                 // sound least unlike the scan: the motion alone moves it.
                 engine.ln_emission.fill(0.0);
                 engine.stats.scans_unexplained += 1;
+            }
+            if first_unexplained {
+                for (e, _) in engine.ln_emission.iter_mut().zip(&silent).filter(|(_, &s)| s) {
+                    *e = f64::NEG_INFINITY;
+                }
             }
             engine.epoch_radio_fit = radio_fit.is_finite().then_some((radio_fit, unexplained));
             engine.run_epoch(scan.timestamp_ns, EpochInput::Scan, None, &motion)
@@ -235,12 +245,13 @@ impl Engine {
 /// (docs/tuning.md#unsurveyed-states).
 const UNSURVEYED_AFTER_SCANS: u32 = 2;
 
-/// The largest of `ln_emission` over the states not in `unsurveyed` (sorted indices).
-fn best_fingerprinted(ln_emission: &[f64], unsurveyed: &[usize]) -> f64 {
+/// The largest of `ln_emission` over the states neither in `unsurveyed` (sorted indices) nor
+/// `silent`; -∞ when there is none.
+fn best_fingerprinted(ln_emission: &[f64], unsurveyed: &[usize], silent: &[bool]) -> f64 {
     let mut skip = unsurveyed.iter().peekable();
     let mut best = f64::NEG_INFINITY;
-    for (i, &e) in ln_emission.iter().enumerate() {
-        if skip.next_if_eq(&&i).is_none() {
+    for (i, (&e, &quiet)) in ln_emission.iter().zip(silent).enumerate() {
+        if skip.next_if_eq(&&i).is_none() && !quiet {
             best = best.max(e);
         }
     }

@@ -391,11 +391,9 @@ impl RadioMap {
     /// the unheard model): what the scan is worth without a fingerprint.
     pub fn ln_likelihood(&self, observations: &[(u32, f64)], out: &mut [f64]) -> f64 {
         debug_assert_eq!(out.len(), self.state_count());
-        let mut scanned = [false; 2];
-        for &(t, _) in observations {
-            scanned[self.kinds[t as usize] as usize] = true;
-        }
-        match scanned {
+        let terms = self.scan_terms(observations);
+        // As `absent_terms`, a radio at a time.
+        match terms.scanned {
             [true, true] => {
                 for (o, (w, b)) in out.iter_mut().zip(self.all_absent[0].iter().zip(&self.all_absent[1])) {
                     *o = w + b;
@@ -405,12 +403,9 @@ impl RadioMap {
             [false, true] => out.copy_from_slice(&self.all_absent[1]),
             [false, false] => out.fill(0.0),
         }
-        let mut shared = 0.0;
         for &(t, rssi) in observations {
             // What hearing `rssi` changes for a state using the unheard model...
-            let unheard_delta =
-                self.model.ln_heard(&self.unheard, rssi, self.clip_dbm) - self.unheard_ln_absent;
-            shared += unheard_delta;
+            let unheard_delta = self.unheard_delta(rssi);
             // ...and, for states that model this transmitter, the difference to their own.
             // A reading at or below the clip level is ln p(absent) for every model: no change.
             if rssi <= self.clip_dbm {
@@ -447,11 +442,64 @@ impl RadioMap {
             }
         }
         for v in out.iter_mut() {
-            *v += shared;
+            *v += terms.shared;
         }
-        let absent = self.kinds.iter().filter(|&&k| scanned[usize::from(k)]).count();
-        absent as f64 * self.unheard_ln_absent + shared
+        let absent = self.kinds.iter().filter(|&&k| terms.scanned[usize::from(k)]).count();
+        absent as f64 * self.unheard_ln_absent + terms.shared
     }
+
+    /// Which states' fingerprints say nothing about a scan, from what
+    /// [`ln_likelihood`](Self::ln_likelihood) wrote for it (`ln`): those that model none of
+    /// the transmitters heard above the clip level. Such a state explains the scan as a state
+    /// with no fingerprint does, give or take its absent terms: its value is exactly its absent
+    /// terms plus the terms every state shares, where a state that models a heard transmitter
+    /// has that reading's own term added.
+    pub fn silent_states<'a>(
+        &'a self,
+        observations: &[(u32, f64)],
+        ln: &'a [f64],
+    ) -> impl Iterator<Item = bool> + 'a {
+        let terms = self.scan_terms(observations);
+        ln.iter()
+            .enumerate()
+            .map(move |(state, &v)| v == self.absent_terms(terms.scanned, state) + terms.shared)
+    }
+
+    /// What hearing `rssi` changes for a state that uses the unheard model.
+    fn unheard_delta(&self, rssi: f64) -> f64 {
+        self.model.ln_heard(&self.unheard, rssi, self.clip_dbm) - self.unheard_ln_absent
+    }
+
+    /// The radios a scan used and the sum of its readings' terms at a state with no model of
+    /// them, which every state shares.
+    fn scan_terms(&self, observations: &[(u32, f64)]) -> ScanTerms {
+        let mut terms = ScanTerms { scanned: [false; 2], shared: 0.0 };
+        for &(t, rssi) in observations {
+            terms.scanned[self.kinds[t as usize] as usize] = true;
+            terms.shared += self.unheard_delta(rssi);
+        }
+        terms
+    }
+
+    /// ln p(every transmitter of the scanned radios absent | state).
+    #[inline]
+    fn absent_terms(&self, scanned: [bool; 2], state: usize) -> f64 {
+        match scanned {
+            [true, true] => self.all_absent[0][state] + self.all_absent[1][state],
+            [true, false] => self.all_absent[0][state],
+            [false, true] => self.all_absent[1][state],
+            [false, false] => 0.0,
+        }
+    }
+}
+
+/// What a scan's readings add to every state alike ([`RadioMap::scan_terms`]).
+#[derive(Clone, Copy, Debug)]
+struct ScanTerms {
+    /// Whether the scan heard WiFi, BLE (the radios whose absent terms count).
+    scanned: [bool; 2],
+    /// The readings' terms at a state with no model of them.
+    shared: f64,
 }
 
 #[cfg(test)]
@@ -497,6 +545,21 @@ mod tests {
                 None => 0.0,
             })
             .sum()
+    }
+
+    #[test]
+    fn silent_states_model_none_of_the_transmitters_heard() {
+        let map = small_map(RssiModel::CensoredGaussian);
+        let silent = |heard: &[(u32, f64)]| {
+            let mut out = vec![0.0; 2];
+            map.ln_likelihood(heard, &mut out);
+            map.silent_states(heard, &out).collect::<Vec<_>>()
+        };
+        // State 1 never heard transmitter 2; both model 0 and 1.
+        assert_eq!(silent(&[(2, -92.0)]), [false, true]);
+        assert_eq!(silent(&[(0, -62.0), (2, -92.0)]), [false, false]);
+        // At the clip level a reading changes no state's likelihood: nobody speaks to it.
+        assert_eq!(silent(&[(2, -100.0)]), [true, true]);
     }
 
     #[test]

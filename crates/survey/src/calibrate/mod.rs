@@ -209,6 +209,17 @@ pub fn calibration_steps(floors: &[FloorData], options: &CalibrationOptions) -> 
 /// unexplained (`docs/tuning.md#radio-fit-floor`).
 const RADIO_FIT_FLOOR_QUANTILE: f64 = 0.05;
 
+/// The radio fit floor from the sorted fits of held-out scans on the map: their
+/// [`RADIO_FIT_FLOOR_QUANTILE`], and never below 0. A fit of 0 is a scan the best fingerprint
+/// explains no better than no fingerprint at all, which is what "unexplained" means; on a
+/// sparse survey a state fitted from near-empty scans scores about that for any scan, so the
+/// held-out fits never fall below it and the quantile came out just under 0: no scan was then
+/// ever unexplained, and walkers beyond the map were pulled onto that state on another floor
+/// (`docs/tuning.md#radio-fit-floor`).
+fn radio_fit_floor(sorted_fits: &[f64]) -> f64 {
+    quantile(sorted_fits, RADIO_FIT_FLOOR_QUANTILE).max(0.0)
+}
+
 /// Calibrates a site from its survey walks: the walkers' step length and the site's north
 /// (from waypoints and steps, [`crate::calibrate_motion`]), then γ per floor by
 /// leave-one-walk-out, Hoang §6.2's jackknife with a walk as the unit: each survey walk is
@@ -414,7 +425,7 @@ pub fn survey_calibrated(
     report.sparse_scans.gamma = sparse_curve;
     fits_on_map.sort_by(f64::total_cmp);
     calibration.radio_fit_floor =
-        (fits_on_map.len() >= MIN_SCENARIO_EPOCHS).then(|| quantile(&fits_on_map, RADIO_FIT_FLOOR_QUANTILE));
+        (fits_on_map.len() >= MIN_SCENARIO_EPOCHS).then(|| radio_fit_floor(&fits_on_map));
     report.radio_fit_floor = calibration.radio_fit_floor;
     report.radio_fit_scans = fits_on_map.len();
     report.rssi_weight = calibration.rssi_weight;
@@ -488,4 +499,20 @@ pub fn survey_calibrated(
     report.on_map = OffMapReport::of_on_map(&on, &calibration);
     let site = site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?;
     Ok((site, survey, report))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_radio_fit_floor_is_the_held_out_quantile_and_never_below_zero() {
+        // Twenty fits from 0.5 up: the 5th percentile is the first.
+        let fits: Vec<f64> = (0..20).map(|i| 0.5 + 0.1 * f64::from(i)).collect();
+        assert_eq!(radio_fit_floor(&fits), 0.5);
+        // Held-out fits that never fall below a near-empty state's -0.04: no better than no
+        // fingerprint is unexplained.
+        let fits: Vec<f64> = (0..20).map(|i| -0.04 + 0.1 * f64::from(i)).collect();
+        assert_eq!(radio_fit_floor(&fits), 0.0);
+    }
 }
