@@ -191,7 +191,8 @@ pub struct Calibration {
     /// heard on the map, nats per reading: below it the map does not explain the scan (the
     /// phone is probably beyond the surveyed area), the engine leans on the motion and its
     /// radii grow with the distance walked. The survey's calibration takes the 5th percentile
-    /// over held-out epochs on the map.
+    /// over held-out epochs on the map, and 0 when that is below 0
+    /// (docs/tuning.md#radio-fit-floor).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub radio_fit_floor: Option<f64>,
     /// γ and radius factors for scans far apart, as under Android 9+'s throttling.

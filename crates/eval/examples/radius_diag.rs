@@ -144,6 +144,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let mut engine = Engine::new(Arc::new(site), engine_config.clone()).ok()?;
         Some(replay(&mut engine, trace, replay_options).positions)
     };
+    // The rows of one walk on one site, steady and throttled.
+    let both = |set: &str, site: &Site, f: usize, trace: &Trace, map: &Map| -> Vec<String> {
+        let mut out = Vec::new();
+        for (t, opts) in [(false, &steady), (true, &throttled)] {
+            if let Some(p) = run(site, trace, opts) {
+                out.extend(rows(set, t, f, trace, &p, map));
+            }
+        }
+        out
+    };
     println!(
         "set,throttled,floor,walk,error_m,r68,r95,beyond_radio_m,scenario,fit,band,off_map_m,floor_ok,states_8m"
     );
@@ -157,15 +167,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
         let fits = prepared.fit(&keep, Some(&full), 1);
         let Ok((held_site, _)) = prepared.assemble(&fits) else { return Vec::new() };
-        let map = Map::new(&held_site, floors.len());
-        let trace = &floors[f].survey[w];
-        let mut out = Vec::new();
-        for (t, opts) in [(false, &steady), (true, &throttled)] {
-            if let Some(p) = run(&held_site, trace, opts) {
-                out.extend(rows("held", t, f, trace, &p, &map));
-            }
-        }
-        out
+        both("held", &held_site, f, &floors[f].survey[w], &Map::new(&held_site, floors.len()))
     });
     for r in held.iter().flatten() {
         println!("{r}");
@@ -174,15 +176,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let map = Map::new(&site, floors.len());
     let tests: Vec<(usize, &Trace)> =
         floors.iter().enumerate().flat_map(|(f, fl)| fl.test.iter().map(move |t| (f, t))).collect();
-    let test = parallel_map(&tests, 2, |&(f, trace)| {
-        let mut out = Vec::new();
-        for (t, opts) in [(false, &steady), (true, &throttled)] {
-            if let Some(p) = run(&site, trace, opts) {
-                out.extend(rows("test", t, f, trace, &p, &map));
-            }
-        }
-        out
-    });
+    let test = parallel_map(&tests, 2, |&(f, trace)| both("test", &site, f, trace, &map));
     for r in test.iter().flatten() {
         println!("{r}");
     }
