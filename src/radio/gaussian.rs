@@ -138,18 +138,18 @@ const TABLE_KNOTS_PER_Z: f64 = 256.0;
 /// [`ln_std_normal_cdf`], for scoring scans against compact radio maps that do not cache ln Φ
 /// per entry. Built once per process ([`LnCdfTable::get`]).
 pub struct LnCdfTable {
-    /// ln Φ at each knot.
-    knots: Vec<f64>,
+    /// (ln Φ at each knot, its rise to the next knot).
+    knots: Vec<(f64, f64)>,
 }
 
 impl LnCdfTable {
-    /// The table (built on first use, 96 KB).
+    /// The table (built on first use, 192 KB).
     pub fn get() -> &'static LnCdfTable {
         static TABLE: std::sync::OnceLock<LnCdfTable> = std::sync::OnceLock::new();
         TABLE.get_or_init(|| {
-            let count = ((TABLE_Z.1 - TABLE_Z.0) * TABLE_KNOTS_PER_Z) as usize + 1;
-            let knots =
-                (0..count).map(|k| ln_std_normal_cdf(TABLE_Z.0 + k as f64 / TABLE_KNOTS_PER_Z)).collect();
+            let count = ((TABLE_Z.1 - TABLE_Z.0) * TABLE_KNOTS_PER_Z) as usize;
+            let at = |k: usize| ln_std_normal_cdf(TABLE_Z.0 + k as f64 / TABLE_KNOTS_PER_Z);
+            let knots = (0..count).map(|k| (at(k), at(k + 1) - at(k))).collect();
             LnCdfTable { knots }
         })
     }
@@ -157,13 +157,28 @@ impl LnCdfTable {
     /// ln Φ(z): interpolated within `TABLE_Z`, exact outside.
     #[inline]
     pub fn ln_cdf(&self, z: f64) -> f64 {
+        /// 1.5 · 2^52: adding it rounds a float below 2^51 in magnitude to an integer, which
+        /// the low bits of the sum then hold, without the range checks of an `as` conversion
+        /// (this lookup is most of the time a scan takes, docs/tuning.md#engine-speed).
+        const ROUND: f64 = 6_755_399_441_055_744.0;
         let u = (z - TABLE_Z.0) * TABLE_KNOTS_PER_Z;
-        let k = u as usize; // saturating: NaN and negatives give 0
-        match (self.knots.get(k), self.knots.get(k + 1)) {
-            (Some(&y0), Some(&y1)) if u >= 0.0 => y0 + (u - k as f64) * (y1 - y0),
-            _ => ln_std_normal_cdf(z),
+        if u >= 0.0 && u < self.knots.len() as f64 {
+            // The knot at or below u: u - 1/2 rounded to a whole number. For a whole u that
+            // can be u - 1 (ties round to even); the interpolation then runs to u's own knot.
+            let below = (u - 0.5) + ROUND;
+            if let Some(&(y, rise)) = self.knots.get(below.to_bits() as u32 as usize) {
+                return y + (u - (below - ROUND)) * rise;
+            }
         }
+        exact_ln_cdf(z)
     }
+}
+
+/// [`ln_std_normal_cdf`] out of line, for the table's rare misses.
+#[cold]
+#[inline(never)]
+fn exact_ln_cdf(z: f64) -> f64 {
+    ln_std_normal_cdf(z)
 }
 
 /// ln Φ(z) through [`LnCdfTable`].
