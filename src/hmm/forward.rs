@@ -179,8 +179,15 @@ impl ForwardFilter {
         if max_e.is_finite() {
             let mut total = 0.0;
             for ((w, &p), &e) in self.weights.iter_mut().zip(&self.predicted).zip(ln_emission) {
-                // A state the epoch rules out (-inf) weighs 0 without an exponential.
-                *w = if e.is_nan() || e == f64::NEG_INFINITY { 0.0 } else { p * (e - max_e).exp() };
+                // A state the epoch rules out (-inf) weighs 0 without an exponential, and one
+                // at the maximum (every state, between scans) its prediction: exp(0) = 1.
+                *w = if e.is_nan() || e == f64::NEG_INFINITY {
+                    0.0
+                } else if e == max_e {
+                    p
+                } else {
+                    p * (e - max_e).exp()
+                };
                 total += *w;
             }
             if total > 1e-250 {

@@ -40,7 +40,11 @@ pub struct RowBounds<'a> {
 
 impl RowBounds<'_> {
     fn probabilities(&self, i: usize) -> (f64, f64) {
-        hipe_probabilities(self.table.reachable(i, self.rho_m).len(), self.table.state_count(), self.ratio)
+        self.probabilities_of(self.table.reachable(i, self.rho_m).len())
+    }
+
+    fn probabilities_of(&self, reachable: usize) -> (f64, f64) {
+        hipe_probabilities(reachable, self.table.state_count(), self.ratio)
     }
 
     /// Row `i`'s floor weight.
@@ -51,6 +55,43 @@ impl RowBounds<'_> {
     /// An upper bound on the logarithm of row `i`'s explicit weights.
     pub fn ln_most(&self, i: usize) -> f64 {
         self.probabilities(i).0.ln() + self.ln_most_factor
+    }
+}
+
+/// (ln [`RowBounds::floor`], [`RowBounds::ln_most`]) of rows, by their reachable count: rows
+/// with one count share their bounds, and a site's rows have a few hundred counts between
+/// them, so the Viterbi step takes each logarithm once per count rather than per row. Both
+/// are monotone in the count (HIPE eq. 5), so their largest over every row, `most`, is at
+/// one of the counts 1 and N: a row whose path falls short even of that needs no lookup.
+struct LnBounds<'b> {
+    bounds: &'b RowBounds<'b>,
+    by_count: Vec<Option<(f64, f64)>>,
+    most: (f64, f64),
+}
+
+impl<'b> LnBounds<'b> {
+    fn new(bounds: &'b RowBounds<'b>) -> Self {
+        let mut ln_bounds = Self { bounds, by_count: Vec::new(), most: (0.0, 0.0) };
+        let [few, all] = [1, bounds.table.state_count().max(1)].map(|count| ln_bounds.of_count(count));
+        ln_bounds.most = (few.0.max(all.0), few.1.max(all.1));
+        ln_bounds
+    }
+
+    fn of_count(&mut self, count: usize) -> (f64, f64) {
+        if count >= self.by_count.len() {
+            self.by_count.resize(count + 1, None);
+        }
+        let bounds = self.bounds;
+        *self.by_count[count].get_or_insert_with(|| {
+            let (high, low) = bounds.probabilities_of(count);
+            ((low * bounds.floor_factor).ln(), high.ln() + bounds.ln_most_factor)
+        })
+    }
+
+    /// Row `i`'s (ln floor weight, bound on its ln explicit weights), exactly as
+    /// [`RowBounds`] computes them.
+    fn of(&mut self, i: usize) -> (f64, f64) {
+        self.of_count(self.bounds.table.reachable(i, self.bounds.rho_m).len())
     }
 }
 
@@ -166,12 +207,15 @@ fn expand<B: BackPointer>(
     }
     let bounds = if delta.is_empty() { None } else { transition.bounds() };
     let bounded = bounds.is_some();
-    if let Some(bounds) = &bounds {
+    let mut ln_bounds = bounds.as_ref().map(LnBounds::new);
+    if let Some(ln_bounds) = &mut ln_bounds {
         for (i, &d) in delta.iter().enumerate() {
-            if !in_beam(d) {
+            // Short of the best floor path even through the largest floor weight (BOUND_MARGIN
+            // covers the rounding of the logarithms): this row's cannot beat it.
+            if !in_beam(d) || d + ln_bounds.most.0 + BOUND_MARGIN < floor_best {
                 continue;
             }
-            let via_floor = d + bounds.floor(i).ln();
+            let via_floor = d + ln_bounds.of(i).0;
             if via_floor > floor_best {
                 floor_best = via_floor;
                 floor_arg = i as u32;
@@ -190,8 +234,11 @@ fn expand<B: BackPointer>(
         };
         let d = delta.get(i).copied().filter(|&d| in_beam(d));
         // Skipped only when provably beaten (a NaN bound skips nothing).
-        let beaten = |d: f64, b: &RowBounds| d + b.ln_most(i) + BOUND_MARGIN < floor_best;
-        let expand_path = d.is_some_and(|d| !bounds.as_ref().is_some_and(|b| beaten(d, b)));
+        // Beaten by the largest bound of any row with a margin to spare, or else by its own.
+        let beaten = |d: f64, b: &mut LnBounds| {
+            d + b.most.1 + 2.0 * BOUND_MARGIN < floor_best || d + b.of(i).1 + BOUND_MARGIN < floor_best
+        };
+        let expand_path = d.is_some_and(|d| !ln_bounds.as_mut().is_some_and(|b| beaten(d, b)));
         if !expand_mass && !expand_path {
             continue;
         }
