@@ -162,7 +162,9 @@ impl LnCdfTable {
         /// (this lookup is most of the time a scan takes, docs/tuning.md#engine-speed).
         const ROUND: f64 = 6_755_399_441_055_744.0;
         let u = (z - TABLE_Z.0) * TABLE_KNOTS_PER_Z;
-        if u >= 0.0 && u < self.knots.len() as f64 {
+        // Below 2^31 the rounded value's low 32 bits are it, in two's complement: below the
+        // table they index past its end, and the lookup misses (so does NaN).
+        if u.abs() < 2_147_483_648.0 {
             // The knot at or below u: u - 1/2 rounded to a whole number. For a whole u that
             // can be u - 1 (ties round to even); the interpolation then runs to u's own knot.
             let below = (u - 0.5) + ROUND;
