@@ -140,7 +140,11 @@ fn sum_in_lanes(values: &[f64]) -> f64 {
 /// expected linear time rather than a sort (the estimate is a tenth of an epoch at building
 /// scale, docs/tuning.md#engine-speed). Reorders `items`.
 fn radius_holding(items: &mut [(f64, f64)], mass: f64) -> Option<f64> {
-    // items[..lo] are inside, holding `held`; the answer is among items[lo..hi].
+    // No mass to hold: the nearest item, the first the walk reaches.
+    if mass <= 0.0 {
+        return items.iter().map(|&(d, _)| d).min_by(f64::total_cmp);
+    }
+    // items[..lo] are inside, holding `held` (< mass); the answer is among items[lo..hi].
     let (mut lo, mut hi, mut held) = (0, items.len(), 0.0);
     while lo < hi {
         let mid = lo + (hi - lo) / 2;
