@@ -39,22 +39,28 @@ pub struct RowBounds<'a> {
 }
 
 impl RowBounds<'_> {
-    fn probabilities(&self, i: usize) -> (f64, f64) {
-        self.probabilities_of(self.table.reachable(i, self.rho_m).len())
+    fn reachable(&self, i: usize) -> usize {
+        self.table.reachable(i, self.rho_m).len()
     }
 
-    fn probabilities_of(&self, reachable: usize) -> (f64, f64) {
-        hipe_probabilities(reachable, self.table.state_count(), self.ratio)
+    /// The floor weight of a row with `reachable` explicit entries.
+    fn floor_of(&self, reachable: usize) -> f64 {
+        hipe_probabilities(reachable, self.table.state_count(), self.ratio).1 * self.floor_factor
+    }
+
+    /// The bound on the ln explicit weights of a row with `reachable` explicit entries.
+    fn ln_most_of(&self, reachable: usize) -> f64 {
+        hipe_probabilities(reachable, self.table.state_count(), self.ratio).0.ln() + self.ln_most_factor
     }
 
     /// Row `i`'s floor weight.
     pub fn floor(&self, i: usize) -> f64 {
-        self.probabilities(i).1 * self.floor_factor
+        self.floor_of(self.reachable(i))
     }
 
     /// An upper bound on the logarithm of row `i`'s explicit weights.
     pub fn ln_most(&self, i: usize) -> f64 {
-        self.probabilities(i).0.ln() + self.ln_most_factor
+        self.ln_most_of(self.reachable(i))
     }
 }
 
@@ -71,27 +77,23 @@ struct LnBounds<'b> {
 
 impl<'b> LnBounds<'b> {
     fn new(bounds: &'b RowBounds<'b>) -> Self {
-        let mut ln_bounds = Self { bounds, by_count: Vec::new(), most: (0.0, 0.0) };
-        let [few, all] = [1, bounds.table.state_count().max(1)].map(|count| ln_bounds.of_count(count));
-        ln_bounds.most = (few.0.max(all.0), few.1.max(all.1));
-        ln_bounds
+        let [few, all] = [1, bounds.table.state_count().max(1)].map(|count| Self::ln_of(bounds, count));
+        Self { bounds, by_count: Vec::new(), most: (few.0.max(all.0), few.1.max(all.1)) }
     }
 
-    fn of_count(&mut self, count: usize) -> (f64, f64) {
-        if count >= self.by_count.len() {
-            self.by_count.resize(count + 1, None);
-        }
-        let bounds = self.bounds;
-        *self.by_count[count].get_or_insert_with(|| {
-            let (high, low) = bounds.probabilities_of(count);
-            ((low * bounds.floor_factor).ln(), high.ln() + bounds.ln_most_factor)
-        })
+    fn ln_of(bounds: &RowBounds, count: usize) -> (f64, f64) {
+        (bounds.floor_of(count).ln(), bounds.ln_most_of(count))
     }
 
     /// Row `i`'s (ln floor weight, bound on its ln explicit weights), exactly as
     /// [`RowBounds`] computes them.
     fn of(&mut self, i: usize) -> (f64, f64) {
-        self.of_count(self.bounds.table.reachable(i, self.bounds.rho_m).len())
+        let count = self.bounds.reachable(i);
+        if count >= self.by_count.len() {
+            self.by_count.resize(count + 1, None);
+        }
+        let bounds = self.bounds;
+        *self.by_count[count].get_or_insert_with(|| Self::ln_of(bounds, count))
     }
 }
 
