@@ -6,6 +6,11 @@
 //! a surveyed one, where scans hear more transmitters and each is fingerprinted at more states.
 //! The first walk also pays for the site's walking-distance tables.
 //!
+//! Then each published position's own cost on the CPU clock: the calls since the previous one
+//! (sensor batches, a scan or a timer epoch, the fixed-lag estimate), as the median, 90th
+//! percentile and mean over every position, and the medians of scan and timer epochs apart. A
+//! scan epoch scores the scan against the radio map; a timer epoch only moves the belief.
+//!
 //! ```text
 //! waymark survey target/ilc/site1/{B1,F1,F2,F3,F4} --out mall.wmsite
 //! # or, in a minute, the same states and fingerprints without the calibration:
@@ -19,7 +24,7 @@ use std::sync::Arc;
 use std::time::Instant;
 use waymark::{Engine, EngineConfig, Site};
 use waymark_survey::io::Trace;
-use waymark_survey::replay::{replay, ReplayOptions};
+use waymark_survey::replay::{replay_observed, Call, ReplayOptions};
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -30,11 +35,29 @@ fn main() {
     let site = Arc::new(Site::load(site_path).unwrap_or_else(|e| panic!("{site_path}: {e}")));
     // Per clock (CPU, wall): total seconds and each walk's ms per position.
     let (mut epochs, mut seconds, mut per_walk_ms) = (0usize, [0.0; 2], [Vec::new(), Vec::new()]);
+    // Each published position's own CPU cost, ms, by the call that published it.
+    let (mut scan_ms, mut timer_ms) = (Vec::new(), Vec::new());
     for walk in walks {
         let trace = Trace::read(Path::new(walk)).unwrap_or_else(|e| panic!("{walk}: {e}"));
         let mut engine = Engine::new(Arc::clone(&site), EngineConfig::default()).expect("default config");
         let (cpu, wall) = (ThreadTime::now(), Instant::now());
-        let replayed = replay(&mut engine, &trace, &ReplayOptions::default());
+        // CPU seconds at the previous call's end, and since then.
+        let (mut mark, mut pending) = (0.0, 0.0);
+        let mut observer = |call: Call| {
+            let now = cpu.elapsed().as_secs_f64();
+            pending += now - mark;
+            mark = now;
+            let (published, costs) = match call {
+                Call::Scan { published } => (published, &mut scan_ms),
+                Call::Timer { published } => (published, &mut timer_ms),
+                Call::Sensors => (false, &mut timer_ms),
+            };
+            if published {
+                costs.push(1e3 * pending);
+                pending = 0.0;
+            }
+        };
+        let replayed = replay_observed(&mut engine, &trace, &ReplayOptions::default(), &mut observer);
         let elapsed = [cpu.elapsed().as_secs_f64(), wall.elapsed().as_secs_f64()];
         if replayed.positions.is_empty() {
             continue;
@@ -58,4 +81,23 @@ fn main() {
         site.states().len(),
         per_walk_ms[0].len(),
     );
+    let mut every: Vec<f64> = scan_ms.iter().chain(&timer_ms).copied().collect();
+    let mean = every.iter().sum::<f64>() / every.len().max(1) as f64;
+    println!(
+        "per position, CPU: median {:.2} ms, 90th percentile {:.2} ms, mean {mean:.2} ms; \
+         scan epochs ({}) median {:.2} ms, timer epochs ({}) median {:.2} ms",
+        percentile(&mut every, 0.5),
+        percentile(&mut every, 0.9),
+        scan_ms.len(),
+        percentile(&mut scan_ms, 0.5),
+        timer_ms.len(),
+        percentile(&mut timer_ms, 0.5),
+    );
+}
+
+/// The `q` quantile of `values` (nearest rank), NaN when there are none.
+fn percentile(values: &mut [f64], q: f64) -> f64 {
+    values.sort_by(f64::total_cmp);
+    let rank = ((values.len() as f64 * q).ceil() as usize).clamp(1, values.len().max(1));
+    values.get(rank - 1).copied().unwrap_or(f64::NAN)
 }

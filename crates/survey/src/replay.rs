@@ -141,8 +141,37 @@ pub struct Replay {
     pub rejected_scans: usize,
 }
 
+/// What one call of a replay was, for [`replay_observed`]'s observer.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Call {
+    /// A sensor batch, or a scan the throttle dropped: no epoch.
+    Sensors,
+    /// A scan pushed to the engine.
+    Scan {
+        /// Whether the epoch published a position.
+        published: bool,
+    },
+    /// A timer epoch.
+    Timer {
+        /// Whether the epoch published a position.
+        published: bool,
+    },
+}
+
 /// Feeds `trace` to `engine` as an app would.
 pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Replay {
+    replay_observed(engine, trace, options, &mut |_| {})
+}
+
+/// [`replay`], telling `observer` after each call the app makes (a sensor batch, a scan, a
+/// timer epoch; with [`ReplayOptions::fixed_lag`], the fixed-lag estimate is part of the
+/// epoch's call): what a timing program needs to put a cost on each published position.
+pub fn replay_observed(
+    engine: &mut Engine,
+    trace: &Trace,
+    options: &ReplayOptions,
+    observer: &mut dyn FnMut(Call),
+) -> Replay {
     let mut out = Replay::default();
     // Forced scenarios run their own tracker on the same configuration and hand the engine
     // the masked motion; `Auto` lets the engine's tracker do it.
@@ -170,6 +199,7 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
                 }
             }
         }
+        let scan = matches!(event, Event::Scan(_));
         let result = match event {
             Event::Accelerometer(batch) => {
                 engine.push_accelerometer(&batch);
@@ -205,6 +235,8 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
                 }
             }
         };
+        // A scan the throttle dropped is a sensor-less call; a timer epoch may follow it.
+        let pushed_scan = scan && result.is_some();
         let result = result.or_else(|| {
             let due = options.timer_ns.is_some_and(|gap| last_epoch.is_some_and(|l| t >= l + gap));
             due.then(|| match tracker.as_mut() {
@@ -215,6 +247,11 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
                 None => engine.advance(t),
             })
         });
+        let call = match (pushed_scan, result.is_some()) {
+            (true, _) => Call::Scan { published: matches!(result, Some(Ok(_))) },
+            (false, true) => Call::Timer { published: matches!(result, Some(Ok(_))) },
+            (false, false) => Call::Sensors,
+        };
         if let Some(Ok(waymark::Epoch { position, .. })) = result {
             last_epoch = Some(position.timestamp_ns);
             out.positions.push(position);
@@ -222,6 +259,7 @@ pub fn replay(engine: &mut Engine, trace: &Trace, options: &ReplayOptions) -> Re
                 out.fixed_lag.extend(engine.fixed_lag_position());
             }
         }
+        observer(call);
     }
     out.track = engine.track();
     out
