@@ -140,8 +140,10 @@ pub struct EngineConfig {
     /// bound, not a tuned figure: 16 passes reach 144 m (48 s at 3 m/s), more than most floors.
     pub max_reach_passes: u32,
     /// Readings last measured longer ago than this before their scan are dropped (Android
-    /// re-reports cached access points). `None` keeps every reading: the age limit is chosen
-    /// on real traces, not on the simulator, whose readings are all fresh.
+    /// re-reports cached access points). `None`: the limit the site's survey applied
+    /// ([`Site::max_reading_age_ns`](crate::Site::max_reading_age_ns)), so that a scan counts
+    /// as it did when the fingerprints and the calibration were made; every reading on a site
+    /// that gives none. `Some(u64::MAX)` keeps every reading on any site.
     pub max_reading_age_ns: Option<u64>,
     /// Whether the site file's [`Calibration`](crate::site::Calibration) applies: its γ when
     /// `rssi_weight` is `None`, its surveyors' step length model in place of

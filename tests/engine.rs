@@ -79,6 +79,43 @@ fn rejected_input_leaves_the_engine_unchanged_and_is_counted() {
     assert_eq!((engine.stats().readings_unknown, engine.stats().readings_duplicate), (1, 1));
 }
 
+/// A site that keeps its survey's reading-age limit has engines apply it by default, as the
+/// survey and its calibration did: an app gets the positions that were evaluated. The
+/// configuration can still set its own limit, or keep every reading.
+#[test]
+fn the_sites_reading_age_limit_applies_unless_the_config_sets_one() {
+    let aged = |ages: [u64; 3]| {
+        let mut s = scan(10 * SECOND, &readings_at(1, 9.0));
+        for (r, age) in s.readings.iter_mut().zip(ages) {
+            r.age_ns = age;
+        }
+        s
+    };
+    let site = Arc::new(two_floor_site().with_max_reading_age_ns(Some(2 * SECOND)));
+    let stale_after = |site: &Arc<Site>, config: EngineConfig, ages: [u64; 3]| {
+        let mut engine = Engine::new(Arc::clone(site), config).unwrap();
+        let result = engine.push_scan(&aged(ages)).map(|_| ());
+        (result, engine.stats().readings_stale)
+    };
+    let default = EngineConfig::default;
+    assert_eq!(stale_after(&site, default(), [0, 2 * SECOND, 5 * SECOND]), (Ok(()), 1));
+    assert_eq!(
+        stale_after(&site, default(), [3 * SECOND; 3]),
+        (Err(InputError::NoKnownTransmitter { unknown: 0, stale: 3 }), 0),
+        "every reading stale: the scan says nothing"
+    );
+    let own = EngineConfig { max_reading_age_ns: Some(SECOND), ..default() };
+    assert_eq!(stale_after(&site, own, [0, 2 * SECOND, 5 * SECOND]), (Ok(()), 2));
+    let every = EngineConfig { max_reading_age_ns: Some(u64::MAX), ..default() };
+    assert_eq!(stale_after(&site, every, [0, 2 * SECOND, 5 * SECOND]), (Ok(()), 0));
+    // A site without a limit (files before format version 4) keeps every reading.
+    let unlimited = Arc::new(two_floor_site());
+    assert_eq!(stale_after(&unlimited, default(), [0, 2 * SECOND, 5 * SECOND]), (Ok(()), 0));
+    // The limit survives the site file.
+    let reloaded = Site::from_bytes(&site.to_binary()).unwrap();
+    assert_eq!(reloaded.max_reading_age_ns(), Some(2 * SECOND));
+}
+
 #[test]
 fn each_epoch_returns_its_position_and_a_rejected_one_returns_nothing() {
     let mut engine = engine();

@@ -42,8 +42,26 @@ fn binary_with_version(binary: &[u8], version: u32) -> Vec<u8> {
 }
 
 #[test]
-fn the_current_version_is_3_and_reads_back_to_1() {
-    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 3));
+fn the_current_version_is_4_and_reads_back_to_1() {
+    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 4));
+}
+
+/// A version-3 file loads with no reading-age limit; version 4 adds the survey's
+/// (`radio.max_reading_age_ms`), kept through both encodings and written only when set.
+#[test]
+fn a_version_3_file_still_loads_and_version_4_adds_the_reading_age_limit() {
+    let site = Site::from_json(with_version(VERSION_1, 3).as_bytes()).unwrap();
+    assert_eq!(site.max_reading_age_ns(), None);
+    assert!(!site.to_json().contains("max_reading_age_ms"));
+    let aged = with_version(VERSION_1, 4)
+        .replace(r#""clip_dbm": -100,"#, r#""clip_dbm": -100, "max_reading_age_ms": 2000,"#);
+    let site = Site::from_json(aged.as_bytes()).unwrap();
+    assert_eq!(site.max_reading_age_ns(), Some(2_000_000_000));
+    assert!(site.to_json().contains(r#""max_reading_age_ms":2000"#), "{}", site.to_json());
+    assert_eq!(Site::from_bytes(&site.to_binary()).unwrap().max_reading_age_ns(), Some(2_000_000_000));
+    // Whole milliseconds, rounded up, so that no reading the limit kept is dropped on reload.
+    let odd = site.with_max_reading_age_ns(Some(1_500_000_001));
+    assert_eq!(Site::from_json(odd.to_json().as_bytes()).unwrap().max_reading_age_ns(), Some(1_501_000_000));
 }
 
 /// A version-2 file loads as before; the fields version 3 added (the anchor, floor levels and

@@ -18,7 +18,7 @@ impl Engine {
         self.check_time(scan.timestamp_ns)?;
         motion.map_or(Ok(()), check_motion)?;
         check_readings(scan)?;
-        let max_age_ns = self.config.max_reading_age_ns;
+        let max_age_ns = self.config.max_reading_age_ns.or(self.site.max_reading_age_ns());
         let resolved = match &mut self.id_hasher {
             Some(hasher) => self.site.radio().resolve(hasher.hash_scan(scan), max_age_ns),
             None => self.site.radio().resolve(scan, max_age_ns),

@@ -174,7 +174,8 @@ pub struct InputStats {
     pub readings_unknown: u64,
     /// Repeated readings of one transmitter within a scan (in accepted scans).
     pub readings_duplicate: u64,
-    /// Readings older than `max_reading_age_ns` (in accepted scans).
+    /// Readings older than the reading-age limit (in accepted scans): the configuration's
+    /// `max_reading_age_ns`, else the site's.
     pub readings_stale: u64,
     /// Epochs without a scan ([`Engine::advance`]).
     pub motion_epochs: u64,

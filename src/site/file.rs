@@ -37,6 +37,9 @@ impl IdHashing {
     }
 }
 
+/// Nanoseconds in a millisecond: the file's reading-age limit is in ms, the engine's in ns.
+const NS_PER_MS: u64 = 1_000_000;
+
 /// Largest |x| and |y| of a state, m. Found with the `site_file` fuzz harness: states at
 /// ±1e308 m made distances overflow to an infinite accuracy radius. 1000 km is more than any
 /// building's frame, and keeps every distance and its square finite.
@@ -111,6 +114,7 @@ impl Site {
                     version: ID_HASH_VERSION,
                     salt_check: h.salt_check.clone(),
                 }),
+                max_reading_age_ms: self.max_reading_age_ns.map(|ns| ns.div_ceil(NS_PER_MS)),
                 transmitters: self.radio.transmitters().to_vec(),
             },
             states: self
@@ -166,6 +170,7 @@ impl Site {
             return Err(invalid("states", "more states than a u32 can index"));
         }
         let radio = &file.radio;
+        let max_reading_age_ms = radio.max_reading_age_ms;
         if !radio.clip_dbm.is_finite() || radio.clip_dbm.abs() > MAX_ABS_LEVEL_DBM {
             return Err(invalid("radio.clip_dbm", format!("must be within ±{MAX_ABS_LEVEL_DBM}")));
         }
@@ -300,7 +305,8 @@ impl Site {
             "id",
             |id| ids.get(&id).copied(),
         )?;
-        let site = Site::from_parts(file.name, floors, states, edges, map, file.north);
+        let site = Site::from_parts(file.name, floors, states, edges, map, file.north)
+            .with_max_reading_age_ns(max_reading_age_ms.map(|ms| ms.saturating_mul(NS_PER_MS)));
         let site = site.with_calibration(file.calibration)?.with_anchor(file.anchor)?;
         Ok(Site { id_hashing, zones, zone_of, ..site })
     }
@@ -440,10 +446,11 @@ mod tests {
     #[test]
     fn errors_say_what_and_where() {
         assert!(matches!(err("{\"format_version\": 1,, }"), SiteError::Syntax { line: 1, .. }));
-        assert!(matches!(
-            err(&GOOD.replace("\"format_version\": 1", "\"format_version\": 4")),
-            SiteError::NewerFormat { found: 4, supported: 3 }
-        ));
+        let newer = FORMAT_VERSION + 1;
+        assert_eq!(
+            err(&GOOD.replace("\"format_version\": 1", &format!("\"format_version\": {newer}"))),
+            SiteError::NewerFormat { found: newer.into(), supported: FORMAT_VERSION }
+        );
         let cases = [
             (GOOD.replace("\"format_version\": 1,", ""), "format_version"),
             (

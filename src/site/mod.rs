@@ -413,6 +413,8 @@ pub struct Site {
     adjacency_starts: Vec<usize>,
     adjacency: Vec<(u32, u32)>,
     radio: RadioMap,
+    /// The survey's reading-age limit, ns ([`Site::max_reading_age_ns`]).
+    max_reading_age_ns: Option<u64>,
     north: North,
     /// Where the site frame sits on the Earth, when the file says.
     anchor: Option<Anchor>,
@@ -487,6 +489,7 @@ impl Site {
             adjacency_starts,
             adjacency,
             radio,
+            max_reading_age_ns: None,
             north,
             anchor: None,
             spacing_m,
@@ -549,6 +552,23 @@ impl Site {
     /// The radio map.
     pub fn radio(&self) -> &RadioMap {
         &self.radio
+    }
+
+    /// Readings last measured longer than this before their scan were left out of the
+    /// fingerprints, as not heard (Android re-reports cached access points): engines on the
+    /// site leave them out too unless configured otherwise
+    /// ([`EngineConfig::max_reading_age_ns`](crate::EngineConfig::max_reading_age_ns)), so a
+    /// scan means what it meant to the survey and its calibration. `None`: every reading was
+    /// used, or the file does not say (before format version 4).
+    pub fn max_reading_age_ns(&self) -> Option<u64> {
+        self.max_reading_age_ns
+    }
+
+    /// The site with the survey's reading-age limit ([`max_reading_age_ns`](Self::max_reading_age_ns)).
+    /// Site files keep it in whole milliseconds, rounded up.
+    pub fn with_max_reading_age_ns(mut self, max_age_ns: Option<u64>) -> Site {
+        self.max_reading_age_ns = max_age_ns;
+        self
     }
 
     /// The site frame's orientation on the Earth.

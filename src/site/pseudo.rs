@@ -94,6 +94,7 @@ impl Site {
         site.calibration = self.calibration;
         site.id_hashing = self.id_hashing.clone();
         site.anchor = self.anchor;
+        site.max_reading_age_ns = self.max_reading_age_ns;
         // Pseudo states come after the surveyed ones: each zone's list stays ascending.
         site.with_zones(zones).expect("pseudo states are new states, each added to at most one zone")
     }

@@ -10,9 +10,9 @@ use serde::{Deserialize, Serialize};
 /// The site-file format this build writes. It reads this and every version back to
 /// [`OLDEST_FORMAT_VERSION`], and refuses a newer one ([`SiteError::NewerFormat`]). Version 2
 /// holds the optional fields added within version 1, version 3 adds the optional geo anchor
-/// and floor levels (docs/site-files.md#versioning): each version's files are files of the
-/// next.
-pub const FORMAT_VERSION: u32 = 3;
+/// and floor levels, version 4 the survey's reading-age limit (docs/site-files.md#versioning):
+/// each version's files are files of the next.
+pub const FORMAT_VERSION: u32 = 4;
 
 /// The oldest site-file format this build reads.
 pub const OLDEST_FORMAT_VERSION: u32 = 1;
@@ -76,6 +76,10 @@ pub(super) struct RadioFile {
     /// Present when `transmitters` are salted hashes.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(super) id_hash: Option<IdHashFile>,
+    /// Since version 4: readings older than this before their scan were not heard when the
+    /// fingerprints were fitted, ms.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub(super) max_reading_age_ms: Option<u64>,
     pub(super) transmitters: Vec<TransmitterId>,
 }
 

@@ -404,9 +404,9 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
         Ok(salt) => salt.map(|(salt, _)| salt),
         Err(e) => return fail("replay", e),
     };
-    // The engine as `eval` runs it: stale readings dropped at the survey's age limit.
-    let config =
-        EngineConfig { rssi_weight: args.gamma, site_salt, ..CalibrationOptions::default().engine_config() };
+    // The engine as an app runs it, which is the one `eval` runs: stale readings dropped at
+    // the age limit the site's survey applied.
+    let config = EngineConfig { rssi_weight: args.gamma, site_salt, ..EngineConfig::default() };
     let mut engine = match Engine::new(Arc::clone(&site), config) {
         Ok(e) => e,
         Err(e) => return fail("replay", e),

@@ -11,7 +11,6 @@ use std::sync::Arc;
 use waymark::site::{StateKind, PSEUDO_SPACING_M};
 use waymark::{Engine, EngineConfig, Site};
 use waymark_sim as sim;
-use waymark_survey::calibrate::CalibrationOptions;
 use waymark_survey::io::{FloorPlan, FloorPlanError, Trace, TraceError};
 use waymark_survey::replay::{self as replaying, ReplayOptions};
 
@@ -204,12 +203,11 @@ fn demo(seed: u64, walk_length_m: f64) -> Result<(Arc<Site>, Track), ViewError> 
 }
 
 /// Replays a recorded walk with the engine `waymark replay` builds (stale readings dropped at
-/// the survey's age limit, the site's calibrated γ). Its waypoints, linear between them, are
+/// the age limit the site's survey applied, the site's calibrated γ). Its waypoints, linear between them, are
 /// the truth on the site floor its header names.
 fn replay_walk(site: &Arc<Site>, path: &Path, site_salt: Option<waymark::Salt>) -> Result<Track, ViewError> {
     let trace = Trace::read(path)?;
-    let config =
-        EngineConfig { rssi_weight: None, site_salt, ..CalibrationOptions::default().engine_config() };
+    let config = EngineConfig { rssi_weight: None, site_salt, ..EngineConfig::default() };
     let mut engine = Engine::new(Arc::clone(site), config)?;
     let replay = replaying::replay(&mut engine, &trace, &ReplayOptions::default());
     let truth_floor =

@@ -7,6 +7,7 @@ use std::sync::Arc;
 use waymark::Site;
 use waymark_eval::real::{self, EvalOptions};
 use waymark_survey::calibrate::{self, FloorData};
+use waymark_survey::replay::{replay_observed, Call, ReplayOptions};
 
 /// F1 unpacked under `target/`, or `None` (with a message) without the data.
 fn floor_dir() -> Option<PathBuf> {
@@ -112,6 +113,27 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert_eq!(site.calibration().radio_fit_floor, floor_fit);
     assert_eq!(site.calibration().sparse_scans, sparse.calibration);
     assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
+
+    // The site keeps the survey's reading-age limit, so an app's engine with the default
+    // configuration replays a walk as the evaluation's does (readings the survey left out are
+    // left out), and each published position is one observed epoch.
+    assert_eq!(site.max_reading_age_ns(), Some(options.calibration.survey.max_reading_age_ns));
+    let site_arc = Arc::new(site.clone());
+    let walk = &floors[0].test[0];
+    let replayed = |config: waymark::EngineConfig| {
+        let mut engine = waymark::Engine::new(Arc::clone(&site_arc), config).unwrap();
+        let mut epochs = 0;
+        let r = replay_observed(&mut engine, walk, &ReplayOptions::default(), &mut |call| {
+            epochs +=
+                usize::from(matches!(call, Call::Scan { published: true } | Call::Timer { published: true }));
+        });
+        (r.positions, epochs, engine.stats().readings_stale)
+    };
+    let (app, app_epochs, stale) = replayed(waymark::EngineConfig::default());
+    let (evaluated, _, _) = replayed(options.calibration.engine_config());
+    assert_eq!(app, evaluated);
+    assert_eq!(app_epochs, app.len());
+    assert!(stale > 0, "the walk's cached readings are left out");
 
     let (reports, walks) = real::evaluate_on(&site, &floors, &options, &|| {}).expect("replays");
     assert_eq!(walks.len(), 3);

@@ -163,8 +163,12 @@ impl PreparedSurvey<'_> {
             fit: FitOptions { clip_dbm: fits.clip_dbm, ..options.build.fit },
             ..options.build
         };
-        // Builder ids are state indices.
-        let site = builder.build_fitted(build, ids, triples)?.with_zones(zones)?;
+        // Builder ids are state indices. The site keeps the reading-age limit its fingerprints
+        // were fitted with, for the engines on it to apply.
+        let site = builder
+            .build_fitted(build, ids, triples)?
+            .with_zones(zones)?
+            .with_max_reading_age_ns(Some(options.max_reading_age_ns));
         let transmitters = site.radio().transmitters().len();
         Ok((site, SurveyReport { floors: reports, transmitters }))
     }

@@ -53,7 +53,7 @@ pub struct SurveyOptions {
     /// Readings older than this, ns, were not heard in the scan's own sweep: in training they
     /// count as "not heard" (Android re-reports cached access points for ~30 s). 2 s: one
     /// scan interval, so an entry not refreshed by the latest sweep is out
-    /// (`docs/tuning.md#reading-age`).
+    /// (`docs/tuning.md#reading-age`). The site keeps it: engines on it drop such readings too.
     pub max_reading_age_ns: u64,
     /// Censored EM or naive fit, clip level, σ floor and cap.
     pub build: BuildOptions,
