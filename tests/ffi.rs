@@ -166,6 +166,27 @@ fn errors_are_typed() {
     );
 }
 
+/// A site whose survey dropped stale readings has the FFI's engine drop them too: the C,
+/// Kotlin and Swift engines are the one the evaluation measures.
+#[test]
+fn the_sites_reading_age_limit_applies_through_the_ffi() {
+    let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
+    let reading = |age_ms| WifiReading { bssid: "02:00:00:00:00:00".into(), rssi_dbm: -60.0, age_ms };
+    let stale_counted = |site: &waymark::Site| {
+        let engine = PositioningEngine::new(site.to_json(), EngineOptions::default()).unwrap();
+        let scan = RadioScan { timestamp_ns: 10, wifi: vec![reading(0), reading(5_000)], beacons: vec![] };
+        // The same transmitter twice: the fresh reading is kept, the old one is stale or a
+        // duplicate.
+        engine.push_scan(scan).unwrap();
+        let only_old = RadioScan { timestamp_ns: 20, wifi: vec![reading(5_000)], beacons: vec![] };
+        let result = engine.push_scan(only_old);
+        (result.is_ok(), engine.input_stats().unwrap().readings_stale)
+    };
+    let limited = office.site.clone().with_max_reading_age_ns(Some(2_000_000_000));
+    assert_eq!(stale_counted(&limited), (false, 1), "the site's 2 s limit applies");
+    assert_eq!(stale_counted(&office.site), (true, 0), "a site without a limit keeps every reading");
+}
+
 #[test]
 fn a_hashed_site_needs_its_salt() {
     let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
