@@ -38,4 +38,7 @@ pub use recorder::{RecorderError, RecorderOptions, RecordingStats, SurveyRecorde
 pub use route::{Destination, FloorPoint, Progress, Route, RouteError, RouteTracker};
 pub use site::{Site, SiteError, Zone, ZoneKind};
 
+/// Nanoseconds in a millisecond: the FFIs and site files give ages in ms, the engine keeps ns.
+pub(crate) const NS_PER_MS: u64 = 1_000_000;
+
 uniffi::setup_scaffolding!();

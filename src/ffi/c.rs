@@ -423,7 +423,7 @@ fn readings(
             readings.push(Reading {
                 transmitter,
                 rssi_dbm: w.rssi_dbm,
-                age_ns: w.age_ms.saturating_mul(1_000_000),
+                age_ns: w.age_ms.saturating_mul(crate::NS_PER_MS),
             });
         }
     }
@@ -437,7 +437,7 @@ fn readings(
             readings.push(Reading {
                 transmitter,
                 rssi_dbm: b.rssi_dbm,
-                age_ns: b.age_ms.saturating_mul(1_000_000),
+                age_ns: b.age_ms.saturating_mul(crate::NS_PER_MS),
             });
         }
     }

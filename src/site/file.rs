@@ -20,6 +20,7 @@ use crate::radio::{
     Gaussian, RadioMap, Salt, ScanHasher, HASH_HEX_DIGITS, ID_HASH_SCHEME, ID_HASH_VERSION,
     MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB,
 };
+use crate::NS_PER_MS;
 use nalgebra::Point2;
 use std::collections::HashMap;
 
@@ -36,9 +37,6 @@ impl IdHashing {
         &self.salt_check
     }
 }
-
-/// Nanoseconds in a millisecond: the file's reading-age limit is in ms, the engine's in ns.
-const NS_PER_MS: u64 = 1_000_000;
 
 /// Largest |x| and |y| of a state, m. Found with the `site_file` fuzz harness: states at
 /// ±1e308 m made distances overflow to an infinite accuracy radius. 1000 km is more than any

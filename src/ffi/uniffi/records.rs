@@ -204,14 +204,14 @@ impl RadioScan {
             readings.push(Reading {
                 transmitter: TransmitterId::wifi(&w.bssid)?,
                 rssi_dbm: w.rssi_dbm,
-                age_ns: w.age_ms.saturating_mul(1_000_000),
+                age_ns: w.age_ms.saturating_mul(crate::NS_PER_MS),
             });
         }
         for b in &self.beacons {
             readings.push(Reading {
                 transmitter: crate::ffi::beacon_id(&b.uuid, b.major, b.minor, b.address.as_deref())?,
                 rssi_dbm: b.rssi_dbm,
-                age_ns: b.age_ms.saturating_mul(1_000_000),
+                age_ns: b.age_ms.saturating_mul(crate::NS_PER_MS),
             });
         }
         Ok(crate::radio::Scan { timestamp_ns: self.timestamp_ns, readings })
