@@ -136,7 +136,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         },
         ..*site.calibration()
     };
-    let engine_config = options.calibration.engine_config();
+    let engine_config = options.calibration.engine.clone();
     let steady = options.calibration.calibration_replay();
     let throttled = options.calibration.throttled_replay();
     let run = |site: &Site, trace: &Trace, replay_options: &ReplayOptions| -> Option<Vec<Position>> {

@@ -258,7 +258,7 @@ pub fn evaluate_on(
 ) -> Result<(BTreeMap<String, ConfigurationReport>, Vec<WalkResult>), EvalError> {
     let wanted =
         |key: &str| options.configurations.is_empty() || options.configurations.iter().any(|c| c == key);
-    let engine_config = options.calibration.engine_config();
+    let engine_config = options.calibration.engine.clone();
     // The Viterbi configuration smooths whole walks: a window longer than any test walk.
     let longest =
         floors.iter().flat_map(|f| &f.test).map(|t| t.wifi_scans.len() * 2 + 64).max().unwrap_or(64);
@@ -488,7 +488,7 @@ pub fn survey_habits(
     floors: &[FloorData],
     options: &EvalOptions,
 ) -> Result<(HabitModel, HabitReport, HabitSelection), EvalError> {
-    let config = EngineConfig { history_epochs: usize::MAX, ..options.calibration.engine_config() };
+    let config = EngineConfig { history_epochs: usize::MAX, ..options.calibration.engine.clone() };
     // (floor, walk within the floor, trace) of every survey walk.
     let jobs: Vec<(usize, usize, &Trace)> = floors
         .iter()

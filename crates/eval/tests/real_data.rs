@@ -114,9 +114,10 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert_eq!(site.calibration().sparse_scans, sparse.calibration);
     assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
 
-    // The site keeps the survey's reading-age limit, so an app's engine with the default
-    // configuration replays a walk as the evaluation's does (readings the survey left out are
-    // left out), and each published position is one observed epoch.
+    // The site keeps the survey's reading-age limit, so an engine with the default
+    // configuration (an app's, and the evaluation's) replays a walk as one given the survey's
+    // limit does: readings the survey left out are left out. Each published position is one
+    // observed epoch.
     assert_eq!(site.max_reading_age_ns(), Some(options.calibration.survey.max_reading_age_ns));
     let site_arc = Arc::new(site.clone());
     let walk = &floors[0].test[0];
@@ -130,8 +131,10 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
         (r.positions, epochs, engine.stats().readings_stale)
     };
     let (app, app_epochs, stale) = replayed(waymark::EngineConfig::default());
-    let (evaluated, _, _) = replayed(options.calibration.engine_config());
-    assert_eq!(app, evaluated);
+    let survey_limit = Some(options.calibration.survey.max_reading_age_ns);
+    let (limited, _, _) =
+        replayed(waymark::EngineConfig { max_reading_age_ns: survey_limit, ..Default::default() });
+    assert_eq!(app, limited);
     assert_eq!(app_epochs, app.len());
     assert!(stale > 0, "the walk's cached readings are left out");
 

@@ -54,7 +54,8 @@ pub enum CalibrationError {
 pub struct CalibrationOptions {
     /// How the site is surveyed.
     pub survey: SurveyOptions,
-    /// The engine as shipped (γ, models...).
+    /// The engine as shipped (γ, models...). Its reading-age limit, unless set here, is the
+    /// one the survey's sites carry (`SurveyOptions::max_reading_age_ns`), as in an app.
     pub engine: EngineConfig,
     /// How walks are replayed.
     pub replay: ReplayOptions,
@@ -81,15 +82,6 @@ impl Default for CalibrationOptions {
 }
 
 impl CalibrationOptions {
-    /// The engine's configuration: `engine`, with the survey's reading-age limit unless it
-    /// sets its own, so stale readings mean the same at survey and replay time.
-    pub fn engine_config(&self) -> EngineConfig {
-        EngineConfig {
-            max_reading_age_ns: self.engine.max_reading_age_ns.or(Some(self.survey.max_reading_age_ns)),
-            ..self.engine.clone()
-        }
-    }
-
     /// How the calibration replays its held-out walks: as `replay`, but with every scan (the
     /// site a phone gets is surveyed from unthrottled walks, and its calibration replays them
     /// both ways, see [`SparseScans`]), and without fixed-lag
@@ -294,7 +286,7 @@ pub fn survey_calibrated(
                     .iter()
                     .map(|&gamma| {
                         let runs: [Vec<Tag>; RUNS] = std::array::from_fn(|run| {
-                            let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine_config() };
+                            let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine.clone() };
                             let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
                                 return Vec::new();
                             };
@@ -457,7 +449,7 @@ pub fn survey_calibrated(
                     .clone()
                     .with_calibration(calibration)
                     .and_then(|s| s.with_floor_rssi_weights(&weights));
-                let mut engine = Engine::new(Arc::new(site.ok()?), options.engine_config()).ok()?;
+                let mut engine = Engine::new(Arc::new(site.ok()?), options.engine.clone()).ok()?;
                 Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
             };
             Some((
