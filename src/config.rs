@@ -127,9 +127,9 @@ pub struct EngineConfig {
     /// [200, 200 000], i.e. the most trust in the reachability model.
     pub transition_ratio: f64,
     /// M, the number of most likely states averaged into the estimate (Hoang eq. 4; the paper
-    /// gives no value). Default 3, the best fused on the pseudo-state grid and within 4 mm of
-    /// the best radio only (docs/tuning.md#mixture-components-m).
-    pub estimate_states: usize,
+    /// gives no value). `None` (the default): the site's calibrated M (with
+    /// `site_calibration`), else [`DEFAULT_ESTIMATE_STATES`].
+    pub estimate_states: Option<usize>,
     /// Radius of the precomputed walking-distance table, m. A larger reach (a long gap between
     /// scans) is covered by several passes of the table. Default: the reach of two of Hoang's
     /// 1.5 s epochs at `max_speed_mps` = 3 m/s, so scan jitter up to 2x needs one pass.
@@ -192,7 +192,7 @@ impl Default for EngineConfig {
             track_window_epochs: 64,
             fixed_lag_epochs: 3,
             transition_ratio: 200_000.0,
-            estimate_states: 3,
+            estimate_states: None,
             reach_radius_m: 9.0,
             max_reach_passes: 16,
             max_reading_age_ns: None,
@@ -299,6 +299,11 @@ impl HabitOptions {
     }
 }
 
+/// M of Hoang eq. 4 (the paper gives no value) on a site without a calibrated one: 3, the best
+/// fused on the pseudo-state grid and within 4 mm of the best radio only
+/// (docs/tuning.md#mixture-components-m).
+pub const DEFAULT_ESTIMATE_STATES: usize = 3;
+
 impl EngineConfig {
     /// The motion configuration an engine on `site` runs: `motion` with the site's north (or
     /// the `north` override) applied.
@@ -316,6 +321,13 @@ impl EngineConfig {
             step_length,
             ..self.motion.clone()
         }
+    }
+
+    /// M of Hoang eq. 4 on `site`: `estimate_states`, else the site's calibrated M (with
+    /// `site_calibration`), else [`DEFAULT_ESTIMATE_STATES`].
+    pub fn estimate_states_for(&self, site: &crate::Site) -> usize {
+        let calibrated = site.calibration().estimate_states.filter(|_| self.site_calibration);
+        self.estimate_states.or(calibrated.map(|m| m as usize)).unwrap_or(DEFAULT_ESTIMATE_STATES)
     }
 
     /// γ of Hoang eq. 14 an engine on `site` uses in epochs with a movement likelihood and in
@@ -452,7 +464,7 @@ impl EngineConfig {
         if self.track_window_epochs == 0 || self.fixed_lag_epochs >= self.track_window_epochs {
             return fail("track_window_epochs must be > fixed_lag_epochs".into());
         }
-        if self.estimate_states == 0 {
+        if self.estimate_states == Some(0) {
             return fail("estimate_states must be at least 1".into());
         }
         if !(self.reach_radius_m.is_finite() && self.reach_radius_m > 0.0) {

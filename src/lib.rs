@@ -24,7 +24,9 @@ pub mod route;
 pub mod sensors;
 pub mod site;
 
-pub use config::{EngineConfig, HipeConfig, HoangConfig, TransitionModel, ZoneHysteresis};
+pub use config::{
+    EngineConfig, HipeConfig, HoangConfig, TransitionModel, ZoneHysteresis, DEFAULT_ESTIMATE_STATES,
+};
 pub use engine::{
     Engine, EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent,
     TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,

@@ -117,6 +117,43 @@ fn the_sites_reading_age_limit_applies_unless_the_config_sets_one() {
 }
 
 #[test]
+fn the_sites_calibrated_m_applies_unless_the_config_sets_one() {
+    let calibrated = |m: Option<u32>| {
+        let calibration = waymark::site::Calibration { estimate_states: m, ..Default::default() };
+        Arc::new(two_floor_site().with_calibration(calibration).unwrap())
+    };
+    // Between two states' fingerprints, so that the M most likely states average to
+    // different places.
+    let position_after = |site: &Arc<Site>, config: EngineConfig| {
+        let mut engine = Engine::new(Arc::clone(site), config).unwrap();
+        let p = engine.push_scan(&scan(SECOND, &readings_at(1, 7.3))).unwrap().position;
+        let by_m: Vec<[f64; 2]> = engine.positions_by_states(&[1, 3]);
+        ([p.x, p.y], by_m)
+    };
+    let default = EngineConfig::default;
+    let (p, by_m) = position_after(&calibrated(Some(1)), default());
+    assert_ne!(by_m[0], by_m[1], "M must matter on this scan: {by_m:?}");
+    assert_eq!(p, by_m[0], "the site's M");
+    let (p, by_m) =
+        position_after(&calibrated(Some(1)), EngineConfig { estimate_states: Some(3), ..default() });
+    assert_eq!(p, by_m[1], "the configuration's M");
+    let (p, by_m) =
+        position_after(&calibrated(Some(3)), EngineConfig { estimate_states: Some(1), ..default() });
+    assert_eq!(p, by_m[0], "the configuration's M");
+    let (p, by_m) =
+        position_after(&calibrated(Some(1)), EngineConfig { site_calibration: false, ..default() });
+    assert_eq!(p, by_m[1], "without the site's calibration, the default M");
+    assert_eq!(waymark::DEFAULT_ESTIMATE_STATES, 3);
+    let (p, by_m) = position_after(&calibrated(None), default());
+    assert_eq!(p, by_m[1], "a site without one: the default M");
+    // M survives the site file, and 0 is refused.
+    let reloaded = Site::from_bytes(&calibrated(Some(30)).to_binary()).unwrap();
+    assert_eq!(reloaded.calibration().estimate_states, Some(30));
+    let zero = waymark::site::Calibration { estimate_states: Some(0), ..Default::default() };
+    assert!(two_floor_site().with_calibration(zero).is_err());
+}
+
+#[test]
 fn each_epoch_returns_its_position_and_a_rejected_one_returns_nothing() {
     let mut engine = engine();
     let first = engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
@@ -156,7 +193,7 @@ fn a_site_file_round_trip_gives_the_same_track() {
 
 #[test]
 fn invalid_config_is_refused() {
-    let config = EngineConfig { estimate_states: 0, ..EngineConfig::default() };
+    let config = EngineConfig { estimate_states: Some(0), ..EngineConfig::default() };
     let err = Engine::new(Arc::new(two_floor_site()), config).err().unwrap();
     assert!(err.to_string().contains("estimate_states"));
 }

@@ -42,8 +42,29 @@ fn binary_with_version(binary: &[u8], version: u32) -> Vec<u8> {
 }
 
 #[test]
-fn the_current_version_is_4_and_reads_back_to_1() {
-    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 4));
+fn the_current_version_is_5_and_reads_back_to_1() {
+    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 5));
+}
+
+/// A version-4 file loads with no calibrated M; version 5 adds it
+/// (`calibration.estimate_states`), kept through both encodings and written only when set.
+#[test]
+fn a_version_4_file_still_loads_and_version_5_adds_the_calibrated_m() {
+    let site = Site::from_json(with_version(VERSION_1, 4).as_bytes()).unwrap();
+    assert_eq!(site.calibration().estimate_states, None);
+    assert!(!site.to_json().contains("estimate_states"));
+    let calibrated = with_version(VERSION_1, 5).replacen(
+        r#""name":"#,
+        r#""calibration": {"estimate_states": 30}, "name":"#,
+        1,
+    );
+    let site = Site::from_json(calibrated.as_bytes()).unwrap();
+    assert_eq!(site.calibration().estimate_states, Some(30));
+    assert!(site.to_json().contains(r#""estimate_states":30"#), "{}", site.to_json());
+    assert_eq!(Site::from_bytes(&site.to_binary()).unwrap().calibration().estimate_states, Some(30));
+    let zero = calibrated.replace(r#""estimate_states": 30"#, r#""estimate_states": 0"#);
+    let err = Site::from_json(zero.as_bytes()).unwrap_err().to_string();
+    assert!(err.contains("calibration.estimate_states"), "{err}");
 }
 
 /// A version-3 file loads with no reading-age limit; version 4 adds the survey's

@@ -141,7 +141,7 @@ impl Engine {
         let e = estimate(
             &self.site,
             self.filter.posterior(),
-            self.config.estimate_states,
+            self.estimate_states,
             self.config.accuracy_mass,
             &mut self.scratch,
         );

@@ -69,6 +69,8 @@ pub struct Engine {
     scenario_rssi_weight: [Option<f64>; 4],
     /// Factors on the 68% and 95% radii (the site's calibration), per motion scenario.
     accuracy_scale: [[f64; 2]; 4],
+    /// M of Hoang eq. 4 in effect ([`EngineConfig::estimate_states_for`]).
+    estimate_states: usize,
     /// Hashes scans' ids with the site's salt when the site's ids are hashed.
     id_hasher: Option<ScanHasher>,
     /// What the running epoch may change, as it was before (see [`Engine::atomically`]).
@@ -129,6 +131,7 @@ impl Engine {
         let site_rssi_weight = config.rssi_weight_for(&site);
         let scenario_rssi_weight = config.scenario_rssi_weights(&site);
         let accuracy_scale = config.accuracy_scales_for(&site);
+        let estimate_states = config.estimate_states_for(&site);
         let sparse_scans = config.sparse_scans_for(&site);
         let site_zones = site.zones().len();
         let habits = HabitModel::new(&site);
@@ -155,6 +158,7 @@ impl Engine {
             site_rssi_weight,
             scenario_rssi_weight,
             accuracy_scale,
+            estimate_states,
             id_hasher,
             zone_mass: vec![0.0; site_zones],
             history: History::new(config.history_epochs),
@@ -199,6 +203,15 @@ impl Engine {
     /// The latest position, if any epoch has run.
     pub fn position(&self) -> Option<&Position> {
         self.latest.as_ref()
+    }
+
+    /// The current estimate's (x, y) with each M of Hoang eq. 4 in `grid` in place of the
+    /// engine's, on the same floor: for choosing M on held-out walks.
+    pub fn positions_by_states(&self, grid: &[usize]) -> Vec<[f64; 2]> {
+        crate::hmm::positions_by_states(&self.site, self.filter.posterior(), grid)
+            .into_iter()
+            .map(|p| [p.x, p.y])
+            .collect()
     }
 
     /// The posterior over the site's states.
@@ -280,13 +293,8 @@ impl Engine {
         let (mut carried, mut scratch) = (Vec::new(), Vec::new());
         let timestamp_ns =
             self.viterbi.ancestors(lag, self.filter.posterior(), &mut carried, &mut scratch)?;
-        let e = estimate(
-            &self.site,
-            &carried,
-            self.config.estimate_states,
-            self.config.accuracy_mass,
-            &mut Vec::new(),
-        );
+        let e =
+            estimate(&self.site, &carried, self.estimate_states, self.config.accuracy_mass, &mut Vec::new());
         let state = (0..carried.len()).max_by(|&a, &b| carried[a].total_cmp(&carried[b]))? as u32;
         Some(TrackPoint { timestamp_ns, state, floor: e.floor, x: e.position.x, y: e.position.y })
     }

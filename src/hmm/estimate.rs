@@ -39,39 +39,9 @@ pub fn estimate(
     scratch: &mut Vec<(f64, f64)>,
 ) -> Estimate {
     let states = site.states();
-    let floor_mass = floor_masses(site, posterior);
-    let (floor, &floor_probability) = floor_mass
-        .iter()
-        .enumerate()
-        .max_by(|a, b| a.1.total_cmp(b.1))
-        .expect("a site has at least one floor");
-
-    // Eq. 4 over the M most likely states of that floor; scratch holds (-p, index).
-    scratch.clear();
-    scratch.extend(
-        states
-            .iter()
-            .zip(posterior)
-            .enumerate()
-            .filter(|(_, (s, &p))| s.floor == floor && p > 0.0)
-            .map(|(i, (_, &p))| (-p, i as f64)),
-    );
-    let m = top_m.min(scratch.len()).max(1);
-    let position = if scratch.is_empty() {
-        // No mass on any state of the floor (cannot happen with a normalised posterior and a
-        // floor chosen by mass); the first state of the floor keeps the output on the site.
-        states.iter().find(|s| s.floor == floor).map_or(Point2::origin(), |s| s.position)
-    } else {
-        if m < scratch.len() {
-            scratch.select_nth_unstable_by(m - 1, |a, b| a.0.total_cmp(&b.0));
-        }
-        let (mut sum, mut weight) = (nalgebra::Vector2::zeros(), 0.0);
-        for &(neg_p, i) in &scratch[..m] {
-            sum += states[i as usize].position.coords * -neg_p;
-            weight -= neg_p;
-        }
-        Point2::from(sum / weight)
-    };
+    let (floor, floor_probability) = most_likely_floor(site, posterior);
+    floor_states(site, posterior, floor, scratch);
+    let position = mean_of_most_likely(site, floor, scratch, top_m);
 
     // The radius holding `mass` of the whole posterior: states of other floors never count
     // as inside. scratch now holds (distance, p), for the states with at least PRUNE_MASS
@@ -102,6 +72,60 @@ pub fn estimate(
     let accuracy_m = with_cell(radius.unwrap_or(farthest), mass);
     let accuracy_95_m = with_cell(radius_95.unwrap_or(farthest), mass.max(MASS_95)).max(accuracy_m);
     Estimate { floor, floor_probability, position, accuracy_m, accuracy_95_m }
+}
+
+/// The estimate's position (Hoang eq. 4) with each M of `grid`, on the floor [`estimate`]
+/// takes: what choosing M on held-out walks compares (docs/tuning.md#mixture-components-m).
+pub fn positions_by_states(site: &Site, posterior: &[f64], grid: &[usize]) -> Vec<Point2<f64>> {
+    if grid.is_empty() {
+        return Vec::new();
+    }
+    let (floor, _) = most_likely_floor(site, posterior);
+    let mut scratch = Vec::new();
+    floor_states(site, posterior, floor, &mut scratch);
+    grid.iter().map(|&m| mean_of_most_likely(site, floor, &mut scratch, m)).collect()
+}
+
+/// The floor holding the most posterior mass, and that mass.
+fn most_likely_floor(site: &Site, posterior: &[f64]) -> (usize, f64) {
+    floor_masses(site, posterior)
+        .into_iter()
+        .enumerate()
+        .max_by(|a, b| a.1.total_cmp(&b.1))
+        .expect("a site has at least one floor")
+}
+
+/// `scratch` set to (-p, index) of the states of `floor` with any mass.
+fn floor_states(site: &Site, posterior: &[f64], floor: usize, scratch: &mut Vec<(f64, f64)>) {
+    scratch.clear();
+    scratch.extend(
+        site.states()
+            .iter()
+            .zip(posterior)
+            .enumerate()
+            .filter(|(_, (s, &p))| s.floor == floor && p > 0.0)
+            .map(|(i, (_, &p))| (-p, i as f64)),
+    );
+}
+
+/// Eq. 4 over the `m` most likely of the states in `scratch` ([`floor_states`], reordered).
+fn mean_of_most_likely(site: &Site, floor: usize, scratch: &mut [(f64, f64)], m: usize) -> Point2<f64> {
+    let states = site.states();
+    if scratch.is_empty() {
+        // No mass on any state of the floor (cannot happen with a normalised posterior and a
+        // floor chosen by mass); the first state of the floor keeps the output on the site.
+        return states.iter().find(|s| s.floor == floor).map_or(Point2::origin(), |s| s.position);
+    }
+    let m = m.min(scratch.len()).max(1);
+    if m < scratch.len() {
+        scratch.select_nth_unstable_by(m - 1, |a, b| a.0.total_cmp(&b.0));
+    }
+    let (mut sum, mut weight) = (nalgebra::Vector2::zeros(), 0.0);
+    for &(neg_p, i) in &scratch[..m] {
+        sum += states[i as usize].position.coords * -neg_p;
+        weight -= neg_p;
+    }
+    Point2::from(sum / weight)
 }
 
 /// Posterior mass per floor. States come in runs on one floor; each run is summed in four
@@ -165,6 +189,29 @@ fn radius_holding(items: &mut [(f64, f64)], mass: f64) -> Option<f64> {
 mod tests {
     use super::*;
     use proptest::prelude::*;
+
+    #[test]
+    fn positions_by_states_are_the_estimates_with_each_m() {
+        let mut b = crate::site::SiteBuilder::new("grid");
+        let f = b.floor("G", 0.0);
+        for k in 0..24 {
+            b.state(f, Point2::new((k % 6) as f64, (k / 6) as f64), vec![]);
+        }
+        let site = b.build(crate::site::BuildOptions::default()).unwrap();
+        let n = site.states().len();
+        // Distinct masses, so that the M most likely states are one set.
+        let weights: Vec<f64> = (0..n).map(|i| 1.0 + ((i * 7919) % n) as f64).collect();
+        let total: f64 = weights.iter().sum();
+        let posterior: Vec<f64> = weights.iter().map(|w| w / total).collect();
+        let grid = [1, 2, 3, 10, n + 5];
+        let by_m = positions_by_states(&site, &posterior, &grid);
+        for (&m, p) in grid.iter().zip(&by_m) {
+            let e = estimate(&site, &posterior, m, 0.68, &mut Vec::new());
+            // The same states, summed perhaps in another order.
+            assert!((e.position - p).norm() < 1e-12, "M = {m}: {} against {p}", e.position);
+        }
+        assert!(positions_by_states(&site, &posterior, &[]).is_empty());
+    }
 
     /// Walking the items in order of distance, as the radius is defined.
     fn by_sorting(items: &[(f64, f64)], mass: f64) -> Option<f64> {

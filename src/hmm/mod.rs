@@ -9,7 +9,7 @@ mod motion;
 mod transition;
 mod viterbi;
 
-pub use estimate::{estimate, Estimate};
+pub use estimate::{estimate, positions_by_states, Estimate};
 pub use forward::{FilterError, ForwardFilter};
 pub use motion::{angle_between, azimuth, HipeRegion, HipeTransition, HoangTransition};
 pub use transition::{

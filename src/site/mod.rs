@@ -198,6 +198,10 @@ pub struct Calibration {
     /// γ and radius factors for scans far apart, as under Android 9+'s throttling.
     #[serde(default, skip_serializing_if = "SparseScans::is_empty")]
     pub sparse_scans: SparseScans,
+    /// M of Hoang eq. 4, the most likely states averaged into the estimate, chosen like γ on
+    /// held-out survey walks (docs/tuning.md#mixture-components-m). Since format version 5.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub estimate_states: Option<u32>,
 }
 
 /// A scan that comes longer than this after the one before it, s, is a sparse scan, and the
@@ -291,6 +295,9 @@ impl Calibration {
             if !f.is_finite() {
                 return Err(("calibration.radio_fit_floor".into(), format!("must be finite, got {f}")));
             }
+        }
+        if self.estimate_states == Some(0) {
+            return Err(("calibration.estimate_states".into(), "must be at least 1".into()));
         }
         let by_scenario = crate::sensors::MdiScenario::ALL.map(|s| {
             (

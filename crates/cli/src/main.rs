@@ -209,7 +209,7 @@ fn demo(args: &DemoArgs) -> ExitCode {
         Fit::Naive => RssiModel::NaiveGaussian,
     };
     if let Some(m) = args.top_m {
-        experiment.engine = EngineConfig { estimate_states: m, ..experiment.engine };
+        experiment.engine = EngineConfig { estimate_states: Some(m), ..experiment.engine };
     }
     let report = match sim::run(&experiment) {
         Ok(report) => report,
@@ -238,7 +238,7 @@ fn demo(args: &DemoArgs) -> ExitCode {
             "surveyed_states": report.surveyed_states,
             "states": report.states,
             "access_points": report.access_points,
-            "top_m": experiment.engine.estimate_states,
+            "top_m": experiment.engine.estimate_states.unwrap_or(waymark::DEFAULT_ESTIMATE_STATES),
             "epochs": s.epochs,
             "mean_error_m": s.mean_error_m,
             "median_error_m": s.median_error_m,

@@ -601,7 +601,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         options.calibration.engine.hoang.measured_spread = false;
     }
     if let Some(m) = args.top_m {
-        options.calibration.engine.estimate_states = m;
+        options.calibration.engine.estimate_states = Some(m);
     }
     if let Some(lag) = args.fixed_lag {
         options.calibration.engine.fixed_lag_epochs = lag;

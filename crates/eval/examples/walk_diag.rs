@@ -42,8 +42,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut options = EvalOptions::default();
     options.calibration.replay.events.beacon_wait_ns =
         env_or("BEACON_WAIT_MS", options.calibration.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
+    // Unset: the site's calibrated M.
     options.calibration.engine.estimate_states =
-        env_or("ESTIMATE_STATES", options.calibration.engine.estimate_states);
+        std::env::var("ESTIMATE_STATES").ok().and_then(|v| v.parse().ok());
     options.calibration.engine.max_speed_mps = env_or("MAX_SPEED", options.calibration.engine.max_speed_mps);
     options.calibration.engine.hoang.movement_variance_m2 =
         env_or("MOVEMENT_VAR", options.calibration.engine.hoang.movement_variance_m2);

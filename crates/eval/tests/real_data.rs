@@ -72,6 +72,17 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert!(floor.jackknife_se_m.is_some_and(|se| se.is_finite() && se > 0.0), "{floor:?}");
     assert!(calibration.refitted_share > 0.0 && calibration.refitted_share < 1.0);
     assert_eq!(site.floors()[0].rssi_weight, floor_gamma);
+    // M of eq. 4: every M of the grid scored at the chosen γ, the least error chosen, and at
+    // M = 3 the held-out error is the γ curve's own (the same replays, up to ties in the
+    // ranking of states).
+    let by_m = &calibration.estimate_states_mean_error_m;
+    assert_eq!(by_m.iter().map(|p| p.0).collect::<Vec<_>>(), calibrate::ESTIMATE_STATES_GRID, "{by_m:?}");
+    let least = by_m.iter().min_by(|a, b| a.1.total_cmp(&b.1)).unwrap();
+    assert_eq!(calibration.estimate_states, Some(least.0 as u32));
+    assert_eq!(site.calibration().estimate_states, calibration.estimate_states);
+    let at_gamma = calibration.gamma_mean_error_m.iter().find(|p| p.0 == gamma).unwrap().1;
+    let at_3 = by_m.iter().find(|p| p.0 == 3).unwrap().1;
+    assert!((at_3 - at_gamma).abs() < 0.05 * at_gamma, "{at_3} against {at_gamma}");
     // The radio fit floor, and the held-out walks replayed as shipped: every epoch of the
     // calibration's own replays again, on the map or beyond it.
     let floor_fit = calibration.radio_fit_floor;

@@ -104,6 +104,9 @@ pub struct ReplayOptions {
     /// Ask the engine for the fixed-lag estimate after each epoch ([`Replay::fixed_lag`]); off
     /// where only the live positions are scored, as the smoothing costs an estimate per epoch.
     pub fixed_lag: bool,
+    /// Also give each live position with each M of Hoang eq. 4 in this list
+    /// ([`Replay::by_estimate_states`]); empty for none.
+    pub estimate_states_grid: &'static [usize],
 }
 
 /// Waypoints as feedback: the walk's floor in the site, and the radius of the circle confirmed.
@@ -124,6 +127,7 @@ impl Default for ReplayOptions {
             mask: MotionMask::Auto,
             feedback: None,
             fixed_lag: true,
+            estimate_states_grid: &[],
         }
     }
 }
@@ -139,6 +143,18 @@ pub struct Replay {
     pub track: Vec<TrackPoint>,
     /// Scans the engine rejected (no known transmitter, ...).
     pub rejected_scans: usize,
+    /// Per M of [`ReplayOptions::estimate_states_grid`], `positions` with that M's (x, y).
+    pub by_estimate_states: Vec<Vec<Position>>,
+}
+
+impl Replay {
+    /// Adds the engine's latest position, and its (x, y) with each M of `grid`.
+    fn publish(&mut self, engine: &Engine, position: Position, grid: &[usize]) {
+        for (k, [x, y]) in engine.positions_by_states(grid).into_iter().enumerate() {
+            self.by_estimate_states[k].push(Position { x, y, ..position.clone() });
+        }
+        self.positions.push(position);
+    }
 }
 
 /// What one call of a replay was, for [`replay_observed`]'s observer.
@@ -172,7 +188,10 @@ pub fn replay_observed(
     options: &ReplayOptions,
     observer: &mut dyn FnMut(Call),
 ) -> Replay {
-    let mut out = Replay::default();
+    let mut out = Replay {
+        by_estimate_states: vec![Vec::new(); options.estimate_states_grid.len()],
+        ..Replay::default()
+    };
     // Forced scenarios run their own tracker on the same configuration and hand the engine
     // the masked motion; `Auto` lets the engine's tracker do it.
     let mut tracker = match options.mask {
@@ -193,7 +212,7 @@ pub fn replay_observed(
                     {
                         if last_epoch != Some(p.timestamp_ns) {
                             last_epoch = Some(p.timestamp_ns);
-                            out.positions.push(p);
+                            out.publish(engine, p, options.estimate_states_grid);
                         }
                     }
                 }
@@ -254,7 +273,7 @@ pub fn replay_observed(
         };
         if let Some(Ok(waymark::Epoch { position, .. })) = result {
             last_epoch = Some(position.timestamp_ns);
-            out.positions.push(position);
+            out.publish(engine, position, options.estimate_states_grid);
             if options.fixed_lag {
                 out.fixed_lag.extend(engine.fixed_lag_position());
             }

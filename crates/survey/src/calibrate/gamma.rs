@@ -8,6 +8,11 @@ use crate::scoring::Scored;
 /// the value Hoang §6.2 found by jackknife on field data.
 pub const GAMMA_GRID: [f64; 6] = [0.003, 0.01, 0.03, 0.1, 0.3, 1.0];
 
+/// M of Hoang eq. 4 (the paper gives no value) the leave-one-walk-out tries at the chosen γ:
+/// log-spaced like [`GAMMA_GRID`], from the most likely state alone to 100 states; the whole
+/// posterior's mean averages across its modes (docs/tuning.md#mixture-components-m).
+pub const ESTIMATE_STATES_GRID: [usize; 5] = [1, 3, 10, 30, 100];
+
 /// The γ of least mean error per floor from each walk's held-out epochs, with the jackknife.
 pub(super) fn gamma_curve(walks: &[&HeldOut], mask: usize) -> (Vec<GammaPoint>, Option<usize>) {
     let sums: Vec<Vec<(f64, usize)>> = walks

@@ -11,6 +11,19 @@ use waymark::{ScanTiming, Site};
 /// [`THROTTLED`]): the held-out epochs.
 pub(super) type HeldOut = Vec<[Vec<Scored>; RUNS]>;
 
+/// One survey walk held out: its replays on the site surveyed without it.
+pub(super) struct WalkHeldOut {
+    /// Its epochs' scores, per γ and run.
+    pub scored: HeldOut,
+    /// States the site without it refitted.
+    pub refitted: usize,
+    /// Its epochs tagged, per γ and run.
+    pub tagged: Vec<Tagged>,
+    /// Per γ, per M of `ESTIMATE_STATES_GRID`: the epochs of the run with the motion scored
+    /// with that M.
+    pub by_m: Vec<Vec<Vec<Scored>>>,
+}
+
 /// Per run of the calibration: each held-out epoch (`Tag`).
 pub(super) type Tagged = [Vec<Tag>; RUNS];
 

@@ -10,7 +10,7 @@ mod radius;
 mod report;
 
 pub use floors::{parse_survey_fraction, survey_inputs, survey_subset, FloorData};
-pub use gamma::GAMMA_GRID;
+pub use gamma::{ESTIMATE_STATES_GRID, GAMMA_GRID};
 pub use held_out::MIN_SCENARIO_EPOCHS;
 pub use radius::{RadiusPoint, FINGERPRINT_RADIUS_FOLDS, FINGERPRINT_RADIUS_GRID};
 pub use report::{
@@ -20,10 +20,10 @@ pub use report::{
 
 use crate::io::Trace;
 use crate::replay::{replay, MotionMask, ReplayOptions};
-use crate::scoring::quantile;
+use crate::scoring::{live_estimates, quantile, score, Scored};
 use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
 use gamma::{gamma_curve, own_gamma};
-use held_out::{radius_factors, tag, HeldOut, OnMap, Tag, Tagged, RUNS, THROTTLED};
+use held_out::{radius_factors, tag, HeldOut, OnMap, Tag, Tagged, WalkHeldOut, RUNS, THROTTLED};
 use radius::calibrate_fingerprint_radius;
 use std::sync::Arc;
 use waymark::sensors::MdiScenario;
@@ -270,50 +270,66 @@ pub fn survey_calibrated(
         .flat_map(|(f, floor)| (0..floor.survey.len()).map(move |w| (f, w)))
         .collect();
     let cost = |&(f, w): &(usize, usize)| replay_cost(&floors[f].survey[w]);
-    let held_out: Vec<Option<(HeldOut, usize, Vec<Tagged>)>> =
-        parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
-            let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
-            let fits = prepared.fit(&keep, Some(&full), 1);
-            let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
-            let result = site.map(|site| {
-                let site = Arc::new(site);
-                // The scan likelihoods of this walk on this site, computed by its first replay.
-                let shared = SharedEmissions::new(&site);
-                let trace = &floors[f].survey[w];
-                let mapped = OnMap::new(&site, f);
-                let mut tagged = Vec::with_capacity(GAMMA_GRID.len());
-                let per_gamma: HeldOut = GAMMA_GRID
-                    .iter()
-                    .map(|&gamma| {
-                        let runs: [Vec<Tag>; RUNS] = std::array::from_fn(|run| {
-                            let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine.clone() };
-                            let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
-                                return Vec::new();
-                            };
-                            // Of this very site: cannot fail.
-                            let _ = engine.share_emissions(Arc::clone(&shared));
-                            let replay_options = match masks.get(run) {
-                                Some(&mask) => ReplayOptions { mask, ..options.calibration_replay() },
-                                None => options.calibration_throttled_replay(),
-                            };
-                            let r = replay(&mut engine, trace, &replay_options);
-                            tag(trace, f, &mapped, &r.positions)
-                        });
-                        let plain = std::array::from_fn(|m| runs[m].iter().map(|t| t.scored).collect());
-                        tagged.push(runs);
-                        plain
-                    })
-                    .collect();
-                (per_gamma, fits.refitted(), tagged)
-            });
-            progress();
-            result
+    // With the motion as the sensors give it, each epoch is also scored with each M of eq. 4,
+    // unless the configuration sets M.
+    let grid: &'static [usize] =
+        if options.engine.estimate_states.is_none() { &ESTIMATE_STATES_GRID } else { &[] };
+    let held_out: Vec<Option<WalkHeldOut>> = parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
+        let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
+        let fits = prepared.fit(&keep, Some(&full), 1);
+        let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
+        let result = site.map(|site| {
+            let site = Arc::new(site);
+            // The scan likelihoods of this walk on this site, computed by its first replay.
+            let shared = SharedEmissions::new(&site);
+            let trace = &floors[f].survey[w];
+            let mapped = OnMap::new(&site, f);
+            let mut tagged = Vec::with_capacity(GAMMA_GRID.len());
+            // Per γ, per M of `grid`: the epochs of the first run.
+            let mut by_m = Vec::with_capacity(GAMMA_GRID.len());
+            let per_gamma: HeldOut = GAMMA_GRID
+                .iter()
+                .map(|&gamma| {
+                    let mut scored_by_m = Vec::new();
+                    let runs: [Vec<Tag>; RUNS] = std::array::from_fn(|run| {
+                        let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine.clone() };
+                        let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
+                            return Vec::new();
+                        };
+                        // Of this very site: cannot fail.
+                        let _ = engine.share_emissions(Arc::clone(&shared));
+                        let replay_options = match masks.get(run) {
+                            Some(&mask) => ReplayOptions {
+                                mask,
+                                estimate_states_grid: if run == 0 { grid } else { &[] },
+                                ..options.calibration_replay()
+                            },
+                            None => options.calibration_throttled_replay(),
+                        };
+                        let r = replay(&mut engine, trace, &replay_options);
+                        if run == 0 {
+                            scored_by_m = (r.by_estimate_states.iter())
+                                .map(|p| score(trace, f, &live_estimates(p)).0)
+                                .collect();
+                        }
+                        tag(trace, f, &mapped, &r.positions)
+                    });
+                    let plain = std::array::from_fn(|m| runs[m].iter().map(|t| t.scored).collect());
+                    tagged.push(runs);
+                    by_m.push(scored_by_m);
+                    plain
+                })
+                .collect();
+            WalkHeldOut { scored: per_gamma, refitted: fits.refitted(), tagged, by_m }
         });
+        progress();
+        result
+    });
     report.sites = held_out.iter().flatten().count();
-    report.refitted_share = held_out.iter().flatten().map(|h| h.1 as f64).sum::<f64>()
+    report.refitted_share = held_out.iter().flatten().map(|h| h.refitted as f64).sum::<f64>()
         / (report.sites.max(1) * site.states().len().max(1)) as f64;
     // Pooled over every floor's walks.
-    let walks: Vec<&HeldOut> = held_out.iter().flatten().map(|h| &h.0).collect();
+    let walks: Vec<&HeldOut> = held_out.iter().flatten().map(|h| &h.scored).collect();
     let (pooled, best) = gamma_curve(&walks, 0);
     let (pooled_still, best_still) = gamma_curve(&walks, 1);
     report.gamma_mean_error_m = pooled.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
@@ -321,6 +337,23 @@ pub fn survey_calibrated(
         pooled_still.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
     calibration.rssi_weight = best.map(|k| pooled[k].gamma);
     calibration.rssi_weight_without_movement = best_still.map(|k| pooled_still[k].gamma);
+    // M: the grid's of least pooled held-out error at that γ.
+    if let Some(g) = best.and_then(|k| GAMMA_GRID.iter().position(|&x| x == pooled[k].gamma)) {
+        report.estimate_states_mean_error_m = (grid.iter().enumerate())
+            .filter_map(|(k, &m)| {
+                let epochs =
+                    held_out.iter().flatten().flat_map(|h| h.by_m.get(g).and_then(|by_m| by_m.get(k)));
+                let (total, n) = epochs.fold((0.0, 0), |(t, n), e| {
+                    (t + e.iter().map(Scored::penalised_m).sum::<f64>(), n + e.len())
+                });
+                (n > 0).then(|| (m, total / n as f64))
+            })
+            .collect();
+        calibration.estimate_states = (report.estimate_states_mean_error_m.iter())
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|p| p.0 as u32);
+    }
+    report.estimate_states = calibration.estimate_states;
     // Distance only and heading only: their own γ when it beats the γ without movement on
     // their own held-out curve by more than its standard error (`own_gamma`).
     for (mask, scenario) in [(2, MdiScenario::Distance), (3, MdiScenario::HeadingSpeed)] {
@@ -339,13 +372,13 @@ pub fn survey_calibrated(
             .iter()
             .zip(&held_out)
             .filter(|((ff, _), _)| *ff == f)
-            .filter_map(|(_, h)| h.as_ref().map(|h| &h.0))
+            .filter_map(|(_, h)| h.as_ref().map(|h| &h.scored))
             .collect();
         let mine_tagged: Vec<&Vec<Tagged>> = jobs
             .iter()
             .zip(&held_out)
             .filter(|((ff, _), _)| *ff == f)
-            .filter_map(|(_, h)| h.as_ref().map(|h| &h.2))
+            .filter_map(|(_, h)| h.as_ref().map(|h| &h.tagged))
             .collect();
         let (curve, best) = gamma_curve(&mine, 0);
         let (curve_still, best_still) = gamma_curve(&mine, 1);

@@ -53,6 +53,12 @@ pub struct CalibrationReport {
     pub gamma_mean_error_m: Vec<(f64, f64)>,
     /// The same with the motion withheld.
     pub gamma_without_movement_mean_error_m: Vec<(f64, f64)>,
+    /// All floors pooled, at the site-wide γ with the motion: mean held-out error with each M
+    /// of [`ESTIMATE_STATES_GRID`](super::ESTIMATE_STATES_GRID), m (floor penalty included);
+    /// empty when the configuration sets M.
+    pub estimate_states_mean_error_m: Vec<(usize, f64)>,
+    /// The M of least error there (Hoang eq. 4).
+    pub estimate_states: Option<u32>,
     /// The γ of least pooled error: the site-wide γ, for floors without their own.
     pub rssi_weight: Option<f64>,
     /// The same for epochs without a movement likelihood.
