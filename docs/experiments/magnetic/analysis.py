@@ -1,3 +1,4 @@
+"""Shared code: walks from the cache, the magnetic features, per-floor maps and epoch aggregation (see README.md)."""
 import glob, os, sys, json, numpy as np
 C='target/magnetic/cache'; FLOORS=['B1','F1','F2','F3','F4']
 FEAT=['mag','vert','horiz']; NMIN=5

@@ -1,3 +1,4 @@
+"""Survey walks per map cell, and the residuals' robust spread."""
 import os,sys,glob,numpy as np
 sys.path.insert(0,os.path.dirname(os.path.abspath(__file__))); from analysis import *
 for fl in ['B1','F2']:

@@ -1,3 +1,4 @@
+"""Reads the competition walks in target/ilc/site1 into target/magnetic/cache, one .npz per walk."""
 import os, sys, glob, numpy as np
 from multiprocessing import Pool
 ROOT='target/ilc/site1'

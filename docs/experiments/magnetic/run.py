@@ -1,3 +1,4 @@
+"""Per floor and pooled: walk offsets, residual spreads, map contrast and per-epoch log-likelihood ratios (arguments: cell sizes, epoch lengths)."""
 import os, sys, json, numpy as np, glob
 sys.path.insert(0,os.path.dirname(os.path.abspath(__file__))); from analysis import *
 CS=[float(x) for x in (sys.argv[1] if len(sys.argv)>1 else '1,2').split(',')]

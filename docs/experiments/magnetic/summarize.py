@@ -1,3 +1,4 @@
+"""Prints the tables of run.py's JSON (argument: test or loo)."""
 import json,sys
 r=json.load(open('target/magnetic/results_1.0_2.0_2.0_0.5.json'))
 F=['mag','vert','horiz']
