@@ -83,6 +83,41 @@ fn every_model_follows_a_walk_and_the_track_has_every_epoch() {
     }
 }
 
+/// The fixed-lag estimate smooths over the filter's steps since it last started over: feedback
+/// pins an epoch without a step, so the lag starts again from it and grows back to the
+/// configured one.
+#[test]
+fn the_fixed_lag_estimate_starts_again_at_feedback_and_grows_back() {
+    let mut engine = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
+    let lag = engine.config().fixed_lag_epochs;
+    assert_eq!(engine.fixed_lag_position(), None);
+    let mut times = Vec::new();
+    for k in 0..5u64 {
+        let t = SECOND * (k + 1);
+        engine.push_scan_with_motion(&scan(t, &readings_at(0, 3.0 * k as f64)), &walking(4)).unwrap();
+        times.push(t);
+        // Until the filter has taken `lag` steps, the estimate is of its first epoch.
+        assert_eq!(
+            engine.fixed_lag_position().unwrap().timestamp_ns,
+            times[k.saturating_sub(lag as u64) as usize]
+        );
+    }
+    let latest = *times.last().unwrap();
+    engine.confirm_position(latest, 12.0, 0.0, 0, 1.0).unwrap();
+    let pinned = engine.fixed_lag_position().unwrap();
+    assert_eq!(pinned.timestamp_ns, latest);
+    assert!((pinned.x - 12.0).abs() < 1.0, "{pinned:?}");
+    assert_eq!(engine.smoothed_position(1), None);
+    for k in 5..5 + lag as u64 + 2 {
+        let t = SECOND * (k + 1);
+        engine.push_scan_with_motion(&scan(t, &readings_at(0, 12.0)), &MotionUpdate::default()).unwrap();
+        times.push(t);
+        let back = (k as usize - 4).min(lag);
+        assert_eq!(engine.fixed_lag_position().unwrap().timestamp_ns, times[k as usize - back], "epoch {k}");
+    }
+    assert!(engine.smoothed_position(lag + 1).is_none(), "beyond the configured lag");
+}
+
 #[test]
 fn scenario_and_motion_changes_are_announced() {
     let mut engine = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();

@@ -228,6 +228,8 @@ impl Engine {
     /// by `ln_emission` (no prediction), and its position revised. Feedback that contradicts
     /// earlier feedback at the same epoch wins: the posterior restarts on its states.
     pub(super) fn pin_latest(&mut self, latest: Position, states: &[u32]) -> Epoch {
+        // Feedback is an observation without a step: the smoother's history ends here.
+        self.smoother.clear();
         if self.filter.step(None, &self.ln_emission).is_err() {
             self.restart();
         }
@@ -264,6 +266,8 @@ impl Engine {
             Err(panic) => {
                 self.filter.rollback();
                 self.viterbi.rollback();
+                // The smoother's history may hold the undone step.
+                self.smoother.clear();
                 self.last_epoch_ns = self.undo.last_epoch_ns;
                 self.unexplained_run = self.undo.unexplained_run;
                 self.scan_timing = self.undo.scan_timing;

@@ -15,7 +15,7 @@ use crate::config::EngineConfig;
 use crate::error::Error;
 use crate::habits::{FixError, HabitError, HabitModel, HabitPrior, HabitReport};
 use crate::history::{EpochRecord, History};
-use crate::hmm::{estimate, ForwardFilter, ViterbiWindow};
+use crate::hmm::{estimate, FixedLagSmoother, ForwardFilter, ViterbiWindow};
 use crate::radio::ScanHasher;
 use crate::sensors::{MotionStats, MotionTracker};
 use crate::site::{ReachTable, Site, SparseScans};
@@ -52,6 +52,8 @@ pub struct Engine {
     whole_reach: bool,
     filter: ForwardFilter,
     viterbi: ViterbiWindow,
+    /// The filter's last steps, for the fixed-lag estimate.
+    smoother: FixedLagSmoother<transition::StepModel>,
     tracker: MotionTracker,
     ln_emission: Vec<f64>,
     scratch: Vec<(f64, f64)>,
@@ -148,6 +150,7 @@ impl Engine {
             map_reach,
             whole_reach: false,
             filter: ForwardFilter::new(n),
+            smoother: FixedLagSmoother::new(config.fixed_lag_epochs),
             ln_emission: vec![0.0; n],
             scratch: Vec::with_capacity(n),
             last_epoch_ns: None,
@@ -276,26 +279,32 @@ impl Engine {
         self.viterbi.path().into_iter().map(|(t, s)| self.track_point(t, s)).collect()
     }
 
-    /// The position `fixed_lag_epochs` epochs ago, smoothed by what came after: the current
-    /// posterior carried back along the Viterbi back-pointers (each state's mass to the state
-    /// its best path passed through then), and Hoang eq. 4 over that, as the live estimate is
-    /// over the posterior. The exact fixed-lag smoother sums over every path into each state
-    /// rather than following the best; this keeps to what the Viterbi window already holds, in
-    /// O(lag × N). `state` is the state holding the most carried mass. Its error against the
-    /// lagged Viterbi state and the live estimate: `docs/tuning.md#fixed-lag`.
+    /// The position `fixed_lag_epochs` epochs ago, smoothed by what came after: the exact
+    /// fixed-lag posterior P(s | o_1..t) of that epoch (the backward pass of the
+    /// forward-backward recursion over the lag, [`FixedLagSmoother`]), and Hoang eq. 4 over it,
+    /// as the live estimate is over the filtered posterior. Fewer epochs back when the filter
+    /// restarted, bridged a gap or was pinned by feedback since, as the filter's history
+    /// begins there. `state` is the state of most smoothed mass. The lag:
+    /// `docs/tuning.md#fixed-lag`.
     pub fn fixed_lag_position(&self) -> Option<TrackPoint> {
-        self.smoothed_position(self.config.fixed_lag_epochs.min(self.viterbi.len().saturating_sub(1)))
+        self.smoothed_position(self.config.fixed_lag_epochs.min(self.smoother.len()))
     }
 
-    /// [`fixed_lag_position`](Self::fixed_lag_position) at another lag, epochs; `None` when
-    /// the track holds fewer than `lag` + 1 epochs.
+    /// [`fixed_lag_position`](Self::fixed_lag_position) at another lag, epochs (0: the
+    /// filtered posterior of the latest epoch); `None` before the first epoch, beyond
+    /// `fixed_lag_epochs`, or beyond the filter's history.
     pub fn smoothed_position(&self, lag: usize) -> Option<TrackPoint> {
-        let (mut carried, mut scratch) = (Vec::new(), Vec::new());
-        let timestamp_ns =
-            self.viterbi.ancestors(lag, self.filter.posterior(), &mut carried, &mut scratch)?;
+        let mut smoothed = Vec::new();
+        let timestamp_ns = match lag {
+            0 => {
+                smoothed.extend_from_slice(self.filter.posterior());
+                self.last_epoch_ns?
+            }
+            lag => self.smoothed_posterior(lag, &mut smoothed)?,
+        };
         let e =
-            estimate(&self.site, &carried, self.estimate_states, self.config.accuracy_mass, &mut Vec::new());
-        let state = (0..carried.len()).max_by(|&a, &b| carried[a].total_cmp(&carried[b]))? as u32;
+            estimate(&self.site, &smoothed, self.estimate_states, self.config.accuracy_mass, &mut Vec::new());
+        let state = (0..smoothed.len()).max_by(|&a, &b| smoothed[a].total_cmp(&smoothed[b]))? as u32;
         Some(TrackPoint { timestamp_ns, state, floor: e.floor, x: e.position.x, y: e.position.y })
     }
 
@@ -350,6 +359,8 @@ impl Engine {
 
     /// Replaces the habits by `model`, which must be of this site.
     pub fn set_habits(&mut self, model: HabitModel) {
+        // The steps the smoother holds were taken with the old habits.
+        self.smoother.clear();
         self.habit_prior = HabitPrior::new(&model, &self.reach, self.site.spacing_m());
         self.habits = model;
     }

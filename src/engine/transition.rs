@@ -3,10 +3,10 @@
 
 use super::{Engine, Position};
 use crate::config::{EngineConfig, TransitionModel};
-use crate::habits::Habitual;
+use crate::habits::{HabitPrior, Habitual};
 use crate::hmm::{HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach};
 use crate::sensors::{MdiScenario, MotionState, MotionUpdate};
-use crate::site::ReachTable;
+use crate::site::{ReachTable, Site};
 
 impl Engine {
     /// Predicts over `dt_s` (none at the first epoch) with the configured model and `motion`,
@@ -14,6 +14,7 @@ impl Engine {
     pub(super) fn forward(&mut self, timestamp_ns: u64, dt_s: Option<f64>, motion: &MotionUpdate) -> f64 {
         let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
         let Some(dt) = dt_s else {
+            self.smoother.clear();
             self.viterbi.step(
                 timestamp_ns,
                 &UniformReach { table, rho_m: 0.0, ratio: 1.0 },
@@ -23,68 +24,105 @@ impl Engine {
         };
         let config = &self.config;
         let speed_reach = config.max_speed_mps * dt;
-        let table_radius = self.reach.radius_m();
         let hipe_region = hipe_region(config, motion, dt);
         let needed = match config.transition {
             TransitionModel::Reach | TransitionModel::Hoang => speed_reach,
             TransitionModel::Hipe => hipe_region.outer_radius_m(),
         };
-        if needed > table_radius {
+        if needed > self.reach.radius_m() {
             return self.bridge_gap(timestamp_ns, speed_reach);
         }
-        let ratio_max = config.transition_ratio;
-        let reach = UniformReach { table, rho_m: speed_reach, ratio: ratio_max };
-        let hipe = HipeTransition {
-            site: &self.site,
-            table,
-            region: hipe_region,
+        let model = self.step_model(timestamp_ns, motion, dt, hipe_region);
+        if let Some(last) = self.last_epoch_ns {
+            self.smoother.begin(last, self.filter.posterior(), model);
+        }
+        // Field by field, as the filter and the track are borrowed beside.
+        let parts = TransitionParts::of(
+            &self.site,
+            &self.reach,
+            self.map_reach.as_deref(),
+            &self.habit_prior,
+            &self.config,
+        );
+        let (filter, viterbi, ln_emission) = (&mut self.filter, &mut self.viterbi, &self.ln_emission);
+        let mut result = Err(crate::hmm::FilterError::Degenerate);
+        // Each row of the transition written once for the Viterbi step and the prediction.
+        parts.with(&model, &mut |transition| {
+            result = filter.step_with_viterbi(viterbi, timestamp_ns, transition, ln_emission);
+        });
+        match result {
+            Ok(evidence) => {
+                self.smoother.finish(self.filter.predicted(), self.filter.posterior());
+                evidence
+            }
+            Err(_) => self.restart(),
+        }
+    }
+
+    /// What this epoch's transition is, from the configuration and `motion` over `dt_s`.
+    fn step_model(
+        &self,
+        timestamp_ns: u64,
+        motion: &MotionUpdate,
+        dt_s: f64,
+        region: HipeRegion,
+    ) -> StepModel {
+        let config = &self.config;
+        let reach_m = config.max_speed_mps * dt_s;
+        let ratio = config.transition_ratio;
+        let kind = match config.transition {
+            TransitionModel::Reach => StepKind::Reach,
+            TransitionModel::Hipe => {
+                StepKind::Hipe { region, ratio: hipe_ratio(config, motion, self.latest.as_ref()) }
+            }
+            // Hoang's Gaussian needs a measured distance (the movement vector, or the distance
+            // alone); with only a heading, HIPE's sector still uses what was measured (HIPE
+            // Table 1).
             // Under Hoang's model the regions only stand in for a missing distance or
             // heading, with the same floor K as its other epochs: HIPE's adaptive K, down to
             // 200, leaks most of the mass of a large multi-floor site each epoch
             // (docs/tuning.md#adaptive-k).
-            ratio: match config.transition {
-                TransitionModel::Hoang => ratio_max,
-                _ => hipe_ratio(config, motion, self.latest.as_ref()),
-            },
-        };
-        let base_variance = config.hoang.movement_variance_m2
-            + if config.hoang.quantisation_variance { self.site.spacing_m().powi(2) / 6.0 } else { 0.0 };
-        let spread = match (config.hoang.measured_spread, motion.distance_m) {
-            (true, Some(d)) => (motion.distance_sigma_m.powi(2), (d * motion.heading_sigma_rad).powi(2)),
-            _ => (0.0, 0.0),
-        };
-        let hoang = HoangTransition {
-            site: &self.site,
-            table,
-            reach_m: speed_reach,
-            ratio: ratio_max,
-            movement_m: motion.displacement_m,
-            walked_m: motion.distance_m.filter(|_| motion.scenario == MdiScenario::Distance),
-            variance_m2: base_variance + spread.0,
-            across_variance_m2: base_variance + spread.1,
-            mahalanobis_cap: config.hoang.mahalanobis_cap,
-            exponent: self.epoch_rssi_weight(timestamp_ns, motion).map_or(1.0, |g| 1.0 - g),
-        };
-        let transition: &dyn Transition = match config.transition {
-            TransitionModel::Reach => &reach,
-            TransitionModel::Hipe => &hipe,
-            // Hoang's Gaussian needs a measured distance (the movement vector, or the distance
-            // alone); with only a heading, HIPE's sector still uses what was measured (HIPE
-            // Table 1).
             TransitionModel::Hoang
                 if motion.displacement_m.is_none() && motion.scenario == MdiScenario::HeadingSpeed =>
             {
-                &hipe
+                StepKind::Hipe { region, ratio }
             }
-            TransitionModel::Hoang => &hoang,
+            TransitionModel::Hoang => {
+                let base_variance = config.hoang.movement_variance_m2
+                    + if config.hoang.quantisation_variance {
+                        self.site.spacing_m().powi(2) / 6.0
+                    } else {
+                        0.0
+                    };
+                let spread = match (config.hoang.measured_spread, motion.distance_m) {
+                    (true, Some(d)) => {
+                        (motion.distance_sigma_m.powi(2), (d * motion.heading_sigma_rad).powi(2))
+                    }
+                    _ => (0.0, 0.0),
+                };
+                StepKind::Hoang {
+                    movement_m: motion.displacement_m,
+                    walked_m: motion.distance_m.filter(|_| motion.scenario == MdiScenario::Distance),
+                    variance_m2: base_variance + spread.0,
+                    across_variance_m2: base_variance + spread.1,
+                    exponent: self.epoch_rssi_weight(timestamp_ns, motion).map_or(1.0, |g| 1.0 - g),
+                }
+            }
         };
-        // Learned habits: a prior multiplied into the motion-based transition of each epoch.
-        let habitual = Habitual { inner: transition, prior: &self.habit_prior };
-        let transition: &dyn Transition = if self.habit_prior.is_empty() { transition } else { &habitual };
-        // Each row of the transition written once for the Viterbi step and the prediction.
-        let result =
-            self.filter.step_with_viterbi(&mut self.viterbi, timestamp_ns, transition, &self.ln_emission);
-        result.unwrap_or_else(|_| self.restart())
+        StepModel { kind, reach_m, ratio, whole_reach: self.whole_reach }
+    }
+
+    /// The fixed-lag posterior `lag` ≥ 1 epochs back ([`FixedLagSmoother`]) into `out`, and
+    /// that epoch's time.
+    pub(super) fn smoothed_posterior(&self, lag: usize, out: &mut Vec<f64>) -> Option<u64> {
+        let parts = TransitionParts::of(
+            &self.site,
+            &self.reach,
+            self.map_reach.as_deref(),
+            &self.habit_prior,
+            &self.config,
+        );
+        self.smoother.smooth(lag, self.filter.posterior(), out, |model, f| parts.with(model, f))
     }
 
     /// Hoang eq. 14's γ for an epoch at `timestamp_ns` with `motion`, of the floor the engine
@@ -129,6 +167,7 @@ impl Engine {
         let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
         let table_radius = self.reach.radius_m();
         let passes = (speed_reach / table_radius).ceil().max(1.0);
+        self.smoother.clear();
         let pass = UniformReach { table, rho_m: speed_reach / passes, ratio: self.config.transition_ratio };
         self.viterbi.step(timestamp_ns, &UniformReach { rho_m: table_radius, ..pass }, &self.ln_emission);
         if passes > f64::from(self.config.max_reach_passes) {
@@ -154,9 +193,97 @@ impl Engine {
     /// The map explains this observation nowhere the motion model allows: start again from the
     /// observation alone.
     pub(super) fn restart(&mut self) -> f64 {
+        self.smoother.clear();
         self.stats.filter_restarts += 1;
         self.filter.reset();
         self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)
+    }
+}
+
+/// An epoch's transition, as the fixed-lag smoother keeps it to write its rows again.
+#[derive(Clone, Copy, Debug)]
+pub(super) struct StepModel {
+    kind: StepKind,
+    /// v_max · Δt, m.
+    reach_m: f64,
+    /// HIPE's K of the configuration.
+    ratio: f64,
+    /// Whether the epoch predicted over the whole table ([`prediction_table`]).
+    whole_reach: bool,
+}
+
+/// The transition model of a [`StepModel`] and what it measured.
+#[derive(Clone, Copy, Debug)]
+enum StepKind {
+    /// Uniform over the reach.
+    Reach,
+    /// HIPE's region, with its K.
+    Hipe { region: HipeRegion, ratio: f64 },
+    /// Hoang's movement-vector Gaussian (the fields of [`HoangTransition`]).
+    Hoang {
+        movement_m: Option<[f64; 2]>,
+        walked_m: Option<f64>,
+        variance_m2: f64,
+        across_variance_m2: f64,
+        exponent: f64,
+    },
+}
+
+/// What a [`StepModel`] becomes a transition over.
+struct TransitionParts<'a> {
+    site: &'a Site,
+    reach: &'a ReachTable,
+    map_reach: Option<&'a ReachTable>,
+    habits: &'a HabitPrior,
+    mahalanobis_cap: f64,
+}
+
+impl<'a> TransitionParts<'a> {
+    fn of(
+        site: &'a Site,
+        reach: &'a ReachTable,
+        map_reach: Option<&'a ReachTable>,
+        habits: &'a HabitPrior,
+        config: &EngineConfig,
+    ) -> Self {
+        Self { site, reach, map_reach, habits, mahalanobis_cap: config.hoang.mahalanobis_cap }
+    }
+
+    /// Hands `model`'s transition, with the learned habits multiplied in, to `f`.
+    fn with(&self, model: &StepModel, f: &mut dyn FnMut(&dyn Transition)) {
+        let table = prediction_table(self.reach, self.map_reach, model.whole_reach);
+        let (reach, hipe, hoang);
+        let transition: &dyn Transition = match model.kind {
+            StepKind::Reach => {
+                reach = UniformReach { table, rho_m: model.reach_m, ratio: model.ratio };
+                &reach
+            }
+            StepKind::Hipe { region, ratio } => {
+                hipe = HipeTransition { site: self.site, table, region, ratio };
+                &hipe
+            }
+            StepKind::Hoang { movement_m, walked_m, variance_m2, across_variance_m2, exponent } => {
+                hoang = HoangTransition {
+                    site: self.site,
+                    table,
+                    reach_m: model.reach_m,
+                    ratio: model.ratio,
+                    movement_m,
+                    walked_m,
+                    variance_m2,
+                    across_variance_m2,
+                    mahalanobis_cap: self.mahalanobis_cap,
+                    exponent,
+                };
+                &hoang
+            }
+        };
+        // Learned habits: a prior multiplied into the motion-based transition of each epoch.
+        if self.habits.is_empty() {
+            f(transition)
+        } else {
+            f(&Habitual { inner: transition, prior: self.habits })
+        }
     }
 }
 

@@ -109,6 +109,11 @@ impl ForwardFilter {
         }
     }
 
+    /// The prediction of the latest step, before its observation (not normalised).
+    pub fn predicted(&self) -> &[f64] {
+        &self.predicted
+    }
+
     /// The current posterior; sums to 1.
     pub fn posterior(&self) -> &[f64] {
         &self.posterior

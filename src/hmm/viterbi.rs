@@ -268,38 +268,6 @@ impl ViterbiWindow {
         self.replace_delta();
     }
 
-    /// Carries `weights` over the newest epoch's states back `lag` epochs along the
-    /// back-pointers: `out[i]` is the weight of the states whose best path passes through i
-    /// `lag` epochs ago. Returns that epoch's timestamp; `None` when the window holds fewer
-    /// than `lag` + 1 epochs (or `weights` is not one per state).
-    pub fn ancestors(
-        &self,
-        lag: usize,
-        weights: &[f64],
-        out: &mut Vec<f64>,
-        scratch: &mut Vec<f64>,
-    ) -> Option<u64> {
-        let n = self.delta.len();
-        if weights.len() != n || self.epochs.len() <= lag {
-            return None;
-        }
-        out.clear();
-        out.extend_from_slice(weights);
-        let newest = self.epochs.len() - 1;
-        for k in (newest - lag + 1..=newest).rev() {
-            let back = &self.epochs[k].1;
-            scratch.clear();
-            scratch.resize(n, 0.0);
-            for (j, &w) in out.iter().enumerate() {
-                if w > 0.0 {
-                    scratch[back.get(j)] += w;
-                }
-            }
-            std::mem::swap(out, scratch);
-        }
-        Some(self.epochs[newest - lag].0)
-    }
-
     /// The most likely path through the window, oldest first, as (timestamp, state).
     pub fn path(&self) -> Vec<(u64, u32)> {
         let Some(mut state) =
@@ -367,39 +335,6 @@ mod tests {
         }
         assert_eq!(short.len(), 2);
         assert_eq!(short.path().iter().map(|p| p.0).collect::<Vec<_>>(), vec![3, 4]);
-    }
-
-    #[test]
-    fn ancestors_carry_each_states_weight_to_its_best_paths_state_lag_epochs_ago() {
-        let a = vec![vec![0.6, 0.3, 0.1], vec![0.2, 0.5, 0.3], vec![0.1, 0.1, 0.8]];
-        let emissions =
-            [vec![-0.1, -2.0, -3.0], vec![-1.5, -0.4, -2.0], vec![-2.0, -1.9, -0.3], vec![-0.2, -2.5, -0.9]];
-        let dense = Dense(a.clone());
-        let mut window = ViterbiWindow::new(3, 10);
-        for (t, e) in emissions.iter().enumerate() {
-            window.step(10 * t as u64, &dense, e);
-        }
-        let weights = [0.5, 0.3, 0.2];
-        let (mut out, mut scratch) = (Vec::new(), Vec::new());
-        for lag in 0..emissions.len() {
-            let at = window.ancestors(lag, &weights, &mut out, &mut scratch);
-            let then = emissions.len() - 1 - lag;
-            assert_eq!(at, Some(10 * then as u64));
-            // The best path ending in j, by brute force with the last epoch pinned to j.
-            let mut expected = [0.0; 3];
-            for (j, w) in weights.iter().enumerate() {
-                let mut pinned = emissions.to_vec();
-                for (k, e) in pinned[emissions.len() - 1].iter_mut().enumerate() {
-                    if k != j {
-                        *e = -1e9;
-                    }
-                }
-                expected[brute_force(&a, &pinned)[then] as usize] += w;
-            }
-            assert_eq!(out, expected, "lag {lag}");
-        }
-        assert_eq!(window.ancestors(emissions.len(), &weights, &mut out, &mut scratch), None);
-        assert_eq!(window.ancestors(0, &weights[..2], &mut out, &mut scratch), None);
     }
 
     #[test]

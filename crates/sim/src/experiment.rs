@@ -70,7 +70,12 @@ pub fn track_walk(
     imu: &ImuTrace,
     lags: usize,
 ) -> Result<TrackedWalk, Error> {
-    let mut engine = Engine::new(Arc::clone(site), config.clone())?;
+    // The smoother keeps as many steps as the configured lag: enough for every lag scored.
+    let config = EngineConfig {
+        fixed_lag_epochs: config.fixed_lag_epochs.max(lags.saturating_sub(1)),
+        ..config.clone()
+    };
+    let mut engine = Engine::new(Arc::clone(site), config)?;
     let mut points = Vec::with_capacity(walk.epochs.len());
     let mut lag_errors = vec![Vec::new(); lags];
     let mut previous = None;

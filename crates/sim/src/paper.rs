@@ -97,7 +97,7 @@ pub struct PaperReport {
     /// Full summaries of every method, by the same names.
     pub summaries: Vec<(String, ErrorSummary)>,
     /// Mean error of the smoothed estimate `lag` epochs behind the newest (the fixed-lag
-    /// estimate, `Engine::smoothed_position`), for lag 0..=6, with
+    /// estimate, `Engine::smoothed_position`), for lag 0..=12, with
     /// the default engine (Hoang transitions, full motion, pseudo states).
     pub fixed_lag_mean_error_m: Vec<(usize, f64)>,
     /// Room-level accuracy of each method (El Gemayel et al. §II-B): the share of epochs whose
@@ -210,7 +210,7 @@ pub fn run_papers(experiment: &PaperExperiment) -> Result<PaperReport, Error> {
         },
     ];
     let mut scored: Vec<Vec<EpochError>> = vec![Vec::new(); methods.len() + 1];
-    let mut lags: Vec<Vec<f64>> = vec![Vec::new(); 7];
+    let mut lags: Vec<Vec<f64>> = vec![Vec::new(); 13];
     for run in 0..experiment.runs {
         let seed = walk_seed(experiment.seed, run);
         let walk = office_em.walk(seed, experiment.walk_length_m);

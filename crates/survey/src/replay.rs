@@ -275,13 +275,31 @@ pub fn replay_observed(
             last_epoch = Some(position.timestamp_ns);
             out.publish(engine, position, options.estimate_states_grid);
             if options.fixed_lag {
-                out.fixed_lag.extend(engine.fixed_lag_position());
+                push_smoothed(&mut out.fixed_lag, engine.fixed_lag_position());
             }
         }
         observer(call);
     }
+    if options.fixed_lag {
+        // The walk ends: the epochs the lag has not reached yet get their estimates smoothed
+        // by what there is, as an app flushing at the end of a session would.
+        for lag in (0..engine.config().fixed_lag_epochs).rev() {
+            push_smoothed(&mut out.fixed_lag, engine.smoothed_position(lag));
+        }
+    }
     out.track = engine.track();
     out
+}
+
+/// Adds a smoothed point: one for the epoch of the last replaces it (smoothed by more epochs,
+/// as the first epochs are until the track holds the whole lag), an older one is dropped.
+fn push_smoothed(points: &mut Vec<TrackPoint>, point: Option<TrackPoint>) {
+    let Some(point) = point else { return };
+    match points.last_mut() {
+        Some(last) if last.timestamp_ns == point.timestamp_ns => *last = point,
+        Some(last) if last.timestamp_ns > point.timestamp_ns => {}
+        _ => points.push(point),
+    }
 }
 
 /// The motion `tracker` measured up to `t`, with what `mask` withholds removed.

@@ -226,8 +226,8 @@ fn scorer(floor: usize, zones: Option<&ZoneTruth>) -> impl Fn(&Estimate, (f64, f
 
 /// A replay's three estimates: the live positions, the fixed-lag estimates and the Viterbi
 /// track (the last two need a track window as long as the walk). Smoothed points carry the
-/// live radius of their epoch; the last `lag` epochs get their fixed-lag estimate when the walk
-/// ends, from the final track, as an app flushing at the end of a session would.
+/// live radius of their epoch; the replay smooths the last `lag` epochs by what there is when
+/// the walk ends, and any epoch after the last smoothed one takes its state on the final track.
 pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
     let live = live_estimates(&r.positions);
     let radius: HashMap<u64, (f64, f64)> =
