@@ -10,12 +10,13 @@
 //! (sensor batches, a scan or a timer epoch, the fixed-lag estimate), as the median, 90th
 //! percentile and mean over every position, and the medians of scan and timer epochs apart. A
 //! scan epoch scores the scan against the radio map; a timer epoch only moves the belief.
+//! `--live-only` leaves the fixed-lag estimate out, as for an app that shows only the live one.
 //!
 //! ```text
 //! waymark survey target/ilc/site1/{B1,F1,F2,F3,F4} --out mall.wmsite
 //! # or, in a minute, the same states and fingerprints without the calibration:
 //! cargo run --release -p waymark-eval --example timing_site -- mall.wmsite 8 0.03 0.1 target/ilc/site1/{B1,F1,F2,F3,F4}
-//! cargo run --release -p waymark-eval --example site_epoch_time -- mall.wmsite target/ilc/site1/F1/path_data_files/*.txt
+//! cargo run --release -p waymark-eval --example site_epoch_time -- [--live-only] mall.wmsite target/ilc/site1/F1/path_data_files/*.txt
 //! ```
 
 use cpu_time::ThreadTime;
@@ -27,9 +28,14 @@ use waymark_survey::io::Trace;
 use waymark_survey::replay::{replay_observed, Call, ReplayOptions};
 
 fn main() {
-    let args: Vec<String> = std::env::args().skip(1).collect();
+    let mut args: Vec<String> = std::env::args().skip(1).collect();
+    let live_only = args.first().is_some_and(|a| a == "--live-only");
+    if live_only {
+        args.remove(0);
+    }
+    let options = ReplayOptions { fixed_lag: !live_only, ..ReplayOptions::default() };
     let Some((site_path, walks)) = args.split_first() else {
-        eprintln!("usage: site_epoch_time SITE WALK.txt...");
+        eprintln!("usage: site_epoch_time [--live-only] SITE WALK.txt...");
         std::process::exit(2);
     };
     let site = Arc::new(Site::load(site_path).unwrap_or_else(|e| panic!("{site_path}: {e}")));
@@ -57,7 +63,7 @@ fn main() {
                 pending = 0.0;
             }
         };
-        let replayed = replay_observed(&mut engine, &trace, &ReplayOptions::default(), &mut observer);
+        let replayed = replay_observed(&mut engine, &trace, &options, &mut observer);
         let elapsed = [cpu.elapsed().as_secs_f64(), wall.elapsed().as_secs_f64()];
         if replayed.positions.is_empty() {
             continue;
