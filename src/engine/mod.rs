@@ -83,7 +83,7 @@ pub struct Engine {
     history: History,
     /// What the user's walks taught ([`Engine::learn_habits`]), and its transition multipliers.
     habits: HabitModel,
-    habit_prior: HabitPrior,
+    habit_prior: Arc<HabitPrior>,
     /// The site's [`radio_fit_floor`](crate::site::Calibration::radio_fit_floor), when the
     /// configuration takes the site's calibration.
     radio_fit_floor: Option<f64>,
@@ -166,7 +166,7 @@ impl Engine {
             zone_mass: vec![0.0; site_zones],
             history: History::new(config.history_epochs),
             habits,
-            habit_prior: HabitPrior::default(),
+            habit_prior: Arc::default(),
             radio_fit_floor,
             epoch_radio_fit: None,
             unsurveyed,
@@ -361,7 +361,7 @@ impl Engine {
     pub fn set_habits(&mut self, model: HabitModel) {
         // The steps the smoother holds were taken with the old habits.
         self.smoother.clear();
-        self.habit_prior = HabitPrior::new(&model, &self.reach, self.site.spacing_m());
+        self.habit_prior = Arc::new(HabitPrior::new(&model, &self.reach, self.site.spacing_m()));
         self.habits = model;
     }
 

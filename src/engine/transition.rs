@@ -7,6 +7,7 @@ use crate::habits::{HabitPrior, Habitual};
 use crate::hmm::{HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach};
 use crate::sensors::{MdiScenario, MotionState, MotionUpdate};
 use crate::site::{ReachTable, Site};
+use std::sync::Arc;
 
 impl Engine {
     /// Predicts over `dt_s` (none at the first epoch) with the configured model and `motion`,
@@ -36,19 +37,11 @@ impl Engine {
         if let Some(last) = self.last_epoch_ns {
             self.smoother.begin(last, self.filter.posterior(), model);
         }
-        // Field by field, as the filter and the track are borrowed beside.
-        let parts = TransitionParts::of(
-            &self.site,
-            &self.reach,
-            self.map_reach.as_deref(),
-            &self.habit_prior,
-            &self.config,
-        );
+        let parts = self.transition_parts();
         let (filter, viterbi, ln_emission) = (&mut self.filter, &mut self.viterbi, &self.ln_emission);
-        let mut result = Err(crate::hmm::FilterError::Degenerate);
         // Each row of the transition written once for the Viterbi step and the prediction.
-        parts.with(&model, &mut |transition| {
-            result = filter.step_with_viterbi(viterbi, timestamp_ns, transition, ln_emission);
+        let result = parts.with(&model, |transition| {
+            filter.step_with_viterbi(viterbi, timestamp_ns, transition, ln_emission)
         });
         match result {
             Ok(evidence) => {
@@ -112,17 +105,23 @@ impl Engine {
         StepModel { kind, reach_m, ratio, whole_reach: self.whole_reach }
     }
 
+    /// What this engine's transitions are built over. It holds its own references, so the
+    /// filter and the track can be stepped while it is in hand.
+    fn transition_parts(&self) -> TransitionParts {
+        TransitionParts {
+            site: Arc::clone(&self.site),
+            reach: Arc::clone(&self.reach),
+            map_reach: self.map_reach.clone(),
+            habits: Arc::clone(&self.habit_prior),
+            mahalanobis_cap: self.config.hoang.mahalanobis_cap,
+        }
+    }
+
     /// The fixed-lag posterior `lag` ≥ 1 epochs back ([`FixedLagSmoother`]) into `out`, and
     /// that epoch's time.
     pub(super) fn smoothed_posterior(&self, lag: usize, out: &mut Vec<f64>) -> Option<u64> {
-        let parts = TransitionParts::of(
-            &self.site,
-            &self.reach,
-            self.map_reach.as_deref(),
-            &self.habit_prior,
-            &self.config,
-        );
-        self.smoother.smooth(lag, self.filter.posterior(), out, |model, f| parts.with(model, f))
+        let parts = self.transition_parts();
+        self.smoother.smooth(lag, self.filter.posterior(), out, |model, f| parts.with(model, |t| f(t)))
     }
 
     /// Hoang eq. 14's γ for an epoch at `timestamp_ns` with `motion`, of the floor the engine
@@ -230,28 +229,18 @@ enum StepKind {
 }
 
 /// What a [`StepModel`] becomes a transition over.
-struct TransitionParts<'a> {
-    site: &'a Site,
-    reach: &'a ReachTable,
-    map_reach: Option<&'a ReachTable>,
-    habits: &'a HabitPrior,
+struct TransitionParts {
+    site: Arc<Site>,
+    reach: Arc<ReachTable>,
+    map_reach: Option<Arc<ReachTable>>,
+    habits: Arc<HabitPrior>,
     mahalanobis_cap: f64,
 }
 
-impl<'a> TransitionParts<'a> {
-    fn of(
-        site: &'a Site,
-        reach: &'a ReachTable,
-        map_reach: Option<&'a ReachTable>,
-        habits: &'a HabitPrior,
-        config: &EngineConfig,
-    ) -> Self {
-        Self { site, reach, map_reach, habits, mahalanobis_cap: config.hoang.mahalanobis_cap }
-    }
-
+impl TransitionParts {
     /// Hands `model`'s transition, with the learned habits multiplied in, to `f`.
-    fn with(&self, model: &StepModel, f: &mut dyn FnMut(&dyn Transition)) {
-        let table = prediction_table(self.reach, self.map_reach, model.whole_reach);
+    fn with<R>(&self, model: &StepModel, f: impl FnOnce(&dyn Transition) -> R) -> R {
+        let table = prediction_table(&self.reach, self.map_reach.as_deref(), model.whole_reach);
         let (reach, hipe, hoang);
         let transition: &dyn Transition = match model.kind {
             StepKind::Reach => {
@@ -259,12 +248,12 @@ impl<'a> TransitionParts<'a> {
                 &reach
             }
             StepKind::Hipe { region, ratio } => {
-                hipe = HipeTransition { site: self.site, table, region, ratio };
+                hipe = HipeTransition { site: &self.site, table, region, ratio };
                 &hipe
             }
             StepKind::Hoang { movement_m, walked_m, variance_m2, across_variance_m2, exponent } => {
                 hoang = HoangTransition {
-                    site: self.site,
+                    site: &self.site,
                     table,
                     reach_m: model.reach_m,
                     ratio: model.ratio,
@@ -282,7 +271,7 @@ impl<'a> TransitionParts<'a> {
         if self.habits.is_empty() {
             f(transition)
         } else {
-            f(&Habitual { inner: transition, prior: self.habits })
+            f(&Habitual { inner: transition, prior: &self.habits })
         }
     }
 }
