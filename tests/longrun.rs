@@ -20,6 +20,9 @@ fn a_short_long_run_keeps_memory_bounded_and_positions_finite() {
         // The Viterbi window is full from the first report on and its memory is at its bound.
         assert_eq!(i.track_window_epochs, report.track_window_capacity, "{i:?}");
         assert_eq!(i.track_memory_bytes, report.track_memory_bound_bytes, "{i:?}");
+        // The fixed-lag smoother holds its steps, within its bound.
+        assert!(i.fixed_lag_memory_bytes > 0, "{i:?}");
+        assert!(i.fixed_lag_memory_bytes <= report.fixed_lag_memory_bound_bytes, "{i:?}");
         assert!(i.mean_error_m.is_finite() && i.mean_error_m < 2.0, "{i:?}");
     }
     let input = &report.intervals.last().unwrap().input;

@@ -252,6 +252,12 @@ impl Engine {
         self.viterbi.memory_bytes()
     }
 
+    /// Bytes held by the fixed-lag smoother: at most `fixed_lag_epochs` steps, each with the
+    /// posterior and prediction over the states holding mass (bounded by every state).
+    pub fn fixed_lag_memory_bytes(&self) -> usize {
+        self.smoother.memory_bytes()
+    }
+
     /// The engine's state, for tests (see [`EngineSnapshot`]).
     #[doc(hidden)]
     pub fn snapshot(&self) -> EngineSnapshot {

@@ -17,8 +17,14 @@ use super::transition::Transition;
 use std::collections::VecDeque;
 
 /// A state's α below `CUT_MASS / N` is not kept: the mass left out of a step is at most
-/// `CUT_MASS`, and so is what the smoothed estimate could have moved there.
+/// `CUT_MASS`, and so is what the smoothed estimate could have moved there (larger cuts,
+/// measured: docs/results.md#the-epoch-as-apps-run-it).
 pub const CUT_MASS: f64 = 1e-6;
+
+/// Bytes per state of a step's vectors: (state, α) in single precision, the predicted state
+/// and its q in double.
+pub const STEP_BYTES_PER_STATE: usize =
+    std::mem::size_of::<(u32, f32)>() + std::mem::size_of::<u32>() + std::mem::size_of::<f64>();
 
 /// One forward step as the smoother needs it, with the transition model `M` it stepped with.
 #[derive(Clone, Debug)]
@@ -52,7 +58,7 @@ fn kept(posterior: &[f64]) -> impl Iterator<Item = (u32, f64)> + '_ {
 impl<M: Clone> FixedLagSmoother<M> {
     /// A smoother over up to `capacity` steps back.
     pub fn new(capacity: usize) -> Self {
-        Self { capacity, steps: VecDeque::with_capacity(capacity), pending: None }
+        Self { capacity, steps: VecDeque::new(), pending: None }
     }
 
     /// Forgets every step: the posterior no longer follows from the last by a transition
@@ -72,7 +78,9 @@ impl<M: Clone> FixedLagSmoother<M> {
         self.steps.is_empty()
     }
 
-    /// Bytes held by the steps.
+    /// Bytes held by the steps (capacity, not length). Each of a step's three vectors holds
+    /// at most N entries and grows by doubling, so the whole is below
+    /// `2 · capacity · N ·` [`STEP_BYTES_PER_STATE`].
     pub fn memory_bytes(&self) -> usize {
         let bytes = |s: &Step<M>| {
             s.prior.capacity() * std::mem::size_of::<(u32, f32)>()
@@ -306,6 +314,7 @@ mod tests {
         let (filter, mut smoother) = run(&stays, &emissions, 2);
         assert_eq!(smoother.len(), 2);
         assert!(smoother.memory_bytes() > 0);
+        assert!(smoother.memory_bytes() <= 2 * 2 * 4 * STEP_BYTES_PER_STATE);
         let mut out = Vec::new();
         let at = smoother.smooth(2, filter.posterior(), &mut out, |&stay, f| f(&Ring { n: 4, stay }));
         assert_eq!(at, Some(30));

@@ -575,12 +575,14 @@ fn long_run(args: &SimulateArgs) -> ExitCode {
             report.rss_end_over_1h.map_or("-".to_owned(), |r| format!("{r:.3}"))
         );
         println!(
-            "Viterbi window: {} epochs of {} states, {} B accounted (bound {} B); fixed lag {} epochs read from it",
+            "Viterbi window: {} epochs of {} states, {} B accounted (bound {} B); fixed lag {} epochs, {} B (bound {} B)",
             report.track_window_capacity,
             report.states,
             last.map_or(0, |i| i.track_memory_bytes),
             report.track_memory_bound_bytes,
-            report.fixed_lag_epochs
+            report.fixed_lag_epochs,
+            last.map_or(0, |i| i.fixed_lag_memory_bytes),
+            report.fixed_lag_memory_bound_bytes
         );
         println!(
             "Generator: largest segment held {:.1} MiB. Positions: {} epochs, {} non-finite; mean error {:.2} m. FFI/core mismatches: {}",

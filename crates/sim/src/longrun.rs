@@ -19,6 +19,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 use waymark::ffi::uniffi as ffi;
+use waymark::hmm::STEP_BYTES_PER_STATE;
 use waymark::radio::{Scan, TransmitterId};
 use waymark::sensors::{MotionStats, SensorSample};
 use waymark::site::{Site, PSEUDO_SPACING_M};
@@ -118,6 +119,8 @@ pub struct IntervalReport {
     pub hwm_kb: Option<u64>,
     /// Bytes the engine accounts to its Viterbi window ([`Engine::track_memory_bytes`]).
     pub track_memory_bytes: usize,
+    /// Bytes its fixed-lag smoother holds ([`Engine::fixed_lag_memory_bytes`]).
+    pub fixed_lag_memory_bytes: usize,
     /// Epochs in the Viterbi window (the fixed-lag estimate reads from it).
     pub track_window_epochs: usize,
     /// Epochs in this interval.
@@ -160,8 +163,11 @@ pub struct LongRunReport {
     /// states) + 3 × states × 8 (scores: current, next, and the previous ones kept while an
     /// epoch runs).
     pub track_memory_bound_bytes: usize,
-    /// Fixed lag, epochs (read from the window; no memory of its own).
+    /// Fixed lag, epochs: the steps the fixed-lag smoother keeps.
     pub fixed_lag_epochs: usize,
+    /// The smoother's bound in bytes: 2 × lag × states × `STEP_BYTES_PER_STATE` (each step's
+    /// vectors over at most every state, grown by doubling).
+    pub fixed_lag_memory_bound_bytes: usize,
     /// Per interval.
     pub intervals: Vec<IntervalReport>,
     /// RSS at the first report at or after 1 h, kB.
@@ -360,6 +366,7 @@ pub fn run(
                 rss_kb,
                 hwm_kb,
                 track_memory_bytes: engines.core.track_memory_bytes(),
+                fixed_lag_memory_bytes: engines.core.fixed_lag_memory_bytes(),
                 track_window_epochs: engines.core.track().len(),
                 epochs: interval_epochs,
                 finite_positions: finite - seen.0,
@@ -399,6 +406,7 @@ pub fn run(
             * if states <= 1 << 16 { 2 } else { 4 }
             + 3 * states * 8,
         fixed_lag_epochs: engine_config.fixed_lag_epochs,
+        fixed_lag_memory_bound_bytes: 2 * engine_config.fixed_lag_epochs * states * STEP_BYTES_PER_STATE,
         rss_1h_kb,
         rss_end_kb,
         rss_end_over_1h: rss_1h_kb.zip(rss_end_kb).map(|(a, b)| b as f64 / a as f64),
