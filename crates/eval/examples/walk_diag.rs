@@ -5,8 +5,9 @@
 //! `GAMMA_WITHOUT`; by default 0.03 and 0.1, `docs/results.md#five-floors`). Prints, per configuration, the mean
 //! error at the WiFi scans and the walks whose first estimate, and whose first scored scan, is
 //! on a wrong floor; the paired
-//! difference of consecutive configurations (in `CONFIGS` order) with its standard error over
-//! walks; and one line per test walk. Errors do not depend on the radius factors, so the means
+//! mean error by the scored scan's place in its walk (scans 1-2, 3-5, 6-10, 11-20, after 20);
+//! the difference of consecutive configurations (in `CONFIGS` order) with its standard error
+//! over walks; and one line per test walk. Errors do not depend on the radius factors, so the means
 //! are those of the evaluation ([`waymark_eval::real`]) at the same γ and fingerprint radius (`FP_RADIUS`).
 //!
 //! ```text
@@ -31,6 +32,10 @@ use waymark_eval::real::{evaluate_on, survey_site, EvalOptions};
 use waymark_survey::calibrate::FloorData;
 use waymark_survey::io::ilc::Trace;
 use waymark_survey::scoring::score_scans;
+
+/// The first scored scan (from 0) of each band the errors are averaged over by their place in
+/// the walk: how much of the error is the start, before the posterior has settled.
+const INDEX_BANDS: [usize; 5] = [0, 2, 5, 10, 20];
 
 fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
@@ -79,12 +84,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     // Per configuration and walk: (Σ error with the floor penalty, scans, first estimate off
     // floor, first scored scan off floor).
     let mut walks: BTreeMap<&str, Vec<(f64, usize, bool, bool)>> = BTreeMap::new();
+    // Per configuration, by the scored scan's place in its walk: (Σ error, scans).
+    let mut by_index: BTreeMap<&str, [(f64, usize); INDEX_BANDS.len()]> = BTreeMap::new();
     for key in &configs {
         for (result, &(f, trace)) in results.iter().zip(&tests) {
             let estimates = result.estimates.get(key).map_or(&[][..], Vec::as_slice);
             let (scans, _) = score_scans(trace, f, estimates, None);
             let first_off = estimates.first().is_some_and(|e| e.floor != f);
             let first_scan_off = scans.first().is_some_and(|s| !s.floor_correct);
+            let bands = by_index.entry(key).or_default();
+            for (k, scan) in scans.iter().enumerate() {
+                let band = INDEX_BANDS.iter().rposition(|&first| k >= first).unwrap_or(0);
+                bands[band].0 += scan.penalised_m();
+                bands[band].1 += 1;
+            }
             let sum = scans.iter().map(|s| s.penalised_m()).sum();
             walks.entry(key).or_default().push((sum, scans.len(), first_off, first_scan_off));
         }
@@ -100,6 +113,19 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             r.epochs,
             w.len()
         );
+    }
+    for key in &configs {
+        let bands: Vec<String> = (0..INDEX_BANDS.len())
+            .map(|b| {
+                let (sum, n) = by_index[key.as_str()][b];
+                let scans = match INDEX_BANDS.get(b + 1) {
+                    Some(next) => format!("{}-{next}", INDEX_BANDS[b] + 1),
+                    None => format!("{}+", INDEX_BANDS[b] + 1),
+                };
+                format!("{scans} {:.2} m ({n})", sum / n.max(1) as f64)
+            })
+            .collect();
+        println!("{key:<26} by scored scan of the walk: {}", bands.join(", "));
     }
     for pair in configs.windows(2) {
         let (a, b) = (&walks[pair[0].as_str()], &walks[pair[1].as_str()]);
