@@ -344,6 +344,23 @@ fn print_calibration(c: &calibrate::CalibrationReport) {
             curve.join(", ")
         );
     }
+    println!("coverage: held-out epochs beyond the map the floor's other walks make (docs/surveying.md#is-the-survey-enough):");
+    for f in &c.floors {
+        let cov = &f.coverage;
+        if cov.epochs == 0 {
+            println!("{:>4}: no held-out epochs (a floor needs two walks or more)", f.name);
+            continue;
+        }
+        let mean = |m: f64| if m.is_finite() { format!("{m:.2} m") } else { "-".into() };
+        println!(
+            "{:>4}: {:.0}% of {} (mean error {} on that map, {} beyond it)",
+            f.name,
+            100.0 * cov.beyond_map_share(),
+            cov.epochs,
+            mean(cov.mean_error_on_map_m),
+            mean(cov.mean_error_beyond_map_m)
+        );
+    }
     let bands = |r: &calibrate::OffMapReport| -> String {
         let bands: Vec<String> = r
             .bands

@@ -13,9 +13,11 @@ use waymark::recorder::{RecorderOptions, SurveyRecorder};
 use waymark::sensors::SensorSample;
 use waymark::{Engine, EngineConfig, Reading, Scan, Site, TransmitterId};
 
-fn waymark(args: &[&str]) {
+/// Runs the CLI; returns its standard output.
+fn waymark(args: &[&str]) -> String {
     let out = Command::new(env!("CARGO_BIN_EXE_waymark")).args(args).output().unwrap();
     assert!(out.status.success(), "waymark {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8(out.stdout).unwrap()
 }
 
 fn read(path: &Path) -> Value {
@@ -108,7 +110,7 @@ fn a_recorded_survey_of_the_office_positions_its_test_walk_like_the_demo() {
     assert_eq!(walks, 12, "sim-export's survey walks");
 
     let site_file = dir.path().join("site.json");
-    waymark(&[
+    let printed = waymark(&[
         "survey",
         recorded.join("F1").to_str().unwrap(),
         "--out",
@@ -116,6 +118,9 @@ fn a_recorded_survey_of_the_office_positions_its_test_walk_like_the_demo() {
         "--name",
         "office",
     ]);
+    // The floor's coverage: how much of its held-out walks lay beyond the others' map.
+    let coverage = printed.lines().skip_while(|l| !l.starts_with("coverage:")).nth(1).unwrap_or_default();
+    assert!(coverage.trim_start().starts_with("F1: ") && coverage.contains("% of "), "{printed}");
     let test_walk = read(&export.join("walk.json"));
     let surveyed = mean_error(Site::load(&site_file).unwrap(), &test_walk);
     let demo = mean_error(Site::load(export.join("site.json")).unwrap(), &test_walk);

@@ -95,6 +95,12 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert_eq!(epochs(&calibration.on_map), calibration.epochs, "{calibration:?}");
     assert_eq!(epochs(&calibration.off_map), calibration.epochs_off_map, "{calibration:?}");
     assert_eq!(epochs(&calibration.off_map_without_floor), calibration.epochs_off_map);
+    // The floor's coverage comes from the same replays as shipped: its epochs on the map are
+    // those the radius factors were fitted on.
+    let coverage = &floor.coverage;
+    assert_eq!(coverage.epochs - coverage.beyond_map, calibration.epochs, "{coverage:?}");
+    assert!(coverage.mean_error_on_map_m.is_finite() && coverage.mean_error_on_map_m > 0.0, "{coverage:?}");
+    assert!(coverage.beyond_map == 0 || coverage.mean_error_beyond_map_m.is_finite(), "{coverage:?}");
 
     // Sparse scans: the held-out walks replayed throttled at every γ, their own γ only when it
     // beats the site-wide one beyond its standard error, and a band's radius factors where it

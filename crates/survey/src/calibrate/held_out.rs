@@ -195,4 +195,23 @@ mod tests {
         assert!((68..=70).contains(&held(0)), "{scale:?} {}", held(0));
         assert!((95..=97).contains(&held(1)), "{scale:?} {}", held(1));
     }
+
+    /// A floor's coverage splits its epochs by the map the other walks made, and a wrong floor
+    /// counts its penalty in the mean as the γ search does.
+    #[test]
+    fn coverage_splits_epochs_on_and_beyond_the_map() {
+        let on = [tag(1.0, 2.0, 0.0), tag(3.0, 2.0, 0.0), tag(5.0, 2.0, 0.0)];
+        let mut beyond = tag(10.0, 2.0, 0.0);
+        beyond.beyond_map_m = 4.0;
+        let mut wrong_floor = tag(2.0, 2.0, 0.0);
+        wrong_floor.scored.floor_correct = false;
+        let c = super::super::Coverage::of(on.iter().chain([&beyond, &wrong_floor]));
+        assert_eq!((c.epochs, c.beyond_map), (5, 1));
+        let penalty = crate::scoring::FLOOR_PENALTY_M;
+        assert!((c.mean_error_on_map_m - (1.0 + 3.0 + 5.0 + 2.0 + penalty) / 4.0).abs() < 1e-12, "{c:?}");
+        assert_eq!(c.mean_error_beyond_map_m, 10.0);
+        assert_eq!(c.beyond_map_share(), 0.2);
+        let none = super::super::Coverage::of([]);
+        assert!(none.beyond_map_share().is_nan() && none.mean_error_on_map_m.is_nan());
+    }
 }

@@ -14,7 +14,7 @@ pub use gamma::{ESTIMATE_STATES_GRID, GAMMA_GRID};
 pub use held_out::MIN_SCENARIO_EPOCHS;
 pub use radius::{RadiusPoint, FINGERPRINT_RADIUS_FOLDS, FINGERPRINT_RADIUS_GRID};
 pub use report::{
-    CalibrationReport, FloorCalibrationReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport,
+    CalibrationReport, Coverage, FloorCalibrationReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport,
     SparseScansReport,
 };
 
@@ -430,6 +430,7 @@ pub fn survey_calibrated(
             jackknife_se_m: best.map(|k| curve[k].jackknife_se_m),
             gamma: curve,
             gamma_without_movement: curve_still,
+            coverage: Coverage::default(),
         };
         weights.push([floor_report.rssi_weight, floor_report.rssi_weight_without_movement]);
         report.floors.push(floor_report);
@@ -493,6 +494,10 @@ pub fn survey_calibrated(
         progress();
         tags.unwrap_or_default()
     });
+    for (f, floor_report) in report.floors.iter_mut().enumerate() {
+        let mine = jobs.iter().zip(&shipped).filter(|((ff, _), _)| *ff == f);
+        floor_report.coverage = Coverage::of(mine.flat_map(|(_, s)| &s.0));
+    }
     let tags: Vec<&Tag> = shipped.iter().flat_map(|s| &s.0).collect();
     let on: Vec<&Tag> = tags.iter().copied().filter(|t| t.beyond_map_m == 0.0).collect();
     calibration.accuracy_scale = radius_factors(&on);

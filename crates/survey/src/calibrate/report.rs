@@ -43,6 +43,53 @@ pub struct FloorCalibrationReport {
     pub best_rssi_weight: Option<f64>,
     /// Jackknife standard error of the mean error at that γ, m.
     pub jackknife_se_m: Option<f64>,
+    /// How much of the floor more than one walk surveyed.
+    pub coverage: Coverage,
+}
+
+/// A floor's held-out walks replayed with the engine as shipped, split by whether the truth
+/// lay on the map the other walks made. An epoch beyond it is on a stretch only the held-out
+/// walk surveyed: a phone there is positioned from the neighbours, so a high share says the
+/// floor needs more walks (`docs/surveying.md#is-the-survey-enough`).
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct Coverage {
+    /// Held-out epochs scored.
+    pub epochs: usize,
+    /// Of those, epochs whose truth lay beyond the map the other walks made.
+    pub beyond_map: usize,
+    /// Mean error of the epochs on that map, m (floor penalty included; NaN, `null` in JSON,
+    /// without any).
+    pub mean_error_on_map_m: f64,
+    /// Mean error of the epochs beyond it, m (the same).
+    pub mean_error_beyond_map_m: f64,
+}
+
+impl Coverage {
+    /// The coverage of a floor from its held-out epochs.
+    pub(super) fn of<'a>(tags: impl IntoIterator<Item = &'a Tag>) -> Self {
+        let (mut on, mut beyond) = ((0usize, 0.0), (0usize, 0.0));
+        for t in tags {
+            let side = if t.beyond_map_m > 0.0 { &mut beyond } else { &mut on };
+            side.0 += 1;
+            side.1 += t.scored.penalised_m();
+        }
+        let mean = |(n, sum): (usize, f64)| if n > 0 { sum / n as f64 } else { f64::NAN };
+        Coverage {
+            epochs: on.0 + beyond.0,
+            beyond_map: beyond.0,
+            mean_error_on_map_m: mean(on),
+            mean_error_beyond_map_m: mean(beyond),
+        }
+    }
+
+    /// The share of epochs beyond the map (NaN without epochs).
+    pub fn beyond_map_share(&self) -> f64 {
+        if self.epochs > 0 {
+            self.beyond_map as f64 / self.epochs as f64
+        } else {
+            f64::NAN
+        }
+    }
 }
 
 /// What the survey's calibration measured.
