@@ -62,6 +62,10 @@ pub struct SurveyArgs {
     /// loads in builds before unsurveyed states).
     #[arg(long, default_value_t = waymark_survey::UNSURVEYED_MARGIN_M)]
     unsurveyed_margin_m: f64,
+    /// Also write where the held-out walks went beyond the map the other walks made, as
+    /// GeoJSON points (the site must be geo-referenced): the stretches to walk again.
+    #[arg(long)]
+    coverage_out: Option<PathBuf>,
     #[command(flatten)]
     salt: SaltArgs,
 }
@@ -255,6 +259,25 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
     };
     if let Err(e) = write_site(&args.out, &site) {
         return fail("survey", e);
+    }
+    if let Some(path) = &args.coverage_out {
+        let Some(geojson) = calibrate::coverage_geojson(&site, &calibration) else {
+            return fail(
+                "survey",
+                format!(
+                    "{} written, but it is not geo-referenced (a floor has no plan): no coverage map",
+                    args.out.display()
+                ),
+            );
+        };
+        if let Err(e) = std::fs::write(path, geojson.to_string()) {
+            return fail("survey", format!("{}: {e}", path.display()));
+        }
+        let points = geojson["features"].as_array().map_or(0, Vec::len);
+        println!(
+            "coverage map: {points} held-out epochs beyond the others' map written to {}",
+            path.display()
+        );
     }
     for f in &report.floors {
         println!(

@@ -101,6 +101,27 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert_eq!(coverage.epochs - coverage.beyond_map, calibration.epochs, "{coverage:?}");
     assert!(coverage.mean_error_on_map_m.is_finite() && coverage.mean_error_on_map_m > 0.0, "{coverage:?}");
     assert!(coverage.beyond_map == 0 || coverage.mean_error_beyond_map_m.is_finite(), "{coverage:?}");
+    assert_eq!(coverage.beyond_map_points.len(), coverage.beyond_map);
+    // The coverage map: every such epoch as a GeoJSON point with its walk, on the floor's plan
+    // (its longitude/latitude box, read from the competition's GeoJSON).
+    let geojson = calibrate::coverage_geojson(&site, &calibration).expect("F1 has a plan");
+    let features = geojson["features"].as_array().unwrap();
+    assert_eq!(features.len(), coverage.beyond_map);
+    assert!(!features.is_empty(), "12 walks leave stretches only one of them walked");
+    let [lo, hi] = floors[0].plan.as_ref().and_then(|p| p.lon_lat_box).expect("a GeoJSON plan");
+    let survey_walks: Vec<&str> = floors[0].survey.iter().map(|t| t.name.as_str()).collect();
+    for feature in features {
+        let at = &feature["geometry"]["coordinates"];
+        let (lon, lat) = (at[0].as_f64().unwrap(), at[1].as_f64().unwrap());
+        assert!((lo[0]..=hi[0]).contains(&lon) && (lo[1]..=hi[1]).contains(&lat), "{feature}");
+        let properties = &feature["properties"];
+        assert!(survey_walks.contains(&properties["walk"].as_str().unwrap()), "{feature}");
+        assert_eq!(properties["floor"], "F1");
+        assert!(properties["beyond_map_m"].as_f64().is_some_and(|m| m > 0.0), "{feature}");
+    }
+    // GeoJSON has no frame but WGS84: a site without an anchor has no coverage map.
+    let unanchored = site.clone().with_anchor(None).unwrap();
+    assert!(calibrate::coverage_geojson(&unanchored, &calibration).is_none());
 
     // Sparse scans: the held-out walks replayed throttled at every γ, their own γ only when it
     // beats the site-wide one beyond its standard error, and a band's radius factors where it

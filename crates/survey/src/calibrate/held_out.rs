@@ -42,6 +42,8 @@ pub(super) struct Tag {
     pub scored: Scored,
     /// How far its truth was beyond the held-out site's map, m (0 on it, `OnMap`).
     pub beyond_map_m: f64,
+    /// Where the truth was, in its floor's frame, m.
+    pub truth: [f64; 2],
     /// The scenario the engine positioned it in.
     pub scenario: MdiScenario,
     /// The radio fit of its scan.
@@ -81,6 +83,7 @@ pub(super) fn tag(trace: &Trace, floor: usize, mapped: &OnMap, positions: &[waym
         .map(|(scored, (p, band, truth))| Tag {
             scored,
             beyond_map_m: mapped.beyond_m(truth),
+            truth: [truth.0, truth.1],
             scenario: p.scenario,
             radio_fit: p.radio_fit,
             band,
@@ -175,6 +178,7 @@ mod tests {
                 in_zone: None,
             },
             beyond_map_m: 0.0,
+            truth: [error_m, 0.0],
             scenario: MdiScenario::DistanceHeading,
             radio_fit: None,
             band: None,
@@ -205,13 +209,18 @@ mod tests {
         beyond.beyond_map_m = 4.0;
         let mut wrong_floor = tag(2.0, 2.0, 0.0);
         wrong_floor.scored.floor_correct = false;
-        let c = super::super::Coverage::of(on.iter().chain([&beyond, &wrong_floor]));
+        let tags = on.iter().chain([&beyond, &wrong_floor]).map(|t| ("walk-a", t));
+        let c = super::super::Coverage::of(tags);
         assert_eq!((c.epochs, c.beyond_map), (5, 1));
+        // The epoch beyond the map is listed where it was, with its walk.
+        let [point] = &c.beyond_map_points[..] else { panic!("{c:?}") };
+        assert_eq!((point.walk.as_str(), point.position_m), ("walk-a", [10.0, 0.0]));
+        assert_eq!((point.beyond_map_m, point.error_m), (4.0, 10.0));
         let penalty = crate::scoring::FLOOR_PENALTY_M;
         assert!((c.mean_error_on_map_m - (1.0 + 3.0 + 5.0 + 2.0 + penalty) / 4.0).abs() < 1e-12, "{c:?}");
         assert_eq!(c.mean_error_beyond_map_m, 10.0);
         assert_eq!(c.beyond_map_share(), 0.2);
-        let none = super::super::Coverage::of([]);
+        let none = super::super::Coverage::of(std::iter::empty::<(&str, &Tag)>());
         assert!(none.beyond_map_share().is_nan() && none.mean_error_on_map_m.is_nan());
     }
 }

@@ -14,8 +14,8 @@ pub use gamma::{ESTIMATE_STATES_GRID, GAMMA_GRID};
 pub use held_out::MIN_SCENARIO_EPOCHS;
 pub use radius::{RadiusPoint, FINGERPRINT_RADIUS_FOLDS, FINGERPRINT_RADIUS_GRID};
 pub use report::{
-    CalibrationReport, Coverage, FloorCalibrationReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport,
-    SparseScansReport,
+    coverage_geojson, CalibrationReport, Coverage, CoveragePoint, FloorCalibrationReport, GammaPoint,
+    MotionSummary, OffMapBand, OffMapReport, SparseScansReport,
 };
 
 use crate::io::Trace;
@@ -496,7 +496,9 @@ pub fn survey_calibrated(
     });
     for (f, floor_report) in report.floors.iter_mut().enumerate() {
         let mine = jobs.iter().zip(&shipped).filter(|((ff, _), _)| *ff == f);
-        floor_report.coverage = Coverage::of(mine.flat_map(|(_, s)| &s.0));
+        let tags =
+            mine.flat_map(|(&(_, w), s)| s.0.iter().map(move |t| (floors[f].survey[w].name.as_str(), t)));
+        floor_report.coverage = Coverage::of(tags);
     }
     let tags: Vec<&Tag> = shipped.iter().flat_map(|s| &s.0).collect();
     let on: Vec<&Tag> = tags.iter().copied().filter(|t| t.beyond_map_m == 0.0).collect();

@@ -62,16 +62,42 @@ pub struct Coverage {
     pub mean_error_on_map_m: f64,
     /// Mean error of the epochs beyond it, m (the same).
     pub mean_error_beyond_map_m: f64,
+    /// Where those epochs were: the stretches to walk again. Not in the JSON report;
+    /// [`coverage_geojson`] writes them.
+    #[serde(skip)]
+    pub beyond_map_points: Vec<CoveragePoint>,
+}
+
+/// A held-out epoch beyond the map the other walks made.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CoveragePoint {
+    /// The held-out walk's name.
+    pub walk: String,
+    /// Its true position in the floor's frame, m.
+    pub position_m: [f64; 2],
+    /// How far beyond the map, m.
+    pub beyond_map_m: f64,
+    /// The engine's error there, m (floor penalty included).
+    pub error_m: f64,
 }
 
 impl Coverage {
-    /// The coverage of a floor from its held-out epochs.
-    pub(super) fn of<'a>(tags: impl IntoIterator<Item = &'a Tag>) -> Self {
+    /// The coverage of a floor from its held-out epochs, each with its walk's name.
+    pub(super) fn of<'a>(tags: impl IntoIterator<Item = (&'a str, &'a Tag)>) -> Self {
         let (mut on, mut beyond) = ((0usize, 0.0), (0usize, 0.0));
-        for t in tags {
+        let mut beyond_map_points = Vec::new();
+        for (walk, t) in tags {
             let side = if t.beyond_map_m > 0.0 { &mut beyond } else { &mut on };
             side.0 += 1;
             side.1 += t.scored.penalised_m();
+            if t.beyond_map_m > 0.0 {
+                beyond_map_points.push(CoveragePoint {
+                    walk: walk.to_string(),
+                    position_m: t.truth,
+                    beyond_map_m: t.beyond_map_m,
+                    error_m: t.scored.penalised_m(),
+                });
+            }
         }
         let mean = |(n, sum): (usize, f64)| if n > 0 { sum / n as f64 } else { f64::NAN };
         Coverage {
@@ -79,6 +105,7 @@ impl Coverage {
             beyond_map: beyond.0,
             mean_error_on_map_m: mean(on),
             mean_error_beyond_map_m: mean(beyond),
+            beyond_map_points,
         }
     }
 
@@ -263,4 +290,31 @@ pub struct MotionSummary {
     pub heading_offset_deg: f64,
     /// Walks used.
     pub walks: usize,
+}
+
+/// The held-out epochs beyond the map of every floor of `report`, as a GeoJSON (RFC 7946)
+/// FeatureCollection of points in WGS84 longitude/latitude, each with its floor's name and
+/// level, its walk, how far beyond the map it was and the error there: where a survey of
+/// `site` needs more walks (`docs/surveying.md#is-the-survey-enough`). `None` when `site` is
+/// not geo-referenced, since GeoJSON has no other frame.
+pub fn coverage_geojson(site: &waymark::Site, report: &CalibrationReport) -> Option<serde_json::Value> {
+    site.anchor()?;
+    let mut features = Vec::new();
+    for (f, floor) in report.floors.iter().enumerate() {
+        for p in &floor.coverage.beyond_map_points {
+            let at = site.lat_lon(f, p.position_m[0], p.position_m[1])?;
+            features.push(serde_json::json!({
+                "type": "Feature",
+                "geometry": { "type": "Point", "coordinates": [at.lon_deg, at.lat_deg] },
+                "properties": {
+                    "floor": floor.name,
+                    "level": site.floor_level(f),
+                    "walk": p.walk,
+                    "beyond_map_m": p.beyond_map_m,
+                    "error_m": p.error_m,
+                },
+            }));
+        }
+    }
+    Some(serde_json::json!({ "type": "FeatureCollection", "features": features }))
 }
