@@ -43,7 +43,8 @@ pub struct FloorCalibrationReport {
     pub best_rssi_weight: Option<f64>,
     /// Jackknife standard error of the mean error at that γ, m.
     pub jackknife_se_m: Option<f64>,
-    /// How much of the floor more than one walk surveyed.
+    /// How much of the floor only one walk surveyed, from the held-out walks replayed as
+    /// shipped.
     pub coverage: Coverage,
 }
 
@@ -87,17 +88,20 @@ impl Coverage {
         let (mut on, mut beyond) = ((0usize, 0.0), (0usize, 0.0));
         let mut beyond_map_points = Vec::new();
         for (walk, t) in tags {
-            let side = if t.beyond_map_m > 0.0 { &mut beyond } else { &mut on };
-            side.0 += 1;
-            side.1 += t.scored.penalised_m();
-            if t.beyond_map_m > 0.0 {
+            let error_m = t.scored.penalised_m();
+            let side = if t.beyond_map_m > 0.0 {
                 beyond_map_points.push(CoveragePoint {
                     walk: walk.to_string(),
                     position_m: t.truth,
                     beyond_map_m: t.beyond_map_m,
-                    error_m: t.scored.penalised_m(),
+                    error_m,
                 });
-            }
+                &mut beyond
+            } else {
+                &mut on
+            };
+            side.0 += 1;
+            side.1 += error_m;
         }
         let mean = |(n, sum): (usize, f64)| if n > 0 { sum / n as f64 } else { f64::NAN };
         Coverage {
