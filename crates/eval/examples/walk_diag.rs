@@ -6,6 +6,7 @@
 //! error at the WiFi scans and the walks whose first estimate, and whose first scored scan, is
 //! on a wrong floor; the paired
 //! mean error by the scored scan's place in its walk (scans 1-2, 3-5, 6-10, 11-20, after 20);
+//! the error along the walk's direction and across it, mean and rms;
 //! the difference of consecutive configurations (in `CONFIGS` order) with its standard error
 //! over walks; and one line per test walk. Errors do not depend on the radius factors, so the means
 //! are those of the evaluation ([`waymark_eval::real`]) at the same γ and fingerprint radius (`FP_RADIUS`).
@@ -22,7 +23,8 @@
 //! `EngineConfig::estimate_states`, `max_speed_mps`, `HoangConfig::movement_variance_m2`,
 //! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms);
 //! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; the evaluation
-//! calibrates it).
+//! calibrates it); `FRACTION` keeps that share of each floor's survey walks, as `eval
+//! --survey-fraction` does.
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -31,7 +33,7 @@ use waymark::site::Calibration;
 use waymark_eval::real::{evaluate_on, survey_site, EvalOptions};
 use waymark_survey::calibrate::FloorData;
 use waymark_survey::io::ilc::Trace;
-use waymark_survey::scoring::score_scans;
+use waymark_survey::scoring::{score_scans, Estimate};
 
 /// The first scored scan (from 0) of each band the errors are averaged over by their place in
 /// the walk: how much of the error is the start, before the posterior has settled.
@@ -43,7 +45,10 @@ fn env_or<T: std::str::FromStr>(name: &str, default: T) -> T {
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dirs: Vec<PathBuf> = std::env::args().skip(1).map(PathBuf::from).collect();
-    let floors = dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?;
+    let mut floors = dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?;
+    for f in &mut floors {
+        f.keep_survey_fraction(env_or("FRACTION", 1.0));
+    }
     let mut options = EvalOptions::default();
     options.calibration.replay.events.beacon_wait_ns =
         env_or("BEACON_WAIT_MS", options.calibration.replay.events.beacon_wait_ns / 1_000_000) * 1_000_000;
@@ -86,10 +91,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut walks: BTreeMap<&str, Vec<(f64, usize, bool, bool)>> = BTreeMap::new();
     // Per configuration, by the scored scan's place in its walk: (Σ error, scans).
     let mut by_index: BTreeMap<&str, [(f64, usize); INDEX_BANDS.len()]> = BTreeMap::new();
+    // Per configuration: each scored scan's error along and across the walk's direction, m.
+    let mut along: BTreeMap<&str, Vec<(f64, f64)>> = BTreeMap::new();
     for key in &configs {
         for (result, &(f, trace)) in results.iter().zip(&tests) {
             let estimates = result.estimates.get(key).map_or(&[][..], Vec::as_slice);
             let (scans, _) = score_scans(trace, f, estimates, None);
+            let track = along.entry(key).or_default();
+            for scan in &trace.wifi_scans {
+                if let Some(e) = along_across(trace, f, estimates, scan.timestamp_ns) {
+                    track.push(e);
+                }
+            }
             let first_off = estimates.first().is_some_and(|e| e.floor != f);
             let first_scan_off = scans.first().is_some_and(|s| !s.floor_correct);
             let bands = by_index.entry(key).or_default();
@@ -127,6 +140,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             .collect();
         println!("{key:<26} by scored scan of the walk: {}", bands.join(", "));
     }
+    for key in &configs {
+        let e = &along[key.as_str()];
+        let n = e.len().max(1) as f64;
+        let mean = |f: fn(&(f64, f64)) -> f64| e.iter().map(f).sum::<f64>() / n;
+        let rms = |f: fn(&(f64, f64)) -> f64| (e.iter().map(|x| f(x).powi(2)).sum::<f64>() / n).sqrt();
+        println!(
+            "{key:<26} along the walk mean {:+.2} m (rms {:.2}), across {:+.2} m (rms {:.2}), over {} scans on the floor while walking",
+            mean(|x| x.0),
+            rms(|x| x.0),
+            mean(|x| x.1),
+            rms(|x| x.1),
+            e.len()
+        );
+    }
     for pair in configs.windows(2) {
         let (a, b) = (&walks[pair[0].as_str()], &walks[pair[1].as_str()]);
         let n: usize = a.iter().map(|x| x.1).sum();
@@ -149,4 +176,21 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         println!("{line}");
     }
     Ok(())
+}
+
+/// The error of the estimate scored at `t` along the walk's direction there (positive: ahead)
+/// and across it (positive: to the left), m: `None` off the floor, or where the truth moves
+/// less than 0.5 m in the 2 s around `t` (standing, or the direction is not known).
+fn along_across(trace: &Trace, floor: usize, estimates: &[Estimate], t: u64) -> Option<(f64, f64)> {
+    let k = estimates.partition_point(|e| e.timestamp_ns <= t).checked_sub(1)?;
+    let e = estimates.get(k).filter(|e| e.floor == floor)?;
+    let truth = trace.position_at(t)?;
+    let (a, b) = (trace.position_at(t.checked_sub(1_000_000_000)?)?, trace.position_at(t + 1_000_000_000)?);
+    let (dx, dy) = (b.0 - a.0, b.1 - a.1);
+    let n = dx.hypot(dy);
+    if n < 0.5 {
+        return None;
+    }
+    let (ex, ey) = (e.x - truth.0, e.y - truth.1);
+    Some(((ex * dx + ey * dy) / n, (ey * dx - ex * dy) / n))
 }
