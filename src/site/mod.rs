@@ -533,6 +533,12 @@ impl Site {
         &self.name
     }
 
+    /// The site called `name`.
+    pub fn with_name(mut self, name: impl Into<String>) -> Site {
+        self.name = name.into();
+        self
+    }
+
     /// Floors, by index.
     pub fn floors(&self) -> &[Floor] {
         &self.floors

@@ -246,6 +246,7 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         Err(e) => return fail("survey", e),
     };
     bar.finish_and_clear();
+    let site = site.with_name(&args.name);
     let site = match args.salt.salt() {
         Err(e) => return fail("survey", e),
         Ok(None) => site,

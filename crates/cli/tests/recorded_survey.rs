@@ -133,7 +133,9 @@ fn a_recorded_survey_of_the_office_positions_its_test_walk_like_the_demo() {
     assert!(!out.status.success() && stderr.contains("not geo-referenced"), "{stderr}");
     assert!(!dir.path().join("coverage.geojson").exists());
     let test_walk = read(&export.join("walk.json"));
-    let surveyed = mean_error(Site::load(&site_file).unwrap(), &test_walk);
+    let site = Site::load(&site_file).unwrap();
+    assert_eq!(site.name(), "office", "--name names the site");
+    let surveyed = mean_error(site, &test_walk);
     let demo = mean_error(Site::load(export.join("site.json")).unwrap(), &test_walk);
     eprintln!("mean error on the test walk: {surveyed:.2} m on the recorded survey, {demo:.2} m on the office's site");
     // Like the demo: within half as much again as on the office's own site, whose 300 scans
