@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
-# The page test of `waymark view` (docs/view.md#the-test): builds the CLI, writes two pages —
-# the simulated office with its walk (`waymark view --demo`), and a two-floor site (the
-# office's site file with a copy of its floor above it, joined by a stair edge) — and loads
+# The page test of `waymark view` (docs/view.md#the-test): builds the CLI, writes three pages —
+# the simulated office with its walk (`waymark view --demo`), a two-floor site (the office's
+# site file with a copy of its floor above it, joined by a stair edge), and that site
+# geo-referenced with a survey coverage file (`--coverage`, 5 points on one floor, 3 on the
+# other, each of which the page must say it drew) — and loads
 # every floor of each (`#floor=N`) in headless Chromium. A floor passes when the page says it
 # drew that floor (body[data-rendered], data-floor, its states), recorded no error
 # (window.onerror, console.error: body[data-errors], #errors), and its screenshot's map area
@@ -57,6 +59,27 @@ site["states"] += upper
 json.dump(site, open(sys.argv[2], "w"))
 PY
 "$waymark" view --site "$work/two-floors.json" --out "$work/two-floors.html"
+# The same site on the Earth, and held-out epochs beyond its map as `waymark survey
+# --coverage-out` writes them (x east and y north of the anchor; 111 320 m a degree of
+# latitude is close enough to land them by the states they are put beside).
+python3 - "$work/two-floors.json" "$work/anchored.json" "$work/coverage.geojson" <<'PY'
+import json, math, sys
+site = json.load(open(sys.argv[1]))
+lat0, lon0 = 30.19, 120.08
+site["anchor"] = {"lat_deg": lat0, "lon_deg": lon0, "azimuth_rad": 0.0, "scale": [1.0, 1.0]}
+json.dump(site, open(sys.argv[2], "w"))
+features = []
+for floor, name, count in [(0, site["floors"][0]["name"], 5), (1, "upstairs", 3)]:
+    states = [s for s in site["states"] if s["floor"] == floor][:count]
+    for s in states:
+        x, y = s["x"] + 1.5, s["y"] + 1.5
+        at = [lon0 + x / (111320.0 * math.cos(math.radians(lat0))), lat0 + y / 111320.0]
+        features.append({"type": "Feature", "geometry": {"type": "Point", "coordinates": at},
+                         "properties": {"floor": name, "level": floor, "walk": "w", "beyond_map_m": 3.0,
+                                        "error_m": 12.0}})
+json.dump({"type": "FeatureCollection", "features": features}, open(sys.argv[3], "w"))
+PY
+"$waymark" view --site "$work/anchored.json" --coverage "$work/coverage.geojson" --out "$work/coverage.html"
 # Controls: a page that logs an error, and one whose map is hidden (blank).
 sed 's|</body>|<script>console.error("control error")</script></body>|' "$work/demo.html" >"$work/control-error.html"
 sed 's|</style>|#map { visibility: hidden; }</style>|' "$work/demo.html" >"$work/control-blank.html"
@@ -76,6 +99,7 @@ chrome() {
 cat >"$work/check.py" <<'PY'
 import re, struct, sys, zlib
 dom_path, png_path, floor, floors = sys.argv[1], sys.argv[2], int(sys.argv[3]), int(sys.argv[4])
+coverage = sys.argv[5] if len(sys.argv) > 5 else "0"
 problems = []
 dom = open(dom_path, errors="replace").read()
 tag = re.search(r"<body([^>]*)>", dom)
@@ -91,6 +115,8 @@ if attr("floor") != str(floor) or attr("floors") != str(floors):
     problems.append("drew floor %s of %s, not %d of %d" % (attr("floor"), attr("floors"), floor, floors))
 if not (attr("states") or "0").isdigit() or int(attr("states") or "0") == 0:
     problems.append("no states drawn")
+if attr("coverage") != coverage:
+    problems.append("drew %s coverage points, not %s" % (attr("coverage"), coverage))
 
 def pixels(path):
     """Rows of (r, g, b) of an 8-bit RGB or RGBA, non-interlaced PNG."""
@@ -144,14 +170,15 @@ PY
 
 passed=0
 failed=0
-# check PAGE FLOOR FLOORS EXPECT: EXPECT is "pass", or "fail" for a control.
+# check PAGE FLOOR FLOORS EXPECT [COVERAGE]: EXPECT is "pass", or "fail" for a control;
+# COVERAGE the coverage points the floor must draw (default 0).
 check() {
-    local page=$1 floor=$2 floors=$3 expect=$4 name
+    local page=$1 floor=$2 floors=$3 expect=$4 coverage=${5:-0} name
     name="$(basename "$page" .html) floor $floor"
     local url="file://$work/$page#floor=$floor" out="$work/${page%.html}-$floor"
     chrome --virtual-time-budget=2000 --dump-dom "$url" >"$out.html" || true
     chrome --virtual-time-budget=2000 --screenshot="$out.png" "$url" >/dev/null || true
-    if python3 "$work/check.py" "$out.html" "$out.png" "$floor" "$floors"; then result=pass; else result=fail; fi
+    if python3 "$work/check.py" "$out.html" "$out.png" "$floor" "$floors" "$coverage"; then result=pass; else result=fail; fi
     if [ "$result" = "$expect" ]; then
         passed=$((passed + 1))
         echo "ok: $name ($expect)"
@@ -165,6 +192,8 @@ echo "-- floors in headless Chromium ($(chromium --version 2>/dev/null))"
 check demo.html 0 1 pass
 check two-floors.html 0 2 pass
 check two-floors.html 1 2 pass
+check coverage.html 0 2 pass 5
+check coverage.html 1 2 pass 3
 check control-error.html 0 1 fail
 check control-blank.html 0 1 fail
 

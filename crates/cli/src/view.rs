@@ -1,14 +1,15 @@
 //! `waymark view`: one self-contained HTML page (inline script and style, the data as JSON,
 //! nothing fetched) showing a site's floors — the plan when one is given, the HMM's states and
 //! walkable graph, the zones — and optionally a walk: the engine's estimate with its 68% circle
-//! and the truth when it is known, with play, pause and a time slider (docs/view.md).
+//! and the truth when it is known, with play, pause and a time slider; and where the survey's
+//! held-out walks were beyond the map (`waymark survey --coverage-out`) (docs/view.md).
 
 use crate::real::SaltArgs;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use waymark::site::{StateKind, PSEUDO_SPACING_M};
+use waymark::site::{LatLon, StateKind, PSEUDO_SPACING_M};
 use waymark::{Engine, EngineConfig, Site};
 use waymark_sim as sim;
 use waymark_survey::io::{FloorPlan, FloorPlanError, Trace, TraceError};
@@ -36,6 +37,10 @@ pub struct ViewArgs {
     /// plan is drawn under the site's floor of the same name. Repeat for more floors.
     #[arg(long = "plan", value_name = "FLOOR_DIR", conflicts_with = "demo")]
     plans: Vec<PathBuf>,
+    /// Where the survey's held-out walks were beyond the map: the GeoJSON `waymark survey
+    /// --coverage-out` writes, drawn on the floors it names. Needs a geo-referenced site.
+    #[arg(long, value_name = "GEOJSON", conflicts_with = "demo")]
+    coverage: Option<PathBuf>,
     /// The simulated office of `waymark demo`, with its first walk and the truth.
     #[arg(long)]
     demo: bool,
@@ -77,6 +82,9 @@ pub enum ViewError {
     /// A track CSV is malformed.
     #[error("{path}, line {line}: {message}")]
     Track { path: String, line: usize, message: String },
+    /// A coverage file is malformed or does not fit the site.
+    #[error("{path}: {message}")]
+    Coverage { path: String, message: String },
     /// The salt could not be read.
     #[error("{0}")]
     Salt(String),
@@ -135,15 +143,27 @@ fn write_view(args: &ViewArgs) -> Result<String, ViewError> {
         let floor = floor_index(&site, &name, &dir.display().to_string())?;
         plans[floor] = Some(FloorPlan::read(dir)?);
     }
-    let data = page_data(&site, &plans, track.as_ref());
+    let coverage = match &args.coverage {
+        Some(path) => read_coverage(path, &site)?,
+        None => Vec::new(),
+    };
+    let mut data = page_data(&site, &plans, track.as_ref());
+    for p in &coverage {
+        data.floors[p.floor].coverage.extend([cm(p.x), cm(p.y), cm(p.beyond_map_m)]);
+    }
     let html = render(&data)?;
     std::fs::write(&args.out, &html)
         .map_err(|source| ViewError::Write { path: args.out.display().to_string(), source })?;
     Ok(format!(
-        "{} floors, {} states{}; {} bytes written to {}",
+        "{} floors, {} states{}{}; {} bytes written to {}",
         site.floors().len(),
         site.states().len(),
         track.map_or(String::new(), |t| format!(", {} epochs of {}", t.epochs.len(), t.source)),
+        if args.coverage.is_some() {
+            format!(", {} held-out epochs beyond the map", coverage.len())
+        } else {
+            String::new()
+        },
         html.len(),
         args.out.display()
     ))
@@ -326,6 +346,64 @@ fn parse_track_csv(text: &str, path: &str, site: &Site) -> Result<Track, ViewErr
     Ok(Track { source: format!("track {name}"), epochs })
 }
 
+/// One held-out survey epoch beyond the map, from a coverage file.
+#[derive(Clone, Debug, PartialEq)]
+struct CoverageDot {
+    floor: usize,
+    x: f64,
+    y: f64,
+    beyond_map_m: f64,
+}
+
+/// Reads a coverage file (`waymark survey --coverage-out`): a GeoJSON FeatureCollection of
+/// points in WGS84 longitude/latitude, each naming its floor and how far beyond the map it was.
+fn read_coverage(path: &Path, site: &Site) -> Result<Vec<CoverageDot>, ViewError> {
+    let text = std::fs::read_to_string(path)
+        .map_err(|source| ViewError::Read { path: path.display().to_string(), source })?;
+    parse_coverage(&text, &path.display().to_string(), site)
+}
+
+fn parse_coverage(text: &str, path: &str, site: &Site) -> Result<Vec<CoverageDot>, ViewError> {
+    let bad = |message: String| ViewError::Coverage { path: path.to_owned(), message };
+    if site.anchor().is_none() {
+        return Err(bad(
+            "the site is not geo-referenced (no anchor), so WGS84 points have no place on it".into()
+        ));
+    }
+    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| bad(format!("not JSON: {e}")))?;
+    if value["type"] != "FeatureCollection" {
+        return Err(bad("not a GeoJSON FeatureCollection".into()));
+    }
+    let features = value["features"].as_array().ok_or_else(|| bad("no `features` array".into()))?;
+    let mut dots = Vec::with_capacity(features.len());
+    for (k, feature) in features.iter().enumerate() {
+        let at = |message: &str| bad(format!("feature {k}: {message}"));
+        let geometry = &feature["geometry"];
+        if geometry["type"] != "Point" {
+            return Err(at("not a Point"));
+        }
+        let [lon, lat] = match geometry["coordinates"].as_array().map(Vec::as_slice) {
+            Some([lon, lat, ..]) => [lon.as_f64(), lat.as_f64()],
+            _ => [None, None],
+        };
+        let (Some(lon), Some(lat)) = (lon, lat) else {
+            return Err(at("coordinates are not [longitude, latitude]"));
+        };
+        let properties = &feature["properties"];
+        let name = properties["floor"].as_str().ok_or_else(|| at("no `floor` name"))?;
+        let floor = floor_index(site, name, &format!("{path}, feature {k}"))?;
+        let beyond_map_m = properties["beyond_map_m"]
+            .as_f64()
+            .filter(|b| b.is_finite() && *b >= 0.0)
+            .ok_or_else(|| at("`beyond_map_m` is not a distance"))?;
+        let point = LatLon::new(lat, lon)
+            .and_then(|p| site.site_point(Some(floor), p))
+            .map_err(|e| at(&e.to_string()))?;
+        dots.push(CoverageDot { floor, x: point.x, y: point.y, beyond_map_m });
+    }
+    Ok(dots)
+}
+
 /// What the page's script reads, as JSON. Coordinates are metres in the site's frame, rounded
 /// to centimetres; per-state arrays are flat, for size.
 #[derive(Serialize)]
@@ -351,6 +429,8 @@ struct FloorView {
     edges: Vec<u32>,
     /// This floor's states with an edge to another floor (stairs, lifts).
     connectors: Vec<u32>,
+    /// x0, y0, beyond0, x1, ...: held-out survey epochs beyond the map and how far, m.
+    coverage: Vec<f64>,
     plan: Option<PlanView>,
 }
 
@@ -392,6 +472,7 @@ fn page_data(site: &Site, plans: &[Option<FloorPlan>], track: Option<&Track>) ->
             zones: Vec::new(),
             edges: Vec::new(),
             connectors: Vec::new(),
+            coverage: Vec::new(),
             plan: None,
         })
         .collect();
@@ -477,7 +558,7 @@ fn render(data: &PageData) -> Result<String, serde_json::Error> {
 mod tests {
     use super::*;
     use nalgebra::Point2;
-    use waymark::site::{BuildOptions, SiteBuilder, TrainingScan};
+    use waymark::site::{Anchor, BuildOptions, SiteBuilder, TrainingScan};
     use waymark::ZoneKind;
 
     /// Two floors of two states, a stair edge between them, one zone per floor.
@@ -546,6 +627,80 @@ mod tests {
         let data = page_data(&site, &[None, None], Some(&track));
         let epochs = data.track.unwrap().epochs;
         assert_eq!(epochs[1][..5], [Some(1.5), Some(1.0), Some(3.0), Some(3.0), Some(1.75)]);
+    }
+
+    fn anchored() -> Site {
+        let anchor = Anchor { lat_deg: 30.19, lon_deg: 120.08, azimuth_rad: 0.3, scale: [1.0, 1.0] };
+        site().with_anchor(Some(anchor)).expect("a valid anchor")
+    }
+
+    /// A coverage feature as `waymark survey --coverage-out` writes it.
+    fn dot(site: &Site, floor: usize, x: f64, y: f64, beyond_map_m: f64) -> serde_json::Value {
+        let at = site.lat_lon(floor, x, y).expect("an anchored site");
+        serde_json::json!({
+            "type": "Feature",
+            "geometry": { "type": "Point", "coordinates": [at.lon_deg, at.lat_deg] },
+            "properties": { "floor": site.floors()[floor].name, "level": null, "walk": "w1",
+                            "beyond_map_m": beyond_map_m, "error_m": 9.5 },
+        })
+    }
+
+    fn collection(features: Vec<serde_json::Value>) -> String {
+        serde_json::json!({ "type": "FeatureCollection", "features": features }).to_string()
+    }
+
+    #[test]
+    fn coverage_points_land_on_their_floors_in_the_site_frame() {
+        let site = anchored();
+        let text = collection(vec![dot(&site, 0, 12.5, -3.25, 4.0), dot(&site, 1, 0.5, 40.0, 0.75)]);
+        let dots = parse_coverage(&text, "c.geojson", &site).unwrap();
+        assert_eq!(dots.len(), 2);
+        for (d, (floor, x, y, beyond)) in dots.iter().zip([(0, 12.5, -3.25, 4.0), (1, 0.5, 40.0, 0.75)]) {
+            assert_eq!((d.floor, d.beyond_map_m), (floor, beyond));
+            assert!((d.x - x).abs() < 1e-6 && (d.y - y).abs() < 1e-6, "{d:?}");
+        }
+        assert!(parse_coverage(&collection(Vec::new()), "c.geojson", &site).unwrap().is_empty());
+    }
+
+    #[test]
+    fn a_bad_coverage_file_is_an_error_naming_the_feature() {
+        let site = anchored();
+        let good = dot(&site, 0, 1.0, 1.0, 2.0);
+        let with = |edit: &dyn Fn(&mut serde_json::Value)| {
+            let mut f = good.clone();
+            edit(&mut f);
+            collection(vec![good.clone(), f])
+        };
+        for (text, needle) in [
+            ("{".to_string(), "not JSON"),
+            (r#"{"type": "Feature"}"#.to_string(), "FeatureCollection"),
+            (r#"{"type": "FeatureCollection"}"#.to_string(), "features"),
+            (with(&|f| f["geometry"]["type"] = "LineString".into()), "feature 1: not a Point"),
+            (with(&|f| f["geometry"]["coordinates"] = serde_json::json!([120.0])), "feature 1: coordinates"),
+            (with(&|f| f["geometry"]["coordinates"] = serde_json::json!([120.0, 95.0])), "feature 1: "),
+            (with(&|f| f["properties"]["beyond_map_m"] = (-1.0).into()), "feature 1: `beyond_map_m`"),
+            (with(&|f| f["properties"]["floor"] = serde_json::Value::Null), "feature 1: no `floor`"),
+        ] {
+            match parse_coverage(&text, "c.geojson", &site) {
+                Err(ViewError::Coverage { message, .. }) => {
+                    assert!(message.contains(needle), "{text}: {message}")
+                }
+                other => panic!("{text}: {other:?}"),
+            }
+        }
+        match parse_coverage(&with(&|f| f["properties"]["floor"] = "B7".into()), "c.geojson", &site) {
+            Err(ViewError::UnknownFloor { floor, source_name, .. }) => {
+                assert_eq!((floor.as_str(), source_name.as_str()), ("B7", "c.geojson, feature 1"))
+            }
+            other => panic!("{other:?}"),
+        }
+        let text = collection(vec![good.clone()]);
+        match parse_coverage(&text, "c.geojson", &self::site()) {
+            Err(ViewError::Coverage { message, .. }) => {
+                assert!(message.contains("not geo-referenced"), "{message}")
+            }
+            other => panic!("{other:?}"),
+        }
     }
 
     #[test]

@@ -28,7 +28,7 @@
   var COLORS = {
     background: "#f4f3ef", floor: "#ffffff", wall: "#4b5563", room: "#9ca3af", edge: "#cfd3d8",
     surveyed: "#374151", pseudo: "#9ca3af", unsurveyed: "#9ca3af", connector: "#d97706",
-    estimate: "#2563eb", truth: "#16a34a"
+    estimate: "#2563eb", truth: "#16a34a", beyond: "#dc2626"
   };
 
   var data, canvas, ctx;
@@ -59,6 +59,7 @@
     }
     function addFlat(a) { for (var i = 0; i + 1 < a.length; i += 2) add(a[i], a[i + 1]); }
     addFlat(f.states);
+    for (var c = 0; c + 2 < f.coverage.length; c += 3) add(f.coverage[c], f.coverage[c + 1]);
     if (f.plan) f.plan.outline.forEach(function (poly) { poly.forEach(addFlat); });
     epochs.forEach(function (e) {
       if (e[1] === index) add(e[2], e[3]);
@@ -264,6 +265,19 @@
         if (k[2]) { ctx.fillStyle = k[1]; ctx.fill(); } else { ctx.strokeStyle = k[1]; ctx.lineWidth = 1; ctx.stroke(); }
       });
 
+      // Held-out survey epochs beyond the map (`waymark survey --coverage-out`): where the
+      // survey needs more walks. Half transparent, so that where they pile up reads darker.
+      ctx.beginPath();
+      for (var c = 0; c + 2 < f.coverage.length; c += 3) {
+        var cx = X(f.coverage[c]), cy = Y(f.coverage[c + 1]), cr = Math.max(4, r + 2);
+        ctx.moveTo(cx + cr, cy);
+        ctx.arc(cx, cy, cr, 0, 2 * Math.PI);
+      }
+      ctx.globalAlpha = 0.45;
+      ctx.fillStyle = COLORS.beyond;
+      ctx.fill();
+      ctx.globalAlpha = 1;
+
       ctx.beginPath();
       f.connectors.forEach(function (i) {
         var x = X(f.states[2 * i]), y = Y(f.states[2 * i + 1]), q = r + 3;
@@ -350,9 +364,10 @@
       ctx.stroke();
     }
 
-    var states = f.kinds.length;
+    var states = f.kinds.length, beyond = Math.floor(f.coverage.length / 3);
     document.getElementById("status").textContent =
-      f.name + ": " + states + " states, " + frame.zones.length + " zones" + (status ? " | " + status : "");
+      f.name + ": " + states + " states, " + frame.zones.length + " zones" +
+      (beyond ? ", " + beyond + " held-out epochs beyond the map" : "") + (status ? " | " + status : "");
     document.getElementById("clock").textContent = view.time.toFixed(1) + " / " + duration.toFixed(1) + " s";
     document.getElementById("time").value = String(view.time);
     Array.prototype.forEach.call(document.querySelectorAll("#floors button"), function (button, i) {
@@ -362,6 +377,7 @@
     body.setAttribute("data-floor", String(view.floor));
     body.setAttribute("data-time", view.time.toFixed(1));
     body.setAttribute("data-states", String(states));
+    body.setAttribute("data-coverage", String(beyond));
     body.setAttribute("data-canvas", [rect.left, rect.top, rect.width, rect.height].map(Math.round).join(","));
     body.setAttribute("data-rendered", "1");
   }
@@ -422,6 +438,7 @@
     if (kind(1)) items.push(["pseudo state", COLORS.pseudo]);
     if (kind(2)) items.push(["unsurveyed state", COLORS.unsurveyed, true]);
     if (any(function (f) { return f.connectors.length > 0; })) items.push(["to another floor", COLORS.connector]);
+    if (any(function (f) { return f.coverage.length > 0; })) items.push(["held-out survey walk beyond the map", COLORS.beyond]);
     if (epochs.length) {
       items.push(["estimate (68% circle)", COLORS.estimate]);
       if (epochs.some(function (e) { return e[5] !== null; })) items.push(["truth", COLORS.truth]);
