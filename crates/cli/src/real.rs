@@ -63,7 +63,8 @@ pub struct SurveyArgs {
     #[arg(long, default_value_t = waymark_survey::UNSURVEYED_MARGIN_M)]
     unsurveyed_margin_m: f64,
     /// Also write where the held-out walks went beyond the map the other walks made, as
-    /// GeoJSON points (the site must be geo-referenced): the stretches to walk again.
+    /// GeoJSON points: the stretches to walk again. Needs every floor's plan (for WGS84), and
+    /// fails at once without.
     #[arg(long)]
     coverage_out: Option<PathBuf>,
     #[command(flatten)]
@@ -234,6 +235,27 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
             f
         })
         .collect();
+    // A coverage map needs WGS84, which only plans for every floor give: say so before the
+    // calibration's minutes, not after.
+    if args.coverage_out.is_some() {
+        let plans: Vec<_> = floors.iter().map(|f| f.plan.as_ref()).collect();
+        if waymark_survey::geo_reference(&plans).0.is_none() {
+            let missing: Vec<&str> =
+                floors.iter().filter(|f| f.plan.is_none()).map(|f| f.name.as_str()).collect();
+            return fail(
+                "survey",
+                if missing.is_empty() {
+                    "--coverage-out needs a geo-referenced site, and the plans give no place on the Earth"
+                        .to_owned()
+                } else {
+                    format!(
+                        "--coverage-out needs a geo-referenced site, which needs every floor's plan: none for {}",
+                        missing.join(", ")
+                    )
+                },
+            );
+        }
+    }
     let mut options = CalibrationOptions::default();
     options.survey.unsurveyed_margin_m = args.unsurveyed_margin_m;
     let bar = progress_bar(
@@ -262,13 +284,11 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         return fail("survey", e);
     }
     if let Some(path) = &args.coverage_out {
+        // Checked before the calibration; only a site that lost its anchor on the way fails here.
         let Some(geojson) = calibrate::coverage_geojson(&site, &calibration) else {
             return fail(
                 "survey",
-                format!(
-                    "{} written, but it is not geo-referenced (a floor has no plan): no coverage map",
-                    args.out.display()
-                ),
+                format!("{} written, but it is not geo-referenced: no coverage map", args.out.display()),
             );
         };
         if let Err(e) = std::fs::write(path, geojson.to_string()) {

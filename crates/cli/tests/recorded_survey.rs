@@ -121,7 +121,8 @@ fn a_recorded_survey_of_the_office_positions_its_test_walk_like_the_demo() {
     // The floor's coverage: how much of its held-out walks lay beyond the others' map.
     let coverage = printed.lines().skip_while(|l| !l.starts_with("coverage:")).nth(1).unwrap_or_default();
     assert!(coverage.trim_start().starts_with("F1: ") && coverage.contains("% of "), "{printed}");
-    // Where, as GeoJSON, needs WGS84: the office has no plan, so it says so and fails.
+    // Where, as GeoJSON, needs WGS84: the office has no plan, so it says so and fails before
+    // calibrating, writing nothing.
     let out = Command::new(env!("CARGO_BIN_EXE_waymark"))
         .args(["survey", recorded.join("F1").to_str().unwrap(), "--out"])
         .arg(dir.path().join("again.json"))
@@ -130,8 +131,8 @@ fn a_recorded_survey_of_the_office_positions_its_test_walk_like_the_demo() {
         .output()
         .unwrap();
     let stderr = String::from_utf8_lossy(&out.stderr);
-    assert!(!out.status.success() && stderr.contains("not geo-referenced"), "{stderr}");
-    assert!(!dir.path().join("coverage.geojson").exists());
+    assert!(!out.status.success() && stderr.contains("every floor's plan: none for F1"), "{stderr}");
+    assert!(!dir.path().join("coverage.geojson").exists() && !dir.path().join("again.json").exists());
     let test_walk = read(&export.join("walk.json"));
     let site = Site::load(&site_file).unwrap();
     assert_eq!(site.name(), "office", "--name names the site");
