@@ -24,7 +24,9 @@
 //! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms);
 //! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; the evaluation
 //! calibrates it); `FRACTION` keeps that share of each floor's survey walks, as `eval
-//! --survey-fraction` does.
+//! --survey-fraction` does; `THROTTLE` replays with one scan every 30 s, as `eval --throttle`
+//! does (the sparse regime's own γ and radius factors aside, which the errors do not need when
+//! the calibration records no sparse γ).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -63,6 +65,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         env_or("FP_RADIUS", options.calibration.survey.fingerprint_radius_m);
     options.calibration.survey.build.fit.max_std_db =
         env_or("MAX_STD", options.calibration.survey.build.fit.max_std_db);
+    if std::env::var("THROTTLE").is_ok() {
+        options.calibration.replay = options.calibration.throttled_replay();
+    }
     options.calibration.survey.max_reading_age_ns =
         env_or("AGE_MS", options.calibration.survey.max_reading_age_ns / 1_000_000) * 1_000_000;
     let survey: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
