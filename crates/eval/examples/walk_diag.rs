@@ -26,7 +26,8 @@
 //! calibrates it); `FRACTION` keeps that share of each floor's survey walks, as `eval
 //! --survey-fraction` does; `THROTTLE` replays with one scan every 30 s, as `eval --throttle`
 //! does (the sparse regime's own γ and radius factors aside, which the errors do not need when
-//! the calibration records no sparse γ).
+//! the calibration records no sparse γ); `TIMER_MS` sets the replay's timer
+//! (`ReplayOptions::timer_ns`).
 
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -67,6 +68,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         env_or("MAX_STD", options.calibration.survey.build.fit.max_std_db);
     if std::env::var("THROTTLE").is_ok() {
         options.calibration.replay = options.calibration.throttled_replay();
+    }
+    if let Ok(ms) = std::env::var("TIMER_MS").map(|v| v.parse::<u64>()) {
+        options.calibration.replay.timer_ns = Some(ms? * 1_000_000);
     }
     options.calibration.survey.max_reading_age_ns =
         env_or("AGE_MS", options.calibration.survey.max_reading_age_ns / 1_000_000) * 1_000_000;
