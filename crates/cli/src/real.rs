@@ -294,7 +294,7 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         if let Err(e) = std::fs::write(path, geojson.to_string()) {
             return fail("survey", format!("{}: {e}", path.display()));
         }
-        let points = geojson["features"].as_array().map_or(0, Vec::len);
+        let points = geojson.features.len();
         println!(
             "coverage map: {points} held-out epochs beyond the others' map written to {}",
             path.display()

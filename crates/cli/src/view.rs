@@ -370,30 +370,23 @@ fn parse_coverage(text: &str, path: &str, site: &Site) -> Result<Vec<CoverageDot
             "the site is not geo-referenced (no anchor), so WGS84 points have no place on it".into()
         ));
     }
-    let value: serde_json::Value = serde_json::from_str(text).map_err(|e| bad(format!("not JSON: {e}")))?;
-    if value["type"] != "FeatureCollection" {
-        return Err(bad("not a GeoJSON FeatureCollection".into()));
-    }
-    let features = value["features"].as_array().ok_or_else(|| bad("no `features` array".into()))?;
-    let mut dots = Vec::with_capacity(features.len());
-    for (k, feature) in features.iter().enumerate() {
+    let collection = match text.parse::<geojson::GeoJson>() {
+        Ok(geojson::GeoJson::FeatureCollection(c)) => c,
+        Ok(_) => return Err(bad("not a GeoJSON FeatureCollection".into())),
+        Err(e) => return Err(bad(format!("not GeoJSON: {e}"))),
+    };
+    let mut dots = Vec::with_capacity(collection.features.len());
+    for (k, feature) in collection.features.iter().enumerate() {
         let at = |message: &str| bad(format!("feature {k}: {message}"));
-        let geometry = &feature["geometry"];
-        if geometry["type"] != "Point" {
-            return Err(at("not a Point"));
-        }
-        let [lon, lat] = match geometry["coordinates"].as_array().map(Vec::as_slice) {
-            Some([lon, lat, ..]) => [lon.as_f64(), lat.as_f64()],
-            _ => [None, None],
+        let [lon, lat] = match feature.geometry.as_ref().map(|g| &g.value) {
+            Some(geojson::Value::Point(p)) if p.len() >= 2 => [p[0], p[1]],
+            _ => return Err(at("not a Point")),
         };
-        let (Some(lon), Some(lat)) = (lon, lat) else {
-            return Err(at("coordinates are not [longitude, latitude]"));
-        };
-        let properties = &feature["properties"];
-        let name = properties["floor"].as_str().ok_or_else(|| at("no `floor` name"))?;
+        let name = feature.property("floor").and_then(|v| v.as_str()).ok_or_else(|| at("no `floor` name"))?;
         let floor = floor_index(site, name, &format!("{path}, feature {k}"))?;
-        let beyond_map_m = properties["beyond_map_m"]
-            .as_f64()
+        let beyond_map_m = feature
+            .property("beyond_map_m")
+            .and_then(|v| v.as_f64())
             .filter(|b| b.is_finite() && *b >= 0.0)
             .ok_or_else(|| at("`beyond_map_m` is not a distance"))?;
         let point = LatLon::new(lat, lon)
@@ -672,12 +665,19 @@ mod tests {
             collection(vec![good.clone(), f])
         };
         for (text, needle) in [
-            ("{".to_string(), "not JSON"),
-            (r#"{"type": "Feature"}"#.to_string(), "FeatureCollection"),
-            (r#"{"type": "FeatureCollection"}"#.to_string(), "features"),
-            (with(&|f| f["geometry"]["type"] = "LineString".into()), "feature 1: not a Point"),
-            (with(&|f| f["geometry"]["coordinates"] = serde_json::json!([120.0])), "feature 1: coordinates"),
-            (with(&|f| f["geometry"]["coordinates"] = serde_json::json!([120.0, 95.0])), "feature 1: "),
+            ("{".to_string(), "not GeoJSON"),
+            (r#"{"type": "Feature", "geometry": null, "properties": {}}"#.to_string(), "FeatureCollection"),
+            (r#"{"type": "FeatureCollection"}"#.to_string(), "not GeoJSON"),
+            (
+                with(&|f| {
+                    f["geometry"] = serde_json::json!({"type": "LineString", "coordinates": [[0, 0], [1, 1]]})
+                }),
+                "feature 1: not a Point",
+            ),
+            (
+                with(&|f| f["geometry"]["coordinates"] = serde_json::json!([120.0, 95.0])),
+                "feature 1: invalid latitude",
+            ),
             (with(&|f| f["properties"]["beyond_map_m"] = (-1.0).into()), "feature 1: `beyond_map_m`"),
             (with(&|f| f["properties"]["floor"] = serde_json::Value::Null), "feature 1: no `floor`"),
         ] {

@@ -105,6 +105,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     // The coverage map: every such epoch as a GeoJSON point with its walk, on the floor's plan
     // (its longitude/latitude box, read from the competition's GeoJSON).
     let geojson = calibrate::coverage_geojson(&site, &calibration).expect("F1 has a plan");
+    let geojson = serde_json::to_value(geojson).unwrap();
     let features = geojson["features"].as_array().unwrap();
     assert_eq!(features.len(), coverage.beyond_map);
     assert!(!features.is_empty(), "12 walks leave stretches only one of them walked");

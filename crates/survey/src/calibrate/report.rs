@@ -301,24 +301,28 @@ pub struct MotionSummary {
 /// level, its walk, how far beyond the map it was and the error there: where a survey of
 /// `site` needs more walks (`docs/surveying.md#is-the-survey-enough`). `None` when `site` is
 /// not geo-referenced, since GeoJSON has no other frame.
-pub fn coverage_geojson(site: &waymark::Site, report: &CalibrationReport) -> Option<serde_json::Value> {
+pub fn coverage_geojson(
+    site: &waymark::Site,
+    report: &CalibrationReport,
+) -> Option<geojson::FeatureCollection> {
     site.anchor()?;
     let mut features = Vec::new();
     for (f, floor) in report.floors.iter().enumerate() {
         for p in &floor.coverage.beyond_map_points {
             let at = site.lat_lon(f, p.position_m[0], p.position_m[1])?;
-            features.push(serde_json::json!({
-                "type": "Feature",
-                "geometry": { "type": "Point", "coordinates": [at.lon_deg, at.lat_deg] },
-                "properties": {
-                    "floor": floor.name,
-                    "level": site.floor_level(f),
-                    "walk": p.walk,
-                    "beyond_map_m": p.beyond_map_m,
-                    "error_m": p.error_m,
-                },
-            }));
+            let properties = serde_json::json!({
+                "floor": floor.name,
+                "level": site.floor_level(f),
+                "walk": p.walk,
+                "beyond_map_m": p.beyond_map_m,
+                "error_m": p.error_m,
+            });
+            features.push(geojson::Feature {
+                geometry: Some(geojson::Geometry::new(geojson::Value::Point(vec![at.lon_deg, at.lat_deg]))),
+                properties: properties.as_object().cloned(),
+                ..geojson::Feature::default()
+            });
         }
     }
-    Some(serde_json::json!({ "type": "FeatureCollection", "features": features }))
+    Some(geojson::FeatureCollection { bbox: None, features, foreign_members: None })
 }
