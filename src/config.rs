@@ -121,6 +121,14 @@ pub struct EngineConfig {
     /// epochs: 3 (4.5 s at 1.5 s epochs), where the smoothed error is near its flat optimum
     /// (docs/tuning.md#fixed-lag).
     pub fixed_lag_epochs: usize,
+    /// Shortest motion-only epoch the filter steps over, s: an [`advance`](crate::Engine::advance)
+    /// sooner than this after the filter's last step is held (its position is the estimate
+    /// over the posterior predicted by the motion since, the filter unchanged) and its motion
+    /// carried into the next epoch, so that advancing more often does not spread the mass
+    /// more: each step adds Σ_v and the grid's quantisation spread whatever its length. 2 s: the replay's timer, one unthrottled scan
+    /// interval, the cadence at which the site's γ and radius factors are calibrated
+    /// (docs/tuning.md#replay-timer). 0 steps at every advance.
+    pub min_motion_step_s: f64,
     /// Ratio K between the high transition probability (reachable states) and the low one
     /// (everything else), HIPE eqs. 5-6. The low one keeps every a_ij > 0 (HIPE eq. 11) so the
     /// filter can recover from a wrong track. Default: the top of HIPE Table 4's range
@@ -191,6 +199,7 @@ impl Default for EngineConfig {
             rssi_weight_without_movement: None,
             track_window_epochs: 64,
             fixed_lag_epochs: 3,
+            min_motion_step_s: 2.0,
             transition_ratio: 200_000.0,
             estimate_states: None,
             reach_radius_m: 9.0,
@@ -460,6 +469,12 @@ impl EngineConfig {
             if !(g > 0.0 && g <= 1.0) {
                 return fail(format!("rssi_weight must be in (0, 1] (got {g})"));
             }
+        }
+        if !(self.min_motion_step_s.is_finite() && self.min_motion_step_s >= 0.0) {
+            return fail(format!(
+                "min_motion_step_s must be finite and >= 0 (got {})",
+                self.min_motion_step_s
+            ));
         }
         if self.track_window_epochs == 0 || self.fixed_lag_epochs >= self.track_window_epochs {
             return fail("track_window_epochs must be > fixed_lag_epochs".into());

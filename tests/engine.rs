@@ -399,9 +399,11 @@ fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
     };
     let site = site(0.5 * (good + bad));
 
-    // `twin` gets the same input, but no scan where `engine`'s is unexplained.
+    // `twin` gets the same input, but no scan where `engine`'s is unexplained; its filter steps
+    // at every advance, as `engine`'s does at every scan.
     let mut engine = Engine::new(Arc::clone(&site), EngineConfig::default()).unwrap();
-    let mut twin = Engine::new(Arc::clone(&site), EngineConfig::default()).unwrap();
+    let every_advance = EngineConfig { min_motion_step_s: 0.0, ..EngineConfig::default() };
+    let mut twin = Engine::new(Arc::clone(&site), every_advance).unwrap();
     // The first scan is all there is to go on.
     let first = engine.push_scan_with_motion(&scan(SECOND, &unexplained), &walked(1)).unwrap().position;
     assert_eq!((first.beyond_radio_m, engine.stats().scans_unexplained), (0.0, 0));

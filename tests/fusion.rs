@@ -211,12 +211,13 @@ fn motion_epochs_move_the_estimate_without_radio() {
     let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
     engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
     let mut p = None;
+    // 1.5 m/s: every other advance is held, its motion carried into the next.
     for k in 0..4u64 {
-        p = Some(engine.advance_with_motion(SECOND * (k + 2), &walking(4)).unwrap().position);
+        p = Some(engine.advance_with_motion(SECOND * (k + 2), &walking(2)).unwrap().position);
     }
     let p = p.unwrap();
     assert!(p.radio_log_evidence.is_none());
-    assert!(p.x > 6.0, "{p:?}");
+    assert!(p.x > 4.5 && p.floor == 0, "{p:?}");
     assert_eq!(engine.stats().motion_epochs, 4);
     assert!(engine.advance_with_motion(SECOND, &walking(1)).is_err());
 }
@@ -248,4 +249,159 @@ fn motion_with_a_nan_or_negative_field_is_rejected_and_changes_nothing() {
     let p =
         engine.push_scan_with_motion(&scan(2 * SECOND, &readings_at(0, 3.0)), &walking(4)).unwrap().position;
     assert!(p.heading_rad.is_some_and(f64::is_finite));
+}
+
+/// A walk east along floor 0's corridor on a simulated phone: its inertial samples.
+fn corridor_walk() -> waymark_sim::imu::ImuTrace {
+    use nalgebra::Point2;
+    let points = [Point2::new(0.0, 0.0), Point2::new(12.0, 0.0)];
+    let trajectory = waymark_sim::Trajectory::new(3 * SECOND, 1.0, &points, Vec::new());
+    waymark_sim::imu::synthesize(&trajectory, &waymark_sim::imu::ImuConfig::default(), 7)
+}
+
+/// Gives `engine` the samples of `trace` up to `t` not given yet (`cursor`).
+fn feed(engine: &mut Engine, trace: &waymark_sim::imu::ImuTrace, cursor: &mut [usize; 3], t: u64) {
+    let streams = [&trace.accelerometer, &trace.gyroscope, &trace.magnetometer];
+    for (k, samples) in streams.iter().enumerate() {
+        let to = cursor[k] + samples[cursor[k]..].partition_point(|s| s.timestamp_ns <= t);
+        let batch = &samples[cursor[k]..to];
+        match k {
+            0 => engine.push_accelerometer(batch),
+            1 => engine.push_gyroscope(batch),
+            _ => engine.push_magnetometer(batch),
+        };
+        cursor[k] = to;
+    }
+}
+
+/// An app advancing every 0.5 s between scans every 2 s gets the filter of one that only
+/// scans: the advances sooner than `min_motion_step_s` after the filter's last step are held,
+/// their motion carried into the next scan's step, so the mass spreads no more than over one
+/// step. Their positions, the prediction by the motion since the step, move with the walker
+/// meanwhile, no more certain than the step, and are not in the history. With
+/// `min_motion_step_s` 0 every advance is a step, and the mass spreads more.
+#[test]
+fn advancing_more_often_than_the_minimum_step_moves_the_mass_as_one_step() {
+    let trace = corridor_walk();
+    let site = Arc::new(two_floor_site());
+    let config = EngineConfig { transition: TransitionModel::Hoang, ..EngineConfig::default() };
+    let every = EngineConfig { min_motion_step_s: 0.0, ..config.clone() };
+    let mut often = Engine::new(Arc::clone(&site), config.clone()).unwrap();
+    let mut scans_only = Engine::new(Arc::clone(&site), config).unwrap();
+    let mut every_advance = Engine::new(site, every).unwrap();
+    let mut cursors = [[0usize; 3]; 3];
+    let (mut held, mut moved) = (0, 0);
+    for k in 1..=32u64 {
+        let t = k * SECOND / 2;
+        for (engine, cursor) in
+            [&mut often, &mut scans_only, &mut every_advance].into_iter().zip(&mut cursors)
+        {
+            feed(engine, &trace, cursor, t);
+        }
+        if k % 4 == 0 {
+            let x = (t as f64 / SECOND as f64 - 3.0).clamp(0.0, 12.0);
+            let s = scan(t, &readings_at(0, x));
+            let p = often.push_scan(&s).unwrap().position;
+            assert_eq!(p, scans_only.push_scan(&s).unwrap().position);
+            every_advance.push_scan(&s).unwrap();
+            assert_eq!(often.posterior(), scans_only.posterior(), "at {t}");
+            assert_eq!(often.position(), scans_only.position());
+        } else if k > 4 {
+            let step = scans_only.position().unwrap().clone();
+            let p = often.advance(t).unwrap().position;
+            every_advance.advance(t).unwrap();
+            assert_eq!((p.timestamp_ns, p.radio_log_evidence, p.floor), (t, None, step.floor));
+            assert!(p.accuracy_m >= step.accuracy_m - 1e-9, "{p:?} {step:?}");
+            held += 1;
+            if p.steps > 0 && step.x < 10.0 {
+                // East with the walker, by what it walked since the step, short of the
+                // corridor's end at 12 m.
+                assert!(p.x > step.x && (p.y - step.y).abs() < 0.5 * (p.x - step.x), "{p:?} {step:?}");
+                moved += 1;
+            }
+        }
+    }
+    assert!(held == 21 && moved >= 10, "{held} held, {moved} moved");
+    assert_eq!(often.history().len(), scans_only.history().len());
+    assert_eq!(often.stats().motion_epochs, 21);
+    assert_eq!(every_advance.history().len(), scans_only.history().len() + 21);
+    let spread = |engine: &Engine| engine.posterior().iter().filter(|&&p| p > 1e-3).count();
+    assert!(spread(&every_advance) >= spread(&often), "{:?}", every_advance.posterior());
+    assert_ne!(every_advance.posterior(), often.posterior());
+}
+
+/// Motion given with held advances adds up ([`MotionUpdate::then`]) into the next epoch's.
+/// A held advance's time is the latest epoch's: input before it is out of order, and feedback
+/// at it is a step of its own over the held motion.
+#[test]
+fn held_motion_given_adds_up_and_a_held_epoch_orders_input() {
+    let site = Arc::new(two_floor_site());
+    let config = EngineConfig { transition: TransitionModel::Hoang, ..EngineConfig::default() };
+    let mut held = Engine::new(Arc::clone(&site), config.clone()).unwrap();
+    let mut once = Engine::new(site, config).unwrap();
+    let part = |k: u64| MotionUpdate { start_ns: (k - 1) * SECOND / 2, end_ns: k * SECOND / 2, ..walking(1) };
+    for engine in [&mut held, &mut once] {
+        engine.push_scan(&scan(SECOND / 2, &readings_at(0, 0.0))).unwrap();
+    }
+    let mut sum = part(2);
+    for k in 2..=4 {
+        let p = held.advance_with_motion(k * SECOND / 2, &part(k)).unwrap().position;
+        assert_eq!(p.steps, (k - 1) as u32);
+        if k > 2 {
+            sum = sum.then(&part(k));
+        }
+    }
+    assert_eq!(sum.distance_m, Some(2.25));
+    assert_eq!(sum.displacement_m, Some([2.25, 0.0]));
+    let late = held.push_scan(&scan(SECOND + SECOND / 4, &readings_at(0, 2.0)));
+    assert_eq!(late, Err(InputError::OutOfOrder { timestamp_ns: SECOND + SECOND / 4, last_ns: 2 * SECOND }));
+    let s = scan(5 * SECOND / 2, &readings_at(0, 3.0));
+    held.push_scan_with_motion(&s, &part(5)).unwrap();
+    once.push_scan_with_motion(&s, &sum.then(&part(5))).unwrap();
+    assert_eq!(held.posterior(), once.posterior());
+    assert_eq!(held.position(), once.position());
+
+    held.advance_with_motion(3 * SECOND, &part(6)).unwrap();
+    let steps = held.history().len();
+    held.confirm_position(3 * SECOND, 6.0, 0.0, 0, 2.0).unwrap();
+    assert_eq!(held.history().len(), steps + 1);
+    assert_eq!(
+        held.history().back().map(|r| (r.timestamp_ns, r.input.clone())),
+        Some((3 * SECOND, waymark::EpochInput::Feedback))
+    );
+}
+
+/// An app whose timer advances 2 s after its last epoch by a clock a few milliseconds behind
+/// the engine's (Android's newest sample) holds every other advance, and the next one comes
+/// nearly 4 s after the filter's last step, beyond the walking-distance table's reach: the
+/// filter first steps over the held motion, so the walk is followed as by an engine stepping
+/// at every advance, not bridged by the speed bound alone. The held epoch is in the history.
+#[test]
+fn an_epoch_beyond_the_reach_of_the_last_step_steps_over_the_held_motion_first() {
+    let trace = corridor_walk();
+    let site = Arc::new(two_floor_site());
+    let config = EngineConfig { transition: TransitionModel::Hoang, ..EngineConfig::default() };
+    let every = EngineConfig { min_motion_step_s: 0.0, ..config.clone() };
+    let mut app = Engine::new(Arc::clone(&site), config).unwrap();
+    let mut reference = Engine::new(site, every).unwrap();
+    let mut cursors = [[0usize; 3]; 2];
+    let mut t = 4 * SECOND;
+    for (engine, cursor) in [&mut app, &mut reference].into_iter().zip(&mut cursors) {
+        feed(engine, &trace, cursor, t);
+        engine.push_scan(&scan(t, &readings_at(0, 1.0))).unwrap();
+    }
+    let mut worst: f64 = 0.0;
+    for _ in 0..5 {
+        t += 2 * SECOND - 5_000_000;
+        for (engine, cursor) in [&mut app, &mut reference].into_iter().zip(&mut cursors) {
+            feed(engine, &trace, cursor, t);
+        }
+        let p = app.advance(t).unwrap().position;
+        let q = reference.advance(t).unwrap().position;
+        worst = worst.max((p.x - q.x).hypot(p.y - q.y));
+    }
+    // 10 s walked at 1 m/s from x = 1: the end of the corridor.
+    let end = app.position().unwrap();
+    assert!(end.x > 9.0 && worst < 0.5, "{end:?}, {worst} m from the reference");
+    assert_eq!(app.history().len(), reference.history().len() - 1, "the last advance is held");
 }

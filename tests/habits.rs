@@ -31,10 +31,11 @@ fn walk_east(engine: &mut Engine, laps: std::ops::Range<u64>) {
     }
 }
 
-/// The posterior one second after a scan at x = 6 m, with no motion measured.
+/// The posterior two seconds after a scan at x = 6 m, with no motion measured (an advance
+/// sooner would be held, without a step: `EngineConfig::min_motion_step_s`).
 fn predicted_from_the_middle(engine: &mut Engine, t: u64) -> Vec<f64> {
     engine.push_scan(&scan(t, &readings_at(6.0))).unwrap();
-    engine.advance(t + SECOND).unwrap();
+    engine.advance(t + 2 * SECOND).unwrap();
     engine.posterior().to_vec()
 }
 

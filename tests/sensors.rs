@@ -297,3 +297,45 @@ mod fuzz {
         }
     }
 }
+
+/// Peeking at the interval leaves it open: updates every 2 s with peeks every 0.5 s between
+/// report what updates every 2 s alone do, and each peek what an update at its time would.
+#[test]
+fn a_peek_leaves_the_interval_to_the_next_update() {
+    let (_, trace, imu) = straight_walk();
+    let all = [&trace.accelerometer, &trace.gyroscope, &trace.magnetometer];
+    let mut peeking = MotionTracker::new(walk_config(&imu)).unwrap();
+    let mut plain = MotionTracker::new(walk_config(&imu)).unwrap();
+    let start = trace.accelerometer[0].timestamp_ns;
+    let end = trace.accelerometer.last().unwrap().timestamp_ns;
+    let half = 500_000_000;
+    let mut cursor = [0usize; 3];
+    let (mut peeks, mut walked) = (0, 0);
+    let mut t = start;
+    while t < end {
+        t += half;
+        for (k, samples) in all.iter().enumerate() {
+            let to = cursor[k] + samples[cursor[k]..].partition_point(|s| s.timestamp_ns <= t);
+            for tracker in [&mut peeking, &mut plain] {
+                match k {
+                    0 => tracker.push_accelerometer(&samples[cursor[k]..to]),
+                    1 => tracker.push_gyroscope(&samples[cursor[k]..to]),
+                    _ => tracker.push_magnetometer(&samples[cursor[k]..to]),
+                };
+            }
+            cursor[k] = to;
+        }
+        if (t - start) % (4 * half) == 0 {
+            let update = peeking.update(t);
+            assert_eq!(update, plain.update(t));
+            walked += update.steps;
+        } else {
+            let peek = peeking.peek(t);
+            let mut twin = peeking.clone();
+            assert_eq!(peek, twin.update(t));
+            peeks += 1;
+        }
+    }
+    assert!(peeks > 30 && walked > 20, "{peeks} peeks, {walked} steps");
+    assert_eq!(peeking.stats().steps_total, plain.stats().steps_total);
+}

@@ -942,8 +942,10 @@ waymark_result waymark_engine_push_scan(waymark_engine *engine,
                                         waymark_position *out);
 
 /**
- * An epoch without radio at `timestamp_ns`, from the motion since the last epoch. A
- * `timestamp_ns` not after the last epoch's returns `InputRejected` and changes nothing.
+ * An epoch without radio at `timestamp_ns`, from the motion since the last epoch. Sooner
+ * than 2 s after the filter's last step it is held: the position is the prediction by the
+ * motion since, and the next epoch steps over it. A `timestamp_ns` not after the last
+ * epoch's returns `InputRejected` and changes nothing.
  */
 waymark_result waymark_engine_advance(waymark_engine *engine,
                                       uint64_t timestamp_ns,

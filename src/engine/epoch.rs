@@ -85,9 +85,17 @@ impl Engine {
         allowed: Option<Vec<u32>>,
         motion: &MotionUpdate,
     ) -> Epoch {
+        let (motion, held_record) = match self.step_over_far_held(timestamp_ns, motion) {
+            Some((rest, record)) => (std::borrow::Cow::Owned(rest), Some(record)),
+            None => (std::borrow::Cow::Borrowed(motion), None),
+        };
+        let motion = motion.as_ref();
         let dt_s = self.last_epoch_ns.map(|last| (timestamp_ns - last) as f64 * 1e-9);
         let radio = self.epoch_radio_fit.take().filter(|_| input == EpochInput::Scan);
-        let beyond_radio_m = self.beyond_radio_m(radio.map(|r| r.1), dt_s, motion);
+        let before = self.step_position().map_or(0.0, |p| p.beyond_radio_m);
+        // The filter steps over the held epochs now: `motion` is theirs and this one's.
+        self.held = None;
+        let beyond_radio_m = self.beyond_radio_from(before, radio.map(|r| r.1), dt_s, motion);
         let radio_fit = radio.map(|r| r.0);
         let was_off_map = self.unexplained_run >= UNSURVEYED_AFTER_SCANS;
         if let Some((_, unexplained)) = radio {
@@ -96,34 +104,17 @@ impl Engine {
         let off_map = self.unexplained_run >= UNSURVEYED_AFTER_SCANS;
         // Back from beyond the map, the mass out there needs the whole table to come home.
         self.whole_reach = was_off_map || off_map;
-        if !off_map {
-            // On the map (as far as the radio says): the unsurveyed states around it are out.
-            for &i in &self.unsurveyed {
-                self.ln_emission[i] = f64::NEG_INFINITY;
-            }
-        }
+        self.rule_out_unsurveyed();
         let evidence = self.forward(timestamp_ns, dt_s, motion);
         self.last_epoch_ns = Some(timestamp_ns);
-        let position = self.locate(Position {
-            timestamp_ns,
-            floor: 0,
-            floor_probability: 0.0,
-            zone: None,
-            zone_probability: 0.0,
-            x: 0.0,
-            y: 0.0,
-            accuracy_m: 0.0,
-            accuracy_95_m: 0.0,
-            heading_rad: motion.heading_rad,
-            heading_accuracy_rad: motion.heading_rad.map(|_| motion.heading_sigma_rad),
-            motion_state: motion.motion_state,
-            scenario: motion.scenario,
-            steps: motion.steps,
-            radio_log_evidence: (input == EpochInput::Scan).then_some(evidence),
-            radio_fit,
-            beyond_radio_m,
-        });
+        let mut position = Position::of_motion(timestamp_ns, motion, beyond_radio_m);
+        position.radio_log_evidence = (input == EpochInput::Scan).then_some(evidence);
+        position.radio_fit = radio_fit;
+        let position = self.locate(position);
         self.conclude(position, |history, p| {
+            if let Some(record) = held_record {
+                history.push(record);
+            }
             history.push(EpochRecord {
                 timestamp_ns,
                 input,
@@ -136,15 +127,70 @@ impl Engine {
         })
     }
 
+    /// On the map (as far as the radio says): the unsurveyed states around it are out of
+    /// `ln_emission`.
+    pub(super) fn rule_out_unsurveyed(&mut self) {
+        if self.on_map() {
+            for &i in &self.unsurveyed {
+                self.ln_emission[i] = f64::NEG_INFINITY;
+            }
+        }
+    }
+
+    /// Whether the radio places the walker on the surveyed map: fewer than
+    /// [`UNSURVEYED_AFTER_SCANS`] unexplained scans in a row.
+    pub(super) fn on_map(&self) -> bool {
+        self.unexplained_run < UNSURVEYED_AFTER_SCANS
+    }
+
+    /// When the epoch at `timestamp_ns` is farther from the filter's last step than the
+    /// walking-distance table reaches, with epochs held since: the filter first steps over
+    /// the held motion, a motion-only epoch at the latest held epoch's time, so that the motion
+    /// is not lost to a gap bridged by the speed bound alone. An app advancing every 2 s by a
+    /// clock slightly behind the engine's holds every other advance. Returns the rest of
+    /// `motion` and the held epoch's record for the history.
+    fn step_over_far_held(
+        &mut self,
+        timestamp_ns: u64,
+        motion: &MotionUpdate,
+    ) -> Option<(MotionUpdate, EpochRecord)> {
+        let last = self.last_epoch_ns?;
+        let far = self.config.max_speed_mps * (timestamp_ns - last) as f64 * 1e-9 > self.reach.radius_m();
+        // The latest position is the latest held epoch's: any other epoch steps.
+        let shown = self.latest.clone().filter(|_| far && self.held.is_some())?;
+        let held = self.held.take()?;
+        let emission = std::mem::take(&mut self.ln_emission);
+        self.ln_emission = vec![0.0; emission.len()];
+        self.rule_out_unsurveyed();
+        let dt_s = (held.timestamp_ns - last) as f64 * 1e-9;
+        self.forward(held.timestamp_ns, Some(dt_s), &held.motion);
+        self.ln_emission = emission;
+        self.last_epoch_ns = Some(held.timestamp_ns);
+        let record = EpochRecord {
+            timestamp_ns: held.timestamp_ns,
+            input: EpochInput::Motion,
+            floor: shown.floor,
+            x: shown.x,
+            y: shown.y,
+            accuracy_m: shown.accuracy_m,
+            allowed: None,
+        };
+        Some((motion.after(&held.motion), record))
+    }
+
     /// `position` with the estimate from the current posterior: floor, (x, y), radii, zone.
     pub(super) fn locate(&mut self, position: Position) -> Position {
-        let e = estimate(
-            &self.site,
-            self.filter.posterior(),
-            self.estimate_states,
-            self.config.accuracy_mass,
-            &mut self.scratch,
-        );
+        self.locate_over(position, false)
+    }
+
+    /// [`locate`](Self::locate) over the posterior, or with `predicted` over the prediction a
+    /// held epoch left in `ln_emission` ([`Engine::hold_epoch`]). The zone is always the
+    /// posterior's, as [`Engine::zone_posterior`] and the zone events are: they change at the
+    /// filter's steps.
+    pub(super) fn locate_over(&mut self, position: Position, predicted: bool) -> Position {
+        let over = if predicted { &self.ln_emission } else { self.filter.posterior() };
+        let e =
+            estimate(&self.site, over, self.estimate_states, self.config.accuracy_mass, &mut self.scratch);
         let sparse = self.scan_timing.sparse_band(position.timestamp_ns);
         let scale = sparse
             .and_then(|band| self.sparse_scans.accuracy_scale_by_since[band])
@@ -281,4 +327,30 @@ pub(crate) fn check_readings(scan: &Scan) -> Result<(), InputError> {
 /// explain the scan. Above [`MAX_RSSI_DBM`] is `RssiTooHigh`.
 fn plausible_rssi(rssi_dbm: f64) -> bool {
     rssi_dbm.is_finite() && rssi_dbm >= -1000.0
+}
+
+impl Position {
+    /// What an epoch at `timestamp_ns` with `motion` reports before the estimate is placed:
+    /// the motion's heading, state, scenario and steps, and no radio.
+    pub(super) fn of_motion(timestamp_ns: u64, motion: &MotionUpdate, beyond_radio_m: f64) -> Position {
+        Position {
+            timestamp_ns,
+            floor: 0,
+            floor_probability: 0.0,
+            zone: None,
+            zone_probability: 0.0,
+            x: 0.0,
+            y: 0.0,
+            accuracy_m: 0.0,
+            accuracy_95_m: 0.0,
+            heading_rad: motion.heading_rad,
+            heading_accuracy_rad: motion.heading_rad.map(|_| motion.heading_sigma_rad),
+            motion_state: motion.motion_state,
+            scenario: motion.scenario,
+            steps: motion.steps,
+            radio_log_evidence: None,
+            radio_fit: None,
+            beyond_radio_m,
+        }
+    }
 }

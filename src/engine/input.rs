@@ -1,7 +1,7 @@
 //! The inputs an engine takes: inertial batches, scans, advances without radio, position
 //! fixes and user feedback, each epoch run atomically.
 
-use super::{Engine, Epoch, Position};
+use super::{Engine, Epoch, Held, Position};
 use crate::error::InputError;
 use crate::fix::{self, PositionFix};
 use crate::history::EpochInput;
@@ -68,7 +68,10 @@ impl Engine {
     /// An epoch without radio at `timestamp_ns`, from what the inertial sensors measured
     /// since the previous epoch: call it on a timer when scans are rare (iOS, throttled
     /// Android) to keep the position moving. Scans older than it will then be rejected as out
-    /// of order.
+    /// of order. Sooner than [`min_motion_step_s`](crate::EngineConfig::min_motion_step_s)
+    /// after the filter's last step it is held: the position is the estimate over the
+    /// posterior predicted by the motion since, and the filter steps over all of it at the
+    /// next epoch.
     pub fn advance(&mut self, timestamp_ns: u64) -> Result<Epoch, InputError> {
         self.advance_from(timestamp_ns, None)
     }
@@ -102,12 +105,43 @@ impl Engine {
     ) -> Result<Epoch, InputError> {
         self.check_time(timestamp_ns)?;
         motion.map_or(Ok(()), check_motion)?;
+        let min_step_ns = (self.config.min_motion_step_s * 1e9) as u64;
+        let soon = self.last_epoch_ns.is_some_and(|last| timestamp_ns - last < min_step_ns);
+        // Held from the position of the filter's last step.
+        let hold_from = self.step_position().filter(|_| soon).cloned();
         Ok(self.atomically(motion.is_none(), |engine| {
+            engine.stats.motion_epochs += 1;
+            if let Some(step) = hold_from {
+                // The tracker's own interval stays open, so that the step reports all of it
+                // as one; motion given is added to what was held.
+                let motion = match motion {
+                    None => engine.tracker.peek(timestamp_ns),
+                    Some(_) => engine.motion_until(timestamp_ns, motion),
+                };
+                return engine.hold_epoch(timestamp_ns, motion, step);
+            }
             let motion = engine.motion_until(timestamp_ns, motion);
             engine.ln_emission.fill(0.0);
-            engine.stats.motion_epochs += 1;
             engine.run_epoch(timestamp_ns, EpochInput::Motion, None, &motion)
         }))
+    }
+
+    /// A motion-only epoch the filter does not step over ([`Held`]): the estimate over the
+    /// prediction from the filter's last step (at `step`) by `motion`, all there has been since it, into
+    /// `ln_emission` (scratch between epochs); the posterior, and with it the zone, stays as
+    /// it was. Not in the history, which holds the filter's steps.
+    fn hold_epoch(&mut self, timestamp_ns: u64, motion: MotionUpdate, step: Position) -> Epoch {
+        let dt_s = self.last_epoch_ns.map_or(0.0, |last| (timestamp_ns - last) as f64 * 1e-9);
+        let beyond_radio_m = self.beyond_radio_from(step.beyond_radio_m, None, Some(dt_s), &motion);
+        self.predict_held(timestamp_ns, dt_s, &motion);
+        let position = self.locate_over(Position::of_motion(timestamp_ns, &motion, beyond_radio_m), true);
+        self.held = Some(Held { timestamp_ns, motion, step });
+        self.conclude(position, |_, _| {})
+    }
+
+    /// The position of the filter's last step: the latest but for held epochs.
+    pub(super) fn step_position(&self) -> Option<&Position> {
+        self.held.as_ref().map(|h| &h.step).or(self.latest.as_ref())
     }
 
     /// A position from another positioning system (GNSS near an entrance, WiFi RTT, UWB): one
@@ -201,10 +235,13 @@ impl Engine {
         timestamp_ns: u64,
         states: Result<Vec<u32>, InputError>,
     ) -> Result<Epoch, InputError> {
-        let latest = self.latest.clone().filter(|p| p.timestamp_ns == timestamp_ns);
-        if latest.is_none() {
+        let at_latest = self.latest.as_ref().is_some_and(|p| p.timestamp_ns == timestamp_ns);
+        if !at_latest {
             self.check_time(timestamp_ns)?;
         }
+        // A held epoch was not a step of the filter: the feedback at it is a step of its own,
+        // over the motion held.
+        let latest = self.latest.clone().filter(|_| at_latest && self.held.is_none());
         let states = states?;
         // §IV-C: the forward variable is zeroed outside the known states.
         self.ln_emission.fill(f64::NEG_INFINITY);
@@ -248,6 +285,7 @@ impl Engine {
     /// returned track and the counters, and a clone of the tracker when it is used.
     pub(super) fn atomically<T>(&mut self, uses_tracker: bool, epoch: impl FnOnce(&mut Self) -> T) -> T {
         self.undo.last_epoch_ns = self.last_epoch_ns;
+        self.undo.held.clone_from(&self.held);
         self.undo.unexplained_run = self.unexplained_run;
         self.undo.scan_timing = self.scan_timing;
         self.undo.latest.clone_from(&self.latest);
@@ -269,6 +307,7 @@ impl Engine {
                 // The smoother's history may hold the undone step.
                 self.smoother.clear();
                 self.last_epoch_ns = self.undo.last_epoch_ns;
+                std::mem::swap(&mut self.held, &mut self.undo.held);
                 self.unexplained_run = self.undo.unexplained_run;
                 self.scan_timing = self.undo.scan_timing;
                 std::mem::swap(&mut self.latest, &mut self.undo.latest);
@@ -287,13 +326,14 @@ impl Engine {
     /// (`unexplained`; `None`: no scan) with `motion` over `dt_s`: back to 0 when the map
     /// explains the scan, growing by the distance walked when it does not, or when there was no
     /// scan since one it did not.
-    pub(super) fn beyond_radio_m(
+    /// `before` is its value at the filter's last step.
+    pub(super) fn beyond_radio_from(
         &self,
+        before: f64,
         unexplained: Option<bool>,
         dt_s: Option<f64>,
         motion: &MotionUpdate,
     ) -> f64 {
-        let before = self.latest.as_ref().map_or(0.0, |p| p.beyond_radio_m);
         if !unexplained.unwrap_or(before > 0.0) {
             return 0.0;
         }
@@ -305,16 +345,20 @@ impl Engine {
         before + walked
     }
 
-    /// The motion given, or what the tracker measured up to `timestamp_ns`.
+    /// What the tracker measured up to `timestamp_ns` since its previous update, which spans
+    /// the epochs held since (they only peek); or the motion given, after that of the held
+    /// epochs.
     pub(super) fn motion_until(&mut self, timestamp_ns: u64, given: Option<&MotionUpdate>) -> MotionUpdate {
-        match given {
-            Some(m) => m.clone(),
-            None => self.tracker.update(timestamp_ns),
+        match (given, &self.held) {
+            (None, _) => self.tracker.update(timestamp_ns),
+            (Some(m), Some(held)) => held.motion.then(m),
+            (Some(m), None) => m.clone(),
         }
     }
 
+    /// Input must come after the latest epoch, held or not.
     pub(super) fn check_time(&self, timestamp_ns: u64) -> Result<(), InputError> {
-        match self.last_epoch_ns {
+        match self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns) {
             Some(last_ns) if timestamp_ns <= last_ns => Err(InputError::OutOfOrder { timestamp_ns, last_ns }),
             _ => Ok(()),
         }

@@ -17,7 +17,7 @@ use crate::habits::{FixError, HabitError, HabitModel, HabitPrior, HabitReport};
 use crate::history::{EpochRecord, History};
 use crate::hmm::{estimate, FixedLagSmoother, ForwardFilter, ViterbiWindow};
 use crate::radio::ScanHasher;
-use crate::sensors::{MotionStats, MotionTracker};
+use crate::sensors::{MotionStats, MotionTracker, MotionUpdate};
 use crate::site::{ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
@@ -57,7 +57,11 @@ pub struct Engine {
     tracker: MotionTracker,
     ln_emission: Vec<f64>,
     scratch: Vec<(f64, f64)>,
+    /// Time of the filter's last step.
     last_epoch_ns: Option<u64>,
+    /// The motion-only epochs since the filter's last step, held back from it
+    /// ([`EngineConfig::min_motion_step_s`]).
+    held: Option<Held>,
     latest: Option<Position>,
     last_track: Vec<TrackPoint>,
     stats: InputStats,
@@ -105,11 +109,24 @@ pub struct Engine {
     shared_emissions: Option<Arc<SharedEmissions>>,
 }
 
+/// Motion-only epochs the filter has not stepped over yet: they came sooner than
+/// [`EngineConfig::min_motion_step_s`] after its last step.
+#[derive(Clone, Debug)]
+struct Held {
+    /// The latest held epoch.
+    timestamp_ns: u64,
+    /// The motion since the filter's last step.
+    motion: MotionUpdate,
+    /// The position of the filter's last step.
+    step: Position,
+}
+
 /// What an epoch changes besides the filter and the Viterbi window, which keep their own
 /// checkpoints: saved before it, so that a panic inside can be undone.
 #[derive(Default)]
 struct Undo {
     last_epoch_ns: Option<u64>,
+    held: Option<Held>,
     unexplained_run: u32,
     scan_timing: ScanTiming,
     latest: Option<Position>,
@@ -154,6 +171,7 @@ impl Engine {
             ln_emission: vec![0.0; n],
             scratch: Vec::with_capacity(n),
             last_epoch_ns: None,
+            held: None,
             latest: None,
             last_track: Vec::new(),
             stats: InputStats::default(),
@@ -262,13 +280,14 @@ impl Engine {
     #[doc(hidden)]
     pub fn snapshot(&self) -> EngineSnapshot {
         EngineSnapshot {
-            last_epoch_ns: self.last_epoch_ns,
+            last_epoch_ns: self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns),
             position: self.latest.clone(),
             posterior: self.filter.posterior().to_vec(),
             last_track: self.last_track.clone(),
             stats: self.stats.clone(),
             internals: format!(
-                "{:?}\n{:?}\n{:?}\n{:?}\n{:?}",
+                "{:?}\n{:?}\n{:?}\n{:?}\n{:?}\n{:?}",
+                self.held,
                 self.filter,
                 self.viterbi,
                 self.tracker,

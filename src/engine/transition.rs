@@ -52,6 +52,40 @@ impl Engine {
         }
     }
 
+    /// The posterior predicted `dt_s` on by `motion` into `ln_emission`, normalised, the filter
+    /// unchanged: where a held epoch is ([`Engine::hold_epoch`]). The posterior itself when
+    /// the transition's reach does not cover `dt_s`.
+    pub(super) fn predict_held(&mut self, timestamp_ns: u64, dt_s: f64, motion: &MotionUpdate) {
+        let config = &self.config;
+        let region = hipe_region(config, motion, dt_s);
+        let needed = match config.transition {
+            TransitionModel::Reach | TransitionModel::Hoang => config.max_speed_mps * dt_s,
+            TransitionModel::Hipe => region.outer_radius_m(),
+        };
+        if needed > self.reach.radius_m() {
+            self.ln_emission.copy_from_slice(self.filter.posterior());
+            return;
+        }
+        let model = self.step_model(timestamp_ns, motion, dt_s, region);
+        let parts = self.transition_parts();
+        let (posterior, predicted) = (self.filter.posterior(), &mut self.ln_emission);
+        let mut row = Vec::new();
+        parts.with(&model, |t| crate::hmm::predict(t, posterior, predicted, &mut row));
+        // As a motion-only step would: on the map, no mass on the unsurveyed states.
+        if self.on_map() {
+            for &i in &self.unsurveyed {
+                self.ln_emission[i] = 0.0;
+            }
+        }
+        let predicted = &mut self.ln_emission;
+        let total: f64 = predicted.iter().sum();
+        if total > 0.0 && total.is_finite() {
+            predicted.iter_mut().for_each(|p| *p /= total);
+        } else {
+            predicted.copy_from_slice(posterior);
+        }
+    }
+
     /// What this epoch's transition is, from the configuration and `motion` over `dt_s`.
     fn step_model(
         &self,
@@ -66,7 +100,7 @@ impl Engine {
         let kind = match config.transition {
             TransitionModel::Reach => StepKind::Reach,
             TransitionModel::Hipe => {
-                StepKind::Hipe { region, ratio: hipe_ratio(config, motion, self.latest.as_ref()) }
+                StepKind::Hipe { region, ratio: hipe_ratio(config, motion, self.step_position()) }
             }
             // Hoang's Gaussian needs a measured distance (the movement vector, or the distance
             // alone); with only a heading, HIPE's sector still uses what was measured (HIPE

@@ -444,8 +444,10 @@ fn readings(
     Ok(readings)
 }
 
-/// An epoch without radio at `timestamp_ns`, from the motion since the last epoch. A
-/// `timestamp_ns` not after the last epoch's returns `InputRejected` and changes nothing.
+/// An epoch without radio at `timestamp_ns`, from the motion since the last epoch. Sooner
+/// than 2 s after the filter's last step it is held: the position is the prediction by the
+/// motion since, and the next epoch steps over it. A `timestamp_ns` not after the last
+/// epoch's returns `InputRejected` and changes nothing.
 #[no_mangle]
 pub extern "C" fn waymark_engine_advance(
     engine: *mut waymark_engine,

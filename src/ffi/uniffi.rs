@@ -239,7 +239,8 @@ impl PositioningEngine {
     }
 
     /// An epoch without radio, from the motion since the last one: call it on a timer when
-    /// scans are rare.
+    /// scans are rare. Sooner than 2 s after the filter's last step it is held: the position
+    /// is the prediction by the motion since, and the next epoch steps over it.
     pub fn advance(&self, timestamp_ns: u64) -> Result<PositionEstimate, PositioningError> {
         self.epoch(|engine| engine.advance(timestamp_ns))
     }

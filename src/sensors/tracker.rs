@@ -291,6 +291,32 @@ impl MotionTracker {
     /// reports what happened since the previous update. An `until_ns` before the previous one
     /// is taken as the previous one (an empty interval).
     pub fn update(&mut self, until_ns: u64) -> MotionUpdate {
+        let (start, until) = self.process_until(until_ns);
+        let steps = std::mem::take(&mut self.steps);
+        let update = self.summarise(start, until, &steps);
+        self.stats.steps_total += steps.len() as u64;
+        self.last_steps = steps;
+        self.steps = Vec::with_capacity(32);
+        self.interval_start_ns = Some(until);
+        self.accel_covered_ns = 0;
+        self.interval_disturbed = false;
+        update
+    }
+
+    /// What happened since the previous [`update`](Self::update) up to `until_ns`, as
+    /// `update` would report it, with the interval left open: the next `update` reports all
+    /// of it again, to its own end.
+    pub fn peek(&mut self, until_ns: u64) -> MotionUpdate {
+        let (start, until) = self.process_until(until_ns);
+        let steps = std::mem::take(&mut self.steps);
+        let update = self.summarise(start, until, &steps);
+        self.steps = steps;
+        update
+    }
+
+    /// Processes every buffered sample up to `until_ns` (see [`update`](Self::update)):
+    /// the interval's start and end.
+    fn process_until(&mut self, until_ns: u64) -> (u64, u64) {
         let earliest = self.buffers.iter().filter_map(|b| b.front().map(|s| s.timestamp_ns)).min();
         let start = self
             .interval_start_ns
@@ -314,10 +340,11 @@ impl MotionTracker {
         }
         self.gait.tick(until);
         self.processed_until_ns = Some(until);
-        self.summarise(start, until)
+        (start, until)
     }
 
-    fn summarise(&mut self, start: u64, end: u64) -> MotionUpdate {
+    /// The interval from `start` to `end` with its `steps`.
+    fn summarise(&mut self, start: u64, end: u64, steps: &[StepEvent]) -> MotionUpdate {
         let c = &self.config;
         // Accelerometer coverage of the interval, counting the tail up to `end`.
         let mut covered = self.accel_covered_ns;
@@ -329,7 +356,6 @@ impl MotionTracker {
         }
         let covered_enough =
             if end > start { covered as f64 >= 0.5 * (end - start) as f64 } else { accel_alive };
-        let steps = std::mem::take(&mut self.steps);
         let distance: f64 = steps.iter().map(|s| s.length_m).sum();
         let distance_m = covered_enough.then_some(distance);
         let walking = self.gait.walking() && !self.detector.gravity().still();
@@ -367,7 +393,7 @@ impl MotionTracker {
             let mut sum = [0.0, 0.0];
             let mut worst = now.map_or(0.0, |h| h.1);
             let mut known = true;
-            for s in &steps {
+            for s in steps {
                 match s.heading_rad.map(|h| (h, s.heading_sigma_rad)).or(now) {
                     Some((h, sigma)) => {
                         sum[0] += s.length_m * h.sin();
@@ -394,7 +420,8 @@ impl MotionTracker {
             (false, true) => MdiScenario::HeadingSpeed,
             (false, false) => MdiScenario::Speed,
         };
-        let update = MotionUpdate {
+        self.stats.rejected_step_candidates = self.gait.rejected();
+        MotionUpdate {
             start_ns: start,
             end_ns: end,
             steps: steps.len() as u32,
@@ -407,15 +434,7 @@ impl MotionTracker {
             scenario,
             compass_disturbed: self.interval_disturbed
                 || (self.heading.disturbed() && self.heading.compass_alive(end)),
-        };
-        self.stats.steps_total += steps.len() as u64;
-        self.stats.rejected_step_candidates = self.gait.rejected();
-        self.last_steps = steps;
-        self.steps = Vec::with_capacity(32);
-        self.interval_start_ns = Some(end);
-        self.accel_covered_ns = 0;
-        self.interval_disturbed = false;
-        update
+        }
     }
 
     /// The steps counted by the most recent [`update`](Self::update), with their times.

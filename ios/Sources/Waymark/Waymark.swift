@@ -1186,7 +1186,8 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     
     /**
      * An epoch without radio, from the motion since the last one: call it on a timer when
-     * scans are rare.
+     * scans are rare. Sooner than 2 s after the filter's last step it is held: the position
+     * is the prediction by the motion since, and the next epoch steps over it.
      */
     func advance(timestampNs: UInt64) throws  -> PositionEstimate
     
@@ -1483,7 +1484,8 @@ open func addGeofence(geofence: Geofence)throws   {try rustCallWithError(FfiConv
     
     /**
      * An epoch without radio, from the motion since the last one: call it on a timer when
-     * scans are rare.
+     * scans are rare. Sooner than 2 s after the filter's last step it is held: the position
+     * is the prediction by the motion since, and the next epoch steps over it.
      */
 open func advance(timestampNs: UInt64)throws  -> PositionEstimate  {
     return try  FfiConverterTypePositionEstimate_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
@@ -7213,7 +7215,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_add_geofence() != 7636) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_advance() != 1226) {
+    if (uniffi_waymark_checksum_method_positioningengine_advance() != 29950) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_clear_habits() != 62222) {
