@@ -249,8 +249,10 @@ impl Engine {
         out
     }
 
-    /// The last epochs (at most `history_epochs`), oldest first, each with the states the user
-    /// confirmed at it, if any: input for a later learning pass.
+    /// The last epochs the filter stepped over (at most `history_epochs`), oldest first, each
+    /// with the states the user confirmed at it, if any: input for a later learning pass. A held
+    /// advance ([`EngineConfig::min_motion_step_s`]) is not among them until an epoch beyond
+    /// the walking-distance table's reach steps over it.
     pub fn history(&self) -> &std::collections::VecDeque<EpochRecord> {
         self.history.records()
     }
