@@ -6,7 +6,8 @@
 //! error at the WiFi scans and the walks whose first estimate, and whose first scored scan, is
 //! on a wrong floor; the paired
 //! mean error by the scored scan's place in its walk (scans 1-2, 3-5, 6-10, 11-20, after 20);
-//! the error along the walk's direction and across it, mean and rms;
+//! the error along the walk's direction and across it, mean and rms; the error of the position
+//! an app shows at every half second (the latest one);
 //! the difference of consecutive configurations (in `CONFIGS` order) with its standard error
 //! over walks; and one line per test walk. Errors do not depend on the radius factors, so the means
 //! are those of the evaluation ([`waymark_eval::real`]) at the same γ and fingerprint radius (`FP_RADIUS`).
@@ -102,6 +103,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let mut by_index: BTreeMap<&str, [(f64, usize); INDEX_BANDS.len()]> = BTreeMap::new();
     // Per configuration: each scored scan's error along and across the walk's direction, m.
     let mut along: BTreeMap<&str, Vec<(f64, f64)>> = BTreeMap::new();
+    // Per configuration: the position shown every half second, (Σ error on the right floor,
+    // samples on the right floor, samples).
+    let mut shown: BTreeMap<&str, (f64, usize, usize)> = BTreeMap::new();
     for key in &configs {
         for (result, &(f, trace)) in results.iter().zip(&tests) {
             let estimates = result.estimates.get(key).map_or(&[][..], Vec::as_slice);
@@ -111,6 +115,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
                 if let Some(e) = along_across(trace, f, estimates, scan.timestamp_ns) {
                     track.push(e);
                 }
+            }
+            let dot = shown.entry(key).or_default();
+            for (error, on_floor) in as_shown(trace, f, estimates) {
+                dot.0 += error;
+                dot.1 += usize::from(on_floor);
+                dot.2 += 1;
             }
             let first_off = estimates.first().is_some_and(|e| e.floor != f);
             let first_scan_off = scans.first().is_some_and(|s| !s.floor_correct);
@@ -163,6 +173,14 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
             e.len()
         );
     }
+    for key in &configs {
+        let (sum, on_floor, n) = shown[key.as_str()];
+        println!(
+            "{key:<26} as shown every 0.5 s: mean {:.3} m on the walk's floor, there {:.4} of {n}",
+            sum / on_floor.max(1) as f64,
+            on_floor as f64 / n.max(1) as f64
+        );
+    }
     for pair in configs.windows(2) {
         let (a, b) = (&walks[pair[0].as_str()], &walks[pair[1].as_str()]);
         let n: usize = a.iter().map(|x| x.1).sum();
@@ -190,6 +208,22 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
 /// The error of the estimate scored at `t` along the walk's direction there (positive: ahead)
 /// and across it (positive: to the left), m: `None` off the floor, or where the truth moves
 /// less than 0.5 m in the 2 s around `t` (standing, or the direction is not known).
+/// The position an app shows every half second from the walk's first estimate to its last
+/// waypoint (the latest estimate then): its error against the truth then when on the walk's
+/// `floor` (0 otherwise), and whether it is.
+fn as_shown(trace: &Trace, floor: usize, estimates: &[Estimate]) -> Vec<(f64, bool)> {
+    let (Some(first), Some(last)) = (estimates.first(), trace.waypoints.last()) else { return Vec::new() };
+    (first.timestamp_ns..=last.timestamp_ns)
+        .step_by(500_000_000)
+        .filter_map(|t| {
+            let e = &estimates[estimates.partition_point(|e| e.timestamp_ns <= t).checked_sub(1)?];
+            let (x, y) = trace.position_at(t)?;
+            let on_floor = e.floor == floor;
+            Some((if on_floor { (e.x - x).hypot(e.y - y) } else { 0.0 }, on_floor))
+        })
+        .collect()
+}
+
 fn along_across(trace: &Trace, floor: usize, estimates: &[Estimate], t: u64) -> Option<(f64, f64)> {
     let k = estimates.partition_point(|e| e.timestamp_ns <= t).checked_sub(1)?;
     let e = estimates.get(k).filter(|e| e.floor == floor)?;
