@@ -125,9 +125,10 @@ pub struct EngineConfig {
     /// sooner than this after the filter's last step is held (its position is the estimate
     /// over the posterior predicted by the motion since, the filter unchanged) and its motion
     /// carried into the next epoch, so that advancing more often does not spread the mass
-    /// more: each step adds Σ_v and the grid's quantisation spread whatever its length. 2 s: the replay's timer, one unthrottled scan
-    /// interval, the cadence at which the site's γ and radius factors are calibrated
-    /// (docs/tuning.md#replay-timer). 0 steps at every advance.
+    /// more: each step adds Σ_v and the grid's quantisation spread whatever its length. 2 s:
+    /// the replay's timer, one unthrottled scan interval, the cadence at which the site's γ
+    /// and radius factors are calibrated (docs/tuning.md#replay-timer). 0 steps at every
+    /// advance.
     pub min_motion_step_s: f64,
     /// Ratio K between the high transition probability (reachable states) and the low one
     /// (everything else), HIPE eqs. 5-6. The low one keeps every a_ij > 0 (HIPE eq. 11) so the

@@ -259,6 +259,16 @@ fn corridor_walk() -> waymark_sim::imu::ImuTrace {
     waymark_sim::imu::synthesize(&trajectory, &waymark_sim::imu::ImuConfig::default(), 7)
 }
 
+/// Engines on [`two_floor_site`] with Hoang's transition, one per `min_motion_step_s`.
+fn hoang_engines<const N: usize>(min_motion_step_s: [f64; N]) -> [Engine; N] {
+    let site = Arc::new(two_floor_site());
+    min_motion_step_s.map(|min_motion_step_s| {
+        let config =
+            EngineConfig { transition: TransitionModel::Hoang, min_motion_step_s, ..EngineConfig::default() };
+        Engine::new(Arc::clone(&site), config).unwrap()
+    })
+}
+
 /// Gives `engine` the samples of `trace` up to `t` not given yet (`cursor`).
 fn feed(engine: &mut Engine, trace: &waymark_sim::imu::ImuTrace, cursor: &mut [usize; 3], t: u64) {
     let streams = [&trace.accelerometer, &trace.gyroscope, &trace.magnetometer];
@@ -283,12 +293,7 @@ fn feed(engine: &mut Engine, trace: &waymark_sim::imu::ImuTrace, cursor: &mut [u
 #[test]
 fn advancing_more_often_than_the_minimum_step_moves_the_mass_as_one_step() {
     let trace = corridor_walk();
-    let site = Arc::new(two_floor_site());
-    let config = EngineConfig { transition: TransitionModel::Hoang, ..EngineConfig::default() };
-    let every = EngineConfig { min_motion_step_s: 0.0, ..config.clone() };
-    let mut often = Engine::new(Arc::clone(&site), config.clone()).unwrap();
-    let mut scans_only = Engine::new(Arc::clone(&site), config).unwrap();
-    let mut every_advance = Engine::new(site, every).unwrap();
+    let [mut often, mut scans_only, mut every_advance] = hoang_engines([2.0, 2.0, 0.0]);
     let mut cursors = [[0usize; 3]; 3];
     let (mut held, mut moved) = (0, 0);
     for k in 1..=32u64 {
@@ -335,10 +340,7 @@ fn advancing_more_often_than_the_minimum_step_moves_the_mass_as_one_step() {
 /// at it is a step of its own over the held motion.
 #[test]
 fn held_motion_given_adds_up_and_a_held_epoch_orders_input() {
-    let site = Arc::new(two_floor_site());
-    let config = EngineConfig { transition: TransitionModel::Hoang, ..EngineConfig::default() };
-    let mut held = Engine::new(Arc::clone(&site), config.clone()).unwrap();
-    let mut once = Engine::new(site, config).unwrap();
+    let [mut held, mut once] = hoang_engines([2.0, 2.0]);
     let part = |k: u64| MotionUpdate { start_ns: (k - 1) * SECOND / 2, end_ns: k * SECOND / 2, ..walking(1) };
     for engine in [&mut held, &mut once] {
         engine.push_scan(&scan(SECOND / 2, &readings_at(0, 0.0))).unwrap();
@@ -379,11 +381,7 @@ fn held_motion_given_adds_up_and_a_held_epoch_orders_input() {
 #[test]
 fn an_epoch_beyond_the_reach_of_the_last_step_steps_over_the_held_motion_first() {
     let trace = corridor_walk();
-    let site = Arc::new(two_floor_site());
-    let config = EngineConfig { transition: TransitionModel::Hoang, ..EngineConfig::default() };
-    let every = EngineConfig { min_motion_step_s: 0.0, ..config.clone() };
-    let mut app = Engine::new(Arc::clone(&site), config).unwrap();
-    let mut reference = Engine::new(site, every).unwrap();
+    let [mut app, mut reference] = hoang_engines([2.0, 0.0]);
     let mut cursors = [[0usize; 3]; 2];
     let mut t = 4 * SECOND;
     for (engine, cursor) in [&mut app, &mut reference].into_iter().zip(&mut cursors) {

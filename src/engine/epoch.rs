@@ -143,8 +143,8 @@ impl Engine {
         self.unexplained_run < UNSURVEYED_AFTER_SCANS
     }
 
-    /// When the epoch at `timestamp_ns` is farther from the filter's last step than the
-    /// walking-distance table reaches, with epochs held since: the filter first steps over
+    /// When the epoch at `timestamp_ns` with `motion` is farther from the filter's last step
+    /// than the walking-distance table reaches, with epochs held since: the filter first steps over
     /// the held motion, a motion-only epoch at the latest held epoch's time, so that the motion
     /// is not lost to a gap bridged by the speed bound alone. An app advancing every 2 s by a
     /// clock slightly behind the engine's holds every other advance. Returns the rest of
@@ -155,7 +155,7 @@ impl Engine {
         motion: &MotionUpdate,
     ) -> Option<(MotionUpdate, EpochRecord)> {
         let last = self.last_epoch_ns?;
-        let far = self.config.max_speed_mps * (timestamp_ns - last) as f64 * 1e-9 > self.reach.radius_m();
+        let far = self.within_reach(motion, (timestamp_ns - last) as f64 * 1e-9).is_none();
         // The latest position is the latest held epoch's: any other epoch steps.
         let shown = self.latest.clone().filter(|_| far && self.held.is_some())?;
         let held = self.held.take()?;

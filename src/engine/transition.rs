@@ -23,16 +23,9 @@ impl Engine {
             );
             return self.update(None);
         };
-        let config = &self.config;
-        let speed_reach = config.max_speed_mps * dt;
-        let hipe_region = hipe_region(config, motion, dt);
-        let needed = match config.transition {
-            TransitionModel::Reach | TransitionModel::Hoang => speed_reach,
-            TransitionModel::Hipe => hipe_region.outer_radius_m(),
+        let Some(hipe_region) = self.within_reach(motion, dt) else {
+            return self.bridge_gap(timestamp_ns, self.config.max_speed_mps * dt);
         };
-        if needed > self.reach.radius_m() {
-            return self.bridge_gap(timestamp_ns, speed_reach);
-        }
         let model = self.step_model(timestamp_ns, motion, dt, hipe_region);
         if let Some(last) = self.last_epoch_ns {
             self.smoother.begin(last, self.filter.posterior(), model);
@@ -56,16 +49,10 @@ impl Engine {
     /// unchanged: where a held epoch is ([`Engine::hold_epoch`]). The posterior itself when
     /// the transition's reach does not cover `dt_s`.
     pub(super) fn predict_held(&mut self, timestamp_ns: u64, dt_s: f64, motion: &MotionUpdate) {
-        let config = &self.config;
-        let region = hipe_region(config, motion, dt_s);
-        let needed = match config.transition {
-            TransitionModel::Reach | TransitionModel::Hoang => config.max_speed_mps * dt_s,
-            TransitionModel::Hipe => region.outer_radius_m(),
-        };
-        if needed > self.reach.radius_m() {
+        let Some(region) = self.within_reach(motion, dt_s) else {
             self.ln_emission.copy_from_slice(self.filter.posterior());
             return;
-        }
+        };
         let model = self.step_model(timestamp_ns, motion, dt_s, region);
         let parts = self.transition_parts();
         let (posterior, predicted) = (self.filter.posterior(), &mut self.ln_emission);
@@ -84,6 +71,19 @@ impl Engine {
         } else {
             predicted.copy_from_slice(posterior);
         }
+    }
+
+    /// HIPE's regions for `motion` over `dt_s` when the configured transition's reach (the
+    /// speed bound's, or the regions' for HIPE) is within the walking-distance table; `None`
+    /// when the gap has to be bridged by the speed bound alone.
+    pub(super) fn within_reach(&self, motion: &MotionUpdate, dt_s: f64) -> Option<HipeRegion> {
+        let config = &self.config;
+        let region = hipe_region(config, motion, dt_s);
+        let needed = match config.transition {
+            TransitionModel::Reach | TransitionModel::Hoang => config.max_speed_mps * dt_s,
+            TransitionModel::Hipe => region.outer_radius_m(),
+        };
+        (needed <= self.reach.radius_m()).then_some(region)
     }
 
     /// What this epoch's transition is, from the configuration and `motion` over `dt_s`.
