@@ -12,7 +12,14 @@ mkdir -p "$target"
 log="$target/test-suite.log"
 : > "$log"
 
-step() { printf '\n==> %s\n' "$*"; }
+# Each step's heading also prints how long the previous one took, so a slow CI run shows where.
+step_start=$SECONDS
+step_name=""
+step() {
+    if [[ -n $step_name ]]; then printf '(%s: %d s)\n' "$step_name" $((SECONDS - step_start)); fi
+    step_name=$*; step_start=$SECONDS
+    printf '\n==> %s\n' "$*"
+}
 # Runs a command, keeping its output in the log for the final count.
 run() { "$@" 2>&1 | tee -a "$log"; }
 
@@ -58,6 +65,7 @@ step "waymark view in headless Chromium (every floor renders, no console errors)
 run bash scripts/view-test.sh
 
 step "All tests"
+echo "(whole run: $SECONDS s)"
 python3 - "$log" <<'PY'
 import re, sys
 text = open(sys.argv[1], errors="replace").read()

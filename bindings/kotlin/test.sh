@@ -70,16 +70,17 @@ done
 cd "$REPO"
 step "cargo build -p uniffi-bindgen"
 cargo build -p uniffi-bindgen
-# The simulated site and walk. Built and run before the lean library below, because a build
-# of the CLI rewrites target/debug/libwaymark.so too (without fault injection).
+# The simulated site and walk, by the release CLI: the survey test builds a site with it, which
+# takes minutes in a debug build and seconds in release (the test is of the recorder and the
+# CLI's pipeline, not of the build profile). A release build leaves target/debug alone.
 step "waymark sim-export --out $SIM"
-cargo build -p waymark-cli
-"$TARGET/debug/waymark" sim-export --out "$SIM"
+cargo build --release -p waymark-cli
+"$TARGET/release/waymark" sim-export --out "$SIM"
 # The same site with its transmitter ids hashed, under a fixed test salt.
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$SIM/salt.hex"
-"$TARGET/debug/waymark" site hash --salt-file "$SIM/salt.hex" "$SIM/site.json" "$SIM/site-hashed.json" >&2
+"$TARGET/release/waymark" site hash --salt-file "$SIM/salt.hex" "$SIM/site.json" "$SIM/site-hashed.json" >&2
 # The same site in the binary encoding an app ships.
-"$TARGET/debug/waymark" site pack "$SIM/site.json" "$SIM/site.wmsite" >&2
+"$TARGET/release/waymark" site pack "$SIM/site.json" "$SIM/site.wmsite" >&2
 # The shipped library (plus the test-only fault injection): the one the JVM loads.
 step "cargo build --lib"
 # A test build: a scan at ULong.MAX - 7 panics inside the engine (feature fault-injection).
@@ -114,7 +115,7 @@ java -Djna.library.path="$TARGET/debug" \
     -Dwaymark.site="$SIM/site.json" -Dwaymark.walk="$SIM/walk.json" \
     -Dwaymark.hashedSite="$SIM/site-hashed.json" -Dwaymark.salt="$SIM/salt.hex" \
     -Dwaymark.packedSite="$SIM/site.wmsite" \
-    -Dwaymark.surveyWalks="$SIM/survey" -Dwaymark.cli="$TARGET/debug/waymark" \
+    -Dwaymark.surveyWalks="$SIM/survey" -Dwaymark.cli="$TARGET/release/waymark" \
     -cp "$OUT/classes:$run_cp" dev.waymark.RunTests 2>&1 | tee "$OUT/junit.log"
 status=${PIPESTATUS[0]}
 set -e

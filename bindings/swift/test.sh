@@ -39,15 +39,15 @@ fi
 # --- 2. The library and the generator, exactly as the release does (bindgen never in the lib).
 log "building"
 cargo build --quiet -p uniffi-bindgen
-# The simulated site and walk the XCTest replays (building the CLI rebuilds the library without
-# fault injection, so the library comes last).
-cargo run --quiet -p waymark-cli -- sim-export --out "$TARGET/sim-export" >/dev/null
+# The simulated site and walk the XCTest replays, by the release CLI: the survey test builds a
+# site with it, minutes in a debug build and seconds in release. The library comes last.
+cargo run --release --quiet -p waymark-cli -- sim-export --out "$TARGET/sim-export" >/dev/null
 # The same site with its transmitter ids hashed, under a fixed test salt.
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$TARGET/sim-export/salt.hex"
-cargo run --quiet -p waymark-cli -- site hash --salt-file "$TARGET/sim-export/salt.hex" \
+cargo run --release --quiet -p waymark-cli -- site hash --salt-file "$TARGET/sim-export/salt.hex" \
     "$TARGET/sim-export/site.json" "$TARGET/sim-export/site-hashed.json" >/dev/null
 # The same site in the binary encoding an app ships.
-cargo run --quiet -p waymark-cli -- site pack "$TARGET/sim-export/site.json" \
+cargo run --release --quiet -p waymark-cli -- site pack "$TARGET/sim-export/site.json" \
     "$TARGET/sim-export/site.wmsite" >/dev/null
 # A test build: a scan at UInt64.max - 7 panics inside the engine (feature fault-injection).
 cargo build --quiet -p waymark --lib --features fault-injection
@@ -99,7 +99,7 @@ unshare --mount --fork /bin/bash -euo pipefail -c '
     mount -t proc proc "$root/proc"
     mount --rbind /dev "$root/dev"
     exec chroot "$root" /usr/bin/env -i PATH=/usr/bin:/bin HOME=/root LANG=C.UTF-8 \
-        WAYMARK_SIM_DIR="$target/sim-export" WAYMARK_CLI="$target/debug/waymark" LD_LIBRARY_PATH="$target/debug" \
+        WAYMARK_SIM_DIR="$target/sim-export" WAYMARK_CLI="$target/release/waymark" LD_LIBRARY_PATH="$target/debug" \
         /usr/bin/swift test --disable-swift-testing \
             --package-path "$package" --scratch-path "$target/swift-build" \
             -Xlinker -L -Xlinker "$target/debug" -Xlinker -rpath -Xlinker "$target/debug"

@@ -7,7 +7,7 @@ import org.junit.runner.notification.Failure
 import org.junit.runner.notification.RunListener
 
 /**
- * Runs the JUnit 4 test classes, prints one line per test and, last, exactly
+ * Runs the JUnit 4 test classes, prints one line per test with its time and, last, exactly
  * `N passed, N failed` (what CI reads). Exits 1 if anything failed.
  */
 object RunTests {
@@ -16,8 +16,10 @@ object RunTests {
         val core = JUnitCore()
         core.addListener(object : RunListener() {
             private val failed = HashSet<Description>()
+            private var started = 0L
 
             override fun testStarted(description: Description) {
+                started = System.nanoTime()
                 println("RUN  ${description.methodName}")
             }
 
@@ -28,7 +30,9 @@ object RunTests {
             }
 
             override fun testFinished(description: Description) {
-                if (description !in failed) println("PASS ${description.methodName}")
+                // The time shows which test a slow CI run spent its minutes on.
+                val ms = (System.nanoTime() - started) / 1_000_000
+                if (description !in failed) println("PASS ${description.methodName} ($ms ms)")
             }
         })
         val classes = arrayOf(
