@@ -40,7 +40,8 @@ fi
 log "building"
 cargo build --quiet -p uniffi-bindgen
 # The simulated site and walk the XCTest replays, by the release CLI: the survey test builds a
-# site with it, minutes in a debug build and seconds in release. The library comes last.
+# site with it, minutes in a debug build and seconds in release. A release build leaves
+# target/debug, where the library below goes, alone.
 cargo run --release --quiet -p waymark-cli -- sim-export --out "$TARGET/sim-export" >/dev/null
 # The same site with its transmitter ids hashed, under a fixed test salt.
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$TARGET/sim-export/salt.hex"
