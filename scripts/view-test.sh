@@ -39,8 +39,9 @@ if ! command -v chromium >/dev/null 2>&1; then
 fi
 
 echo "-- pages"
-cargo build -p waymark-cli --locked --quiet
-waymark="$target/debug/waymark"
+# The release CLI, as the rest of scripts/test.sh uses (one CLI build for the whole suite).
+cargo build --release -p waymark-cli --locked --quiet
+waymark="$target/release/waymark"
 "$waymark" view --demo --out "$work/demo.html"
 "$waymark" sim-export --walk-length-m 40 --out "$work/sim"
 python3 - "$work/sim/site.json" "$work/two-floors.json" <<'PY'

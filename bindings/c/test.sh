@@ -31,15 +31,16 @@ if ! grep -q "#define WAYMARK_VERSION \"$crate_version\"" bindings/c/waymark.h; 
 fi
 
 echo "-- build"
-# The CLI first: building it rebuilds the library without fault injection; the
-# `--lib` build after it leaves the library the test links against.
-cargo run -p waymark-cli --locked --quiet -- sim-export --walk-length-m 40 --out "$work"
+# The test's inputs come from the release CLI, the build the demo, Kotlin and Swift steps of
+# scripts/test.sh use too (one CLI build for the whole suite).
+cargo build --release -p waymark-cli --locked --quiet
+waymark="$target/release/waymark"
+"$waymark" sim-export --walk-length-m 40 --out "$work"
 # The same site with its transmitter ids hashed, under a fixed test salt.
 echo 5a1f00d0c0ffee00112233445566778899aabbccddeeff0123456789abcdef01 > "$work/salt.hex"
-cargo run -p waymark-cli --locked --quiet -- site hash --salt-file "$work/salt.hex" \
-    "$work/site.json" "$work/site-hashed.json" >/dev/null
+"$waymark" site hash --salt-file "$work/salt.hex" "$work/site.json" "$work/site-hashed.json" >/dev/null
 # The same site in the binary encoding an app ships.
-cargo run -p waymark-cli --locked --quiet -- site pack "$work/site.json" "$work/site.wmsite" >/dev/null
+"$waymark" site pack "$work/site.json" "$work/site.wmsite" >/dev/null
 # A test build: a scan at UINT64_MAX - 7 panics inside the engine (feature fault-injection).
 cargo build -p waymark --lib --locked --quiet --features fault-injection
 python3 bindings/c/walk_to_text.py "$work/walk.json" "$work/walk.txt"
@@ -53,21 +54,32 @@ for test in test robustness threads; do
     gcc "${flags[@]}" "bindings/c/$test.c" "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/${test}_static"
 done
 
-for kind in shared static; do
+# Valgrind runs one thread at a time, so the shared and static runs go side by side, each
+# into its own log, printed in order once both are done.
+valgrind_suite() {
+    local kind=$1
+    local vg=(valgrind --quiet --error-exitcode=1 --leak-check=full
+        --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect)
     echo "-- $kind library under valgrind"
-    LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
-        --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
+    LD_LIBRARY_PATH="$target/debug" "${vg[@]}" \
         "$work/test_$kind" "$work/site.json" "$work/walk.txt" "$work/site-hashed.json" "$work/salt.hex" \
         "$work/site.wmsite"
     echo "-- bad input, $kind library under valgrind"
-    LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
-        --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
-        "$work/robustness_$kind" "$work/site.json"
+    LD_LIBRARY_PATH="$target/debug" "${vg[@]}" "$work/robustness_$kind" "$work/site.json"
     echo "-- threads pushing at once, $kind library under valgrind"
-    LD_LIBRARY_PATH="$target/debug" valgrind --quiet --error-exitcode=1 --leak-check=full \
-        --errors-for-leak-kinds=definite,indirect --show-leak-kinds=definite,indirect \
-        "$work/threads_$kind" "$work/site.json"
+    LD_LIBRARY_PATH="$target/debug" "${vg[@]}" "$work/threads_$kind" "$work/site.json"
+}
+pids=()
+for kind in shared static; do
+    valgrind_suite "$kind" > "$work/valgrind-$kind.log" 2>&1 &
+    pids+=($!)
 done
+status=0
+for i in 0 1; do
+    wait "${pids[$i]}" || status=1
+done
+cat "$work/valgrind-shared.log" "$work/valgrind-static.log"
+[ "$status" = 0 ] || { echo "test.sh: a valgrind run failed (above)" >&2; exit 1; }
 
 echo "-- no networking"
 bash scripts/check-no-network.sh "$target/debug/libwaymark.so"
