@@ -29,22 +29,45 @@ for component in rustfmt clippy; do
         rustup component add "$component"
     fi
 done
-command -v chromium >/dev/null || { apt-get update -qq && DEBIAN_FRONTEND=noninteractive apt-get install -y -qq chromium; }
+# Every Debian package the steps below use, in one apt run (two at once would fight over its lock).
+packages=(chromium gcc valgrind python3 libjna-java junit4 debootstrap)
+missing=()
+for pkg in "${packages[@]}"; do dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg"); done
+if (( ${#missing[@]} )); then
+    apt-get update -qq
+    DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}"
+fi
+# The Kotlin compiler and the Swift chroot are downloads and unpacking, not compiling: they are
+# made in the background while the Rust steps compile, and the binding steps wait for them.
+# Each in its own process group, so that a failing run stops them too.
+setsid bash bindings/kotlin/test.sh --tools-only > "$target/kotlin-tools.log" 2>&1 &
+kotlin_tools=$!
+setsid bash bindings/swift/test.sh --tools-only > "$target/swift-tools.log" 2>&1 &
+swift_tools=$!
+trap 'kill -- -$kotlin_tools -$swift_tools 2>/dev/null || true' EXIT
+# Waits for one of those; on failure shows its log and stops.
+tools_ready() {
+    wait "$1" || { cat "$2" >&2; echo "test.sh: making the tools failed (above)" >&2; exit 1; }
+}
 
 step "Formatting (cargo fmt --check)"
 cargo fmt --all -- --check
 
+# Lints, docs and tests leave out crates/uniffi-bindgen, one line that calls uniffi's own
+# main: checking it means checking uniffi_bindgen, the longest unit of each of those builds
+# (about 2 minutes each, docs/testing.md#how-long-it-takes). The Kotlin and Swift steps build
+# and run it.
 step "Lints (cargo clippy, warnings denied)"
-cargo clippy --workspace --all-targets --all-features --locked -- -D warnings
+cargo clippy --workspace --exclude uniffi-bindgen --all-targets --all-features --locked -- -D warnings
 
 step "The shipped library as apps build it: no features, no tool crates"
 cargo build -p waymark --lib --locked
 
 step "API docs of the whole workspace, warnings denied"
-RUSTDOCFLAGS="-D warnings" cargo doc --workspace --no-deps --locked --quiet
+RUSTDOCFLAGS="-D warnings" cargo doc --workspace --exclude uniffi-bindgen --no-deps --locked --quiet
 
 step "Rust tests (unit, integration, property, doc)"
-run cargo test --workspace --all-features --locked
+run cargo test --workspace --exclude uniffi-bindgen --all-features --locked
 
 step "The library on the declared MSRV and the mobile targets (checked: no NDK or Xcode here)"
 ./scripts/check-targets.sh
@@ -56,9 +79,11 @@ step "C ABI: header freshness, shared and static library under valgrind"
 run bash bindings/c/test.sh
 
 step "Kotlin bindings on the JVM (JNA, JUnit 4)"
+tools_ready "$kotlin_tools" "$target/kotlin-tools.log"
 run bash bindings/kotlin/test.sh
 
 step "Swift bindings on Linux (XCTest in a Debian trixie chroot)"
+tools_ready "$swift_tools" "$target/swift-tools.log"
 run bash bindings/swift/test.sh
 
 step "waymark view in headless Chromium (every floor renders, no console errors)"

@@ -4,7 +4,11 @@
 # with kotlinc and runs it. Installs what is missing (Debian: libjna-java junit4; npm: the Kotlin
 # compiler, unpacked under $TARGET/tools). Last line: exactly "N passed, N failed".
 # Usage: bash bindings/kotlin/test.sh        (from anywhere; honours CARGO_TARGET_DIR)
+#        bash bindings/kotlin/test.sh --tools-only   (installs and unpacks the tools, then stops;
+#        scripts/test.sh runs it in the background while Rust compiles)
 set -euo pipefail
+tools_only=0
+[ "${1:-}" = --tools-only ] && tools_only=1
 
 KOTLIN_VERSION=2.4.20
 HERE=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
@@ -65,6 +69,10 @@ HAMCREST=/usr/share/java/hamcrest-core.jar
 for jar in "$STDLIB" "$COROUTINES" "$JNA" "$JUNIT" "$HAMCREST"; do
     [ -f "$jar" ] || { echo "test.sh: missing $jar" >&2; exit 1; }
 done
+if (( tools_only )); then
+    summary_printed=1
+    exit 0
+fi
 
 # --- Build, generate, export ---------------------------------------------------------------------
 cd "$REPO"

@@ -7,7 +7,12 @@
 #
 # The chroot ($TARGET/swift-root, ~2.6 GB) is made on the first run (~2 minutes) and reused;
 # delete it to rebuild it. XCTest's closing line is the last line printed.
+#
+#   bash bindings/swift/test.sh --tools-only   # makes the chroot, then stops (scripts/test.sh
+#                                              # runs it in the background while Rust compiles)
 set -euo pipefail
+tools_only=0
+[[ "${1:-}" == --tools-only ]] && tools_only=1
 
 REPO="$(cd "$(dirname "${BASH_SOURCE[0]}")/../.." && pwd)"
 export CARGO_TARGET_DIR="${CARGO_TARGET_DIR:-$REPO/target}"
@@ -35,6 +40,7 @@ if [[ ! -e "$ROOT/.waymark-swift-ready" ]]; then
     rm -rf "$ROOT"
     mv "$ROOT.partial" "$ROOT"
 fi
+if (( tools_only )); then exit 0; fi
 
 # --- 2. The library and the generator, exactly as the release does (bindgen never in the lib).
 log "building"
