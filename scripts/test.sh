@@ -37,19 +37,6 @@ if (( ${#missing[@]} )); then
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
-# The Kotlin compiler and the Swift chroot are downloads and unpacking, not compiling: they are
-# made in the background while the Rust steps compile, and the binding steps wait for them.
-# Each in its own process group, so that a failing run stops them too.
-setsid bash bindings/kotlin/test.sh --tools-only > "$target/kotlin-tools.log" 2>&1 &
-kotlin_tools=$!
-setsid bash bindings/swift/test.sh --tools-only > "$target/swift-tools.log" 2>&1 &
-swift_tools=$!
-trap 'kill -- -$kotlin_tools -$swift_tools 2>/dev/null || true' EXIT
-# Waits for one of those; on failure shows its log and stops.
-tools_ready() {
-    wait "$1" || { cat "$2" >&2; echo "test.sh: making the tools failed (above)" >&2; exit 1; }
-}
-
 step "Formatting (cargo fmt --check)"
 cargo fmt --all -- --check
 
@@ -73,6 +60,19 @@ step "The library on the declared MSRV and the mobile targets (checked: no NDK o
 ./scripts/check-targets.sh
 
 step "The README's main command, as a smoke test (waymark demo --json)"
+# The Kotlin compiler and the Swift chroot are downloads and unpacking: they are made in the
+# background from the demo step on, whose release build links on one core, and the binding
+# steps wait for them. Started with clippy, they slowed it as much as they saved.
+# Each in its own process group, so that a failing run stops them too.
+setsid bash bindings/kotlin/test.sh --tools-only > "$target/kotlin-tools.log" 2>&1 &
+kotlin_tools=$!
+setsid bash bindings/swift/test.sh --tools-only > "$target/swift-tools.log" 2>&1 &
+swift_tools=$!
+trap 'kill -- -$kotlin_tools -$swift_tools 2>/dev/null || true' EXIT
+# Waits for one of those; on failure shows its log and stops.
+tools_ready() {
+    wait "$1" || { cat "$2" >&2; echo "test.sh: making the tools failed (above)" >&2; exit 1; }
+}
 cargo run --release -p waymark-cli --locked --quiet -- demo --json --walks 20
 
 step "C ABI: header freshness, shared and static library under valgrind"
