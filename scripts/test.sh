@@ -37,6 +37,7 @@ if (( ${#missing[@]} )); then
     apt-get update -qq
     DEBIAN_FRONTEND=noninteractive apt-get install -y -qq --no-install-recommends "${missing[@]}"
 fi
+
 step "Formatting (cargo fmt --check)"
 cargo fmt --all -- --check
 

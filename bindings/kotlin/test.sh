@@ -5,7 +5,7 @@
 # compiler, unpacked under $TARGET/tools). Last line: exactly "N passed, N failed".
 # Usage: bash bindings/kotlin/test.sh        (from anywhere; honours CARGO_TARGET_DIR)
 #        bash bindings/kotlin/test.sh --tools-only   (installs and unpacks the tools, then stops;
-#        scripts/test.sh runs it in the background while Rust compiles)
+#        scripts/test.sh runs it in the background during its demo step)
 set -euo pipefail
 tools_only=0
 [ "${1:-}" = --tools-only ] && tools_only=1
