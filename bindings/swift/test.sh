@@ -9,7 +9,7 @@
 # delete it to rebuild it. XCTest's closing line is the last line printed.
 #
 #   bash bindings/swift/test.sh --tools-only   # makes the chroot, then stops (scripts/test.sh
-#                                              # runs it in the background while Rust compiles)
+#                                              # runs it in the background during its demo step)
 set -euo pipefail
 tools_only=0
 [[ "${1:-}" == --tools-only ]] && tools_only=1
