@@ -21,8 +21,8 @@ import sys
 from collections import defaultdict
 
 MIN_EPOCHS = 200
-FLOATS = ("error_m", "r68", "r95", "beyond_radio_m", "fit", "off_map_m")
-INTS = ("throttled", "floor", "scenario", "band", "floor_ok", "states_8m")
+FLOATS = ("error_m", "r68", "r95", "beyond_radio_m", "fit", "off_map_m", "lag_d", "jump", "floor_p")
+INTS = ("throttled", "floor", "scenario", "band", "floor_ok", "states_8m", "k")
 
 
 def load(path):
@@ -82,6 +82,34 @@ def rule(held, select, key=None, bands=1):
     return scale
 
 
+def power_law(rows, key, p):
+    """(A, b) of the radius A * r^b whose log is the p-th quantile regression of the log error
+    on the log posterior radius (least pinball loss, b on a 0.01 grid over [-0.5, 1.5])."""
+    pts = [(math.log(max(r[key], 0.1)), math.log(max(r["error_m"] - r["beyond_radio_m"], 0.05))) for r in rows]
+    best = None
+    for k in range(-50, 151):
+        b = k / 100
+        c = quantile([y - b * x for x, y in pts], p)
+        loss = sum((p if y >= c + b * x else p - 1) * (y - c - b * x) for x, y in pts)
+        if best is None or loss < best[0]:
+            best = (loss, math.exp(c), b)
+    return best[1:]
+
+
+def power_rule(held, select):
+    """A power law of the posterior radius in place of the steady factor (sparse bands as before)."""
+    steady = [r for r in held if not r["throttled"] and r["scenario"] == 0 and select(r)]
+    laws = [power_law(steady, "r68", 0.68), power_law(steady, "r95", 0.95)]
+    sparse = [factors([r for r in held if r["throttled"] and r["band"] == k and select(r)]) for k in range(5)]
+
+    def scale(r):
+        if r["band"] >= 0 and sparse[r["band"]]:
+            return sparse[r["band"]]
+        return [a * max(r[key], 0.1) ** (b - 1) for (a, b), key in zip(laws, ("r68", "r95"))]
+
+    return scale
+
+
 def main(path):
     rows = load(path)
     held = [r for r in rows if r["set"] == "held"]
@@ -100,6 +128,8 @@ def main(path):
         ("every epoch, radio fit quintiles", rule(held, lambda r: True, fit, 5)),
         ("every epoch, states within 8 m quintiles", rule(held, lambda r: True, lambda r: r["states_8m"], 5)),
         ("every epoch, posterior 68% radius quintiles", rule(held, lambda r: True, lambda r: r["r68"], 5)),
+        ("on the map, power law of the posterior radius", power_rule(held, on)),
+        ("on the map, fixed-lag disagreement quintiles", rule(held, on, lambda r: r["lag_d"] if r["lag_d"] == r["lag_d"] else -1.0, 5)),
     ]
     for name, scale in rules:
         (a, b), (c, d) = share(test[0], scale), share(test[1], scale)

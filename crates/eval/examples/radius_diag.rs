@@ -16,12 +16,17 @@
 //! without factors or `beyond_radio_m`), `beyond_radio_m`, `scenario` (index in
 //! `MdiScenario::ALL`), `fit` (radio fit of the latest scan), `band` (sparse band, -1 none),
 //! `off_map_m` (how far the truth is beyond the map the walk was replayed on), `floor_ok`,
-//! `states_8m` (fingerprinted states of the estimate's floor within 8 m of it).
+//! `states_8m` (fingerprinted states of the estimate's floor within 8 m of it), `lag_d` (how far
+//! the fixed-lag estimate of the epoch `lag` epochs back lies from that epoch's live one: what
+//! the engine knows at this epoch of how much later evidence moved it), `jump` (how far the live
+//! estimate moved since the epoch before), `k` (the epoch's index in the walk), `floor_p` (the
+//! estimate's floor probability).
 
+use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
 use waymark::site::{Calibration, StateKind};
-use waymark::{Engine, Position, ScanTiming, Site};
+use waymark::{Engine, Position, ScanTiming, Site, TrackPoint};
 use waymark_eval::real::EvalOptions;
 use waymark_survey::calibrate::{parallel_map, survey_calibrated, survey_inputs, FloorData};
 use waymark_survey::io::ilc::Trace;
@@ -64,8 +69,26 @@ fn rows(
     floor: usize,
     trace: &Trace,
     positions: &[Position],
+    (fixed_lag, lag): (&[TrackPoint], usize),
     map: &Map,
 ) -> Vec<String> {
+    let lagged: HashMap<u64, (f64, f64)> = fixed_lag.iter().map(|t| (t.timestamp_ns, (t.x, t.y))).collect();
+    let lag_d: Vec<f64> = (0..positions.len())
+        .map(|k| {
+            let Some(back) = k.checked_sub(lag) else { return f64::NAN };
+            let p = &positions[back];
+            lagged.get(&p.timestamp_ns).map_or(f64::NAN, |&(x, y)| (x - p.x).hypot(y - p.y))
+        })
+        .collect();
+    let jump: Vec<f64> = (0..positions.len())
+        .map(|k| {
+            if k == 0 {
+                f64::NAN
+            } else {
+                (positions[k].x - positions[k - 1].x).hypot(positions[k].y - positions[k - 1].y)
+            }
+        })
+        .collect();
     // Per position: the latest scan's fit and the sparse band.
     let mut timing = ScanTiming::default();
     let mut fit = f64::NAN;
@@ -95,7 +118,7 @@ fn rows(
             let (fit, band) = features[k];
             let error = (p.x - truth.0).hypot(p.y - truth.1);
             Some(format!(
-                "{set},{},{floor},{},{error:.3},{:.3},{:.3},{:.3},{},{fit:.4},{band},{:.3},{},{}",
+                "{set},{},{floor},{},{error:.3},{:.3},{:.3},{:.3},{},{fit:.4},{band},{:.3},{},{},{:.3},{:.3},{},{:.4}",
                 throttled as u8,
                 trace.name,
                 p.accuracy_m - p.beyond_radio_m,
@@ -105,6 +128,10 @@ fn rows(
                 map.beyond_m(floor, truth),
                 (p.floor == floor) as u8,
                 map.within(p.floor, (p.x, p.y), 8.0),
+                lag_d[k],
+                jump[k],
+                k,
+                p.floor_probability,
             ))
         })
         .collect()
@@ -139,23 +166,28 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let engine_config = options.calibration.engine.clone();
     let steady = options.calibration.calibration_replay();
     let throttled = options.calibration.throttled_replay();
-    let run = |site: &Site, trace: &Trace, replay_options: &ReplayOptions| -> Option<Vec<Position>> {
+    let run = |site: &Site,
+               trace: &Trace,
+               replay_options: &ReplayOptions|
+     -> Option<(Vec<Position>, Vec<TrackPoint>)> {
+        let replay_options = &ReplayOptions { fixed_lag: true, ..*replay_options };
         let site = site.clone().with_calibration(unscaled).ok()?.with_floor_rssi_weights(&weights).ok()?;
         let mut engine = Engine::new(Arc::new(site), engine_config.clone()).ok()?;
-        Some(replay(&mut engine, trace, replay_options).positions)
+        let r = replay(&mut engine, trace, replay_options);
+        Some((r.positions, r.fixed_lag))
     };
     // The rows of one walk on one site, steady and throttled.
     let both = |set: &str, site: &Site, f: usize, trace: &Trace, map: &Map| -> Vec<String> {
         let mut out = Vec::new();
         for (t, opts) in [(false, &steady), (true, &throttled)] {
-            if let Some(p) = run(site, trace, opts) {
-                out.extend(rows(set, t, f, trace, &p, map));
+            if let Some((p, fl)) = run(site, trace, opts) {
+                out.extend(rows(set, t, f, trace, &p, (&fl, engine_config.fixed_lag_epochs), map));
             }
         }
         out
     };
     println!(
-        "set,throttled,floor,walk,error_m,r68,r95,beyond_radio_m,scenario,fit,band,off_map_m,floor_ok,states_8m"
+        "set,throttled,floor,walk,error_m,r68,r95,beyond_radio_m,scenario,fit,band,off_map_m,floor_ok,states_8m,lag_d,jump,k,floor_p"
     );
     // Held out.
     let inputs = survey_inputs(&floors);
