@@ -11,6 +11,9 @@ CELL_M = 3.0  # neighbourhood radius, m
 
 
 def read(path):
+    """A walk's fresh WiFi readings as (x, y, heading, bssid, rssi): position interpolated
+    between the waypoints either side of the scan, heading (rad) that segment's direction, or
+    None when the segment is under 1 m long."""
     waypoints, scans = [], collections.defaultdict(list)
     for line in open(path, errors="replace"):
         if line.startswith("#"):
@@ -30,7 +33,8 @@ def read(path):
         if 0 < i < len(times):
             (t0, x0, y0), (t1, x1, y1) = waypoints[i - 1], waypoints[i]
             f = (t - t0) / max(1, t1 - t0)
-            out.extend((x0 + f * (x1 - x0), y0 + f * (y1 - y0), b, v) for b, v in readings)
+            h = math.atan2(y1 - y0, x1 - x0) if math.hypot(x1 - x0, y1 - y0) >= 1.0 else None
+            out.extend((x0 + f * (x1 - x0), y0 + f * (y1 - y0), h, b, v) for b, v in readings)
     return out
 
 
@@ -40,12 +44,12 @@ def offsets(floor):
     survey = [w for i, w in enumerate(walks) if i % 5 != 4]
     index = collections.defaultdict(list)
     for k, walk in enumerate(survey):
-        for x, y, b, v in walk:
+        for x, y, _, b, v in walk:
             index[(b, int(x // CELL_M), int(y // CELL_M))].append((x, y, v, k))
 
     def offset(walk, own):
         d = []
-        for x, y, b, v in walk:
+        for x, y, _, b, v in walk:
             cx, cy = int(x // CELL_M), int(y // CELL_M)
             near = [vv for i in (-1, 0, 1) for j in (-1, 0, 1)
                     for (xx, yy, vv, k) in index.get((b, cx + i, cy + j), ())
@@ -65,8 +69,9 @@ def summary(xs):
             f"range {xs[0]:+.2f} to {xs[-1]:+.2f} dB ({len(xs)} walks)")
 
 
-for floor in sys.argv[1:]:
-    held, tests = offsets(floor)
-    name = os.path.basename(floor.rstrip("/"))
-    print(f"{name}: survey walks held out: {summary(held)}")
-    print(f"{name}: test walks:            {summary(tests)}")
+if __name__ == "__main__":
+    for floor in sys.argv[1:]:
+        held, tests = offsets(floor)
+        name = os.path.basename(floor.rstrip("/"))
+        print(f"{name}: survey walks held out: {summary(held)}")
+        print(f"{name}: test walks:            {summary(tests)}")
