@@ -393,6 +393,17 @@ impl EngineConfig {
         })
     }
 
+    /// The site's calibration of the floor probability outside the sparse regime
+    /// ([`Calibration::floor_reliability`](crate::site::Calibration)); none without
+    /// `site_calibration` (the posterior's own mass is then reported).
+    pub fn floor_reliability_for(&self, site: &crate::Site) -> crate::site::FloorReliability {
+        if self.site_calibration {
+            site.calibration().floor_reliability
+        } else {
+            crate::site::FloorReliability::default()
+        }
+    }
+
     /// The site's calibration for sparse scans ([`SparseScans`](crate::site::SparseScans)),
     /// without its γ when `rssi_weight` is given (an explicit γ overrides every calibrated
     /// one); none without `site_calibration`.

@@ -563,7 +563,7 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
 #[test]
 fn sparse_scans_take_their_own_radius_factors_and_gamma() {
     use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
-    use waymark::site::{Calibration, SparseScans, SPARSE_BANDS};
+    use waymark::site::{Calibration, FloorReliability, SparseScans, SPARSE_BANDS};
     let mut accuracy_scale_by_since = [None; SPARSE_BANDS];
     accuracy_scale_by_since[0] = Some([3.0, 4.0]);
     accuracy_scale_by_since[1] = Some([5.0, 6.0]);
@@ -573,7 +573,7 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
     };
     let (plain, scales, gamma) = (
         site(SparseScans::default()),
-        site(SparseScans { rssi_weight: None, accuracy_scale_by_since }),
+        site(SparseScans { accuracy_scale_by_since, ..SparseScans::default() }),
         site(SparseScans { rssi_weight: Some(0.05), ..SparseScans::default() }),
     );
     // An epoch every 2 s from 1 s to 41 s, 0.3 m east each with steps and heading measured;
@@ -638,6 +638,41 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
     let explicit = || EngineConfig { rssi_weight: Some(0.3), ..default() };
     let (a, b) = (run(&plain, explicit(), &throttled), run(&gamma, explicit(), &throttled));
     assert!(a.iter().zip(&b).all(|(a, b)| a.1 == b.1));
+    // The floor probability: the band's share of the sparse table in the sparse regime (every
+    // epoch when throttled, the first when steady), else of the steady table; the posterior's
+    // own mass without the site's calibration, and the steady table when no sparse one is fitted.
+    let steady_table = FloorReliability([0.11, 0.22, 0.33, 0.44, 0.55].map(Some));
+    let sparse_table = FloorReliability([0.61, 0.62, 0.63, 0.64, 0.65].map(Some));
+    let with_tables = |sparse: FloorReliability| {
+        let sparse_scans = SparseScans { floor_reliability: sparse, ..SparseScans::default() };
+        Arc::new(
+            two_floor_site()
+                .with_calibration(Calibration { floor_reliability: steady_table, sparse_scans, ..base })
+                .unwrap(),
+        )
+    };
+    let (both, steady_only) = (with_tables(sparse_table), with_tables(FloorReliability::default()));
+    let p = |epochs: &[(waymark::Epoch, Vec<f64>)]| -> Vec<f64> {
+        epochs.iter().map(|e| e.0.position.floor_probability).collect()
+    };
+    let raw = p(&run(&plain, default(), &throttled));
+    assert_eq!(
+        p(&run(&both, default(), &throttled)),
+        raw.iter().map(|&r| sparse_table.report(r)).collect::<Vec<_>>()
+    );
+    assert_eq!(
+        p(&run(&steady_only, default(), &throttled)),
+        raw.iter().map(|&r| steady_table.report(r)).collect::<Vec<_>>()
+    );
+    let uncalibrated = || EngineConfig { site_calibration: false, ..default() };
+    assert_eq!(p(&run(&both, uncalibrated(), &throttled)), p(&run(&plain, uncalibrated(), &throttled)));
+    let raw = p(&run(&plain, default(), &steady));
+    let reported = p(&run(&both, default(), &steady));
+    assert_eq!(reported[0], sparse_table.report(raw[0]), "the first scan is sparse");
+    assert!(
+        raw.iter().zip(&reported).skip(1).all(|(&r, &c)| c == steady_table.report(r)),
+        "{raw:?} {reported:?}"
+    );
 }
 
 /// Engines sharing scan likelihoods (the calibration's replays) give the positions of engines

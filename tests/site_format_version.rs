@@ -42,8 +42,34 @@ fn binary_with_version(binary: &[u8], version: u32) -> Vec<u8> {
 }
 
 #[test]
-fn the_current_version_is_5_and_reads_back_to_1() {
-    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 5));
+fn the_current_version_is_6_and_reads_back_to_1() {
+    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 6));
+}
+
+/// A version-5 file loads with no floor calibration; version 6 adds it, steady and sparse
+/// (`calibration.floor_reliability`, `calibration.sparse_scans.floor_reliability`), kept
+/// through both encodings and written only when set.
+#[test]
+fn a_version_5_file_still_loads_and_version_6_adds_the_floor_reliability() {
+    let site = Site::from_json(with_version(VERSION_1, 5).as_bytes()).unwrap();
+    assert!(site.calibration().floor_reliability.is_empty());
+    assert!(!site.to_json().contains("floor_reliability"));
+    let calibrated = with_version(VERSION_1, 6).replacen(
+        r#""name":"#,
+        r#""calibration": {"floor_reliability": [null, 0.4, 0.8, 0.9, 0.99],
+            "sparse_scans": {"floor_reliability": [0.3, 0.5, 0.7, 0.8, 0.95]}}, "name":"#,
+        1,
+    );
+    let site = Site::from_json(calibrated.as_bytes()).unwrap();
+    let expected = [None, Some(0.4), Some(0.8), Some(0.9), Some(0.99)];
+    assert_eq!(site.calibration().floor_reliability.0, expected);
+    assert_eq!(site.calibration().sparse_scans.floor_reliability.0[4], Some(0.95));
+    assert!(site.to_json().contains(r#""floor_reliability":[null,0.4,0.8,0.9,0.99]"#), "{}", site.to_json());
+    let binary = Site::from_bytes(&site.to_binary()).unwrap();
+    assert_eq!(binary.calibration(), site.calibration());
+    let out_of_range = calibrated.replace("0.99]", "1.5]");
+    let err = Site::from_json(out_of_range.as_bytes()).unwrap_err().to_string();
+    assert!(err.contains("calibration.floor_reliability[4]"), "{err}");
 }
 
 /// A version-4 file loads with no calibrated M; version 5 adds it

@@ -419,7 +419,9 @@ typedef struct {
    */
   uint32_t floor;
   /**
-   * Probability of that floor.
+   * Probability that the floor is right: how often it was at this posterior mass on it on
+   * held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
+   * when the site file has no such calibration.
    */
   double floor_probability;
   /**

@@ -196,6 +196,14 @@ impl Engine {
             .and_then(|band| self.sparse_scans.accuracy_scale_by_since[band])
             .unwrap_or(self.accuracy_scale[position.scenario.index()]);
         let radii = scaled_radii([e.accuracy_m, e.accuracy_95_m], scale, position.beyond_radio_m);
+        // The floor probability as calibrated on held-out walks (docs/accuracy.md#floor-probability):
+        // the sparse regime's table there when the survey fitted one.
+        let floor_reliability = match sparse {
+            Some(_) if !self.sparse_scans.floor_reliability.is_empty() => {
+                &self.sparse_scans.floor_reliability
+            }
+            _ => &self.floor_reliability,
+        };
         let (zone, zone_probability) = if self.site.zones().is_empty() {
             (None, 1.0)
         } else {
@@ -204,7 +212,7 @@ impl Engine {
         };
         Position {
             floor: e.floor,
-            floor_probability: e.floor_probability,
+            floor_probability: floor_reliability.report(e.floor_probability),
             zone,
             zone_probability,
             x: e.position.x,

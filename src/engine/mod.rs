@@ -18,7 +18,7 @@ use crate::history::{EpochRecord, History};
 use crate::hmm::{estimate, FixedLagSmoother, ForwardFilter, ViterbiWindow};
 use crate::radio::ScanHasher;
 use crate::sensors::{MotionStats, MotionTracker, MotionUpdate};
-use crate::site::{ReachTable, Site, SparseScans};
+use crate::site::{FloorReliability, ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
 pub(crate) use epoch::check_readings;
@@ -100,6 +100,8 @@ pub struct Engine {
     unexplained_run: u32,
     /// The site's calibration for scans far apart.
     sparse_scans: SparseScans,
+    /// The site's calibration of the floor probability outside the sparse regime.
+    floor_reliability: FloorReliability,
     /// Whether the person is in each zone and geofence, and the app's geofences.
     presence: presence::Presence,
     /// When the latest accepted scan came, and how long after the one before.
@@ -152,6 +154,7 @@ impl Engine {
         let accuracy_scale = config.accuracy_scales_for(&site);
         let estimate_states = config.estimate_states_for(&site);
         let sparse_scans = config.sparse_scans_for(&site);
+        let floor_reliability = config.floor_reliability_for(&site);
         let site_zones = site.zones().len();
         let habits = HabitModel::new(&site);
         let radio_fit_floor = site.calibration().radio_fit_floor.filter(|_| config.site_calibration);
@@ -190,6 +193,7 @@ impl Engine {
             unsurveyed,
             unexplained_run: 0,
             sparse_scans,
+            floor_reliability,
             presence: presence::Presence::new(site_zones),
             scan_timing: ScanTiming::default(),
             shared_emissions: None,

@@ -17,7 +17,9 @@ pub struct Position {
     pub timestamp_ns: u64,
     /// Floor index into the site's floors.
     pub floor: usize,
-    /// Posterior probability of that floor.
+    /// Probability that the floor is right: how often it was at this posterior mass on it on
+    /// held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
+    /// when the site file has no such calibration.
     pub floor_probability: f64,
     /// The most likely zone, an index into the site's zones: the zone holding the most
     /// posterior mass, or `None` when the site has no zones or more mass lies outside every

@@ -202,6 +202,52 @@ pub struct Calibration {
     /// held-out survey walks (docs/tuning.md#mixture-components-m). Since format version 5.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub estimate_states: Option<u32>,
+    /// How often the floor was right on held-out survey epochs, by band of the posterior's
+    /// mass on it: the floor probability engines report (docs/accuracy.md#floor-probability).
+    /// Since format version 6.
+    #[serde(default, skip_serializing_if = "FloorReliability::is_empty")]
+    pub floor_reliability: FloorReliability,
+}
+
+/// Edges of the floor probability's bands, as the posterior's mass off the chosen floor: a
+/// decade each from an even split down to one in a thousand, the range in which held-out
+/// epochs are found wrong (docs/accuracy.md#floor-probability).
+pub const FLOOR_MISS_BANDS: [f64; 4] = [0.5, 0.1, 0.01, 0.001];
+
+/// Bands of the posterior's floor mass ([`FLOOR_MISS_BANDS`], the last one open).
+pub const FLOOR_BANDS: usize = FLOOR_MISS_BANDS.len() + 1;
+
+/// The share of held-out epochs whose floor was right, per band of the posterior's mass on
+/// the floor ([`FloorReliability::band`]); `None`: not fitted. The survey's calibration fits
+/// it as it fits the radius factors, so that the floor probability an app reads holds as
+/// often as it says, where the posterior's own mass is overconfident because the survey is
+/// sparse.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Serialize, Deserialize)]
+#[serde(transparent)]
+pub struct FloorReliability(pub [Option<f64>; FLOOR_BANDS]);
+
+impl FloorReliability {
+    /// Whether no band is fitted.
+    pub fn is_empty(&self) -> bool {
+        self.0.iter().all(Option::is_none)
+    }
+
+    /// The band of a posterior mass `p` on the floor: for how many of [`FLOOR_MISS_BANDS`]
+    /// it is above one minus the edge.
+    pub fn band(p: f64) -> usize {
+        FLOOR_MISS_BANDS.iter().take_while(|&&miss| p > 1.0 - miss).count()
+    }
+
+    /// The floor probability to report for a posterior mass `p`: its band's share, else `p`.
+    pub fn report(&self, p: f64) -> f64 {
+        self.0[Self::band(p)].unwrap_or(p)
+    }
+
+    /// The first share out of [0, 1], as (band, share).
+    fn invalid(&self) -> Option<(usize, f64)> {
+        (self.0.iter().enumerate())
+            .find_map(|(band, share)| share.filter(|s| !(0.0..=1.0).contains(s)).map(|s| (band, s)))
+    }
 }
 
 /// A scan that comes longer than this after the one before it, s, is a sparse scan, and the
@@ -233,6 +279,11 @@ pub struct SparseScans {
     /// sparse scan ([`SINCE_SPARSE_SCAN_BANDS_S`]), in place of the scenario's.
     #[serde(default, skip_serializing_if = "no_scales")]
     pub accuracy_scale_by_since: BandScales,
+    /// The floor probability's calibration in the sparse regime, in place of
+    /// [`Calibration::floor_reliability`]: long on the motion alone, the posterior's floor
+    /// mass means something else. Since format version 6.
+    #[serde(default, skip_serializing_if = "FloorReliability::is_empty")]
+    pub floor_reliability: FloorReliability,
 }
 
 /// Radius factors (68%, 95%) per band of time since a sparse scan; `None`: not fitted.
@@ -294,6 +345,14 @@ impl Calibration {
         if let Some(f) = self.radio_fit_floor {
             if !f.is_finite() {
                 return Err(("calibration.radio_fit_floor".into(), format!("must be finite, got {f}")));
+            }
+        }
+        for (path, reliability) in [
+            ("calibration.floor_reliability", &self.floor_reliability),
+            ("calibration.sparse_scans.floor_reliability", &self.sparse_scans.floor_reliability),
+        ] {
+            if let Some((band, share)) = reliability.invalid() {
+                return Err((format!("{path}[{band}]"), format!("must be in [0, 1], got {share}")));
             }
         }
         if self.estimate_states == Some(0) {
@@ -749,7 +808,11 @@ mod tests {
         let mut accuracy_scale_by_since = [None; SPARSE_BANDS];
         accuracy_scale_by_since[1] = Some([1.5, 1.25]);
         let calibration = Calibration {
-            sparse_scans: SparseScans { rssi_weight: Some(0.1), accuracy_scale_by_since },
+            sparse_scans: SparseScans {
+                rssi_weight: Some(0.1),
+                accuracy_scale_by_since,
+                floor_reliability: FloorReliability::default(),
+            },
             ..Calibration::default()
         };
         let json = serde_json::to_string(&calibration).unwrap();
@@ -780,5 +843,39 @@ mod tests {
         };
         assert_eq!(scale.check().unwrap_err().0, "calibration.sparse_scans.accuracy_scale_by_since[2]");
         assert!(Calibration::default().check().is_ok());
+    }
+
+    /// The bands are decades of the mass off the floor, each closed at its upper end of mass.
+    #[test]
+    fn floor_bands_are_decades_of_the_mass_off_the_floor() {
+        assert_eq!(
+            [0.0, 0.5, 0.51, 0.9, 0.91, 0.99, 0.995, 0.999, 0.9995, 1.0].map(FloorReliability::band),
+            [0, 0, 1, 1, 2, 2, 3, 3, 4, 4]
+        );
+        let table = FloorReliability([None, Some(0.6), Some(0.8), Some(0.9), Some(0.97)]);
+        assert_eq!(table.report(0.3), 0.3, "an unfitted band reports the posterior's mass");
+        assert_eq!(table.report(0.95), 0.8);
+        assert_eq!(table.report(1.0), 0.97);
+        assert_eq!(FloorReliability::default().report(0.95), 0.95);
+    }
+
+    /// The floor calibration round-trips as a plain array, is left out when empty and is
+    /// refused with its path when a share is not a probability.
+    #[test]
+    fn floor_reliability_round_trips_and_is_checked() {
+        let calibration = Calibration {
+            floor_reliability: FloorReliability([None, Some(0.5), Some(0.75), Some(0.9), Some(0.99)]),
+            ..Calibration::default()
+        };
+        let json = serde_json::to_string(&calibration).unwrap();
+        assert!(json.contains("\"floor_reliability\":[null,0.5,0.75,0.9,0.99]"), "{json}");
+        assert_eq!(serde_json::from_str::<Calibration>(&json).unwrap(), calibration);
+        assert!(!serde_json::to_string(&Calibration::default()).unwrap().contains("floor"));
+        let mut bad = calibration;
+        bad.floor_reliability.0[3] = Some(1.5);
+        assert_eq!(bad.check().unwrap_err().0, "calibration.floor_reliability[3]");
+        let mut bad = Calibration::default();
+        bad.sparse_scans.floor_reliability.0[0] = Some(f64::NAN);
+        assert_eq!(bad.check().unwrap_err().0, "calibration.sparse_scans.floor_reliability[0]");
     }
 }

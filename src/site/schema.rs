@@ -11,8 +11,9 @@ use serde::{Deserialize, Serialize};
 /// [`OLDEST_FORMAT_VERSION`], and refuses a newer one ([`SiteError::NewerFormat`]). Version 2
 /// holds the optional fields added within version 1, version 3 adds the optional geo anchor
 /// and floor levels, version 4 the survey's reading-age limit, version 5 the calibrated M of
-/// the estimate (docs/site-files.md#versioning): each version's files are files of the next.
-pub const FORMAT_VERSION: u32 = 5;
+/// the estimate, version 6 the floor probability's calibration
+/// (docs/site-files.md#versioning): each version's files are files of the next.
+pub const FORMAT_VERSION: u32 = 6;
 
 /// The oldest site-file format this build reads.
 pub const OLDEST_FORMAT_VERSION: u32 = 1;

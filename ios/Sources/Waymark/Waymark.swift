@@ -3662,7 +3662,9 @@ public struct PositionEstimate: Equatable, Hashable {
      */
     public var floorLevel: Int32?
     /**
-     * Probability of that floor.
+     * Probability that the floor is right: how often it was at this posterior mass on it on
+     * held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
+     * when the site file has no such calibration.
      */
     public var floorProbability: Double
     /**
@@ -3749,7 +3751,9 @@ public struct PositionEstimate: Equatable, Hashable {
          * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
          */floorLevel: Int32? = nil, 
         /**
-         * Probability of that floor.
+         * Probability that the floor is right: how often it was at this posterior mass on it on
+         * held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
+         * when the site file has no such calibration.
          */floorProbability: Double, 
         /**
          * Latitude, degrees north (WGS84), when the site file is geo-referenced (has an

@@ -212,7 +212,9 @@ pub struct waymark_position {
     pub y: f64,
     /// Floor index in the site file.
     pub floor: u32,
-    /// Probability of that floor.
+    /// Probability that the floor is right: how often it was at this posterior mass on it on
+    /// held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
+    /// when the site file has no such calibration.
     pub floor_probability: f64,
     /// Whether `floor_level` holds the floor's logical level (the site file gives one).
     pub has_floor_level: bool,

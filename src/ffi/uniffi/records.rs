@@ -259,7 +259,9 @@ pub struct PositionEstimate {
     /// Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
     #[uniffi(default = None)]
     pub floor_level: Option<i32>,
-    /// Probability of that floor.
+    /// Probability that the floor is right: how often it was at this posterior mass on it on
+    /// held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
+    /// when the site file has no such calibration.
     pub floor_probability: f64,
     /// Latitude, degrees north (WGS84), when the site file is geo-referenced (has an
     /// `anchor`); `null` / `nil` otherwise.
