@@ -450,6 +450,23 @@ fn print_calibration(c: &calibrate::CalibrationReport) {
         curve.join(", ")
     );
     println!("  radius factors 68%/95% by time since the sparse scan | {}", factors.join(", "));
+    let floor_table = |r: &calibrate::FloorReliabilityReport| -> String {
+        let edges = waymark::site::FLOOR_MISS_BANDS.map(|miss| 1.0 - miss);
+        let bands: Vec<String> = (r.epochs_right_by_band.iter().enumerate())
+            .map(|(band, [right, all])| {
+                let from = band.checked_sub(1).map_or("0".into(), |b| edges[b].to_string());
+                let to = edges.get(band).map_or("1".into(), f64::to_string);
+                let share = r.calibration.0[band].map_or("-".into(), |p| format!("{p:.3}"));
+                format!("{from}-{to}: {share} ({right} of {all} right)")
+            })
+            .collect();
+        bands.join(", ")
+    };
+    if !c.floor_reliability.calibration.is_empty() || !sparse.floor_reliability.calibration.is_empty() {
+        println!("floor probability reported, by the posterior's mass on the floor, on held-out epochs on the map:");
+        println!("  steady scans | {}", floor_table(&c.floor_reliability));
+        println!("  sparse scans | {}", floor_table(&sparse.floor_reliability));
+    }
 }
 
 pub fn replay(args: &ReplayArgs) -> ExitCode {

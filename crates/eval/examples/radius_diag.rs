@@ -20,7 +20,8 @@
 //! the fixed-lag estimate of the epoch `lag` epochs back lies from that epoch's live one: what
 //! the engine knows at this epoch of how much later evidence moved it), `jump` (how far the live
 //! estimate moved since the epoch before), `k` (the epoch's index in the walk), `floor_p` (the
-//! estimate's floor probability).
+//! posterior's mass on the estimate's floor: every replay runs without the site's floor
+//! calibration, as without its radius factors, which the script applies).
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -159,8 +160,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         accuracy_scale_by_scenario: Default::default(),
         sparse_scans: waymark::site::SparseScans {
             accuracy_scale_by_since: Default::default(),
+            floor_reliability: Default::default(),
             ..site.calibration().sparse_scans
         },
+        floor_reliability: Default::default(),
         ..*site.calibration()
     };
     let engine_config = options.calibration.engine.clone();

@@ -306,6 +306,7 @@ pub fn evaluate_on(
                         accuracy_m: spread,
                         accuracy_95_m: 2.0 * spread,
                         zone: zone_truth.as_ref().and_then(|z| z.zone_at(f, p.x, p.y)),
+                        floor_probability: None,
                     })
                 })
                 .collect();
@@ -327,6 +328,7 @@ pub fn evaluate_on(
                         accuracy_m: cell,
                         accuracy_95_m: 2.0 * cell,
                         zone: site.zone_of(best),
+                        floor_probability: None,
                     })
                 })
                 .collect();

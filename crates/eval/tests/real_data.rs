@@ -139,6 +139,10 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
         assert!(at(gamma).mean_error_m - at(g).mean_error_m > at(g).jackknife_se_m, "{sparse:?}");
     }
     assert_eq!(site.calibration().sparse_scans, sparse.calibration);
+    // One floor: the floor is never in doubt, so there is no floor probability to calibrate.
+    for floor in [&calibration.floor_reliability, &sparse.floor_reliability] {
+        assert!(floor.calibration.is_empty() && floor.epochs_right_by_band == [[0, 0]; 5], "{floor:?}");
+    }
 
     // Unsurveyed states around the surveyed ones, on the floor's plan, none with a fingerprint.
     let kind = |i: u32| site.states()[i as usize].kind;
@@ -184,6 +188,11 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
         assert!(m.epochs > 0, "{key} scored nothing");
         assert!(m.mean_m.is_finite() && m.mean_m < 40.0, "{key}: {m:?}");
         assert_eq!(m.floor_hit, 1.0, "one floor: {key}");
+        // Live positions report a floor probability, smoothed ones and single scans none.
+        let live = key.starts_with("forward");
+        let near = |v: Option<f64>, to: f64| v.map(|v| (v - to).abs() < 1e-12);
+        assert_eq!(near(m.floor_probability_mean, 1.0), live.then_some(true), "{key}: {m:?}");
+        assert_eq!(near(m.floor_brier, 0.0), live.then_some(true), "{key}: {m:?}");
     }
     // The fused engine beats a single scan on average even on this small survey.
     assert!(reports["forward-auto"].pooled.mean_m < reports["wifi-mle"].pooled.mean_m + 1.0);
@@ -206,6 +215,46 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     }
     assert_eq!(real::choose_held_out_strength(&selection.strengths).is_some(), selection.strength.is_some());
     assert_eq!(model.strength(), selection.strength);
+}
+
+/// Two floors as one site, from a few walks each: the calibration fits how often the floor
+/// was right per band of the posterior's mass on it, steady and sparse, and engines on the
+/// site report it.
+#[test]
+fn a_two_floor_slice_calibrates_its_floor_probability() {
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let Some(dirs) = ["B1", "F1"]
+        .iter()
+        .map(|f| waymark_eval::data::site1_floor(&workspace, f))
+        .collect::<Option<Vec<_>>>()
+    else {
+        return;
+    };
+    let floors: Vec<FloorData> =
+        dirs.iter().map(|d| FloorData::load(d, Some(10)).expect("the floor reads")).collect();
+    let options = EvalOptions { configurations: vec!["forward-auto".into()], ..EvalOptions::default() };
+    let (site, _, calibration) =
+        calibrate::survey_calibrated(&floors, &options.calibration, &|| {}).expect("survey");
+    for (floor, stored) in [
+        (&calibration.floor_reliability, site.calibration().floor_reliability),
+        (&calibration.sparse_scans.floor_reliability, site.calibration().sparse_scans.floor_reliability),
+    ] {
+        let epochs: usize = floor.epochs_right_by_band.iter().map(|c| c[1]).sum();
+        assert!(floor.epochs_right_by_band.iter().all(|[right, all]| right <= all), "{floor:?}");
+        assert_eq!(floor.calibration.is_empty(), epochs < calibrate::MIN_SCENARIO_EPOCHS, "{floor:?}");
+        assert_eq!(stored, floor.calibration);
+        let shares: Vec<f64> = floor.calibration.0.iter().flatten().copied().collect();
+        assert!(
+            shares.windows(2).all(|w| w[0] <= w[1]) && shares.iter().all(|p| (0.0..=1.0).contains(p)),
+            "{floor:?}"
+        );
+    }
+    assert!(!calibration.floor_reliability.calibration.is_empty(), "{:?}", calibration.floor_reliability);
+    // The live positions report the table's shares; the score reads them.
+    let (reports, _) = real::evaluate_on(&Arc::new(site), &floors, &options, &|| {}).expect("replays");
+    let m = &reports["forward-auto"].pooled;
+    let (p, brier) = (m.floor_probability_mean.unwrap(), m.floor_brier.unwrap());
+    assert!(p > 0.0 && p <= 1.0 && (0.0..=1.0).contains(&brier), "{m:?}");
 }
 
 /// A real floor plan (hundreds of rooms in lon/lat) drawn under a walk: every ring of the plan

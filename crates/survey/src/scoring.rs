@@ -42,6 +42,14 @@ pub struct Metrics {
     /// likely zone of none is right there): the base rate `zone_hit` should be read against.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub in_zone: Option<f64>,
+    /// Mean reported floor probability, over the points that report one (live positions):
+    /// read against `floor_hit` (docs/accuracy.md#floor-probability).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub floor_probability_mean: Option<f64>,
+    /// Brier score of the reported floor probability over the same points: the mean of
+    /// (probability − 1 if the floor was right, else 0)², 0 at best.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub floor_brier: Option<f64>,
     /// Points scored.
     pub epochs: usize,
 }
@@ -61,6 +69,8 @@ pub struct Scored {
     pub zone_correct: Option<bool>,
     /// Whether the true position was in a zone; `None` when not scored by zone.
     pub in_zone: Option<bool>,
+    /// The reported floor probability; `None` for estimates that report none.
+    pub floor_probability: Option<f64>,
 }
 
 impl Scored {
@@ -103,9 +113,19 @@ impl Metrics {
             floor_hit: share(&|p| p.floor_correct),
             zone_hit: crate::metrics::zone_hit(points.iter().map(|p| p.zone_correct)),
             in_zone: crate::metrics::zone_hit(points.iter().map(|p| p.in_zone)),
+            floor_probability_mean: mean(points.iter().filter_map(|p| p.floor_probability)),
+            floor_brier: mean(points.iter().filter_map(|p| {
+                p.floor_probability.map(|q| (q - if p.floor_correct { 1.0 } else { 0.0 }).powi(2))
+            })),
             epochs: n,
         }
     }
+}
+
+/// The mean of `values`; `None` without any.
+fn mean(values: impl Iterator<Item = f64>) -> Option<f64> {
+    let (sum, n) = values.fold((0.0, 0usize), |(sum, n), v| (sum + v, n + 1));
+    (n > 0).then(|| sum / n as f64)
 }
 
 /// An estimate in time, for scoring.
@@ -125,6 +145,9 @@ pub struct Estimate {
     pub accuracy_95_m: f64,
     /// The most likely zone, by index into the site's zones.
     pub zone: Option<usize>,
+    /// The reported floor probability; `None` for estimates that report none (smoothed
+    /// points, single-scan baselines).
+    pub floor_probability: Option<f64>,
 }
 
 /// The true zone of a position: the zone of the site's state nearest to it on its floor (a
@@ -220,6 +243,7 @@ fn scorer(floor: usize, zones: Option<&ZoneTruth>) -> impl Fn(&Estimate, (f64, f
             floor_correct: e.floor == floor,
             zone_correct: truth.map(|t| e.floor == floor && e.zone == t),
             in_zone: truth.map(|t| t.is_some()),
+            floor_probability: e.floor_probability,
         }
     }
 }
@@ -244,6 +268,7 @@ pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
                     accuracy_m: a68,
                     accuracy_95_m: a95,
                     zone: site.zone_of(p.state as usize),
+                    floor_probability: None,
                 }
             })
             .collect()
@@ -268,6 +293,36 @@ pub fn live_estimates(positions: &[waymark::Position]) -> Vec<Estimate> {
             accuracy_m: p.accuracy_m,
             accuracy_95_m: p.accuracy_95_m,
             zone: p.zone,
+            floor_probability: Some(p.floor_probability),
         })
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn point(floor_correct: bool, floor_probability: Option<f64>) -> Scored {
+        Scored {
+            error_m: 1.0,
+            accuracy_m: 2.0,
+            accuracy_95_m: 3.0,
+            floor_correct,
+            zone_correct: None,
+            in_zone: None,
+            floor_probability,
+        }
+    }
+
+    /// The floor probability's mean and Brier score are over the points that report one.
+    #[test]
+    fn the_floor_probability_is_scored_where_reported() {
+        let points = [point(true, Some(0.9)), point(false, Some(0.6)), point(false, None)];
+        let m = Metrics::new(&points);
+        assert!((m.floor_probability_mean.unwrap() - 0.75).abs() < 1e-12, "{m:?}");
+        assert!((m.floor_brier.unwrap() - (0.01 + 0.36) / 2.0).abs() < 1e-12, "{m:?}");
+        assert!((m.floor_hit - 1.0 / 3.0).abs() < 1e-12);
+        let none = Metrics::new(&[point(true, None)]);
+        assert_eq!((none.floor_probability_mean, none.floor_brier), (None, None));
+    }
 }

@@ -107,6 +107,7 @@ mod tests {
                 floor_correct: true,
                 zone_correct: None,
                 in_zone: None,
+                floor_probability: None,
             })
             .collect()
     }

@@ -4,7 +4,7 @@
 use crate::io::Trace;
 use crate::scoring::{live_estimates, quantile, score, Scored};
 use waymark::sensors::MdiScenario;
-use waymark::site::{scaled_radii, Calibration, StateKind};
+use waymark::site::{scaled_radii, Calibration, FloorReliability, StateKind, FLOOR_BANDS, FLOOR_MISS_BANDS};
 use waymark::{ScanTiming, Site};
 
 /// Per walk, per γ, per run of the calibration (`survey_calibrated`'s `masks`, then
@@ -149,6 +149,43 @@ pub(super) fn radius_factors(points: &[&Tag]) -> Option<[f64; 2]> {
     scale.iter().all(|s| s.is_finite() && *s > 0.0).then_some(scale)
 }
 
+/// The floor probability's calibration ([`FloorReliability`]) from held-out epochs, each
+/// (the posterior's mass on its floor, whether the floor was right), and the (right, all)
+/// epochs of each band.
+///
+/// A band's share is its right epochs with two pseudo-epochs at what the uncalibrated mass
+/// promises at least (the band's lower edge; 1/2 below): a Beta prior of weight 2, as
+/// Laplace's rule of succession, so a band with few epochs stays near the posterior's own
+/// mass and one with none keeps a value. The shares are then made to rise with the mass by
+/// pooling adjacent violators, weighted by epochs (isotonic calibration, Zadrozny & Elkan
+/// 2002), so a larger posterior mass never reports a smaller probability.
+pub(super) fn floor_reliability(
+    points: impl Iterator<Item = (f64, bool)>,
+) -> (FloorReliability, [[usize; 2]; FLOOR_BANDS]) {
+    let mut counts = [[0usize; 2]; FLOOR_BANDS];
+    for (p, right) in points {
+        let band = &mut counts[FloorReliability::band(p)];
+        band[0] += usize::from(right);
+        band[1] += 1;
+    }
+    // (share, weight, bands) blocks, merged while a block's share is below the one before it.
+    let mut blocks: Vec<(f64, f64, usize)> = Vec::with_capacity(FLOOR_BANDS);
+    for (band, &[right, all]) in counts.iter().enumerate() {
+        let prior = band.checked_sub(1).map_or(0.5, |b| 1.0 - FLOOR_MISS_BANDS[b]).max(0.5);
+        let weight = all as f64 + 2.0;
+        blocks.push(((right as f64 + 2.0 * prior) / weight, weight, 1));
+        while let [.., (a, wa, na), (b, wb, nb)] = blocks[..] {
+            if a <= b {
+                break;
+            }
+            blocks.truncate(blocks.len() - 2);
+            blocks.push(((a * wa + b * wb) / (wa + wb), wa + wb, na + nb));
+        }
+    }
+    let shares: Vec<f64> = blocks.iter().flat_map(|&(share, _, n)| std::iter::repeat_n(share, n)).collect();
+    (FloorReliability(std::array::from_fn(|band| Some(shares[band]))), counts)
+}
+
 impl Tag {
     /// Whether the 68% and 95% radii hold the truth with `calibration`'s factors applied as
     /// the engine applies them (`Engine::locate`) to this epoch's radii, replayed without
@@ -176,6 +213,7 @@ mod tests {
                 floor_correct: true,
                 zone_correct: None,
                 in_zone: None,
+                floor_probability: None,
             },
             beyond_map_m: 0.0,
             truth: [error_m, 0.0],
@@ -198,6 +236,36 @@ mod tests {
         let held = |k: usize| tags.iter().filter(|t| t.holds(&calibration)[k]).count();
         assert!((68..=70).contains(&held(0)), "{scale:?} {}", held(0));
         assert!((95..=97).contains(&held(1)), "{scale:?} {}", held(1));
+    }
+
+    /// Each band's share is its right epochs with two pseudo-epochs at its lower edge, and
+    /// shares that fall as the mass rises are pooled: a larger mass never reports less.
+    #[test]
+    fn the_floor_calibration_is_smoothed_per_band_and_rises_with_the_mass() {
+        let epochs = |p: f64, right: usize, wrong: usize| {
+            std::iter::repeat_n((p, true), right).chain(std::iter::repeat_n((p, false), wrong))
+        };
+        // Band 4 (mass over 0.999): 95 right of 100. Band 3: 9 of 10. Band 2: 1 of 8, below
+        // band 1's 3 of 4, so the two are pooled. Band 0: none.
+        let points = epochs(0.9999, 95, 5)
+            .chain(epochs(0.995, 9, 1))
+            .chain(epochs(0.95, 1, 7))
+            .chain(epochs(0.7, 3, 1));
+        let (table, counts) = floor_reliability(points);
+        assert_eq!(counts, [[0, 0], [3, 4], [1, 8], [9, 10], [95, 100]]);
+        let t = table.0.map(Option::unwrap);
+        assert!((t[4] - (95.0 + 2.0 * 0.999) / 102.0).abs() < 1e-12, "{t:?}");
+        assert!((t[3] - (9.0 + 2.0 * 0.99) / 12.0).abs() < 1e-12, "{t:?}");
+        // Band 1: (3 + 2·0.5) / 6 = 0.667; band 2: (1 + 2·0.9) / 10 = 0.28: pooled with band
+        // 1, then with band 0's prior (0.5, weight 2), which the pool fell below.
+        let pooled = (1.0 + 4.0 + 2.8) / (2.0 + 6.0 + 10.0);
+        for band in 0..3 {
+            assert!((t[band] - pooled).abs() < 1e-12, "{t:?}");
+        }
+        assert!(t.windows(2).all(|w| w[0] <= w[1]), "{t:?}");
+        // No epochs: every band at its prior.
+        let (empty, _) = floor_reliability(std::iter::empty());
+        assert_eq!(empty.0.map(Option::unwrap), [0.5, 0.5, 0.9, 0.99, 0.999]);
     }
 
     /// A floor's coverage splits its epochs by the map the other walks made, and a wrong floor

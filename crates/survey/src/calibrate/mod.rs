@@ -14,8 +14,8 @@ pub use gamma::{ESTIMATE_STATES_GRID, GAMMA_GRID};
 pub use held_out::MIN_SCENARIO_EPOCHS;
 pub use radius::{RadiusPoint, FINGERPRINT_RADIUS_FOLDS, FINGERPRINT_RADIUS_GRID};
 pub use report::{
-    coverage_geojson, CalibrationReport, Coverage, CoveragePoint, FloorCalibrationReport, GammaPoint,
-    MotionSummary, OffMapBand, OffMapReport, SparseScansReport,
+    coverage_geojson, CalibrationReport, Coverage, CoveragePoint, FloorCalibrationReport,
+    FloorReliabilityReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport, SparseScansReport,
 };
 
 use crate::io::Trace;
@@ -23,11 +23,13 @@ use crate::replay::{replay, MotionMask, ReplayOptions};
 use crate::scoring::{live_estimates, quantile, score, Scored};
 use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
 use gamma::{gamma_curve, own_gamma};
-use held_out::{radius_factors, tag, HeldOut, OnMap, Tag, Tagged, WalkHeldOut, RUNS, THROTTLED};
+use held_out::{
+    floor_reliability, radius_factors, tag, HeldOut, OnMap, Tag, Tagged, WalkHeldOut, RUNS, THROTTLED,
+};
 use radius::calibrate_fingerprint_radius;
 use std::sync::Arc;
 use waymark::sensors::MdiScenario;
-use waymark::site::{Calibration, North, Site, SparseScans, SPARSE_BANDS};
+use waymark::site::{Calibration, FloorReliability, North, Site, SparseScans, SPARSE_BANDS};
 use waymark::{Engine, EngineConfig, SharedEmissions};
 
 /// Why a site could not be read or calibrated.
@@ -468,7 +470,12 @@ pub fn survey_calibrated(
     let unscaled = Calibration {
         accuracy_scale: None,
         accuracy_scale_by_scenario: Default::default(),
-        sparse_scans: SparseScans { accuracy_scale_by_since: Default::default(), ..calibration.sparse_scans },
+        sparse_scans: SparseScans {
+            accuracy_scale_by_since: Default::default(),
+            floor_reliability: Default::default(),
+            ..calibration.sparse_scans
+        },
+        floor_reliability: Default::default(),
         ..calibration
     };
     let shipped: Vec<(Vec<Tag>, Vec<Tag>)> = parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
@@ -521,6 +528,28 @@ pub fn survey_calibrated(
         report.sparse_scans.epochs_by_since[band] = points.len();
         calibration.sparse_scans.accuracy_scale_by_since[band] =
             if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points) } else { None };
+    }
+    // The floor probability, on a site of several floors: how often the floor was right per
+    // band of the posterior's mass on it, over the held-out epochs on the map of both replays,
+    // in the sparse regime and out of it (docs/accuracy.md#floor-probability).
+    if site.floors().len() > 1 {
+        let on_map = || shipped.iter().flat_map(|s| s.0.iter().chain(&s.1)).filter(|t| t.beyond_map_m == 0.0);
+        for (sparse, report, table) in [
+            (false, &mut report.floor_reliability, &mut calibration.floor_reliability),
+            (
+                true,
+                &mut report.sparse_scans.floor_reliability,
+                &mut calibration.sparse_scans.floor_reliability,
+            ),
+        ] {
+            let points = on_map().filter(|t| t.band.is_some() == sparse);
+            let points = points.filter_map(|t| Some((t.scored.floor_probability?, t.scored.floor_correct)));
+            let (fitted, counts) = floor_reliability(points);
+            report.epochs_right_by_band = counts;
+            let epochs: usize = counts.iter().map(|c| c[1]).sum();
+            *table = if epochs >= MIN_SCENARIO_EPOCHS { fitted } else { FloorReliability::default() };
+            report.calibration = *table;
+        }
     }
     report.sparse_scans.calibration = calibration.sparse_scans;
     report.accuracy_scale = calibration.accuracy_scale;

@@ -3,7 +3,7 @@
 use super::held_out::Tag;
 use super::radius::RadiusPoint;
 use serde::Serialize;
-use waymark::site::{Calibration, SPARSE_BANDS};
+use waymark::site::{Calibration, FLOOR_BANDS, SPARSE_BANDS};
 
 /// One γ of [`GAMMA_GRID`](super::GAMMA_GRID) on one floor's held-out walks.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -198,6 +198,8 @@ pub struct CalibrationReport {
     pub fingerprint_radius_mean_error_m: Vec<RadiusPoint>,
     /// The held-out walks replayed with throttled scans, and what they calibrated.
     pub sparse_scans: SparseScansReport,
+    /// The floor probability's calibration outside the sparse regime.
+    pub floor_reliability: FloorReliabilityReport,
 }
 
 /// The calibration for sparse scans ([`SparseScans`](waymark::site::SparseScans)): every
@@ -210,8 +212,22 @@ pub struct SparseScansReport {
     /// since the sparse scan (`SINCE_SPARSE_SCAN_BANDS_S`): the radius factors of a band with
     /// fewer than [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) are not fitted.
     pub epochs_by_since: [usize; SPARSE_BANDS],
+    /// The floor probability's calibration in the sparse regime.
+    pub floor_reliability: FloorReliabilityReport,
     /// What was chosen.
     pub calibration: waymark::site::SparseScans,
+}
+
+/// The floor probability's calibration ([`FloorReliability`](waymark::site::FloorReliability))
+/// and the held-out epochs on the map it rests on; empty on a site of one floor.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct FloorReliabilityReport {
+    /// Per band of the posterior's mass on the floor (`FLOOR_MISS_BANDS`): (epochs whose floor
+    /// was right, epochs). Fewer than [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) in
+    /// all: no calibration.
+    pub epochs_right_by_band: [[usize; 2]; FLOOR_BANDS],
+    /// What was chosen.
+    pub calibration: waymark::site::FloorReliability,
 }
 
 /// The held-out epochs whose truth was off the held-out site's map, with the motion as the
