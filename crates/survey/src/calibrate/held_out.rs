@@ -171,7 +171,7 @@ pub(super) fn floor_reliability(
     // (share, weight, bands) blocks, merged while a block's share is below the one before it.
     let mut blocks: Vec<(f64, f64, usize)> = Vec::with_capacity(FLOOR_BANDS);
     for (band, &[right, all]) in counts.iter().enumerate() {
-        let prior = band.checked_sub(1).map_or(0.5, |b| 1.0 - FLOOR_MISS_BANDS[b]).max(0.5);
+        let prior = band.checked_sub(1).map_or(0.5, |b| 1.0 - FLOOR_MISS_BANDS[b]);
         let weight = all as f64 + 2.0;
         blocks.push(((right as f64 + 2.0 * prior) / weight, weight, 1));
         while let [.., (a, wa, na), (b, wb, nb)] = blocks[..] {
