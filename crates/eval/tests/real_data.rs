@@ -250,8 +250,21 @@ fn a_two_floor_slice_calibrates_its_floor_probability() {
         );
     }
     assert!(!calibration.floor_reliability.calibration.is_empty(), "{:?}", calibration.floor_reliability);
-    // The live positions report the table's shares; the score reads them.
-    let (reports, _) = real::evaluate_on(&Arc::new(site), &floors, &options, &|| {}).expect("replays");
+    // The live positions report the tables' shares, and the score reads them.
+    let site = Arc::new(site);
+    let shares: Vec<f64> =
+        [site.calibration().floor_reliability, site.calibration().sparse_scans.floor_reliability]
+            .iter()
+            .flat_map(|t| t.0.iter().flatten().copied())
+            .collect();
+    let mut engine = waymark::Engine::new(Arc::clone(&site), waymark::EngineConfig::default()).unwrap();
+    let positions =
+        replay_observed(&mut engine, &floors[1].test[0], &ReplayOptions::default(), &mut |_| {}).positions;
+    assert!(!positions.is_empty());
+    for p in &positions {
+        assert!(shares.contains(&p.floor_probability), "{} not in {shares:?}", p.floor_probability);
+    }
+    let (reports, _) = real::evaluate_on(&site, &floors, &options, &|| {}).expect("replays");
     let m = &reports["forward-auto"].pooled;
     let (p, brier) = (m.floor_probability_mean.unwrap(), m.floor_brier.unwrap());
     assert!(p > 0.0 && p <= 1.0 && (0.0..=1.0).contains(&brier), "{m:?}");
