@@ -117,6 +117,12 @@ pub struct EngineConfig {
     /// Epochs the Viterbi tracker keeps (HIPE §4.1 tracks by Viterbi): 64 epochs, 96 s at
     /// Hoang's 1.5 s epoch, bounding its memory to 64 × 4 bytes per state.
     pub track_window_epochs: usize,
+    /// Run the Viterbi tracker: [`Engine::track`](crate::Engine::track) and the revised track
+    /// points each position carries. Off, an epoch skips the Viterbi step and the engine holds
+    /// no track window: for callers that read only the live and fixed-lag positions, as the
+    /// survey's calibration does (docs/tuning.md#evaluation-speed). The positions are the
+    /// same either way.
+    pub track: bool,
     /// Lag of the fixed-lag estimate ([`Engine::fixed_lag_position`](crate::Engine::fixed_lag_position)),
     /// epochs: 3 (4.5 s at 1.5 s epochs), where the smoothed error is near its flat optimum
     /// (docs/tuning.md#fixed-lag).
@@ -199,6 +205,7 @@ impl Default for EngineConfig {
             rssi_weight: None,
             rssi_weight_without_movement: None,
             track_window_epochs: 64,
+            track: true,
             fixed_lag_epochs: 3,
             min_motion_step_s: 2.0,
             transition_ratio: 200_000.0,

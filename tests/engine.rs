@@ -192,6 +192,31 @@ fn a_site_file_round_trip_gives_the_same_track() {
 }
 
 #[test]
+fn without_the_track_the_positions_are_the_same() {
+    let run = |track: bool| {
+        let config = EngineConfig { track, ..EngineConfig::default() };
+        let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
+        // Walking along floor 0, a gap the walking-distance table does not cover, then floor 1.
+        let times = [1, 2, 3, 4, 5, 40, 41, 42];
+        let epochs: Vec<_> = (times.iter().enumerate())
+            .map(|(k, &t)| {
+                let readings = if t < 40 { readings_at(0, 3.0 * k as f64) } else { readings_at(1, 12.0) };
+                engine.push_scan(&scan(SECOND * t, &readings)).unwrap()
+            })
+            .collect();
+        (epochs, engine.track(), engine.track_memory_bytes())
+    };
+    let (with, track, bytes) = run(true);
+    let (without, no_track, no_bytes) = run(false);
+    let positions = |epochs: &[waymark::Epoch]| epochs.iter().map(|e| e.position.clone()).collect::<Vec<_>>();
+    assert_eq!(positions(&with), positions(&without));
+    assert_eq!(track.len(), 8);
+    assert!(bytes > 0);
+    assert!(no_track.is_empty() && no_bytes == 0);
+    assert!(without.iter().all(|e| e.revised_track.is_empty()));
+}
+
+#[test]
 fn invalid_config_is_refused() {
     let config = EngineConfig { estimate_states: Some(0), ..EngineConfig::default() };
     let err = Engine::new(Arc::new(two_floor_site()), config).err().unwrap();

@@ -270,7 +270,9 @@ impl Engine {
         if self.filter.step(None, &self.ln_emission).is_err() {
             self.restart();
         }
-        self.viterbi.pin(&self.ln_emission);
+        if let Some(viterbi) = &mut self.viterbi {
+            viterbi.pin(&self.ln_emission);
+        }
         let position = self.locate(latest);
         self.conclude(position, |history, p| history.pin_latest(states, p.floor, p.x, p.y, p.accuracy_m))
     }
@@ -293,17 +295,23 @@ impl Engine {
         self.undo.stats.clone_from(&self.stats);
         self.undo.tracker = uses_tracker.then(|| self.tracker.clone());
         self.filter.checkpoint();
-        self.viterbi.checkpoint();
+        if let Some(viterbi) = &mut self.viterbi {
+            viterbi.checkpoint();
+        }
         match std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| epoch(self))) {
             Ok(result) => {
                 self.filter.commit();
-                self.viterbi.commit();
+                if let Some(viterbi) = &mut self.viterbi {
+                    viterbi.commit();
+                }
                 self.undo.tracker = None;
                 result
             }
             Err(panic) => {
                 self.filter.rollback();
-                self.viterbi.rollback();
+                if let Some(viterbi) = &mut self.viterbi {
+                    viterbi.rollback();
+                }
                 // The smoother's history may hold the undone step.
                 self.smoother.clear();
                 self.last_epoch_ns = self.undo.last_epoch_ns;

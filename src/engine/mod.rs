@@ -51,7 +51,8 @@ pub struct Engine {
     /// beyond the map.
     whole_reach: bool,
     filter: ForwardFilter,
-    viterbi: ViterbiWindow,
+    /// `None` when the configuration turns the track off.
+    viterbi: Option<ViterbiWindow>,
     /// The filter's last steps, for the fixed-lag estimate.
     smoother: FixedLagSmoother<transition::StepModel>,
     tracker: MotionTracker,
@@ -164,7 +165,7 @@ impl Engine {
             .collect();
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,
-            viterbi: ViterbiWindow::new(n, config.track_window_epochs),
+            viterbi: config.track.then(|| ViterbiWindow::new(n, config.track_window_epochs)),
             site,
             reach,
             map_reach,
@@ -273,7 +274,7 @@ impl Engine {
 
     /// Bytes held by the Viterbi window (bounded by `track_window_epochs`).
     pub fn track_memory_bytes(&self) -> usize {
-        self.viterbi.memory_bytes()
+        self.viterbi.as_ref().map_or(0, ViterbiWindow::memory_bytes)
     }
 
     /// Bytes held by the fixed-lag smoother: at most `fixed_lag_epochs` steps, each with the
@@ -307,7 +308,8 @@ impl Engine {
     /// The most likely path over the last `track_window_epochs` epochs (HIPE §4.1: Viterbi for
     /// tracking), oldest first.
     pub fn track(&self) -> Vec<TrackPoint> {
-        self.viterbi.path().into_iter().map(|(t, s)| self.track_point(t, s)).collect()
+        let path = self.viterbi.as_ref().map(ViterbiWindow::path).unwrap_or_default();
+        path.into_iter().map(|(t, s)| self.track_point(t, s)).collect()
     }
 
     /// The position `fixed_lag_epochs` epochs ago, smoothed by what came after: the exact

@@ -16,11 +16,13 @@ impl Engine {
         let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
         let Some(dt) = dt_s else {
             self.smoother.clear();
-            self.viterbi.step(
-                timestamp_ns,
-                &UniformReach { table, rho_m: 0.0, ratio: 1.0 },
-                &self.ln_emission,
-            );
+            if let Some(viterbi) = &mut self.viterbi {
+                viterbi.step(
+                    timestamp_ns,
+                    &UniformReach { table, rho_m: 0.0, ratio: 1.0 },
+                    &self.ln_emission,
+                );
+            }
             return self.update(None);
         };
         let Some(hipe_region) = self.within_reach(motion, dt) else {
@@ -33,8 +35,9 @@ impl Engine {
         let parts = self.transition_parts();
         let (filter, viterbi, ln_emission) = (&mut self.filter, &mut self.viterbi, &self.ln_emission);
         // Each row of the transition written once for the Viterbi step and the prediction.
-        let result = parts.with(&model, |transition| {
-            filter.step_with_viterbi(viterbi, timestamp_ns, transition, ln_emission)
+        let result = parts.with(&model, |transition| match viterbi {
+            Some(viterbi) => filter.step_with_viterbi(viterbi, timestamp_ns, transition, ln_emission),
+            None => filter.step(Some(transition), ln_emission),
         });
         match result {
             Ok(evidence) => {
@@ -202,7 +205,9 @@ impl Engine {
         let passes = (speed_reach / table_radius).ceil().max(1.0);
         self.smoother.clear();
         let pass = UniformReach { table, rho_m: speed_reach / passes, ratio: self.config.transition_ratio };
-        self.viterbi.step(timestamp_ns, &UniformReach { rho_m: table_radius, ..pass }, &self.ln_emission);
+        if let Some(viterbi) = &mut self.viterbi {
+            viterbi.step(timestamp_ns, &UniformReach { rho_m: table_radius, ..pass }, &self.ln_emission);
+        }
         if passes > f64::from(self.config.max_reach_passes) {
             log::debug!("{speed_reach:.0} m of possible walking since the last epoch: restarting");
             self.filter.reset();

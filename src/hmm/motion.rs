@@ -185,10 +185,11 @@ impl HoangTransition<'_> {
         }
     }
 
-    /// ln N(v; Δ, Σ_v) with the capped Mahalanobis distance, times the exponent.
-    fn ln_movement(&self, m: &Measured, delta: Vector2<f64>) -> f64 {
+    /// The squared Mahalanobis distance of `delta` from the measured movement, `None` at or
+    /// beyond the cap (every such entry has the cap's density). 0 without a movement term.
+    fn movement_r2(&self, m: &Measured, delta: Vector2<f64>) -> Option<f64> {
         if self.movement_m.is_none() {
-            return 0.0;
+            return Some(0.0);
         }
         let residual = m.v - delta;
         let r2 = match m.direction {
@@ -199,20 +200,31 @@ impl HoangTransition<'_> {
             }
             // No direction to be along: the larger spread both ways.
             _ => residual.norm_squared() / self.variance_m2.max(self.across_variance_m2),
-        }
-        .min(self.mahalanobis_cap * self.mahalanobis_cap);
-        self.exponent * (-0.5 * r2 - m.ln_normaliser)
+        };
+        (r2 < self.mahalanobis_cap * self.mahalanobis_cap).then_some(r2)
+    }
+
+    /// The squared distance of the walking distance `walk_m` from the measured `d` along the
+    /// track, `None` at or beyond the cap.
+    fn walked_r2(&self, d: f64, walk_m: f64) -> Option<f64> {
+        let r2 = (d - walk_m).powi(2) / self.variance_m2;
+        (r2 < self.mahalanobis_cap * self.mahalanobis_cap).then_some(r2)
+    }
+
+    /// ln N at squared Mahalanobis distance `r2` under the cap, times the exponent: eq. 11
+    /// with the movement vector, its along-track term with the distance alone.
+    fn ln_density(&self, m: &Measured, r2: f64) -> f64 {
+        let ln_normaliser = match (self.movement_m, self.walked_m) {
+            (None, Some(_)) => m.ln_walked_normaliser,
+            (None, None) => return 0.0,
+            _ => m.ln_normaliser,
+        };
+        self.exponent * (-0.5 * r2 - ln_normaliser)
     }
 
     /// ln(2π √det Σ_v).
     fn ln_normaliser(&self) -> f64 {
         (std::f64::consts::TAU * (self.variance_m2 * self.across_variance_m2).sqrt()).ln()
-    }
-
-    /// ln N(d; w, σ²) along the track, with the capped Mahalanobis distance, times the exponent.
-    fn ln_walked(&self, m: &Measured, d: f64, walk_m: f64) -> f64 {
-        let r2 = ((d - walk_m).powi(2) / self.variance_m2).min(self.mahalanobis_cap * self.mahalanobis_cap);
-        self.exponent * (-0.5 * r2 - m.ln_walked_normaliser)
     }
 
     /// ln √(2π σ²).
@@ -228,6 +240,10 @@ impl Transition for HoangTransition<'_> {
         let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
         let from = &states[i];
         let m = self.measured();
+        // Entries at the Mahalanobis cap (most of a row: the reach is wider than the spread)
+        // all weigh `high · exp(cap)`: one exponential for all of them.
+        let capped = self.ln_movement_range().0.exp();
+        let high_capped = high * capped;
         for (j, walk_m) in reach.iter() {
             let to = &states[j as usize];
             let delta = if to.floor == from.floor {
@@ -236,13 +252,17 @@ impl Transition for HoangTransition<'_> {
                 // Between floors the plan distance is the walk along the stairs.
                 m.direction.unwrap_or_else(Vector2::zeros) * f64::from(walk_m)
             };
-            let ln = match (self.movement_m, self.walked_m) {
-                (None, Some(d)) => self.ln_walked(&m, d, f64::from(walk_m)),
-                _ => self.ln_movement(&m, delta),
+            let r2 = match (self.movement_m, self.walked_m) {
+                (None, Some(d)) => self.walked_r2(d, f64::from(walk_m)),
+                _ => self.movement_r2(&m, delta),
             };
-            row.push((j, high * ln.exp()));
+            let a = match r2 {
+                Some(r2) => high * self.ln_density(&m, r2).exp(),
+                None => high_capped,
+            };
+            row.push((j, a));
         }
-        low * self.ln_movement_range().0.exp()
+        low * capped
     }
 
     fn bounds(&self) -> Option<RowBounds<'_>> {
@@ -397,16 +417,12 @@ mod tests {
         let t = one_metre_east(&site, &table, [1.0, 0.25], 10.0);
         // 1 m short along the movement (staying put): 1σ along; 1 m beside the target: 2σ across.
         let normaliser = std::f64::consts::TAU * (1.0f64 * 0.25).sqrt();
-        assert_relative_eq!(
-            t.ln_movement(&t.measured(), Vector2::new(0.0, 0.0)),
-            -0.5 - normaliser.ln(),
-            epsilon = 1e-12
-        );
-        assert_relative_eq!(
-            t.ln_movement(&t.measured(), Vector2::new(1.0, 1.0)),
-            -2.0 - normaliser.ln(),
-            epsilon = 1e-12
-        );
+        let m = t.measured();
+        let ln = |delta| t.movement_r2(&m, delta).map(|r2| t.ln_density(&m, r2)).unwrap();
+        assert_relative_eq!(ln(Vector2::new(0.0, 0.0)), -0.5 - normaliser.ln(), epsilon = 1e-12);
+        assert_relative_eq!(ln(Vector2::new(1.0, 1.0)), -2.0 - normaliser.ln(), epsilon = 1e-12);
+        // 11 m short along: 11σ, beyond the cap of 10.
+        assert_eq!(t.movement_r2(&m, Vector2::new(-10.0, 0.0)), None);
     }
 
     #[test]

@@ -352,6 +352,8 @@ pub fn evaluate_on(
             if smoothing {
                 config.track_window_epochs = longest;
             }
+            // Only viterbi-auto reads a track.
+            config.track = key == "forward-auto" && wanted("viterbi-auto");
             let Ok(mut engine) = Engine::new(Arc::clone(site), config) else { continue };
             // Of this very site: cannot fail.
             let _ = engine.share_emissions(Arc::clone(&shared));

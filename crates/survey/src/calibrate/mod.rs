@@ -92,6 +92,12 @@ impl CalibrationOptions {
         ReplayOptions { min_scan_interval_ns: None, fixed_lag: false, ..self.replay }
     }
 
+    /// The engine the calibration replays its held-out walks with: `engine` without the
+    /// Viterbi track, which nothing it scores reads (the live positions are the same).
+    pub fn calibration_engine(&self) -> EngineConfig {
+        EngineConfig { track: false, ..self.engine.clone() }
+    }
+
     /// [`calibration_replay`](Self::calibration_replay) with the scans throttled as
     /// [`throttled_replay`](Self::throttled_replay) throttles them.
     fn calibration_throttled_replay(&self) -> ReplayOptions {
@@ -294,7 +300,8 @@ pub fn survey_calibrated(
                 .map(|&gamma| {
                     let mut scored_by_m = Vec::new();
                     let runs: [Vec<Tag>; RUNS] = std::array::from_fn(|run| {
-                        let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine.clone() };
+                        let config =
+                            EngineConfig { rssi_weight: Some(gamma), ..options.calibration_engine() };
                         let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
                             return Vec::new();
                         };
@@ -490,7 +497,7 @@ pub fn survey_calibrated(
                     .clone()
                     .with_calibration(calibration)
                     .and_then(|s| s.with_floor_rssi_weights(&weights));
-                let mut engine = Engine::new(Arc::new(site.ok()?), options.engine.clone()).ok()?;
+                let mut engine = Engine::new(Arc::new(site.ok()?), options.calibration_engine()).ok()?;
                 Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
             };
             Some((

@@ -76,7 +76,7 @@ pub(super) fn calibrate_fingerprint_radius(
                 // The walk's scan likelihoods on the fold's site, computed at the first γ.
                 let shared = SharedEmissions::new(&site);
                 GAMMA_GRID.map(|gamma| {
-                    let config = EngineConfig { rssi_weight: Some(gamma), ..options.engine.clone() };
+                    let config = EngineConfig { rssi_weight: Some(gamma), ..options.calibration_engine() };
                     let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else { return (0.0, 0) };
                     // Of this very site: cannot fail.
                     let _ = engine.share_emissions(Arc::clone(&shared));
