@@ -69,25 +69,23 @@ impl PreparedSurvey<'_> {
                 ids_of.keys().map(|c| (*c, floor.cells[c].room)).collect();
             if margin > 0 {
                 let mut extra: BTreeSet<Cell> = BTreeSet::new();
-                for &(ci, cj) in ids_of.keys() {
-                    for di in -margin..=margin {
-                        for dj in -margin..=margin {
-                            let c = (ci + di, cj + dj);
-                            if (di * di + dj * dj) as f64 * s * s <= options.unsurveyed_margin_m.powi(2)
-                                && !ids_of.contains_key(&c)
-                            {
-                                extra.insert(c);
-                            }
-                        }
-                    }
+                for &c in ids_of.keys() {
+                    extra.extend(margin_cells(c, options).filter(|m| !ids_of.contains_key(m)));
                 }
                 for c in extra {
-                    if floor.plan.is_some_and(|plan| !plan.on_floor(centre(c))) {
+                    // Where the cell lies on the plan, as the survey looked it up.
+                    let on_plan = floor.plan.map(|plan| {
+                        floor.plan_cells.get(&c).copied().unwrap_or_else(|| PlanCell {
+                            on_floor: plan.on_floor(centre(c)),
+                            room: named_room(plan, centre(c)),
+                        })
+                    });
+                    if on_plan.is_some_and(|p| !p.on_floor) {
                         continue;
                     }
                     let room = match floor.cells.get(&c) {
                         Some(candidate) => candidate.room,
-                        None => floor.plan.and_then(|plan| named_room(plan, centre(c))),
+                        None => on_plan.and_then(|p| p.room),
                     };
                     ids_of.insert(c, builder.unsurveyed_state(index, centre(c)));
                     rooms_of.insert(c, room);

@@ -33,12 +33,25 @@ pub(super) struct CandidateCell {
     pub(super) room: Option<usize>,
 }
 
+/// Where a cell's centre lies on its floor's plan: what an unsurveyed state there needs.
+/// Looked up once per survey rather than once per site built from it.
+#[derive(Clone, Copy, Debug, Default)]
+pub(super) struct PlanCell {
+    /// Inside the plan's outline (always, without a plan).
+    pub(super) on_floor: bool,
+    /// The smallest named plan polygon holding the centre.
+    pub(super) room: Option<usize>,
+}
+
 #[derive(Clone, Debug)]
 pub(super) struct PreparedFloor<'a> {
     pub(super) name: String,
     pub(super) plan: Option<&'a FloorPlan>,
     pub(super) walks: Vec<PreparedWalk>,
     pub(super) cells: BTreeMap<Cell, CandidateCell>,
+    /// With a plan: each candidate cell and each cell within the unsurveyed margin of one,
+    /// where it lies on the plan. Empty without a plan.
+    pub(super) plan_cells: HashMap<Cell, PlanCell>,
 }
 
 /// One state's fitted fingerprint.
@@ -208,9 +221,19 @@ impl<'a> PreparedSurvey<'a> {
                 }
                 prepared_walks.push(PreparedWalk { path, scans: interned_scans, gaps, weakest_wifi_dbm });
             }
+            let mut plan_cells = HashMap::new();
             if let Some(plan) = floor.plan {
                 for (&c, candidate) in cells.iter_mut() {
                     candidate.room = named_room(plan, centre(c));
+                }
+                let on_plan = |c: Cell| PlanCell {
+                    on_floor: plan.on_floor(centre(c)),
+                    room: named_room(plan, centre(c)),
+                };
+                for &c in cells.keys() {
+                    for m in margin_cells(c, options) {
+                        plan_cells.entry(m).or_insert_with(|| on_plan(m));
+                    }
                 }
             }
             out.push(PreparedFloor {
@@ -218,6 +241,7 @@ impl<'a> PreparedSurvey<'a> {
                 plan: floor.plan,
                 walks: prepared_walks,
                 cells,
+                plan_cells,
             });
         }
         Ok(PreparedSurvey {
@@ -233,6 +257,17 @@ impl<'a> PreparedSurvey<'a> {
     pub fn walk_count(&self, floor: usize) -> usize {
         self.floors.get(floor).map_or(0, |f| f.walks.len())
     }
+}
+
+/// The cells within the unsurveyed margin of cell `c` (`c` itself included), where a site
+/// whose state is at `c` puts unsurveyed states.
+pub(super) fn margin_cells(c: Cell, options: &SurveyOptions) -> impl Iterator<Item = Cell> + '_ {
+    let s = options.spacing_m;
+    let margin = (options.unsurveyed_margin_m / s).floor() as i64;
+    (-margin..=margin)
+        .flat_map(move |di| (-margin..=margin).map(move |dj| (di, dj)))
+        .filter(move |&(di, dj)| (di * di + dj * dj) as f64 * s * s <= options.unsurveyed_margin_m.powi(2))
+        .map(move |(di, dj)| (c.0 + di, c.1 + dj))
 }
 
 /// The smallest named polygon of `plan` holding `p`: the room a state there belongs to.
