@@ -73,20 +73,13 @@ impl PreparedSurvey<'_> {
                     extra.extend(margin_cells(c, options).filter(|m| !ids_of.contains_key(m)));
                 }
                 for c in extra {
-                    // Where the cell lies on the plan, as the survey looked it up.
-                    let on_plan = floor.plan.map(|plan| {
-                        floor.plan_cells.get(&c).copied().unwrap_or_else(|| PlanCell {
-                            on_floor: plan.on_floor(centre(c)),
-                            room: named_room(plan, centre(c)),
-                        })
-                    });
+                    // Where the cell lies on the plan, as the survey looked it up: a state's
+                    // cell is a candidate, so its margin is there.
+                    let on_plan = floor.plan.and(floor.plan_cells.get(&c));
                     if on_plan.is_some_and(|p| !p.on_floor) {
                         continue;
                     }
-                    let room = match floor.cells.get(&c) {
-                        Some(candidate) => candidate.room,
-                        None => on_plan.and_then(|p| p.room),
-                    };
+                    let room = on_plan.and_then(|p| p.room);
                     ids_of.insert(c, builder.unsurveyed_state(index, centre(c)));
                     rooms_of.insert(c, room);
                     report.unsurveyed_states += 1;

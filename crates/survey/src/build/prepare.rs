@@ -43,6 +43,13 @@ pub(super) struct PlanCell {
     pub(super) room: Option<usize>,
 }
 
+impl PlanCell {
+    /// Where `p` lies on `plan`.
+    fn at(plan: &FloorPlan, p: Point2<f64>) -> PlanCell {
+        PlanCell { on_floor: plan.on_floor(p), room: named_room(plan, p) }
+    }
+}
+
 #[derive(Clone, Debug)]
 pub(super) struct PreparedFloor<'a> {
     pub(super) name: String,
@@ -50,7 +57,8 @@ pub(super) struct PreparedFloor<'a> {
     pub(super) walks: Vec<PreparedWalk>,
     pub(super) cells: BTreeMap<Cell, CandidateCell>,
     /// With a plan: each candidate cell and each cell within the unsurveyed margin of one,
-    /// where it lies on the plan. Empty without a plan.
+    /// where it lies on the plan (every cell a site from these walks can hold). Empty without
+    /// a plan.
     pub(super) plan_cells: HashMap<Cell, PlanCell>,
 }
 
@@ -221,19 +229,14 @@ impl<'a> PreparedSurvey<'a> {
                 }
                 prepared_walks.push(PreparedWalk { path, scans: interned_scans, gaps, weakest_wifi_dbm });
             }
+            // Each candidate cell and its margin (the cell itself among them) on the plan.
             let mut plan_cells = HashMap::new();
             if let Some(plan) = floor.plan {
                 for (&c, candidate) in cells.iter_mut() {
-                    candidate.room = named_room(plan, centre(c));
-                }
-                let on_plan = |c: Cell| PlanCell {
-                    on_floor: plan.on_floor(centre(c)),
-                    room: named_room(plan, centre(c)),
-                };
-                for &c in cells.keys() {
                     for m in margin_cells(c, options) {
-                        plan_cells.entry(m).or_insert_with(|| on_plan(m));
+                        plan_cells.entry(m).or_insert_with(|| PlanCell::at(plan, centre(m)));
                     }
+                    candidate.room = plan_cells[&c].room;
                 }
             }
             out.push(PreparedFloor {
