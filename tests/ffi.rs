@@ -502,3 +502,48 @@ fn one_shared_site_serves_several_engines() {
     let bad = waymark::ffi::uniffi::Site::from_bytes(b"{".to_vec());
     assert!(matches!(bad, Err(PositioningError::InvalidSite { .. })));
 }
+
+/// `track: false` gives the same positions, fixed-lag included, with no track and no
+/// `TrackRevised`; the default engine on the same walk has both.
+#[test]
+fn without_the_track_through_the_ffi() {
+    let office = Office::generate(&OfficeConfig::default());
+    let walk = office.walk(7, 60.0);
+    let trace = imu::synthesize(&walk.trajectory, &imu::ImuConfig::default(), 7);
+    let run = |track: bool| {
+        let options = EngineOptions { track, ..EngineOptions::default() };
+        let engine = PositioningEngine::new(office.site.to_json(), options).unwrap();
+        let counter = Arc::new(Counter::default());
+        let _subscription = Arc::clone(&engine).subscribe(counter.clone());
+        let (mut previous, mut positions) = (0, Vec::new());
+        for epoch in &walk.epochs {
+            let t = epoch.scan.timestamp_ns;
+            let batch = |v: &[waymark::sensors::SensorSample]| {
+                to_ffi(
+                    &v[v.partition_point(|s| s.timestamp_ns <= previous)
+                        ..v.partition_point(|s| s.timestamp_ns <= t)],
+                )
+            };
+            engine.push_accelerometer(batch(&trace.accelerometer)).unwrap();
+            engine.push_gyroscope(batch(&trace.gyroscope)).unwrap();
+            engine.push_magnetometer(batch(&trace.magnetometer)).unwrap();
+            previous = t;
+            positions.push((engine.push_scan(scan(&epoch.scan)).ok(), engine.fixed_lag_position().unwrap()));
+        }
+        let revisions = counter
+            .status_log
+            .lock()
+            .unwrap()
+            .iter()
+            .filter(|s| matches!(s, StatusUpdate::TrackRevised { .. }))
+            .count();
+        (positions, engine.track().unwrap().len(), revisions)
+    };
+    let (with, with_track, with_revisions) = run(true);
+    let (without, without_track, without_revisions) = run(false);
+    assert!(with.iter().filter(|(p, lag)| p.is_some() && lag.is_some()).count() > walk.epochs.len() / 2);
+    assert_eq!(with, without);
+    assert!(with_track > 0 && with_revisions > 0, "{with_track} points, {with_revisions} revisions");
+    assert_eq!((without_track, without_revisions), (0, 0));
+    assert!(EngineOptions::default().track);
+}

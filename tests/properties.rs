@@ -878,8 +878,16 @@ fn options() -> impl Strategy<Value = EngineOptions> {
     let angle = proptest::option::of(prop_oneof![4 => -360.0..360.0f64, 1 => value()]);
     // A salt, long enough or not: the fixtures' ids are raw, so a valid one is ignored.
     let salt = proptest::option::of(proptest::collection::vec(any::<u8>(), 0..40));
-    (transition, length, lag, angle.clone(), angle, salt).prop_map(
-        |(transition, step_length_m, fixed_lag_epochs, declination_deg, site_rotation_deg, site_salt)| {
+    (transition, length, lag, angle.clone(), angle, salt, any::<bool>()).prop_map(
+        |(
+            transition,
+            step_length_m,
+            fixed_lag_epochs,
+            declination_deg,
+            site_rotation_deg,
+            site_salt,
+            track,
+        )| {
             EngineOptions {
                 transition,
                 step_length_m,
@@ -887,6 +895,7 @@ fn options() -> impl Strategy<Value = EngineOptions> {
                 declination_deg,
                 site_rotation_deg,
                 site_salt,
+                track,
             }
         },
     )

@@ -871,6 +871,82 @@ static void survey_recorder(void) {
     waymark_recorder_free(empty);
 }
 
+/* Revisions of the track the status callback heard. */
+static void on_revision(void *userdata, const waymark_status *status) {
+    if (status->kind == WAYMARK_STATUS_KIND_TRACK_REVISED && status->point_count > 0) (*(int *)userdata)++;
+}
+
+/* The walk replayed with `track` set as given: the sum of its positions' x + y + radius (to
+ * compare runs), the positions, and the track revisions reported. */
+static double replay_track(const char *site_path, const char *walk_path, uint8_t track, int *positions,
+                           int *revisions) {
+    waymark_engine_options options;
+    waymark_engine_options_default(&options);
+    options.track = track;
+    size_t len = 0;
+    char *json = read_file(site_path, &len);
+    waymark_engine *engine = NULL;
+    CHECK(json && waymark_engine_new_with_options((const uint8_t *)json, len, &options, &engine) ==
+                      WAYMARK_RESULT_OK,
+          "engine with track = %u", track);
+    free(json);
+    FILE *f = fopen(walk_path, "r");
+    CHECK(f != NULL, "open walk");
+    if (!engine || !f) {
+        if (f) fclose(f);
+        waymark_engine_free(engine);
+        return NAN;
+    }
+    CHECK(waymark_engine_set_status_callback(engine, on_revision, revisions) == WAYMARK_RESULT_OK, "status");
+    unsigned long long t;
+    double tx, ty, sum = 0;
+    size_t na, ng, nm, nw;
+    while (fscanf(f, " E %llu %lf %lf %zu %zu %zu %zu", &t, &tx, &ty, &na, &ng, &nm, &nw) == 7) {
+        waymark_sample *a = read_samples(f, na), *g = read_samples(f, ng), *m = read_samples(f, nm);
+        waymark_engine_push_accelerometer(engine, a, na, NULL);
+        waymark_engine_push_gyroscope(engine, g, ng, NULL);
+        waymark_engine_push_magnetometer(engine, m, nm, NULL);
+        free(a);
+        free(g);
+        free(m);
+        char (*bssids)[32] = NULL;
+        waymark_wifi_reading *w = read_scan(f, nw, &bssids);
+        waymark_position p;
+        if (waymark_engine_push_scan(engine, t, w, nw, NULL, 0, &p) == WAYMARK_RESULT_OK) {
+            (*positions)++;
+            sum += p.x + p.y + p.accuracy_m;
+        }
+        free(w);
+        free(bssids);
+    }
+    fclose(f);
+    waymark_engine_free(engine);
+    return sum;
+}
+
+/* `track` = 0 gives the same positions with no revision reported; only 0 and 1 are valid. */
+static void without_track(const char *site_path, const char *walk_path) {
+    waymark_engine_options options;
+    CHECK(waymark_engine_options_default(&options) == WAYMARK_RESULT_OK && options.track == 1, "track by default");
+    options.track = 2;
+    size_t len = 0;
+    char *json = read_file(site_path, &len);
+    waymark_engine *engine = NULL;
+    CHECK(json && waymark_engine_new_with_options((const uint8_t *)json, len, &options, &engine) ==
+                      WAYMARK_RESULT_INVALID_CONFIG && engine == NULL,
+          "track = 2");
+    free(json);
+    int with_positions = 0, with_revisions = 0, without_positions = 0, without_revisions = 0;
+    double with = replay_track(site_path, walk_path, 1, &with_positions, &with_revisions);
+    double without = replay_track(site_path, walk_path, 0, &without_positions, &without_revisions);
+    printf("track kept: %d positions, %d revisions; without: %d positions, %d revisions\n", with_positions,
+           with_revisions, without_positions, without_revisions);
+    CHECK(with_positions > 10 && with_positions == without_positions && with == without,
+          "the same positions without the track (%d, %d)", with_positions, without_positions);
+    CHECK(with_revisions > 0 && without_revisions == 0, "revisions %d with the track, %d without", with_revisions,
+          without_revisions);
+}
+
 int main(int argc, char **argv) {
     if (argc != 6) {
         fprintf(stderr, "usage: %s site.json walk.txt site-hashed.json salt.hex site.wmsite\n", argv[0]);
@@ -888,6 +964,7 @@ int main(int argc, char **argv) {
     routes(argv[1]);
     survey_recorder();
     walk(argv[1], argv[2], NULL, 0);
+    without_track(argv[1], argv[2]);
     habits(argv[1], argv[2]);
     walk(argv[5], argv[2], NULL, 0);
     binary_site(argv[5]);

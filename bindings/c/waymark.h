@@ -697,6 +697,14 @@ typedef struct {
    * Bytes at `site_salt`.
    */
   size_t site_salt_len;
+  /**
+   * 1 (the default): the engine keeps the Viterbi track and reports its revisions
+   * (`WAYMARK_STATUS_KIND_TRACK_REVISED`). 0: it runs without it, for an app that shows only
+   * the live position: each epoch costs less, the engine holds no track window
+   * (docs/results.md#speed), and no revision is reported. The positions are the same either
+   * way. Other values are rejected (`WAYMARK_RESULT_INVALID_CONFIG`).
+   */
+  uint8_t track;
 } waymark_engine_options;
 
 /**
@@ -1083,9 +1091,9 @@ const char *waymark_version(void);
 
 /**
  * Fills `*out` with the default options: the default transition model and fixed lag, a step
- * length of 0.7 m, the site file's north (NaN declination and rotation), no salt. Call it
- * before setting the fields you need, so that fields a later version adds get their
- * defaults too.
+ * length of 0.7 m, the site file's north (NaN declination and rotation), no salt, the Viterbi
+ * track kept. Call it before setting the fields you need, so that fields a later version adds
+ * get their defaults too.
  */
 waymark_result waymark_engine_options_default(waymark_engine_options *out);
 

@@ -61,6 +61,9 @@ pub(crate) struct Options {
     pub transition: Option<TransitionModel>,
     /// `None`: the default.
     pub fixed_lag_epochs: Option<usize>,
+    /// Whether the engine keeps the Viterbi track ([`EngineConfig::track`]); `None`: the
+    /// default (it does).
+    pub track: Option<bool>,
     /// Degrees; `None`: the site file's.
     pub declination_deg: Option<f64>,
     /// Degrees; `None`: the site file's.
@@ -79,6 +82,7 @@ impl Options {
         let mut config = EngineConfig {
             transition: self.transition.unwrap_or_default(),
             fixed_lag_epochs: self.fixed_lag_epochs.unwrap_or(defaults.fixed_lag_epochs),
+            track: self.track.unwrap_or(defaults.track),
             ..defaults
         };
         if let Some(length_m) = self.step_length_m {

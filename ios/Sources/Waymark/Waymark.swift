@@ -2804,6 +2804,13 @@ public struct EngineOptions: Equatable, Hashable {
      */
     public var fixedLagEpochs: UInt32
     /**
+     * Whether the engine keeps the Viterbi track (`track()`, `TrackRevised`). `false`: an app
+     * that shows only the live position (and maybe `fixedLagPosition()`) saves each epoch's
+     * Viterbi step and the track's memory (docs/results.md#speed); `track()` is then empty
+     * and no `TrackRevised` comes. The positions are the same either way.
+     */
+    public var track: Bool
+    /**
      * Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
      */
     public var declinationDeg: Double?
@@ -2835,6 +2842,12 @@ public struct EngineOptions: Equatable, Hashable {
          * How many epochs behind the newest the fixed-lag estimate is.
          */fixedLagEpochs: UInt32 = UInt32(3), 
         /**
+         * Whether the engine keeps the Viterbi track (`track()`, `TrackRevised`). `false`: an app
+         * that shows only the live position (and maybe `fixedLagPosition()`) saves each epoch's
+         * Viterbi step and the track's memory (docs/results.md#speed); `track()` is then empty
+         * and no `TrackRevised` comes. The positions are the same either way.
+         */track: Bool = true, 
+        /**
          * Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
          */declinationDeg: Double? = nil, 
         /**
@@ -2850,6 +2863,7 @@ public struct EngineOptions: Equatable, Hashable {
         self.transition = transition
         self.stepLengthM = stepLengthM
         self.fixedLagEpochs = fixedLagEpochs
+        self.track = track
         self.declinationDeg = declinationDeg
         self.siteRotationDeg = siteRotationDeg
         self.siteSalt = siteSalt
@@ -2874,6 +2888,7 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
                 transition: FfiConverterOptionTypeTransitionKind.read(from: &buf), 
                 stepLengthM: FfiConverterOptionDouble.read(from: &buf), 
                 fixedLagEpochs: FfiConverterUInt32.read(from: &buf), 
+                track: FfiConverterBool.read(from: &buf), 
                 declinationDeg: FfiConverterOptionDouble.read(from: &buf), 
                 siteRotationDeg: FfiConverterOptionDouble.read(from: &buf), 
                 siteSalt: FfiConverterOptionData.read(from: &buf)
@@ -2884,6 +2899,7 @@ public struct FfiConverterTypeEngineOptions: FfiConverterRustBuffer {
         FfiConverterOptionTypeTransitionKind.write(value.transition, into: &buf)
         FfiConverterOptionDouble.write(value.stepLengthM, into: &buf)
         FfiConverterUInt32.write(value.fixedLagEpochs, into: &buf)
+        FfiConverterBool.write(value.track, into: &buf)
         FfiConverterOptionDouble.write(value.declinationDeg, into: &buf)
         FfiConverterOptionDouble.write(value.siteRotationDeg, into: &buf)
         FfiConverterOptionData.write(value.siteSalt, into: &buf)

@@ -4,9 +4,9 @@
 use super::*;
 
 /// Fills `*out` with the default options: the default transition model and fixed lag, a step
-/// length of 0.7 m, the site file's north (NaN declination and rotation), no salt. Call it
-/// before setting the fields you need, so that fields a later version adds get their
-/// defaults too.
+/// length of 0.7 m, the site file's north (NaN declination and rotation), no salt, the Viterbi
+/// track kept. Call it before setting the fields you need, so that fields a later version adds
+/// get their defaults too.
 #[no_mangle]
 pub extern "C" fn waymark_engine_options_default(out: *mut waymark_engine_options) -> waymark_result {
     boundary(|| {
@@ -24,6 +24,7 @@ pub extern "C" fn waymark_engine_options_default(out: *mut waymark_engine_option
                 site_rotation_deg: f64::NAN,
                 site_salt: std::ptr::null(),
                 site_salt_len: 0,
+                track: u8::from(defaults.track),
             },
         );
         waymark_result::Ok
@@ -56,10 +57,16 @@ fn options_arg(options: *const waymark_engine_options) -> Result<Options, waymar
         // contract); they are copied here.
         (false, len) => Some(unsafe { std::slice::from_raw_parts(o.site_salt, len) }.to_vec()),
     };
+    let track = match o.track {
+        0 => false,
+        1 => true,
+        t => return Err(fail(waymark_result::InvalidConfig, format!("track must be 0 or 1, not {t}"))),
+    };
     let given = |v: f64| (!v.is_nan()).then_some(v);
     Ok(Options {
         transition,
         fixed_lag_epochs: Some(o.fixed_lag_epochs as usize),
+        track: Some(track),
         declination_deg: given(o.declination_deg),
         site_rotation_deg: given(o.site_rotation_deg),
         site_salt: salt,

@@ -132,6 +132,12 @@ pub struct waymark_engine_options {
     pub site_salt: *const u8,
     /// Bytes at `site_salt`.
     pub site_salt_len: usize,
+    /// 1 (the default): the engine keeps the Viterbi track and reports its revisions
+    /// (`WAYMARK_STATUS_KIND_TRACK_REVISED`). 0: it runs without it, for an app that shows only
+    /// the live position: each epoch costs less, the engine holds no track window
+    /// (docs/results.md#speed), and no revision is reported. The positions are the same either
+    /// way. Other values are rejected (`WAYMARK_RESULT_INVALID_CONFIG`).
+    pub track: u8,
 }
 
 /// Severity of a log record (`waymark_set_log_callback`).

@@ -32,6 +32,12 @@ pub struct EngineOptions {
     /// How many epochs behind the newest the fixed-lag estimate is.
     #[uniffi(default = 3)]
     pub fixed_lag_epochs: u32,
+    /// Whether the engine keeps the Viterbi track (`track()`, `TrackRevised`). `false`: an app
+    /// that shows only the live position (and maybe `fixedLagPosition()`) saves each epoch's
+    /// Viterbi step and the track's memory (docs/results.md#speed); `track()` is then empty
+    /// and no `TrackRevised` comes. The positions are the same either way.
+    #[uniffi(default = true)]
+    pub track: bool,
     /// Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
     #[uniffi(default = None)]
     pub declination_deg: Option<f64>,
@@ -54,6 +60,7 @@ impl std::fmt::Debug for EngineOptions {
             .field("transition", &self.transition)
             .field("step_length_m", &self.step_length_m)
             .field("fixed_lag_epochs", &self.fixed_lag_epochs)
+            .field("track", &self.track)
             .field("declination_deg", &self.declination_deg)
             .field("site_rotation_deg", &self.site_rotation_deg)
             .field("site_salt", &self.site_salt.as_ref().map(|s| format!("<{} bytes, redacted>", s.len())))
@@ -68,6 +75,7 @@ impl Default for EngineOptions {
             transition: None,
             step_length_m: None,
             fixed_lag_epochs: core.fixed_lag_epochs as u32,
+            track: core.track,
             declination_deg: None,
             site_rotation_deg: None,
             site_salt: None,
@@ -85,6 +93,7 @@ impl EngineOptions {
                 TransitionKind::Hoang => TransitionModel::Hoang,
             }),
             fixed_lag_epochs: Some(self.fixed_lag_epochs as usize),
+            track: Some(self.track),
             declination_deg: self.declination_deg,
             site_rotation_deg: self.site_rotation_deg,
             site_salt: self.site_salt.clone(),

@@ -398,6 +398,28 @@ final class WaymarkTests: XCTestCase {
         }
     }
 
+    // `track: false`: the same positions and fixed-lag positions, and no track.
+    func testWithoutTheTrackThePositionsAreTheSame() throws {
+        let kept = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let none = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions(track: false))
+        XCTAssertTrue(EngineOptions().track, "the track is kept by default")
+        var positions = 0
+        for epoch in try walk().epochs {
+            for engine in [kept, none] {
+                _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
+                _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
+                _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
+            }
+            let expected = try? kept.pushScan(scan: epoch.scan)
+            XCTAssertEqual(expected, try? none.pushScan(scan: epoch.scan))
+            XCTAssertEqual(try kept.fixedLagPosition(), try none.fixedLagPosition())
+            positions += expected == nil ? 0 : 1
+        }
+        XCTAssertGreaterThan(positions, 10)
+        XCTAssertFalse(try kept.track().isEmpty)
+        XCTAssertTrue(try none.track().isEmpty)
+    }
+
     // The binary site encoding (`waymark site pack`), what an app ships in its bundle: from
     // bytes it positions exactly as the JSON; a damaged copy is an invalid site.
     func testAPackedSitePositionsAsItsJson() throws {

@@ -155,6 +155,25 @@ class WaymarkTest {
     }
 
     @Test
+    fun withoutTheTrackThePositionsAreTheSame() {
+        val kept = PositioningEngine(siteJson, EngineOptions())
+        val none = PositioningEngine(siteJson, EngineOptions(track = false))
+        assertTrue("the track is kept by default", EngineOptions().track)
+        var positions = 0
+        for (epoch in walk) {
+            val expected = pushEpoch(kept, epoch)
+            assertEquals(expected, pushEpoch(none, epoch))
+            assertEquals(kept.fixedLagPosition(), none.fixedLagPosition())
+            if (expected != null) positions++
+        }
+        assertTrue("positions: $positions", positions > walk.size / 2)
+        assertFalse(kept.track().isEmpty())
+        assertTrue(none.track().isEmpty())
+        kept.close()
+        none.close()
+    }
+
+    @Test
     fun aHashedSitePositionsAsTheRawOneWithItsSaltAndFailsWithout() {
         val hashedPath = setting("waymark.hashedSite", "WAYMARK_HASHED_SITE")
         val hashedJson = File(hashedPath).readText()
