@@ -10,13 +10,14 @@
 //! (sensor batches, a scan or a timer epoch, the fixed-lag estimate), as the median, 90th
 //! percentile and mean over every position, and the medians of scan and timer epochs apart. A
 //! scan epoch scores the scan against the radio map; a timer epoch only moves the belief.
-//! `--live-only` leaves the fixed-lag estimate out, as for an app that shows only the live one.
+//! `--live-only` leaves the fixed-lag estimate out, as for an app that shows only the live one;
+//! `--no-track` runs the engine without its Viterbi track (`EngineConfig::track`).
 //!
 //! ```text
 //! waymark survey target/ilc/site1/{B1,F1,F2,F3,F4} --out mall.wmsite
 //! # or, in a minute, the same states and fingerprints without the calibration:
 //! cargo run --release -p waymark-eval --example timing_site -- mall.wmsite 8 0.03 0.1 target/ilc/site1/{B1,F1,F2,F3,F4}
-//! cargo run --release -p waymark-eval --example site_epoch_time -- [--live-only] mall.wmsite target/ilc/site1/F1/path_data_files/*.txt
+//! cargo run --release -p waymark-eval --example site_epoch_time -- [--live-only] [--no-track] mall.wmsite target/ilc/site1/F1/path_data_files/*.txt
 //! ```
 
 use cpu_time::ThreadTime;
@@ -29,13 +30,15 @@ use waymark_survey::replay::{replay_observed, Call, ReplayOptions};
 
 fn main() {
     let mut args: Vec<String> = std::env::args().skip(1).collect();
-    let live_only = args.first().is_some_and(|a| a == "--live-only");
-    if live_only {
-        args.remove(0);
-    }
+    let mut flag = |name: &str| {
+        let given = args.iter().position(|a| a == name).map(|i| args.remove(i));
+        given.is_some()
+    };
+    let (live_only, no_track) = (flag("--live-only"), flag("--no-track"));
     let options = ReplayOptions { fixed_lag: !live_only, ..ReplayOptions::default() };
+    let config = EngineConfig { track: !no_track, ..EngineConfig::default() };
     let Some((site_path, walks)) = args.split_first() else {
-        eprintln!("usage: site_epoch_time [--live-only] SITE WALK.txt...");
+        eprintln!("usage: site_epoch_time [--live-only] [--no-track] SITE WALK.txt...");
         std::process::exit(2);
     };
     let site = Arc::new(Site::load(site_path).unwrap_or_else(|e| panic!("{site_path}: {e}")));
@@ -45,7 +48,7 @@ fn main() {
     let (mut scan_ms, mut timer_ms) = (Vec::new(), Vec::new());
     for walk in walks {
         let trace = Trace::read(Path::new(walk)).unwrap_or_else(|e| panic!("{walk}: {e}"));
-        let mut engine = Engine::new(Arc::clone(&site), EngineConfig::default()).expect("default config");
+        let mut engine = Engine::new(Arc::clone(&site), config.clone()).expect("valid config");
         let (cpu, wall) = (ThreadTime::now(), Instant::now());
         // CPU seconds at the previous call's end, and since then.
         let (mut mark, mut pending) = (0.0, 0.0);
