@@ -22,7 +22,7 @@ from collections import defaultdict
 
 MIN_EPOCHS = 200
 FLOATS = ("error_m", "r68", "r95", "beyond_radio_m", "fit", "off_map_m", "lag_d", "jump", "floor_p")
-INTS = ("throttled", "floor", "scenario", "band", "floor_ok", "states_8m", "k")
+INTS = ("throttled", "floor", "scenario", "band", "floor_ok", "states_8m", "k", "walks_r", "scans_r", "walks_4m")
 
 
 def load(path):
@@ -31,7 +31,7 @@ def load(path):
         for k in FLOATS:
             r[k] = float(r[k])
         for k in INTS:
-            r[k] = int(r[k])
+            r[k] = int(r.get(k, -1))
     return rows
 
 
@@ -119,6 +119,11 @@ def main(path):
     steady_held = [r for r in held if not r["throttled"]]
     print(f"{path}: held-out epochs on the map {sum(map(on, steady_held)) / len(steady_held):.2f}, "
           f"test {sum(map(on, test[0])) / len(test[0]):.2f}")
+    if test[0][0]["walks_r"] >= 0:
+        for key in ("walks_r", "scans_r", "walks_4m"):
+            mean = lambda rs: sum(r[key] for r in rs) / max(len(rs), 1)
+            print(f"  {key}: held-out on the map {mean([r for r in steady_held if on(r)]):.1f}, "
+                  f"every held-out {mean(steady_held):.1f}, test {mean(test[0]):.1f}")
     rules = [
         ("on the map", rule(held, on)),
         ("within 2 m of it", rule(held, lambda r: r["off_map_m"] <= 2.0)),
@@ -131,6 +136,15 @@ def main(path):
         ("on the map, power law of the posterior radius", power_rule(held, on)),
         ("on the map, fixed-lag disagreement quintiles", rule(held, on, lambda r: r["lag_d"] if r["lag_d"] == r["lag_d"] else -1.0, 5)),
     ]
+    if test[0][0]["walks_r"] >= 0:
+        rules += [
+            (f"on the map, {key} {n}-tiles", rule(held, on, lambda r, key=key: r[key], n))
+            for key in ("walks_r", "scans_r", "walks_4m")
+            for n in (3, 5)
+        ] + [
+            (f"every epoch, {key} quintiles", rule(held, lambda r: True, lambda r, key=key: r[key], 5))
+            for key in ("walks_r", "walks_4m")
+        ]
     for name, scale in rules:
         (a, b), (c, d) = share(test[0], scale), share(test[1], scale)
         print(f"  {name:45} {a:.3f} / {b:.3f} | {c:.3f} / {d:.3f}")

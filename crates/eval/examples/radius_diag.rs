@@ -21,7 +21,10 @@
 //! the engine knows at this epoch of how much later evidence moved it), `jump` (how far the live
 //! estimate moved since the epoch before), `k` (the epoch's index in the walk), `floor_p` (the
 //! posterior's mass on the estimate's floor: every replay runs without the site's floor
-//! calibration, as without its radius factors, which the script applies).
+//! calibration, as without its radius factors, which the script applies), `walks_r` and
+//! `scans_r` (the survey walks, and their WiFi scans, within the site's fingerprint radius of
+//! the estimate on its floor, of those the replayed site was surveyed from: how much survey
+//! the estimate's fingerprints rest on), `walks_4m` (the same walks within 4 m).
 
 use std::collections::HashMap;
 use std::path::PathBuf;
@@ -62,6 +65,59 @@ impl Map {
     }
 }
 
+/// Where each floor's survey walks scanned: (x, y, walk) per WiFi scan with a position.
+struct Survey {
+    scans: Vec<Vec<(f64, f64, usize)>>,
+    radius_m: f64,
+}
+
+impl Survey {
+    fn new(floors: &[FloorData], radius_m: f64) -> Survey {
+        let scans = floors
+            .iter()
+            .map(|f| {
+                f.survey
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(w, t)| {
+                        t.wifi_scans
+                            .iter()
+                            .filter_map(move |s| t.position_at(s.timestamp_ns).map(|(x, y)| (x, y, w)))
+                    })
+                    .collect()
+            })
+            .collect();
+        Survey { scans, radius_m }
+    }
+
+    /// Walks with a scan within `r` of `at`, walks and scans within the fingerprint radius;
+    /// `left_out` (floor, walk) does not count.
+    fn near(
+        &self,
+        floor: usize,
+        (x, y): (f64, f64),
+        left_out: Option<(usize, usize)>,
+    ) -> (usize, usize, usize) {
+        let (mut walks_r, mut walks_4m) =
+            (std::collections::BTreeSet::new(), std::collections::BTreeSet::new());
+        let mut scans_r = 0;
+        for &(sx, sy, w) in self.scans.get(floor).map_or(&[][..], |v| &v[..]) {
+            if left_out == Some((floor, w)) {
+                continue;
+            }
+            let d = (sx - x).hypot(sy - y);
+            if d <= self.radius_m {
+                walks_r.insert(w);
+                scans_r += 1;
+            }
+            if d <= 4.0 {
+                walks_4m.insert(w);
+            }
+        }
+        (walks_r.len(), scans_r, walks_4m.len())
+    }
+}
+
 /// Rows of one replay: a held-out walk at each position's own time, as the calibration scores
 /// it; a test walk, as `eval` scores it, at each WiFi scan with the latest position before it.
 fn rows(
@@ -71,7 +127,7 @@ fn rows(
     trace: &Trace,
     positions: &[Position],
     (fixed_lag, lag): (&[TrackPoint], usize),
-    map: &Map,
+    (map, survey, left_out): (&Map, &Survey, Option<(usize, usize)>),
 ) -> Vec<String> {
     let lagged: HashMap<u64, (f64, f64)> = fixed_lag.iter().map(|t| (t.timestamp_ns, (t.x, t.y))).collect();
     let lag_d: Vec<f64> = (0..positions.len())
@@ -118,8 +174,9 @@ fn rows(
             let p = &positions[k];
             let (fit, band) = features[k];
             let error = (p.x - truth.0).hypot(p.y - truth.1);
+            let (walks_r, scans_r, walks_4m) = survey.near(p.floor, (p.x, p.y), left_out);
             Some(format!(
-                "{set},{},{floor},{},{error:.3},{:.3},{:.3},{:.3},{},{fit:.4},{band},{:.3},{},{},{:.3},{:.3},{},{:.4}",
+                "{set},{},{floor},{},{error:.3},{:.3},{:.3},{:.3},{},{fit:.4},{band},{:.3},{},{},{:.3},{:.3},{},{:.4},{walks_r},{scans_r},{walks_4m}",
                 throttled as u8,
                 trace.name,
                 p.accuracy_m - p.beyond_radio_m,
@@ -180,17 +237,20 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         Some((r.positions, r.fixed_lag))
     };
     // The rows of one walk on one site, steady and throttled.
-    let both = |set: &str, site: &Site, f: usize, trace: &Trace, map: &Map| -> Vec<String> {
-        let mut out = Vec::new();
-        for (t, opts) in [(false, &steady), (true, &throttled)] {
-            if let Some((p, fl)) = run(site, trace, opts) {
-                out.extend(rows(set, t, f, trace, &p, (&fl, engine_config.fixed_lag_epochs), map));
+    let survey = Survey::new(&floors, options.calibration.survey.fingerprint_radius_m);
+    let both =
+        |set: &str, site: &Site, f: usize, trace: &Trace, map: &Map, left_out: Option<(usize, usize)>| {
+            let mut out = Vec::new();
+            for (t, opts) in [(false, &steady), (true, &throttled)] {
+                if let Some((p, fl)) = run(site, trace, opts) {
+                    let lag = (&fl[..], engine_config.fixed_lag_epochs);
+                    out.extend(rows(set, t, f, trace, &p, lag, (map, &survey, left_out)));
+                }
             }
-        }
-        out
-    };
+            out
+        };
     println!(
-        "set,throttled,floor,walk,error_m,r68,r95,beyond_radio_m,scenario,fit,band,off_map_m,floor_ok,states_8m,lag_d,jump,k,floor_p"
+        "set,throttled,floor,walk,error_m,r68,r95,beyond_radio_m,scenario,fit,band,off_map_m,floor_ok,states_8m,lag_d,jump,k,floor_p,walks_r,scans_r,walks_4m"
     );
     // Held out.
     let inputs = survey_inputs(&floors);
@@ -202,7 +262,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
         let fits = prepared.fit(&keep, Some(&full), 1);
         let Ok((held_site, _)) = prepared.assemble(&fits) else { return Vec::new() };
-        both("held", &held_site, f, &floors[f].survey[w], &Map::new(&held_site, floors.len()))
+        both("held", &held_site, f, &floors[f].survey[w], &Map::new(&held_site, floors.len()), Some((f, w)))
     });
     for r in held.iter().flatten() {
         println!("{r}");
@@ -211,7 +271,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let map = Map::new(&site, floors.len());
     let tests: Vec<(usize, &Trace)> =
         floors.iter().enumerate().flat_map(|(f, fl)| fl.test.iter().map(move |t| (f, t))).collect();
-    let test = parallel_map(&tests, 2, |&(f, trace)| both("test", &site, f, trace, &map));
+    let test = parallel_map(&tests, 2, |&(f, trace)| both("test", &site, f, trace, &map, None));
     for r in test.iter().flatten() {
         println!("{r}");
     }
