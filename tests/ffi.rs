@@ -53,6 +53,16 @@ fn to_ffi(batch: &[waymark::sensors::SensorSample]) -> Vec<MotionSample> {
     batch.iter().map(|s| MotionSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z }).collect()
 }
 
+/// Pushes the IMU samples after `from` up to `to`, ns, as an app's batches.
+fn push_imu(engine: &PositioningEngine, trace: &imu::ImuTrace, from: u64, to: u64) {
+    let batch = |v: &[waymark::sensors::SensorSample]| {
+        to_ffi(&v[v.partition_point(|s| s.timestamp_ns <= from)..v.partition_point(|s| s.timestamp_ns <= to)])
+    };
+    engine.push_accelerometer(batch(&trace.accelerometer)).unwrap();
+    engine.push_gyroscope(batch(&trace.gyroscope)).unwrap();
+    engine.push_magnetometer(batch(&trace.magnetometer)).unwrap();
+}
+
 fn scan(s: &waymark::Scan) -> RadioScan {
     let wifi = s
         .readings
@@ -80,15 +90,7 @@ fn a_walk_through_the_ffi_with_listeners() {
     let mut errors = Vec::new();
     for epoch in &walk.epochs {
         let t = epoch.scan.timestamp_ns;
-        let batch = |v: &[waymark::sensors::SensorSample]| {
-            to_ffi(
-                &v[v.partition_point(|s| s.timestamp_ns <= previous)
-                    ..v.partition_point(|s| s.timestamp_ns <= t)],
-            )
-        };
-        engine.push_accelerometer(batch(&trace.accelerometer)).unwrap();
-        engine.push_gyroscope(batch(&trace.gyroscope)).unwrap();
-        engine.push_magnetometer(batch(&trace.magnetometer)).unwrap();
+        push_imu(&engine, &trace, previous, t);
         previous = t;
         match engine.push_scan(scan(&epoch.scan)) {
             Ok(p) => {
@@ -518,15 +520,7 @@ fn without_the_track_through_the_ffi() {
         let (mut previous, mut positions) = (0, Vec::new());
         for epoch in &walk.epochs {
             let t = epoch.scan.timestamp_ns;
-            let batch = |v: &[waymark::sensors::SensorSample]| {
-                to_ffi(
-                    &v[v.partition_point(|s| s.timestamp_ns <= previous)
-                        ..v.partition_point(|s| s.timestamp_ns <= t)],
-                )
-            };
-            engine.push_accelerometer(batch(&trace.accelerometer)).unwrap();
-            engine.push_gyroscope(batch(&trace.gyroscope)).unwrap();
-            engine.push_magnetometer(batch(&trace.magnetometer)).unwrap();
+            push_imu(&engine, &trace, previous, t);
             previous = t;
             positions.push((engine.push_scan(scan(&epoch.scan)).ok(), engine.fixed_lag_position().unwrap()));
         }

@@ -449,14 +449,18 @@ static void zones_and_feedback(const char *site_path) {
 /* The walk again, with a position fix 1.5 m east and 0.5 m north of the truth just after
  * every third position, and the user confirming where they are after every seventh: the
  * history habits are learned from. Counts the accepted fixes and confirmations. */
-static void replay_with_fixes(waymark_engine *engine, const char *walk_path, int *fixes, int *confirmations) {
+/* Called after each scan the engine accepted during `replay`, with the epoch's truth. */
+typedef void (*accepted_scan)(waymark_engine *engine, unsigned long long t, double tx, double ty,
+                              const waymark_position *p, void *context);
+
+/* Replays the walk's IMU batches and scans into `engine`, calling `hook` after each accepted scan. */
+static void replay(waymark_engine *engine, const char *walk_path, accepted_scan hook, void *context) {
     FILE *f = fopen(walk_path, "r");
     CHECK(f != NULL, "open walk");
     if (!f) return;
     unsigned long long t;
     double tx, ty;
     size_t na, ng, nm, nw;
-    int positions = 0;
     while (fscanf(f, " E %llu %lf %lf %zu %zu %zu %zu", &t, &tx, &ty, &na, &ng, &nm, &nw) == 7) {
         waymark_sample *a = read_samples(f, na), *g = read_samples(f, ng), *m = read_samples(f, nm);
         waymark_engine_push_accelerometer(engine, a, na, NULL);
@@ -467,19 +471,31 @@ static void replay_with_fixes(waymark_engine *engine, const char *walk_path, int
         free(m);
         char (*bssids)[32] = NULL;
         waymark_wifi_reading *w = read_scan(f, nw, &bssids);
-        if (waymark_engine_push_scan(engine, t, w, nw, NULL, 0, NULL) == WAYMARK_RESULT_OK) {
-            positions++;
-            if (positions % 7 == 3 &&
-                waymark_engine_confirm_position(engine, t, tx, ty, 0, 1.5, NULL) == WAYMARK_RESULT_OK)
-                (*confirmations)++;
-            if (positions % 3 == 1 &&
-                waymark_engine_push_fix(engine, t + 1000, tx + 1.5, ty + 0.5, 0, 2.0, NULL) == WAYMARK_RESULT_OK)
-                (*fixes)++;
-        }
+        waymark_position p;
+        if (waymark_engine_push_scan(engine, t, w, nw, NULL, 0, &p) == WAYMARK_RESULT_OK)
+            hook(engine, t, tx, ty, &p, context);
         free(w);
         free(bssids);
     }
     fclose(f);
+}
+
+/* Fixes and confirmations pushed, and positions seen, by `with_fixes`. */
+typedef struct {
+    int positions, fixes, confirmations;
+} fixed;
+
+/* Confirms some positions at the truth and pushes fixes 1.5 m east and 0.5 m north of it. */
+static void with_fixes(waymark_engine *engine, unsigned long long t, double tx, double ty,
+                       const waymark_position *p, void *context) {
+    (void)p;
+    fixed *c = context;
+    c->positions++;
+    if (c->positions % 7 == 3 && waymark_engine_confirm_position(engine, t, tx, ty, 0, 1.5, NULL) == WAYMARK_RESULT_OK)
+        c->confirmations++;
+    if (c->positions % 3 == 1 &&
+        waymark_engine_push_fix(engine, t + 1000, tx + 1.5, ty + 0.5, 0, 2.0, NULL) == WAYMARK_RESULT_OK)
+        c->fixes++;
 }
 
 /* Habits: learned from a walk, exported (the buffer protocol), imported into a second engine,
@@ -492,8 +508,9 @@ static void habits(const char *site_path, const char *walk_path) {
     CHECK(waymark_engine_fix_error(engine, &e) == WAYMARK_RESULT_OK && e.bias_x_m == 0 && e.bias_y_m == 0 &&
               e.spread == 1,
           "nothing learned yet: bias (%g, %g) spread %g", e.bias_x_m, e.bias_y_m, e.spread);
-    int fixes = 0, confirmations = 0;
-    replay_with_fixes(engine, walk_path, &fixes, &confirmations);
+    fixed pushed = {0};
+    replay(engine, walk_path, with_fixes, &pushed);
+    int fixes = pushed.fixes, confirmations = pushed.confirmations;
     CHECK(fixes > 5 && confirmations > 2, "%d fixes, %d confirmations", fixes, confirmations);
 
     waymark_habit_report r;
@@ -876,10 +893,26 @@ static void on_revision(void *userdata, const waymark_status *status) {
     if (status->kind == WAYMARK_STATUS_KIND_TRACK_REVISED && status->point_count > 0) (*(int *)userdata)++;
 }
 
-/* The walk replayed with `track` set as given: the sum of its positions' x + y + radius (to
- * compare runs), the positions, and the track revisions reported. */
-static double replay_track(const char *site_path, const char *walk_path, uint8_t track, int *positions,
-                           int *revisions) {
+/* Positions and the sum of their x + y + radius (to compare runs), from `summed`. */
+typedef struct {
+    int positions;
+    double sum;
+} summed_positions;
+
+static void summed(waymark_engine *engine, unsigned long long t, double tx, double ty, const waymark_position *p,
+                   void *context) {
+    (void)engine;
+    (void)t;
+    (void)tx;
+    (void)ty;
+    summed_positions *s = context;
+    s->positions++;
+    s->sum += p->x + p->y + p->accuracy_m;
+}
+
+/* The walk replayed with `track` set as given: its positions, and the track revisions reported. */
+static summed_positions replay_track(const char *site_path, const char *walk_path, uint8_t track, int *revisions) {
+    summed_positions out = {0, 0.0};
     waymark_engine_options options;
     waymark_engine_options_default(&options);
     options.track = track;
@@ -890,38 +923,11 @@ static double replay_track(const char *site_path, const char *walk_path, uint8_t
                       WAYMARK_RESULT_OK,
           "engine with track = %u", track);
     free(json);
-    FILE *f = fopen(walk_path, "r");
-    CHECK(f != NULL, "open walk");
-    if (!engine || !f) {
-        if (f) fclose(f);
-        waymark_engine_free(engine);
-        return NAN;
-    }
+    if (!engine) return out;
     CHECK(waymark_engine_set_status_callback(engine, on_revision, revisions) == WAYMARK_RESULT_OK, "status");
-    unsigned long long t;
-    double tx, ty, sum = 0;
-    size_t na, ng, nm, nw;
-    while (fscanf(f, " E %llu %lf %lf %zu %zu %zu %zu", &t, &tx, &ty, &na, &ng, &nm, &nw) == 7) {
-        waymark_sample *a = read_samples(f, na), *g = read_samples(f, ng), *m = read_samples(f, nm);
-        waymark_engine_push_accelerometer(engine, a, na, NULL);
-        waymark_engine_push_gyroscope(engine, g, ng, NULL);
-        waymark_engine_push_magnetometer(engine, m, nm, NULL);
-        free(a);
-        free(g);
-        free(m);
-        char (*bssids)[32] = NULL;
-        waymark_wifi_reading *w = read_scan(f, nw, &bssids);
-        waymark_position p;
-        if (waymark_engine_push_scan(engine, t, w, nw, NULL, 0, &p) == WAYMARK_RESULT_OK) {
-            (*positions)++;
-            sum += p.x + p.y + p.accuracy_m;
-        }
-        free(w);
-        free(bssids);
-    }
-    fclose(f);
+    replay(engine, walk_path, summed, &out);
     waymark_engine_free(engine);
-    return sum;
+    return out;
 }
 
 /* `track` = 0 gives the same positions with no revision reported; only 0 and 1 are valid. */
@@ -936,13 +942,13 @@ static void without_track(const char *site_path, const char *walk_path) {
                       WAYMARK_RESULT_INVALID_CONFIG && engine == NULL,
           "track = 2");
     free(json);
-    int with_positions = 0, with_revisions = 0, without_positions = 0, without_revisions = 0;
-    double with = replay_track(site_path, walk_path, 1, &with_positions, &with_revisions);
-    double without = replay_track(site_path, walk_path, 0, &without_positions, &without_revisions);
-    printf("track kept: %d positions, %d revisions; without: %d positions, %d revisions\n", with_positions,
-           with_revisions, without_positions, without_revisions);
-    CHECK(with_positions > 10 && with_positions == without_positions && with == without,
-          "the same positions without the track (%d, %d)", with_positions, without_positions);
+    int with_revisions = 0, without_revisions = 0;
+    summed_positions with = replay_track(site_path, walk_path, 1, &with_revisions);
+    summed_positions without = replay_track(site_path, walk_path, 0, &without_revisions);
+    printf("track kept: %d positions, %d revisions; without: %d positions, %d revisions\n", with.positions,
+           with_revisions, without.positions, without_revisions);
+    CHECK(with.positions > 10 && with.positions == without.positions && with.sum == without.sum,
+          "the same positions without the track (%d, %d)", with.positions, without.positions);
     CHECK(with_revisions > 0 && without_revisions == 0, "revisions %d with the track, %d without", with_revisions,
           without_revisions);
 }

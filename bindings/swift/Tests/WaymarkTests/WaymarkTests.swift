@@ -82,6 +82,15 @@ func samples(_ rows: [[Double]]) -> [MotionSample] {
     rows.map { MotionSample(timestampNs: UInt64($0[0]), x: $0[1], y: $0[2], z: $0[3]) }
 }
 
+/// Pushes an epoch's IMU batches to each engine.
+func pushIMU(_ epoch: Walk.Epoch, to engines: [PositioningEngine]) throws {
+    for engine in engines {
+        _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
+        _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
+        _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
+    }
+}
+
 final class WaymarkTests: XCTestCase {
     static let simDir: URL = {
         if let dir = ProcessInfo.processInfo.environment["WAYMARK_SIM_DIR"] {
@@ -374,11 +383,7 @@ final class WaymarkTests: XCTestCase {
         let raw = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
         let hashed = try PositioningEngine.fromPath(path: hashedURL.path, options: EngineOptions(siteSalt: salt))
         for epoch in try walk().epochs {
-            for engine in [raw, hashed] {
-                _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
-                _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
-                _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
-            }
+            try pushIMU(epoch, to: [raw, hashed])
             XCTAssertEqual(try? raw.pushScan(scan: epoch.scan), try? hashed.pushScan(scan: epoch.scan))
         }
         XCTAssertNotNil(try hashed.position())
@@ -405,11 +410,7 @@ final class WaymarkTests: XCTestCase {
         XCTAssertTrue(EngineOptions().track, "the track is kept by default")
         var positions = 0
         for epoch in try walk().epochs {
-            for engine in [kept, none] {
-                _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
-                _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
-                _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
-            }
+            try pushIMU(epoch, to: [kept, none])
             let expected = try? kept.pushScan(scan: epoch.scan)
             XCTAssertEqual(expected, try? none.pushScan(scan: epoch.scan))
             XCTAssertEqual(try kept.fixedLagPosition(), try none.fixedLagPosition())
@@ -429,11 +430,7 @@ final class WaymarkTests: XCTestCase {
         let binary = try PositioningEngine.fromSiteBytes(site: packed, options: EngineOptions())
         var positions = 0
         for epoch in try walk().epochs {
-            for engine in [json, binary] {
-                _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
-                _ = try engine.pushGyroscope(batch: samples(epoch.gyroscope))
-                _ = try engine.pushMagnetometer(batch: samples(epoch.magnetometer))
-            }
+            try pushIMU(epoch, to: [json, binary])
             let expected = try? json.pushScan(scan: epoch.scan)
             XCTAssertEqual(expected, try? binary.pushScan(scan: epoch.scan))
             positions += expected == nil ? 0 : 1
