@@ -567,4 +567,44 @@ mod tests {
             apart.step(Some(&t), &[0.0; 3])
         );
     }
+
+    #[test]
+    fn rows_skipped_by_their_bounds_change_no_smoothed_posterior() {
+        use crate::hmm::transition::UniformReach;
+        use crate::hmm::{FixedLagSmoother, ForwardFilter};
+        let site = grid();
+        let table = ReachTable::build(&site, 9.0);
+        let hoang = HoangTransition {
+            reach_m: 2.0,
+            exponent: 0.97,
+            ..one_metre_east(&site, &table, [0.1, 0.4], 3.0)
+        };
+        let walked = HoangTransition { movement_m: None, walked_m: Some(1.0), ..hoang };
+        let uniform = UniformReach { table: &table, rho_m: 1.5, ratio: 1000.0 };
+        let transitions: [&dyn Transition; 3] = [&hoang, &walked, &uniform];
+        let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
+        for (k, &t) in transitions.iter().enumerate() {
+            // Three flat epochs leave mass on every state, then a scan rules out all but the
+            // grid's first row: rows away from it hold no later mass.
+            let mut filter = ForwardFilter::new(25);
+            let mut smoother = FixedLagSmoother::new(4);
+            filter.step(None, &[0.0; 25]).unwrap();
+            for epoch in 1..=4u64 {
+                let e: Vec<f64> =
+                    (0..25).map(|j| if epoch < 4 || j < 5 { -((j % 3) as f64) } else { -60.0 }).collect();
+                smoother.begin(epoch - 1, filter.posterior(), ());
+                filter.step(Some(t), &e).unwrap();
+                smoother.finish(filter.predicted(), filter.posterior());
+            }
+            let (bounded, unbounded) =
+                (Counted(t, true, Default::default()), Counted(t, false, Default::default()));
+            for lag in 1..=4 {
+                let (mut skipped, mut every) = (Vec::new(), Vec::new());
+                let a = smoother.smooth(lag, filter.posterior(), &mut skipped, |_, f| f(&bounded));
+                let b = smoother.smooth(lag, filter.posterior(), &mut every, |_, f| f(&unbounded));
+                assert_eq!((a, bits(&skipped)), (b, bits(&every)), "model {k}, lag {lag}");
+            }
+            assert!(bounded.2.get() < unbounded.2.get(), "model {k}: some rows skipped");
+        }
+    }
 }

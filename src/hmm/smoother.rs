@@ -12,6 +12,8 @@
 //!
 //! A step keeps α, q and the step's transition model (a few numbers); the rows are written
 //! again when smoothing, so memory grows with the posterior's support, not with the rows'.
+//! A row that lists no state the later γ holds mass on is not written when the model gives
+//! its bounds: it contributes its floor weight alone (docs/tuning.md#fixed-lag).
 
 use super::transition::Transition;
 use std::collections::VecDeque;
@@ -181,11 +183,21 @@ fn back<M>(
             total += g / p;
         }
     }
+    // A row none of whose entries holds later mass is its floor weight times the total: its
+    // entries need not be weighed. With the model's bounds, the reach lists the row's states
+    // and gives its floor weight exactly as the row would, so the result is the same.
+    let bounds = transition.bounds();
     let out = step
         .prior
         .iter()
         .map(|&(i, alpha)| {
             let alpha = f64::from(alpha);
+            if let Some(bounds) = &bounds {
+                let reach = bounds.table.reachable(i as usize, bounds.rho_m);
+                if reach.iter().all(|(j, _)| ratio.get(j as usize).is_none_or(|&r| r == 0.0)) {
+                    return (i, alpha * (0.0 + bounds.floor(i as usize) * total.max(0.0)));
+                }
+            }
             row.clear();
             let floor = transition.row(i as usize, row);
             // Σ_j a_ij r(j): the listed entries, and the floor weight on every other j.

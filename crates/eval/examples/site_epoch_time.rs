@@ -11,6 +11,7 @@
 //! percentile and mean over every position, and the medians of scan and timer epochs apart. A
 //! scan epoch scores the scan against the radio map; a timer epoch only moves the belief.
 //! `--live-only` leaves the fixed-lag estimate out, as for an app that shows only the live one;
+//! the last line is the most memory its smoother held (`Engine::fixed_lag_memory_bytes`).
 //! `--no-track` runs the engine without its Viterbi track (`EngineConfig::track`).
 //!
 //! ```text
@@ -46,6 +47,8 @@ fn main() {
     let (mut epochs, mut seconds, mut per_walk_ms) = (0usize, [0.0; 2], [Vec::new(), Vec::new()]);
     // Each published position's own CPU cost, ms, by the call that published it.
     let (mut scan_ms, mut timer_ms) = (Vec::new(), Vec::new());
+    // The most the fixed-lag smoother held at a walk's end, bytes.
+    let mut smoother_bytes = 0;
     for walk in walks {
         let trace = Trace::read(Path::new(walk)).unwrap_or_else(|e| panic!("{walk}: {e}"));
         let mut engine = Engine::new(Arc::clone(&site), config.clone()).expect("valid config");
@@ -68,6 +71,8 @@ fn main() {
         };
         let replayed = replay_observed(&mut engine, &trace, &options, &mut observer);
         let elapsed = [cpu.elapsed().as_secs_f64(), wall.elapsed().as_secs_f64()];
+        // Capacity, which the smoother's recycled steps keep: the most the walk needed.
+        smoother_bytes = smoother_bytes.max(engine.fixed_lag_memory_bytes());
         if replayed.positions.is_empty() {
             continue;
         }
@@ -102,6 +107,7 @@ fn main() {
         timer_ms.len(),
         percentile(&mut timer_ms, 0.5),
     );
+    println!("fixed-lag smoother: at most {:.2} MB at a walk's end", smoother_bytes as f64 / 1e6);
 }
 
 /// The `q` quantile of `values` (nearest rank), NaN when there are none.
