@@ -51,6 +51,13 @@ pub struct BenchArgs {
     /// Internal: load this site file, run an engine on it and print its resident memory.
     #[arg(long, hide = true)]
     rss_probe: Option<PathBuf>,
+    /// With `--rss-probe`: replay this recorded walk (ILC 2.0 text) on the engine instead, as
+    /// an app would, the fixed-lag estimate asked after every epoch.
+    #[arg(long, requires = "rss_probe")]
+    probe_walk: Option<PathBuf>,
+    /// With `--probe-walk`: the engine without its Viterbi track (`EngineConfig::track` off).
+    #[arg(long, requires = "probe_walk")]
+    probe_no_track: bool,
 }
 
 /// Size of the site whose load time and engine memory are measured.
@@ -58,7 +65,8 @@ const REFERENCE_STATES: usize = 10_000;
 
 pub fn bench(args: &BenchArgs) -> ExitCode {
     if let Some(path) = &args.rss_probe {
-        return rss_probe(path);
+        let config = EngineConfig { track: !args.probe_no_track, ..EngineConfig::default() };
+        return rss_probe(path, args.probe_walk.as_deref(), config);
     }
     match run(args) {
         Ok(report) => {
@@ -298,8 +306,9 @@ fn rss_mb(field: &str) -> f64 {
 
 /// The child of [`load_and_probe`]: loads the site, starts an engine, runs 40 epochs of
 /// noise-free scans made from the fingerprints of states along a row, and prints
-/// `{"before_site_mb", "engine_rss_mb", "peak_mb"}`.
-fn rss_probe(path: &Path) -> ExitCode {
+/// `{"before_site_mb", "engine_rss_mb", "peak_mb"}`. With `walk`, the engine replays that
+/// recorded walk instead ([`probe_walk`]).
+fn rss_probe(path: &Path, walk: Option<&Path>, config: EngineConfig) -> ExitCode {
     let before = rss_mb("VmRSS:");
     let site = match Site::load(path) {
         Ok(site) => Arc::new(site),
@@ -309,7 +318,10 @@ fn rss_probe(path: &Path) -> ExitCode {
         }
     };
     let after_site = rss_mb("VmRSS:");
-    let mut engine = match Engine::new(Arc::clone(&site), EngineConfig::default()) {
+    if let Some(walk) = walk {
+        return probe_walk(site, walk, config, before, after_site);
+    }
+    let mut engine = match Engine::new(Arc::clone(&site), config) {
         Ok(engine) => engine,
         Err(e) => {
             eprintln!("{e}");
@@ -344,6 +356,49 @@ fn rss_probe(path: &Path) -> ExitCode {
     println!(
         "{}",
         json!({"before_site_mb": before, "after_site_mb": after_site, "engine_rss_mb": rss_mb("VmRSS:"), "peak_mb": rss_mb("VmHWM:")})
+    );
+    ExitCode::SUCCESS
+}
+
+/// [`rss_probe`] on a recorded walk: the walk is read first, then an engine with `config`
+/// (the default, or without the track) replays it as an app would (sensor batches, scans, a timer epoch after 2 s
+/// without one, the fixed-lag estimate after every epoch). `engine_rss_mb` is the resident
+/// memory at the end less what reading the walk added, so that it compares with the
+/// scan-only probe's; `walk_mb` is that share, and the engine's own accounting of its track
+/// window and fixed-lag steps is printed beside it.
+fn probe_walk(site: Arc<Site>, walk: &Path, config: EngineConfig, before: f64, after_site: f64) -> ExitCode {
+    use waymark_survey::io::Trace;
+    use waymark_survey::replay::{replay, ReplayOptions};
+    let trace = match Trace::read(walk) {
+        Ok(trace) => trace,
+        Err(e) => {
+            eprintln!("{}: {e}", walk.display());
+            return ExitCode::FAILURE;
+        }
+    };
+    let walk_mb = rss_mb("VmRSS:") - after_site;
+    let mut engine = match Engine::new(site, config) {
+        Ok(engine) => engine,
+        Err(e) => {
+            eprintln!("{e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    let options = ReplayOptions { fixed_lag: true, ..ReplayOptions::default() };
+    let replayed = replay(&mut engine, &trace, &options);
+    let engine_rss = rss_mb("VmRSS:") - walk_mb;
+    println!(
+        "{}",
+        json!({
+            "before_site_mb": before,
+            "after_site_mb": after_site,
+            "walk_mb": walk_mb,
+            "positions": replayed.positions.len(),
+            "track_window_mb": engine.track_memory_bytes() as f64 / 1e6,
+            "fixed_lag_mb": engine.fixed_lag_memory_bytes() as f64 / 1e6,
+            "engine_rss_mb": engine_rss,
+            "peak_mb": rss_mb("VmHWM:"),
+        })
     );
     ExitCode::SUCCESS
 }
