@@ -115,7 +115,9 @@ pub struct EngineConfig {
     /// `rssi_weight`, else the site's calibrated value.
     pub rssi_weight_without_movement: Option<f64>,
     /// Epochs the Viterbi tracker keeps (HIPE §4.1 tracks by Viterbi): 64 epochs, 96 s at
-    /// Hoang's 1.5 s epoch, bounding its memory to 64 × 4 bytes per state.
+    /// Hoang's 1.5 s epoch, bounding its memory to 64 × 2 bytes per state (4 beyond 65 536
+    /// states), and far less where most states share their best predecessor
+    /// ([`ViterbiWindow::memory_bound_bytes`](crate::hmm::ViterbiWindow::memory_bound_bytes)).
     pub track_window_epochs: usize,
     /// Run the Viterbi tracker: [`Engine::track`](crate::Engine::track) and the revised track
     /// points each position carries. Off, an epoch skips the Viterbi step and the engine holds

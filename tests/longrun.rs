@@ -17,9 +17,10 @@ fn a_short_long_run_keeps_memory_bounded_and_positions_finite() {
     for i in &report.intervals {
         assert_eq!(i.finite_positions, i.epochs, "{i:?}");
         assert_eq!(i.ffi_core_mismatches, 0, "{i:?}");
-        // The Viterbi window is full from the first report on and its memory is at its bound.
+        // The Viterbi window is full from the first report on and its memory within its bound.
         assert_eq!(i.track_window_epochs, report.track_window_capacity, "{i:?}");
-        assert_eq!(i.track_memory_bytes, report.track_memory_bound_bytes, "{i:?}");
+        assert!(i.track_memory_bytes > 0, "{i:?}");
+        assert!(i.track_memory_bytes <= report.track_memory_bound_bytes, "{i:?}");
         // The fixed-lag smoother holds its steps, within its bound.
         assert!(i.fixed_lag_memory_bytes > 0, "{i:?}");
         assert!(i.fixed_lag_memory_bytes <= report.fixed_lag_memory_bound_bytes, "{i:?}");

@@ -1,6 +1,8 @@
 //! Viterbi over a bounded window of epochs (HIPE §4.1: the Viterbi algorithm for tracking),
 //! in log space, with back-pointers kept for the last `capacity` epochs only, so memory is
-//! capacity × N × 2 bytes (4 beyond 65 536 states) however long the session runs.
+//! bounded by capacity × N × 2 bytes (4 beyond 65 536 states) however long the session runs.
+//! Most states' best predecessor is the one the floor weight's best path comes from, so an
+//! epoch keeps that one once and lists only the others ([`KeptPointers`]).
 
 use super::transition::{viterbi_step, Transition};
 use std::collections::VecDeque;
@@ -18,8 +20,10 @@ pub struct ViterbiWindow {
     next: Vec<f64>,
     /// Per epoch in the window (oldest first): timestamp and back-pointers into the previous
     /// epoch (unused for the window's first epoch).
-    epochs: VecDeque<(u64, BackPointers)>,
-    spare: Vec<BackPointers>,
+    epochs: VecDeque<(u64, KeptPointers)>,
+    spare: Vec<KeptPointers>,
+    /// The step's back-pointers for every state, before they are kept.
+    back: Option<BackPointers>,
     row: Vec<(u32, f64)>,
     undo: Undo,
 }
@@ -31,7 +35,7 @@ struct Undo {
     /// How many of the checkpoint's epochs are still in the window (its oldest were dropped).
     kept: usize,
     /// The checkpoint's epochs dropped since, oldest first.
-    dropped: Vec<(u64, BackPointers)>,
+    dropped: Vec<(u64, KeptPointers)>,
     /// The checkpoint's scores, once a step replaced them (`delta_saved`).
     delta: Vec<f64>,
     delta_saved: bool,
@@ -69,9 +73,115 @@ impl BackPointers {
     /// Bytes held.
     fn bytes(&self) -> usize {
         match self {
-            BackPointers::Narrow(back) => back.len() * 2,
-            BackPointers::Wide(back) => back.len() * 4,
+            BackPointers::Narrow(back) => back.capacity() * 2,
+            BackPointers::Wide(back) => back.capacity() * 4,
         }
+    }
+}
+
+/// The value most of `values` hold when one holds more than half of them (Boyer and Moore's
+/// majority vote), else one of them; `None` when there are none.
+fn majority<T: Copy + PartialEq>(values: &[T]) -> Option<T> {
+    let mut vote: Option<(T, usize)> = None;
+    for &v in values {
+        vote = match vote {
+            None | Some((_, 0)) => Some((v, 1)),
+            Some((c, k)) if c == v => Some((c, k + 1)),
+            Some((c, k)) => Some((c, k - 1)),
+        };
+    }
+    vote.map(|(c, _)| c)
+}
+
+/// Keeps `all` as the value most of them hold (returned) and the others, in order, in `kept`,
+/// with the bitmap and counts of [`KeptPointers`].
+fn keep_listed<T: Copy + PartialEq + Default>(
+    all: &[T],
+    listed: &mut Vec<u64>,
+    before: &mut Vec<u32>,
+    kept: &mut Vec<T>,
+) -> T {
+    let shared = majority(all).unwrap_or_default();
+    let words = all.len().div_ceil(64);
+    listed.clear();
+    before.clear();
+    listed.reserve_exact(words);
+    before.reserve_exact(words);
+    let mut count = 0;
+    for chunk in all.chunks(64) {
+        let word =
+            chunk.iter().enumerate().filter(|&(_, &v)| v != shared).fold(0u64, |w, (bit, _)| w | 1 << bit);
+        listed.push(word);
+        before.push(count);
+        count += word.count_ones();
+    }
+    kept.clear();
+    kept.reserve_exact(count as usize);
+    for (chunk, &word) in all.chunks(64).zip(listed.iter()) {
+        if word != 0 {
+            kept.extend(chunk.iter().copied().filter(|&v| v != shared));
+        }
+    }
+    shared
+}
+
+/// One epoch's back-pointers as the window keeps them: the value most states share once
+/// (`shared`, the state the floor weight's best path comes from: on the five-floor site a
+/// median of 106 of 22 543 states have another, docs/results.md#the-engines-memory-in-use),
+/// and the others in state order, found by a bitmap and a count per 64 states. The same
+/// back-pointers as [`BackPointers`], in a few kilobytes where those take N × 2 bytes.
+#[derive(Clone, Debug, PartialEq)]
+struct KeptPointers {
+    shared: u32,
+    /// Bit j % 64 of word j / 64: state j's pointer is listed.
+    listed: Vec<u64>,
+    /// Listed states before each word of `listed`.
+    before: Vec<u32>,
+    /// The listed pointers, in state order (16 or 32 bits as [`BackPointers`]).
+    pointers: BackPointers,
+}
+
+impl KeptPointers {
+    fn empty(n: usize) -> Self {
+        let pointers =
+            if n <= 1 << 16 { BackPointers::Narrow(Vec::new()) } else { BackPointers::Wide(Vec::new()) };
+        Self { shared: 0, listed: Vec::new(), before: Vec::new(), pointers }
+    }
+
+    /// Keeps `back`, reusing this one's buffers.
+    fn keep(&mut self, back: &BackPointers) {
+        let Self { listed, before, .. } = self;
+        self.shared = match (&mut self.pointers, back) {
+            (BackPointers::Narrow(kept), BackPointers::Narrow(all)) => {
+                u32::from(keep_listed(all, listed, before, kept))
+            }
+            (BackPointers::Wide(kept), BackPointers::Wide(all)) => keep_listed(all, listed, before, kept),
+            (kept, back) => {
+                // Built for another site size: take the width of `back` and keep it again.
+                *kept = match back {
+                    BackPointers::Narrow(_) => BackPointers::Narrow(Vec::new()),
+                    BackPointers::Wide(_) => BackPointers::Wide(Vec::new()),
+                };
+                return self.keep(back);
+            }
+        };
+    }
+
+    /// The state that state `j`'s best path came from.
+    fn get(&self, j: usize) -> usize {
+        let (word, bit) = (j / 64, j % 64);
+        match self.listed.get(word) {
+            Some(&w) if w >> bit & 1 == 1 => {
+                let below = (w & ((1u64 << bit) - 1)).count_ones();
+                self.pointers.get((self.before[word] + below) as usize)
+            }
+            _ => self.shared as usize,
+        }
+    }
+
+    /// Bytes held (capacity).
+    fn bytes(&self) -> usize {
+        self.listed.capacity() * 8 + self.before.capacity() * 4 + self.pointers.bytes()
     }
 }
 
@@ -95,6 +205,7 @@ impl ViterbiWindow {
             next: vec![0.0; n],
             epochs: VecDeque::with_capacity(capacity.max(1)),
             spare: Vec::new(),
+            back: None,
             row: Vec::new(),
             undo: Undo {
                 active: false,
@@ -183,7 +294,18 @@ impl ViterbiWindow {
     /// Bytes held by back-pointers and scores, for memory accounting.
     pub fn memory_bytes(&self) -> usize {
         let epochs = self.epochs.iter().chain(&self.undo.dropped).map(|e| &e.1);
-        epochs.chain(&self.spare).map(BackPointers::bytes).sum::<usize>() + 3 * self.delta.len() * 8
+        epochs.chain(&self.spare).map(KeptPointers::bytes).sum::<usize>()
+            + self.back.as_ref().map_or(0, BackPointers::bytes)
+            + 3 * self.delta.len() * 8
+    }
+
+    /// What [`memory_bytes`](Self::memory_bytes) stays below for `n` states and `capacity`
+    /// epochs: every epoch (and one more, while a step runs) listing every state, the step's
+    /// own back-pointers and three score vectors.
+    pub fn memory_bound_bytes(n: usize, capacity: usize) -> usize {
+        let width = if n <= 1 << 16 { 2 } else { 4 };
+        let words = n.div_ceil(64);
+        (capacity.max(1) + 1) * (n * width + words * (8 + 4)) + n * width + 3 * n * 8
     }
 
     /// Adds an epoch: `transition` from the previous one (ignored for the first epoch of the
@@ -213,19 +335,21 @@ impl ViterbiWindow {
         expand: impl FnOnce(&[f64], &mut [f64], &mut BackPointers),
     ) {
         let n = self.delta.len();
-        let mut back = self.spare.pop().unwrap_or_else(|| BackPointers::new(n));
+        let mut kept = self.spare.pop().unwrap_or_else(|| KeptPointers::empty(n));
         if self.epochs.is_empty() {
             self.next.copy_from_slice(ln_emission);
         } else {
-            expand(&self.delta, &mut self.next, &mut back);
+            let back = self.back.get_or_insert_with(|| BackPointers::new(n));
+            expand(&self.delta, &mut self.next, back);
             for (d, &e) in self.next.iter_mut().zip(ln_emission) {
                 *d += e;
             }
+            kept.keep(back);
         }
         let max = self.next.iter().copied().filter(|v| !v.is_nan()).fold(f64::NEG_INFINITY, f64::max);
         if !max.is_finite() {
             // Nothing explains the observation: restart the window from it alone.
-            self.spare.push(back);
+            self.spare.push(kept);
             self.reset();
             self.next.fill(0.0);
             self.replace_delta();
@@ -238,7 +362,7 @@ impl ViterbiWindow {
         if self.epochs.len() == self.capacity {
             self.drop_oldest();
         }
-        self.epochs.push_back((timestamp_ns, back));
+        self.epochs.push_back((timestamp_ns, kept));
     }
 
     /// Weights the newest epoch's scores by `ln_emission` without adding an epoch (feedback
@@ -292,6 +416,40 @@ mod tests {
     use super::*;
 
     use crate::hmm::transition::DenseTransition as Dense;
+
+    #[test]
+    fn kept_pointers_give_back_every_pointer() {
+        // A fixed LCG: pointers mostly to one state, or spread with no majority at all.
+        let mut seed = 11u64;
+        let mut next = |m: u64| {
+            seed = seed.wrapping_mul(6_364_136_223_846_793_005).wrapping_add(1_442_695_040_888_963_407);
+            (seed >> 33) % m
+        };
+        let mut kept = KeptPointers::empty(300);
+        for (n, listed_in) in [(300usize, 10u64), (300, 1), (130, 2), (64, 3), (1, 1), (0, 1)] {
+            let all: Vec<u16> =
+                (0..n).map(|_| if next(listed_in) == 0 { next(n as u64) as u16 } else { 7 }).collect();
+            let back = BackPointers::Narrow(all.clone());
+            kept.keep(&back);
+            for (j, &p) in all.iter().enumerate() {
+                assert_eq!(kept.get(j), usize::from(p), "n {n}, state {j}");
+            }
+            if listed_in > 2 {
+                // Fresh buffers hold the bitmap, the counts and the listed pointers alone.
+                let mut fresh = KeptPointers::empty(n);
+                fresh.keep(&back);
+                let listed = all.iter().filter(|&&p| p != 7).count();
+                assert_eq!(fresh.shared, 7);
+                assert!(fresh.bytes() < all.len() * 2, "{} bytes for {listed} listed", fresh.bytes());
+            }
+        }
+        // 32-bit pointers, into buffers built for 16-bit ones.
+        let wide: Vec<u32> = (0..200).map(|j| if j % 5 == 0 { 70_000 + j } else { 3 }).collect();
+        kept.keep(&BackPointers::Wide(wide.clone()));
+        assert!((0..200).all(|j| kept.get(j) == wide[j] as usize));
+        assert_eq!(majority::<u8>(&[]), None);
+        assert_eq!(majority(&[1, 2, 1, 3, 1]), Some(1));
+    }
 
     /// The best path by trying every path.
     fn brute_force(a: &[Vec<f64>], emissions: &[Vec<f64>]) -> Vec<u32> {
@@ -396,6 +554,11 @@ mod tests {
             twin.step(t as u64, &dense, e);
         }
         assert_eq!(format!("{window:?}"), format!("{twin:?}"));
-        assert_eq!(window.memory_bytes(), twin.memory_bytes());
+        // As many epochs' buffers held (their sizes follow what each epoch listed).
+        let buffers = |w: &ViterbiWindow| w.epochs.len() + w.spare.len() + w.undo.dropped.len();
+        assert_eq!(buffers(&window), buffers(&twin));
+        assert!(
+            window.memory_bytes() <= ViterbiWindow::memory_bound_bytes(window.state_count(), window.capacity)
+        );
     }
 }

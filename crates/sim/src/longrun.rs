@@ -19,6 +19,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
 use waymark::ffi::uniffi as ffi;
+use waymark::hmm::ViterbiWindow;
 use waymark::hmm::STEP_BYTES_PER_STATE;
 use waymark::radio::{Scan, TransmitterId};
 use waymark::sensors::{MotionStats, SensorSample};
@@ -159,9 +160,8 @@ pub struct LongRunReport {
     pub states: usize,
     /// The Viterbi window's capacity, epochs (`EngineConfig::track_window_epochs`).
     pub track_window_capacity: usize,
-    /// Its bound in bytes: (capacity + 1 spare) × states × 2 (back-pointers; 4 beyond 65 536
-    /// states) + 3 × states × 8 (scores: current, next, and the previous ones kept while an
-    /// epoch runs).
+    /// Its bound in bytes ([`ViterbiWindow::memory_bound_bytes`]: every epoch listing every
+    /// state's back-pointer, and the scores).
     pub track_memory_bound_bytes: usize,
     /// Fixed lag, epochs: the steps the fixed-lag smoother keeps.
     pub fixed_lag_epochs: usize,
@@ -401,10 +401,7 @@ pub fn run(
         hours: config.hours,
         states,
         track_window_capacity,
-        track_memory_bound_bytes: (track_window_capacity + 1)
-            * states
-            * if states <= 1 << 16 { 2 } else { 4 }
-            + 3 * states * 8,
+        track_memory_bound_bytes: ViterbiWindow::memory_bound_bytes(states, track_window_capacity),
         fixed_lag_epochs: engine_config.fixed_lag_epochs,
         fixed_lag_memory_bound_bytes: 2 * engine_config.fixed_lag_epochs * states * STEP_BYTES_PER_STATE,
         rss_1h_kb,
