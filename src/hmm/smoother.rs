@@ -104,6 +104,9 @@ impl<M: Clone> FixedLagSmoother<M> {
         prior.clear();
         predicted_at.clear();
         predicted.clear();
+        // Room for exactly the states kept, not doubled: steps after a timer epoch keep every
+        // surveyed state (docs/results.md#the-engines-memory-in-use).
+        prior.reserve_exact(kept(posterior).count());
         prior.extend(kept(posterior).map(|(i, p)| (i, p as f32)));
         self.pending = Some(Step { timestamp_ns, model, prior, predicted_at, predicted });
     }
@@ -115,6 +118,9 @@ impl<M: Clone> FixedLagSmoother<M> {
         if predicted.len() != posterior.len() {
             return;
         }
+        let count = kept(posterior).count();
+        step.predicted_at.reserve_exact(count);
+        step.predicted.reserve_exact(count);
         for (j, _) in kept(posterior) {
             step.predicted_at.push(j);
             step.predicted.push(predicted[j as usize]);

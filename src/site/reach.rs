@@ -21,9 +21,10 @@ use std::collections::BinaryHeap;
 #[derive(Clone, Debug)]
 pub struct ReachTable {
     radius_m: f64,
-    starts: Vec<usize>,
+    /// Index where state `i`'s entries begin (32 bits: see [`entry_index`]).
+    starts: Vec<u32>,
     /// Index where the distance-sorted part of state `i` begins.
-    sorted_from: Vec<usize>,
+    sorted_from: Vec<u32>,
     targets: Targets,
     distances: Distances,
 }
@@ -179,6 +180,12 @@ impl PartialOrd for Frontier {
     }
 }
 
+/// An entry's index in 32 bits: a table of 2³² entries would hold 8 GB of states alone, more
+/// than any device this runs on allocates, so the index always fits (saturating otherwise).
+fn entry_index(index: usize) -> u32 {
+    u32::try_from(index).unwrap_or(u32::MAX)
+}
+
 impl ReachTable {
     /// Runs a Dijkstra bounded at `radius_m` from every state.
     pub fn build(site: &Site, radius_m: f64) -> Self {
@@ -211,7 +218,7 @@ impl ReachTable {
         let mut heap = BinaryHeap::new();
         let unsurveyed: Vec<bool> = site.states().iter().map(|s| s.kind == StateKind::Unsurveyed).collect();
         for source in 0..n {
-            starts.push(targets.len());
+            starts.push(entry_index(targets.len()));
             entries.clear();
             let neighbours = |u: usize| {
                 if surveyed_only && unsurveyed[u] {
@@ -257,7 +264,7 @@ impl ReachTable {
                     entries.push((v, d as f32));
                 }
             }
-            sorted_from.push(starts[source] + entries.len());
+            sorted_from.push(starts[source] + entry_index(entries.len()));
             let from = entries.len();
             entries.extend(touched.iter().filter(|&&j| !is_near(j)).map(|&j| (j, dist[j as usize] as f32)));
             entries[from..].sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
@@ -270,7 +277,7 @@ impl ReachTable {
             }
             touched.clear();
         }
-        starts.push(targets.len());
+        starts.push(entry_index(targets.len()));
         distances.finish();
         match &mut targets {
             Targets::Narrow(t) => t.shrink_to_fit(),
@@ -291,14 +298,16 @@ impl ReachTable {
     /// States reachable from `i` within `rho_m` (at most the table radius), with their walking
     /// distance: the state itself, its neighbours, and every state within `rho_m`.
     pub fn reachable(&self, i: usize, rho_m: f64) -> Reach<'_> {
-        let within = self.distances.within(self.sorted_from[i], self.starts[i + 1], rho_m);
-        Reach { table: self, from: self.starts[i], to: self.sorted_from[i] + within }
+        let (from, sorted_from, to) =
+            (self.starts[i] as usize, self.sorted_from[i] as usize, self.starts[i + 1] as usize);
+        let within = self.distances.within(sorted_from, to, rho_m);
+        Reach { table: self, from, to: sorted_from + within }
     }
 
     /// How many of the first entries of state `i`'s [`reachable`](Self::reachable) slice are the
     /// state itself and its direct neighbours.
     pub fn near_count(&self, i: usize) -> usize {
-        self.sorted_from[i] - self.starts[i]
+        (self.sorted_from[i] - self.starts[i]) as usize
     }
 
     /// Number of states the table covers.
