@@ -878,16 +878,8 @@ fn options() -> impl Strategy<Value = EngineOptions> {
     let angle = proptest::option::of(prop_oneof![4 => -360.0..360.0f64, 1 => value()]);
     // A salt, long enough or not: the fixtures' ids are raw, so a valid one is ignored.
     let salt = proptest::option::of(proptest::collection::vec(any::<u8>(), 0..40));
-    (transition, length, lag, angle.clone(), angle, salt, any::<bool>()).prop_map(
-        |(
-            transition,
-            step_length_m,
-            fixed_lag_epochs,
-            declination_deg,
-            site_rotation_deg,
-            site_salt,
-            track,
-        )| {
+    let options = (transition, length, lag, angle.clone(), angle, salt).prop_map(
+        |(transition, step_length_m, fixed_lag_epochs, declination_deg, site_rotation_deg, site_salt)| {
             EngineOptions {
                 transition,
                 step_length_m,
@@ -895,10 +887,11 @@ fn options() -> impl Strategy<Value = EngineOptions> {
                 declination_deg,
                 site_rotation_deg,
                 site_salt,
-                track,
+                track: true,
             }
         },
-    )
+    );
+    (options, any::<bool>()).prop_map(|(options, track)| EngineOptions { track, ..options })
 }
 
 fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(), TestCaseError> {
