@@ -306,28 +306,55 @@ fn rss_mb(field: &str) -> f64 {
 
 /// The child of [`load_and_probe`]: loads the site, starts an engine, runs 40 epochs of
 /// noise-free scans made from the fingerprints of states along a row, and prints
-/// `{"before_site_mb", "engine_rss_mb", "peak_mb"}`. With `walk`, the engine replays that
-/// recorded walk instead ([`probe_walk`]).
+/// `{"before_site_mb", "after_site_mb", "engine_rss_mb", "peak_mb"}`.
+///
+/// With `walk`, the engine replays that recorded walk instead, as an app would (sensor
+/// batches, scans, a timer epoch after 2 s without one, the fixed-lag estimate after every
+/// epoch). The walk is read before the engine is made, and `engine_rss_mb` is the resident
+/// memory at the end less what reading it added (`walk_mb`), so that it compares with the
+/// scan-only figure; the engine's own accounting of its track window and fixed-lag steps is
+/// printed beside it.
 fn rss_probe(path: &Path, walk: Option<&Path>, config: EngineConfig) -> ExitCode {
-    let before = rss_mb("VmRSS:");
-    let site = match Site::load(path) {
-        Ok(site) => Arc::new(site),
+    match probe(path, walk, config) {
+        Ok(report) => {
+            println!("{report}");
+            ExitCode::SUCCESS
+        }
         Err(e) => {
             eprintln!("{e}");
-            return ExitCode::FAILURE;
+            ExitCode::FAILURE
         }
-    };
-    let after_site = rss_mb("VmRSS:");
-    if let Some(walk) = walk {
-        return probe_walk(site, walk, config, before, after_site);
     }
-    let mut engine = match Engine::new(Arc::clone(&site), config) {
-        Ok(engine) => engine,
-        Err(e) => {
-            eprintln!("{e}");
-            return ExitCode::FAILURE;
+}
+
+fn probe(path: &Path, walk: Option<&Path>, config: EngineConfig) -> Result<Value, String> {
+    use waymark_survey::io::Trace;
+    use waymark_survey::replay::{replay, ReplayOptions};
+    let before = rss_mb("VmRSS:");
+    let site = Arc::new(Site::load(path).map_err(|e| e.to_string())?);
+    let after_site = rss_mb("VmRSS:");
+    let trace = walk.map(|w| Trace::read(w).map_err(|e| format!("{}: {e}", w.display()))).transpose()?;
+    let walk_mb = if trace.is_some() { rss_mb("VmRSS:") - after_site } else { 0.0 };
+    let mut engine = Engine::new(Arc::clone(&site), config).map_err(|e| e.to_string())?;
+    let mut report = json!({"before_site_mb": before, "after_site_mb": after_site});
+    match &trace {
+        Some(trace) => {
+            let options = ReplayOptions { fixed_lag: true, ..ReplayOptions::default() };
+            let replayed = replay(&mut engine, trace, &options);
+            report["walk_mb"] = json!(walk_mb);
+            report["positions"] = json!(replayed.positions.len());
+            report["track_window_mb"] = json!(engine.track_memory_bytes() as f64 / 1e6);
+            report["fixed_lag_mb"] = json!(engine.fixed_lag_memory_bytes() as f64 / 1e6);
         }
-    };
+        None => push_fingerprint_scans(&site, &mut engine),
+    }
+    report["engine_rss_mb"] = json!(rss_mb("VmRSS:") - walk_mb);
+    report["peak_mb"] = json!(rss_mb("VmHWM:"));
+    Ok(report)
+}
+
+/// The scan-only probe's 40 epochs: scans made from the fingerprints of states along a row.
+fn push_fingerprint_scans(site: &Site, engine: &mut Engine) {
     let n = site.states().len();
     let mut by_state: Vec<Vec<(u32, f64)>> = vec![Vec::new(); n];
     let row: Vec<usize> = (0..40).map(|k| (n / 2 + k).min(n - 1)).collect();
@@ -353,54 +380,6 @@ fn rss_probe(path: &Path, walk: Option<&Path>, config: EngineConfig) -> ExitCode
         };
         let _ = engine.push_scan(&scan);
     }
-    println!(
-        "{}",
-        json!({"before_site_mb": before, "after_site_mb": after_site, "engine_rss_mb": rss_mb("VmRSS:"), "peak_mb": rss_mb("VmHWM:")})
-    );
-    ExitCode::SUCCESS
-}
-
-/// [`rss_probe`] on a recorded walk: the walk is read first, then an engine with `config`
-/// (the default, or without the track) replays it as an app would (sensor batches, scans, a timer epoch after 2 s
-/// without one, the fixed-lag estimate after every epoch). `engine_rss_mb` is the resident
-/// memory at the end less what reading the walk added, so that it compares with the
-/// scan-only probe's; `walk_mb` is that share, and the engine's own accounting of its track
-/// window and fixed-lag steps is printed beside it.
-fn probe_walk(site: Arc<Site>, walk: &Path, config: EngineConfig, before: f64, after_site: f64) -> ExitCode {
-    use waymark_survey::io::Trace;
-    use waymark_survey::replay::{replay, ReplayOptions};
-    let trace = match Trace::read(walk) {
-        Ok(trace) => trace,
-        Err(e) => {
-            eprintln!("{}: {e}", walk.display());
-            return ExitCode::FAILURE;
-        }
-    };
-    let walk_mb = rss_mb("VmRSS:") - after_site;
-    let mut engine = match Engine::new(site, config) {
-        Ok(engine) => engine,
-        Err(e) => {
-            eprintln!("{e}");
-            return ExitCode::FAILURE;
-        }
-    };
-    let options = ReplayOptions { fixed_lag: true, ..ReplayOptions::default() };
-    let replayed = replay(&mut engine, &trace, &options);
-    let engine_rss = rss_mb("VmRSS:") - walk_mb;
-    println!(
-        "{}",
-        json!({
-            "before_site_mb": before,
-            "after_site_mb": after_site,
-            "walk_mb": walk_mb,
-            "positions": replayed.positions.len(),
-            "track_window_mb": engine.track_memory_bytes() as f64 / 1e6,
-            "fixed_lag_mb": engine.fixed_lag_memory_bytes() as f64 / 1e6,
-            "engine_rss_mb": engine_rss,
-            "peak_mb": rss_mb("VmHWM:"),
-        })
-    );
-    ExitCode::SUCCESS
 }
 
 /// Samples per second through the motion tracker (three sensors at 100 Hz, step detection and
