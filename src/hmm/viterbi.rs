@@ -126,10 +126,10 @@ fn keep_listed<T: Copy + PartialEq + Default>(
 }
 
 /// One epoch's back-pointers as the window keeps them: the value most states share once
-/// (`shared`, the state the floor weight's best path comes from: on the five-floor site a
-/// median of 106 of 22 543 states have another, docs/results.md#the-engines-memory-in-use),
-/// and the others in state order, found by a bitmap and a count per 64 states. The same
-/// back-pointers as [`BackPointers`], in a few kilobytes where those take N × 2 bytes.
+/// (`shared`, the state the floor weight's best path comes from; how few have another is
+/// measured in docs/tuning.md#engine-speed), and the others in state order, found by a bitmap
+/// and a count per 64 states. The same back-pointers as [`BackPointers`], in far less than
+/// their N × 2 bytes where few states are listed.
 #[derive(Clone, Debug, PartialEq)]
 struct KeptPointers {
     shared: u32,
