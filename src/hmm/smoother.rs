@@ -80,9 +80,10 @@ impl<M: Clone> FixedLagSmoother<M> {
         self.steps.is_empty()
     }
 
-    /// Bytes held by the steps (capacity, not length). Each of a step's three vectors holds
-    /// at most N entries and grows by doubling, so the whole is below
-    /// `2 · capacity · N ·` [`STEP_BYTES_PER_STATE`].
+    /// Bytes held by the steps (capacity, not length). Each of a step's three vectors is
+    /// reserved for the states it keeps, at most N, so the whole is below
+    /// `2 · capacity · N ·` [`STEP_BYTES_PER_STATE`] even where an allocator rounds the
+    /// reservation up.
     pub fn memory_bytes(&self) -> usize {
         let bytes = |s: &Step<M>| {
             s.prior.capacity() * std::mem::size_of::<(u32, f32)>()
