@@ -2,7 +2,8 @@
 //! scans, a timer epoch after 2 s without one, the fixed-lag estimate after every epoch),
 //! counted by this program's allocator (`stats_alloc`): the bytes allocated and not yet freed
 //! since just before the engine was made, once it is made and after the walk, less the site's
-//! walking-distance tables, which the first engine builds and the site keeps. One engine per
+//! walking-distance tables, which the first engine builds and the site keeps. The site's own
+//! heap once loaded is printed first. One engine per
 //! walk, the default configuration (`--no-track`: without the Viterbi track). Heap, not
 //! resident memory: `waymark bench --rss-probe SITE [--probe-walk WALK]` measures that.
 //!
@@ -28,14 +29,16 @@ fn main() {
         eprintln!("usage: engine_heap [--no-track] SITE WALK.txt...");
         std::process::exit(2);
     };
-    let site = Arc::new(Site::load(site_path).unwrap_or_else(|e| panic!("{site_path}: {e}")));
-    let config = EngineConfig { track: !no_track, ..EngineConfig::default() };
-    let options = ReplayOptions { fixed_lag: true, ..ReplayOptions::default() };
     // Bytes allocated and not freed since `region` began, MB.
     let live_mb = |region: &Region<System>| {
         let change = region.change();
         (change.bytes_allocated as f64 - change.bytes_deallocated as f64) / 1e6
     };
+    let region = Region::new(ALLOCATOR);
+    let site = Arc::new(Site::load(site_path).unwrap_or_else(|e| panic!("{site_path}: {e}")));
+    println!("the site's heap once loaded: {:.2} MB", live_mb(&region));
+    let config = EngineConfig { track: !no_track, ..EngineConfig::default() };
+    let options = ReplayOptions { fixed_lag: true, ..ReplayOptions::default() };
     let mut largest = (0.0, String::new());
     for (k, walk) in walks.iter().enumerate() {
         let trace = Trace::read(Path::new(walk)).unwrap_or_else(|e| panic!("{walk}: {e}"));
