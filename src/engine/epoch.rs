@@ -132,7 +132,7 @@ impl Engine {
     pub(super) fn rule_out_unsurveyed(&mut self) {
         if self.on_map() {
             for &i in &self.unsurveyed {
-                self.ln_emission[i] = f64::NEG_INFINITY;
+                self.ln_emission[i as usize] = f64::NEG_INFINITY;
             }
         }
     }
@@ -301,11 +301,11 @@ const UNSURVEYED_AFTER_SCANS: u32 = 2;
 
 /// The largest of `ln_emission` over the states neither in `unsurveyed` (sorted indices) nor
 /// `silent`; -∞ when there is none.
-fn best_fingerprinted(ln_emission: &[f64], unsurveyed: &[usize], silent: &[bool]) -> f64 {
+fn best_fingerprinted(ln_emission: &[f64], unsurveyed: &[u32], silent: &[bool]) -> f64 {
     let mut skip = unsurveyed.iter().peekable();
     let mut best = f64::NEG_INFINITY;
     for (i, (&e, &quiet)) in ln_emission.iter().zip(silent).enumerate() {
-        if skip.next_if_eq(&&i).is_none() && !quiet {
+        if skip.next_if(|&&j| j as usize == i).is_none() && !quiet {
             best = best.max(e);
         }
     }

@@ -96,7 +96,7 @@ pub struct Engine {
     epoch_radio_fit: Option<(f64, bool)>,
     /// The site's [`StateKind::Unsurveyed`](crate::site::StateKind::Unsurveyed) states: they
     /// hold the estimate only from a scan the map does not explain until one it does.
-    unsurveyed: Vec<usize>,
+    unsurveyed: Vec<u32>,
     /// Scans in a row, up to the latest, that the map did not explain.
     unexplained_run: u32,
     /// The site's calibration for scans far apart.
@@ -161,7 +161,7 @@ impl Engine {
         let radio_fit_floor = site.calibration().radio_fit_floor.filter(|_| config.site_calibration);
         let unsurveyed = (site.states().iter().enumerate())
             .filter(|(_, s)| s.kind == crate::site::StateKind::Unsurveyed)
-            .map(|(i, _)| i)
+            .map(|(i, _)| i as u32)
             .collect();
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,

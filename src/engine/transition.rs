@@ -64,7 +64,7 @@ impl Engine {
         // As a motion-only step would: on the map, no mass on the unsurveyed states.
         if self.on_map() {
             for &i in &self.unsurveyed {
-                self.ln_emission[i] = 0.0;
+                self.ln_emission[i as usize] = 0.0;
             }
         }
         let predicted = &mut self.ln_emission;

@@ -8,7 +8,6 @@
 //! computed when a transmitter is heard, by [`LnCdfTable`].
 
 use super::{ln_std_normal_pdf, Gaussian, LnCdfTable, RssiModel, Scan, TransmitterId};
-use std::collections::HashMap;
 
 /// Resolution of the stored RSSI levels and spreads: 0.01 dB, a hundredth of the 1 dBm step
 /// phones report RSSI in, so storing it changes no likelihood a reading can tell apart.
@@ -134,14 +133,16 @@ pub struct RadioMap {
     unheard: Gaussian,
     unheard_ln_absent: f64,
     ids: Vec<TransmitterId>,
-    index: HashMap<TransmitterId, u32>,
+    /// The transmitters' indices in the order of their ids, for a binary search: a hash map
+    /// held a second copy of every id (docs/tuning.md#engine-speed).
+    by_id: Vec<u32>,
     /// The entries' words, by transmitter and, within one, by state.
     words: Vec<u32>,
     /// (first word, its state) of each run of words; a run's later words step on from the
     /// state before. The runs of transmitter `t` are `runs[run_starts[t]..run_starts[t + 1]]`,
     /// and a last run marks where the words end.
-    runs: Vec<(usize, u32)>,
-    run_starts: Vec<usize>,
+    runs: Vec<(u32, u32)>,
+    run_starts: Vec<u32>,
     layout: Layout,
     /// The distinct standard deviations of the entries (a few hundred on a real site).
     spreads: Vec<Spread>,
@@ -189,11 +190,13 @@ impl RadioMap {
         state_count: usize,
         fingerprints: impl IntoIterator<Item = (u32, u32, Gaussian)>,
     ) -> Result<Self, String> {
-        let mut index = HashMap::with_capacity(ids.len());
-        for (i, id) in ids.iter().enumerate() {
-            if index.insert(id.clone(), i as u32).is_some() {
-                return Err(format!("transmitter {id} is listed twice"));
-            }
+        let Ok(count) = u32::try_from(ids.len()) else {
+            return Err(format!("{} transmitters are more than a map holds", ids.len()));
+        };
+        let mut by_id: Vec<u32> = (0..count).collect();
+        by_id.sort_unstable_by(|&a, &b| ids[a as usize].cmp(&ids[b as usize]));
+        if let Some(w) = by_id.windows(2).find(|w| ids[w[0] as usize] == ids[w[1] as usize]) {
+            return Err(format!("transmitter {} is listed twice", ids[w[0] as usize]));
         }
         // Quantised first: 16 bytes a triple while the map is built, where the f64 triples
         // took 24.
@@ -277,17 +280,21 @@ impl RadioMap {
             spread.clip_at_lowest = (clip_dbm - level(lowest)) * spread.inverse;
             spread.clip_per_step = LEVEL_STEP_DB * spread.inverse;
         }
+        // Words and runs are indexed in 32 bits: 2³² entries would take 16 GB.
+        if !u32::try_from(entries.len()).is_ok_and(|n| n < u32::MAX) {
+            return Err(format!("{} fingerprint entries are more than a map holds", entries.len()));
+        }
         let mut words = Vec::with_capacity(entries.len());
         let (mut runs, mut run_starts) = (Vec::new(), Vec::with_capacity(ids.len() + 1));
         for t in 0..ids.len() {
-            run_starts.push(runs.len());
+            run_starts.push(runs.len() as u32);
             let mut previous = None;
             for &(state, mean, spread) in &entries[starts[t]..starts[t + 1]] {
                 let step = previous.map_or(0, |p| state - p);
                 let word = match previous.and_then(|_| layout.encode(step, mean, spread)) {
                     Some(word) => word,
                     None => {
-                        runs.push((words.len(), state));
+                        runs.push((words.len() as u32, state));
                         layout.encode(0, mean, spread).expect("a step of 0 always fits")
                     }
                 };
@@ -295,8 +302,8 @@ impl RadioMap {
                 previous = Some(state);
             }
         }
-        run_starts.push(runs.len());
-        runs.push((words.len(), 0));
+        run_starts.push(runs.len() as u32);
+        runs.push((words.len() as u32, 0));
         runs.shrink_to_fit();
         Ok(Self {
             model,
@@ -304,7 +311,7 @@ impl RadioMap {
             unheard,
             unheard_ln_absent,
             ids,
-            index,
+            by_id,
             words,
             runs,
             run_starts,
@@ -366,15 +373,17 @@ impl RadioMap {
     /// The runs of transmitter `t`: (the state of the first word, whose step is 0, the words).
     #[inline]
     fn runs(&self, t: u32) -> impl Iterator<Item = (u32, &[u32])> + '_ {
-        let runs = &self.runs[self.run_starts[t as usize]..=self.run_starts[t as usize + 1]];
-        runs.windows(2).map(|run| (run[0].1, &self.words[run[0].0..run[1].0]))
+        let runs =
+            &self.runs[self.run_starts[t as usize] as usize..=self.run_starts[t as usize + 1] as usize];
+        runs.windows(2).map(|run| (run[0].1, &self.words[run[0].0 as usize..run[1].0 as usize]))
     }
 
     /// Heap bytes of the fingerprint entries and their tables (what grows with the site).
     pub fn memory_bytes(&self) -> usize {
         self.words.capacity() * std::mem::size_of::<u32>()
-            + self.runs.capacity() * std::mem::size_of::<(usize, u32)>()
-            + self.run_starts.capacity() * std::mem::size_of::<usize>()
+            + self.runs.capacity() * std::mem::size_of::<(u32, u32)>()
+            + self.run_starts.capacity() * std::mem::size_of::<u32>()
+            + self.by_id.capacity() * std::mem::size_of::<u32>()
             + self.spreads.capacity() * std::mem::size_of::<Spread>()
             + self.all_absent.iter().map(|v| v.capacity() * 8).sum::<usize>()
     }
@@ -389,9 +398,9 @@ impl RadioMap {
                 resolved.stale += 1;
                 continue;
             }
-            match self.index.get(&reading.transmitter) {
-                Some(&t) => found.push((t, reading.age_ns, reading.rssi_dbm)),
-                None => resolved.unknown += 1,
+            match self.by_id.binary_search_by(|&t| self.ids[t as usize].cmp(&reading.transmitter)) {
+                Ok(k) => found.push((self.by_id[k], reading.age_ns, reading.rssi_dbm)),
+                Err(_) => resolved.unknown += 1,
             }
         }
         // Freshest first, then strongest, so dedup keeps that one.

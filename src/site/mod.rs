@@ -134,15 +134,20 @@ pub struct Edge {
 /// site's edges ([`Site::neighbours`]); the default is no neighbour.
 #[derive(Clone, Debug, Default)]
 pub struct Neighbours<'a> {
+    /// The state whose neighbours these are: each is the other end of an edge.
+    from: u32,
     edges: &'a [Edge],
-    slots: std::slice::Iter<'a, (u32, u32)>,
+    slots: std::slice::Iter<'a, u32>,
 }
 
 impl Iterator for Neighbours<'_> {
     type Item = (u32, f64);
 
     fn next(&mut self) -> Option<(u32, f64)> {
-        self.slots.next().map(|&(v, k)| (v, self.edges[k as usize].length_m))
+        self.slots.next().map(|&k| {
+            let edge = &self.edges[k as usize];
+            (if edge.a == self.from { edge.b } else { edge.a }, edge.length_m)
+        })
     }
 
     fn size_hint(&self) -> (usize, Option<usize>) {
@@ -473,11 +478,12 @@ pub struct Site {
     floors: Vec<Floor>,
     states: Vec<State>,
     edges: Vec<Edge>,
-    /// Neighbours of state `i` are `adjacency[adjacency_starts[i]..adjacency_starts[i + 1]]`,
-    /// each as (neighbour, index of the edge in `edges`): the length stays in the edge, so the
-    /// graph holds each length once (docs/tuning.md#engine-speed).
-    adjacency_starts: Vec<usize>,
-    adjacency: Vec<(u32, u32)>,
+    /// The edges of state `i` are `adjacency[adjacency_starts[i]..adjacency_starts[i + 1]]`,
+    /// as indices into `edges`: the neighbour and the length stay in the edge, so the graph
+    /// holds each once (docs/tuning.md#engine-speed). 32 bits, as a site of 2³¹ edges would
+    /// take 32 GB.
+    adjacency_starts: Vec<u32>,
+    adjacency: Vec<u32>,
     radio: RadioMap,
     /// The survey's reading-age limit, ns ([`Site::max_reading_age_ns`]).
     max_reading_age_ns: Option<u64>,
@@ -529,7 +535,7 @@ impl Site {
         north: North,
     ) -> Self {
         let n = states.len();
-        let mut degree = vec![0usize; n + 1];
+        let mut degree = vec![0u32; n + 1];
         for e in &edges {
             degree[e.a as usize + 1] += 1;
             degree[e.b as usize + 1] += 1;
@@ -539,11 +545,11 @@ impl Site {
         }
         let adjacency_starts = degree.clone();
         let mut fill = degree;
-        let mut adjacency = vec![(0u32, 0u32); 2 * edges.len()];
+        let mut adjacency = vec![0u32; 2 * edges.len()];
         for (k, e) in edges.iter().enumerate() {
-            adjacency[fill[e.a as usize]] = (e.b, k as u32);
+            adjacency[fill[e.a as usize] as usize] = k as u32;
             fill[e.a as usize] += 1;
-            adjacency[fill[e.b as usize]] = (e.a, k as u32);
+            adjacency[fill[e.b as usize] as usize] = k as u32;
             fill[e.b as usize] += 1;
         }
         let spacing_m = median_edge_length(&edges);
@@ -616,8 +622,10 @@ impl Site {
     /// Walkable neighbours of state `i` with the edge length.
     pub fn neighbours(&self, i: usize) -> Neighbours<'_> {
         Neighbours {
+            from: i as u32,
             edges: &self.edges,
-            slots: self.adjacency[self.adjacency_starts[i]..self.adjacency_starts[i + 1]].iter(),
+            slots: self.adjacency[self.adjacency_starts[i] as usize..self.adjacency_starts[i + 1] as usize]
+                .iter(),
         }
     }
 
