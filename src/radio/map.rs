@@ -738,6 +738,23 @@ mod tests {
         assert_eq!((r.unknown, r.duplicates, r.stale), (1, 1, 1));
     }
 
+    /// Transmitters listed in any order are found by their own index, and a reading of one the
+    /// map does not list is counted as unknown.
+    #[test]
+    fn resolve_finds_transmitters_listed_out_of_order() {
+        let ble = TransmitterId::BleAddress { mac: "00:00:00:00:00:03".into() };
+        let ids = vec![wifi(9), ble.clone(), wifi(2), wifi(5), wifi(0)];
+        let map =
+            RadioMap::new(RssiModel::CensoredGaussian, -100.0, g(-115.0, 5.0), ids.clone(), 1, []).unwrap();
+        let readings: Vec<Reading> = (ids.iter().chain([&wifi(3)]))
+            .enumerate()
+            .map(|(k, id)| Reading { transmitter: id.clone(), rssi_dbm: -50.0 - k as f64, age_ns: 0 })
+            .collect();
+        let r = map.resolve(&Scan { timestamp_ns: 1, readings }, None);
+        assert_eq!(r.observations, [(0, -50.0), (1, -51.0), (2, -52.0), (3, -53.0), (4, -54.0)]);
+        assert_eq!((r.unknown, r.duplicates, r.stale), (1, 0, 0));
+    }
+
     #[test]
     fn rejects_bad_tables() {
         let dup =

@@ -802,6 +802,27 @@ impl Site {
 mod tests {
     use super::*;
 
+    /// Each state's neighbours are the other ends of its edges, in the order of the site's
+    /// edges, whichever end of an edge the state is.
+    #[test]
+    fn neighbours_are_the_other_ends_of_the_edges() {
+        let mut b = SiteBuilder::new("triangle");
+        let f = b.floor("G", 0.0);
+        let ids: Vec<u32> = [(0.0, 0.0), (1.0, 0.0), (0.0, 2.0)]
+            .iter()
+            .map(|&(x, y)| b.state(f, Point2::new(x, y), Vec::<TrainingScan>::new()))
+            .collect();
+        b.edge(ids[0], ids[1], Some(1.0));
+        b.edge(ids[1], ids[2], Some(2.0));
+        b.edge(ids[2], ids[0], Some(3.0));
+        let site = b.build(Default::default()).unwrap();
+        let of = |i: usize| site.neighbours(i).collect::<Vec<_>>();
+        assert_eq!(of(0), [(1, 1.0), (2, 3.0)]);
+        assert_eq!(of(1), [(0, 1.0), (2, 2.0)]);
+        assert_eq!(of(2), [(1, 2.0), (0, 3.0)]);
+        assert_eq!(site.neighbours(2).len(), 2);
+    }
+
     #[test]
     fn sparse_bands_start_at_their_edges() {
         assert_eq!(
