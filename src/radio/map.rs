@@ -107,7 +107,7 @@ struct Spread {
 }
 
 /// A model's (mean, σ) in [`LEVEL_STEP_DB`] steps, if within the stored range.
-fn quantise(g: &Gaussian) -> Option<(i16, u16)> {
+pub(crate) fn quantise(g: &Gaussian) -> Option<(i16, u16)> {
     let mean = (g.mean_dbm / LEVEL_STEP_DB).round();
     let std = (g.std_db / LEVEL_STEP_DB).round().max(1.0);
     (g.mean_dbm.abs() <= MAX_ABS_LEVEL_DBM && g.std_db <= MAX_STORED_STD_DB)
@@ -190,6 +190,30 @@ impl RadioMap {
         state_count: usize,
         fingerprints: impl IntoIterator<Item = (u32, u32, Gaussian)>,
     ) -> Result<Self, String> {
+        let steps = fingerprints.into_iter().map(|(state, tx, g)| {
+            let (mean, std) = quantise(&g).ok_or_else(|| {
+                format!(
+                    "the model of transmitter {tx} at state {state} (mean {} dBm, σ {} dB) is outside \
+                     the stored range (mean within ±{MAX_ABS_LEVEL_DBM} dBm, σ at most {MAX_STORED_STD_DB} dB)",
+                    g.mean_dbm, g.std_db
+                )
+            })?;
+            Ok((state, tx, mean, std))
+        });
+        Self::from_steps(model, clip_dbm, unheard, ids, state_count, steps)
+    }
+
+    /// [`RadioMap::new`] from `(state, transmitter, mean, σ)` already in [`LEVEL_STEP_DB`]
+    /// steps, as a binary site file stores them, or the error that reading one met: a load
+    /// then holds no list of the models besides this map's (docs/tuning.md#engine-speed).
+    pub(crate) fn from_steps(
+        model: RssiModel,
+        clip_dbm: f64,
+        unheard: Gaussian,
+        ids: Vec<TransmitterId>,
+        state_count: usize,
+        fingerprints: impl Iterator<Item = Result<(u32, u32, i16, u16), String>>,
+    ) -> Result<Self, String> {
         let Ok(count) = u32::try_from(ids.len()) else {
             return Err(format!("{} transmitters are more than a map holds", ids.len()));
         };
@@ -198,20 +222,21 @@ impl RadioMap {
         if let Some(w) = by_id.windows(2).find(|w| ids[w[0] as usize] == ids[w[1] as usize]) {
             return Err(format!("transmitter {} is listed twice", ids[w[0] as usize]));
         }
-        // Quantised first: 16 bytes a triple while the map is built, where the f64 triples
+        // Quantised first: 12 bytes a model while the map is built, where the f64 triples
         // took 24.
-        let mut quantised = Vec::new();
-        for (state, tx, g) in fingerprints {
+        let (max_mean, max_std) = (MAX_ABS_LEVEL_DBM / LEVEL_STEP_DB, MAX_STORED_STD_DB / LEVEL_STEP_DB);
+        let mut quantised = Vec::with_capacity(fingerprints.size_hint().0);
+        for entry in fingerprints {
+            let (state, tx, mean, std) = entry?;
             if state as usize >= state_count || tx as usize >= ids.len() {
                 return Err(format!("fingerprint entry (state {state}, transmitter {tx}) is out of range"));
             }
-            let (mean, std) = quantise(&g).ok_or_else(|| {
-                format!(
-                    "the model of transmitter {tx} at state {state} (mean {} dBm, σ {} dB) is outside \
-                     the stored range (mean within ±{MAX_ABS_LEVEL_DBM} dBm, σ at most {MAX_STORED_STD_DB} dB)",
-                    g.mean_dbm, g.std_db
-                )
-            })?;
+            if f64::from(mean).abs() > max_mean || !(1.0..=max_std).contains(&f64::from(std)) {
+                return Err(format!(
+                    "the model of transmitter {tx} at state {state} ({mean}, {std} steps of {LEVEL_STEP_DB} dB) \
+                     is outside the stored range"
+                ));
+            }
             quantised.push((state, tx, mean, std));
         }
         // The table of distinct spreads, indexed by their steps.

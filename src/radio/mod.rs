@@ -12,6 +12,7 @@ pub use gaussian::{
 pub use hash::{
     Salt, ScanHasher, HASH_HEX_DIGITS, ID_CACHE_CAPACITY, ID_HASH_SCHEME, ID_HASH_VERSION, MIN_SALT_BYTES,
 };
+pub(crate) use map::quantise;
 pub use map::{RadioMap, ResolvedScan, LEVEL_STEP_DB, MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB};
 
 use serde::{Deserialize, Serialize};

@@ -17,7 +17,7 @@ use super::schema::{
 };
 use super::{Edge, Floor, Site, SiteError, State};
 use crate::radio::{
-    Gaussian, RadioMap, Salt, ScanHasher, HASH_HEX_DIGITS, ID_HASH_SCHEME, ID_HASH_VERSION,
+    quantise, Gaussian, RadioMap, Salt, ScanHasher, HASH_HEX_DIGITS, ID_HASH_SCHEME, ID_HASH_VERSION,
     MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB,
 };
 use crate::NS_PER_MS;
@@ -60,6 +60,53 @@ fn gaussian(path: impl FnOnce() -> String, g: &GaussianFile) -> Result<Gaussian,
                 ),
             )
         })
+}
+
+/// A site file's fingerprint entries as `(state, transmitter, mean, σ)` in
+/// [`LEVEL_STEP_DB`](crate::radio::LEVEL_STEP_DB) steps, state by state, for
+/// [`RadioMap::from_steps`].
+struct Entries<'a> {
+    states: &'a [StateFile],
+    fingerprints: Fingerprints<'a>,
+    /// How many states have been started (the one being read is the last), its next entry
+    /// and the number it has.
+    started: usize,
+    k: usize,
+    count: usize,
+    /// The columns' index of the next entry.
+    next: usize,
+}
+
+impl Iterator for Entries<'_> {
+    type Item = Result<(u32, u32, i16, u16), String>;
+
+    fn next(&mut self) -> Option<Self::Item> {
+        while self.k == self.count {
+            let s = self.states.get(self.started)?;
+            self.count = match self.fingerprints {
+                Fingerprints::Nested => s.fingerprint.len(),
+                Fingerprints::Columns(c) => c.count(self.started),
+            };
+            (self.started, self.k) = (self.started + 1, 0);
+        }
+        let (i, k) = (self.started - 1, self.k);
+        self.k += 1;
+        let entry = match self.fingerprints {
+            Fingerprints::Nested => {
+                let f = &self.states[i].fingerprint[k];
+                let g = Gaussian { mean_dbm: f.mean_dbm, std_db: f.std_db };
+                let Some((mean, std)) = quantise(&g) else {
+                    return Some(Err(format!("states[{i}].fingerprint[{k}] is outside the stored range")));
+                };
+                (f.tx, mean, std)
+            }
+            Fingerprints::Columns(c) => {
+                self.next += 1;
+                c.entry_steps(self.next - 1)
+            }
+        };
+        Some(Ok((i as u32, entry.0 as u32, entry.1, entry.2)))
+    }
 }
 
 impl Site {
@@ -177,11 +224,6 @@ impl Site {
         let tx_count = radio.transmitters.len();
         let mut ids = HashMap::with_capacity(file.states.len());
         let mut states = Vec::with_capacity(file.states.len());
-        let entry_count = match fingerprints {
-            Fingerprints::Nested => file.states.iter().map(|s| s.fingerprint.len()).sum(),
-            Fingerprints::Columns(c) => c.len(),
-        };
-        let mut triples = Vec::with_capacity(entry_count);
         let mut seen_in = vec![0usize; tx_count];
         let mut next_column_entry = 0;
         for (i, s) in file.states.iter().enumerate() {
@@ -231,8 +273,7 @@ impl Site {
                     ));
                 }
                 seen_in[tx] = i + 1;
-                let g = gaussian(path, &GaussianFile { mean_dbm, std_db })?;
-                triples.push((i as u32, tx as u32, g));
+                gaussian(path, &GaussianFile { mean_dbm, std_db })?;
             }
             next_column_entry += count;
             states.push(State {
@@ -285,13 +326,17 @@ impl Site {
         for (i, f) in floors.iter().enumerate() {
             f.check(i).map_err(|(path, message)| invalid(path, message))?;
         }
-        let map = RadioMap::new(
+        // Checked above, the entries are read again as the map takes them: a list of them
+        // between the file and the map was the largest part of the load's peak memory
+        // (docs/tuning.md#engine-speed). The columns hold them as the map stores them.
+        let entries = Entries { states: &file.states, fingerprints, started: 0, k: 0, count: 0, next: 0 };
+        let map = RadioMap::from_steps(
             radio.model,
             radio.clip_dbm,
             unheard,
             file.radio.transmitters,
             states.len(),
-            triples,
+            entries,
         )
         .map_err(|m| invalid("radio.transmitters", m))?;
         if !(file.north.site_rotation_rad.is_finite() && file.north.declination_rad.is_finite()) {

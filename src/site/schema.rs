@@ -205,24 +205,27 @@ pub(super) struct Columns<'a> {
 }
 
 impl Columns<'_> {
-    /// Number of entries.
-    pub(super) fn len(&self) -> usize {
-        self.tx.len() / 4
-    }
-
     /// Entries of state `i`.
+    #[inline]
     pub(super) fn count(&self, i: usize) -> usize {
         u32_at(self.counts, i) as usize
     }
 
     /// Entry `k` as (transmitter, mean dBm, σ dB).
     pub(super) fn entry(&self, k: usize) -> (usize, f64, f64) {
-        let mean = i16::from_le_bytes([self.mean[2 * k], self.mean[2 * k + 1]]);
-        let std = u16::from_le_bytes([self.std[2 * k], self.std[2 * k + 1]]);
+        let (tx, mean, std) = self.entry_steps(k);
         // Division, not multiplication by LEVEL_STEP_DB: the nearest double to the level, so
         // that it prints as written (-67.31, not -67.31000000000001).
         let step = 1.0 / LEVEL_STEP_DB;
-        (u32_at(self.tx, k) as usize, f64::from(mean) / step, f64::from(std) / step)
+        (tx, f64::from(mean) / step, f64::from(std) / step)
+    }
+
+    /// Entry `k` as (transmitter, mean and σ in [`LEVEL_STEP_DB`] steps), as stored.
+    #[inline]
+    pub(super) fn entry_steps(&self, k: usize) -> (usize, i16, u16) {
+        let mean = i16::from_le_bytes([self.mean[2 * k], self.mean[2 * k + 1]]);
+        let std = u16::from_le_bytes([self.std[2 * k], self.std[2 * k + 1]]);
+        (u32_at(self.tx, k) as usize, mean, std)
     }
 }
 
