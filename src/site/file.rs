@@ -464,6 +464,39 @@ mod tests {
         assert_eq!(again.states(), site.states());
     }
 
+    /// States without a fingerprint first, between and last: every model reaches the map at
+    /// its own state, from JSON and from the binary file's columns.
+    #[test]
+    fn models_reach_their_states_around_states_without_any() {
+        let json = r#"{
+          "format_version": 1,
+          "name": "gaps",
+          "floors": [{"name": "G"}],
+          "radio": {"clip_dbm": -100, "unheard": {"mean_dbm": -115, "std_db": 5},
+                    "transmitters": [{"wifi": {"bssid": "00:11:22:33:44:55"}},
+                                     {"wifi": {"bssid": "00:11:22:33:44:66"}}]},
+          "states": [
+            {"id": 1, "floor": 0, "x": 0, "y": 0},
+            {"id": 2, "floor": 0, "x": 2, "y": 0, "training_scans": 3,
+             "fingerprint": [{"tx": 1, "mean_dbm": -61.5, "std_db": 4}, {"tx": 0, "mean_dbm": -70, "std_db": 3}]},
+            {"id": 3, "floor": 0, "x": 4, "y": 0},
+            {"id": 4, "floor": 0, "x": 6, "y": 0},
+            {"id": 5, "floor": 0, "x": 8, "y": 0, "training_scans": 2,
+             "fingerprint": [{"tx": 0, "mean_dbm": -55.25, "std_db": 2.5}]},
+            {"id": 6, "floor": 0, "x": 10, "y": 0}
+          ],
+          "edges": [{"from": 1, "to": 2}]
+        }"#;
+        let expected = [(1, 0, -70.0, 3.0), (4, 0, -55.25, 2.5), (1, 1, -61.5, 4.0)];
+        let from_json = Site::from_json(json.as_bytes()).unwrap();
+        let from_binary = Site::from_bytes(&from_json.to_binary()).unwrap();
+        for site in [from_json, from_binary] {
+            let models: Vec<(u32, u32, f64, f64)> =
+                site.radio().fingerprints().map(|(s, t, g)| (s, t, g.mean_dbm, g.std_db)).collect();
+            assert_eq!(models, expected);
+        }
+    }
+
     #[test]
     fn floor_gammas_round_trip_in_both_encodings_and_old_files_have_none() {
         let plain = Site::from_json(GOOD.as_bytes()).unwrap();
