@@ -8,6 +8,8 @@
 //! computed when a transmitter is heard, by [`LnCdfTable`].
 
 use super::{ln_std_normal_pdf, Gaussian, LnCdfTable, RssiModel, Scan, TransmitterId};
+use hashbrown::hash_table::{Entry, HashTable};
+use std::hash::{BuildHasher, BuildHasherDefault, DefaultHasher};
 
 /// Resolution of the stored RSSI levels and spreads: 0.01 dB, a hundredth of the 1 dBm step
 /// phones report RSSI in, so storing it changes no likelihood a reading can tell apart.
@@ -106,6 +108,12 @@ struct Spread {
     clip_per_step: f64,
 }
 
+/// The hash [`RadioMap`] finds a transmitter by: std's SipHash with its fixed keys, the same
+/// on every run.
+fn id_hash(id: &TransmitterId) -> u64 {
+    BuildHasherDefault::<DefaultHasher>::default().hash_one(id)
+}
+
 /// A model's (mean, σ) in [`LEVEL_STEP_DB`] steps, if within the stored range.
 pub(crate) fn quantise(g: &Gaussian) -> Option<(i16, u16)> {
     let mean = (g.mean_dbm / LEVEL_STEP_DB).round();
@@ -133,9 +141,9 @@ pub struct RadioMap {
     unheard: Gaussian,
     unheard_ln_absent: f64,
     ids: Vec<TransmitterId>,
-    /// The transmitters' indices in the order of their ids, for a binary search: a hash map
-    /// held a second copy of every id (docs/tuning.md#engine-speed).
-    by_id: Vec<u32>,
+    /// The transmitters' indices by the hash of their ids: a scan's readings are matched in
+    /// constant time, and no second copy of an id is held (docs/tuning.md#engine-speed).
+    by_id: HashTable<u32>,
     /// The entries' words, by transmitter and, within one, by state.
     words: Vec<u32>,
     /// (first word, its state) of each run of words; a run's later words step on from the
@@ -217,10 +225,15 @@ impl RadioMap {
         let Ok(count) = u32::try_from(ids.len()) else {
             return Err(format!("{} transmitters are more than a map holds", ids.len()));
         };
-        let mut by_id: Vec<u32> = (0..count).collect();
-        by_id.sort_unstable_by(|&a, &b| ids[a as usize].cmp(&ids[b as usize]));
-        if let Some(w) = by_id.windows(2).find(|w| ids[w[0] as usize] == ids[w[1] as usize]) {
-            return Err(format!("transmitter {} is listed twice", ids[w[0] as usize]));
+        let mut by_id = HashTable::with_capacity(ids.len());
+        for (t, id) in (0..count).zip(&ids) {
+            match by_id.entry(id_hash(id), |&u: &u32| ids[u as usize] == *id, |&u| id_hash(&ids[u as usize]))
+            {
+                Entry::Occupied(_) => return Err(format!("transmitter {id} is listed twice")),
+                Entry::Vacant(slot) => {
+                    slot.insert(t);
+                }
+            }
         }
         // Quantised first: 12 bytes a model while the map is built, where the f64 triples
         // took 24.
@@ -408,7 +421,7 @@ impl RadioMap {
         self.words.capacity() * std::mem::size_of::<u32>()
             + self.runs.capacity() * std::mem::size_of::<(u32, u32)>()
             + self.run_starts.capacity() * std::mem::size_of::<u32>()
-            + self.by_id.capacity() * std::mem::size_of::<u32>()
+            + self.by_id.allocation_size()
             + self.spreads.capacity() * std::mem::size_of::<Spread>()
             + self.all_absent.iter().map(|v| v.capacity() * 8).sum::<usize>()
     }
@@ -423,9 +436,10 @@ impl RadioMap {
                 resolved.stale += 1;
                 continue;
             }
-            match self.by_id.binary_search_by(|&t| self.ids[t as usize].cmp(&reading.transmitter)) {
-                Ok(k) => found.push((self.by_id[k], reading.age_ns, reading.rssi_dbm)),
-                Err(_) => resolved.unknown += 1,
+            let id = &reading.transmitter;
+            match self.by_id.find(id_hash(id), |&t| self.ids[t as usize] == *id) {
+                Some(&t) => found.push((t, reading.age_ns, reading.rssi_dbm)),
+                None => resolved.unknown += 1,
             }
         }
         // Freshest first, then strongest, so dedup keeps that one.
