@@ -294,7 +294,7 @@ impl TransitionParts {
                 hoang = HoangTransition {
                     site: &self.site,
                     table,
-                    reach_m: model.reach_m,
+                    reach: table.cut(model.reach_m),
                     ratio: model.ratio,
                     movement_m,
                     walked_m,

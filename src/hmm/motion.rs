@@ -2,7 +2,7 @@
 //! regions (eqs. 5-11, Table 1) and Hoang's Gaussian on the movement vector (eqs. 11, 14).
 
 use super::transition::{hipe_probabilities, RowBounds, Transition};
-use crate::site::{ReachTable, Site};
+use crate::site::{ReachCut, ReachTable, Site};
 use nalgebra::Vector2;
 
 /// Where HIPE puts the high transition probability from state i (HIPE eqs. 7-10, Fig. 6).
@@ -144,8 +144,8 @@ pub struct HoangTransition<'a> {
     pub site: &'a Site,
     /// Walking distances.
     pub table: &'a ReachTable,
-    /// v_max · Δt, m.
-    pub reach_m: f64,
+    /// v_max · Δt, cut in `table`.
+    pub reach: ReachCut,
     /// K of the reachability floor.
     pub ratio: f64,
     /// The measured movement vector v_t in the site frame, m; `None`: no movement term.
@@ -236,7 +236,7 @@ impl HoangTransition<'_> {
 impl Transition for HoangTransition<'_> {
     fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
         let states = self.site.states();
-        let reach = self.table.reachable(i, self.reach_m);
+        let reach = self.table.reachable_within(i, self.reach);
         let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
         let from = &states[i];
         let m = self.measured();
@@ -269,7 +269,7 @@ impl Transition for HoangTransition<'_> {
         let (cap, most) = self.ln_movement_range();
         Some(RowBounds {
             table: self.table,
-            rho_m: self.reach_m,
+            reach: self.reach,
             ratio: self.ratio,
             floor_factor: cap.exp(),
             ln_most_factor: most,
@@ -377,7 +377,7 @@ mod tests {
         HoangTransition {
             site,
             table,
-            reach_m: 4.5,
+            reach: table.cut(4.5),
             ratio: 200_000.0,
             movement_m: Some([1.0, 0.0]),
             walked_m: None,
@@ -575,7 +575,7 @@ mod tests {
         let site = grid();
         let table = ReachTable::build(&site, 9.0);
         let hoang = HoangTransition {
-            reach_m: 2.0,
+            reach: table.cut(2.0),
             exponent: 0.97,
             ..one_metre_east(&site, &table, [0.1, 0.4], 3.0)
         };

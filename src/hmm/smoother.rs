@@ -200,9 +200,9 @@ fn back<M>(
         .map(|&(i, alpha)| {
             let alpha = f64::from(alpha);
             if let Some(bounds) = &bounds {
-                let reach = bounds.table.reachable(i as usize, bounds.rho_m);
+                let reach = bounds.table.reachable_within(i as usize, bounds.reach);
                 if reach.iter().all(|(j, _)| ratio.get(j as usize).is_none_or(|&r| r == 0.0)) {
-                    return (i, alpha * (0.0 + bounds.floor(i as usize) * total.max(0.0)));
+                    return (i, alpha * (0.0 + bounds.floor_of(reach.len()) * total.max(0.0)));
                 }
             }
             row.clear();

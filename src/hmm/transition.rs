@@ -3,7 +3,7 @@
 //! a_ij > 0, so the filter can recover from a wrong track). Prediction and the Viterbi step
 //! are written once over that shape, in O(explicit entries + N).
 
-use crate::site::ReachTable;
+use crate::site::{ReachCut, ReachTable};
 
 /// A transition model (or, with Hoang eq. 14, a transition times a movement likelihood).
 pub trait Transition {
@@ -28,8 +28,8 @@ pub trait Transition {
 pub struct RowBounds<'a> {
     /// Walking-distance table.
     pub table: &'a ReachTable,
-    /// The reach of the rows, m.
-    pub rho_m: f64,
+    /// The reach of the rows, cut in `table`.
+    pub reach: ReachCut,
     /// HIPE's K.
     pub ratio: f64,
     /// What multiplies `low_i` into the floor weight.
@@ -40,11 +40,11 @@ pub struct RowBounds<'a> {
 
 impl RowBounds<'_> {
     fn reachable(&self, i: usize) -> usize {
-        self.table.reachable(i, self.rho_m).len()
+        self.table.reachable_within(i, self.reach).len()
     }
 
     /// The floor weight of a row with `reachable` explicit entries.
-    fn floor_of(&self, reachable: usize) -> f64 {
+    pub fn floor_of(&self, reachable: usize) -> f64 {
         hipe_probabilities(reachable, self.table.state_count(), self.ratio).1 * self.floor_factor
     }
 
@@ -316,8 +316,8 @@ impl Transition for UniformReach<'_> {
     }
 
     fn bounds(&self) -> Option<RowBounds<'_>> {
-        let (table, rho_m, ratio) = (self.table, self.rho_m, self.ratio);
-        Some(RowBounds { table, rho_m, ratio, floor_factor: 1.0, ln_most_factor: 0.0 })
+        let (table, ratio) = (self.table, self.ratio);
+        Some(RowBounds { table, reach: table.cut(self.rho_m), ratio, floor_factor: 1.0, ln_most_factor: 0.0 })
     }
 }
 

@@ -19,7 +19,7 @@ pub use error::SiteError;
 pub use file::{IdHashing, MAX_COORDINATE_M};
 pub use geo::{Anchor, GeoError, LatLon, MAX_ANCHOR_LATITUDE_DEG};
 pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
-pub use reach::{Reach, ReachTable};
+pub use reach::{Reach, ReachCut, ReachTable};
 pub use schema::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
 pub use zones::{most_likely_zone, Zone, ZoneKind, MAX_ZONES};
 

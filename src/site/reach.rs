@@ -118,15 +118,38 @@ impl Distances {
         }
     }
 
-    /// How many of the distance-sorted entries `from..to` are within `rho_m`.
-    fn within(&self, from: usize, to: usize, rho_m: f64) -> usize {
+    /// How many of the distinct coded distances are within `rho_m` (0 for plain distances).
+    fn codes_within(&self, rho_m: f64) -> usize {
         match self {
-            Distances::Coded { codes, values } => {
-                let below = values.partition_point(|&d| f64::from(d) <= rho_m);
-                codes[from..to].partition_point(|&c| usize::from(c) < below)
-            }
-            Distances::Plain(v) => v[from..to].partition_point(|&d| f64::from(d) <= rho_m),
+            Distances::Coded { values, .. } => values.partition_point(|&d| f64::from(d) <= rho_m),
+            Distances::Plain(_) => 0,
         }
+    }
+
+    /// How many of the distance-sorted entries `from..to` are within `cut`.
+    fn within(&self, from: usize, to: usize, cut: ReachCut) -> usize {
+        match self {
+            Distances::Coded { codes, .. } => {
+                codes[from..to].partition_point(|&c| usize::from(c) < cut.codes_within)
+            }
+            Distances::Plain(v) => v[from..to].partition_point(|&d| f64::from(d) <= cut.rho_m),
+        }
+    }
+}
+
+/// A reach looked up once in one table's distances ([`ReachTable::cut`]), for the rows of an
+/// epoch: each row is then cut with one search instead of two (docs/tuning.md#engine-speed).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ReachCut {
+    rho_m: f64,
+    /// How many of the table's distinct coded distances are within `rho_m`.
+    codes_within: usize,
+}
+
+impl ReachCut {
+    /// The reach, m.
+    pub fn rho_m(&self) -> f64 {
+        self.rho_m
     }
 }
 
@@ -298,9 +321,20 @@ impl ReachTable {
     /// States reachable from `i` within `rho_m` (at most the table radius), with their walking
     /// distance: the state itself, its neighbours, and every state within `rho_m`.
     pub fn reachable(&self, i: usize, rho_m: f64) -> Reach<'_> {
+        self.reachable_within(i, self.cut(rho_m))
+    }
+
+    /// `rho_m` looked up in this table, for [`reachable_within`](Self::reachable_within).
+    pub fn cut(&self, rho_m: f64) -> ReachCut {
+        ReachCut { rho_m, codes_within: self.distances.codes_within(rho_m) }
+    }
+
+    /// [`reachable`](Self::reachable) within a cut of this table (of another table, the
+    /// states listed are not those within its reach).
+    pub fn reachable_within(&self, i: usize, cut: ReachCut) -> Reach<'_> {
         let (from, sorted_from, to) =
             (self.starts[i] as usize, self.sorted_from[i] as usize, self.starts[i + 1] as usize);
-        let within = self.distances.within(sorted_from, to, rho_m);
+        let within = self.distances.within(sorted_from, to, cut);
         Reach { table: self, from, to: sorted_from + within }
     }
 
