@@ -42,8 +42,35 @@ fn binary_with_version(binary: &[u8], version: u32) -> Vec<u8> {
 }
 
 #[test]
-fn the_current_version_is_6_and_reads_back_to_1() {
-    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 6));
+fn the_current_version_is_7_and_reads_back_to_1() {
+    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 7));
+}
+
+/// A version-6 file loads with every transmitter a radio of its own; version 7 adds the
+/// transmitters that share a radio (`radio.shared_radios`), kept through both encodings and
+/// through hashing, written only when there are some, and checked.
+#[test]
+fn a_version_6_file_still_loads_and_version_7_adds_the_shared_radios() {
+    let site = Site::from_json(with_version(VERSION_1, 6).as_bytes()).unwrap();
+    assert!(site.radio().shared_radios().is_empty());
+    assert!(!site.to_json().contains("shared_radios"));
+    let two = with_version(VERSION_1, 7).replacen(
+        r#""transmitters": [{"wifi": {"bssid": "00:11:22:33:44:55"}}]"#,
+        r#""shared_radios": [[0, 1]],
+            "transmitters": [{"wifi": {"bssid": "00:11:22:33:44:55"}}, {"wifi": {"bssid": "02:11:22:33:44:55"}}]"#,
+        1,
+    );
+    let site = Site::from_json(two.as_bytes()).unwrap();
+    assert_eq!(site.radio().shared_radios(), [vec![0, 1]]);
+    assert!(site.to_json().contains(r#""shared_radios":[[0,1]]"#), "{}", site.to_json());
+    let binary = Site::from_bytes(&site.to_binary()).unwrap();
+    assert_eq!(binary.radio().shared_radios(), [vec![0, 1]]);
+    let hashed = site.hashed(&waymark::radio::Salt::new(b"a salt of sixteen bytes").unwrap()).unwrap();
+    assert_eq!(hashed.radio().shared_radios(), [vec![0, 1]]);
+    for (bad, says) in [("[[0, 1]]", "[[0, 2]]"), ("[[0, 1]]", "[[0]]")] {
+        let err = Site::from_json(two.replace(bad, says).as_bytes()).unwrap_err().to_string();
+        assert!(err.contains("radio.shared_radios"), "{err}");
+    }
 }
 
 /// A version-5 file loads with no floor calibration; version 6 adds it, steady and sparse

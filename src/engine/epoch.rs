@@ -38,7 +38,9 @@ impl Engine {
         // fingerprint too (docs/accuracy.md#off-the-map).
         let silent: Vec<bool> = radio.silent_states(&resolved.observations, &self.ln_emission).collect();
         let best = best_fingerprinted(&self.ln_emission, &self.unsurveyed, &silent);
-        let radio_fit = (best - ln_unheard) / resolved.observations.len() as f64;
+        // Per radio heard: an access point's several networks count once, as they do in the
+        // likelihood (docs/tuning.md#shared-radios).
+        let radio_fit = (best - ln_unheard) / radio.radios_heard(&resolved.observations);
         let below_floor = self.radio_fit_floor.is_some_and(|floor| radio_fit < floor);
         // Only with an estimate to carry on from: the first scan, unexplained or not, is all
         // there is to go on, and then only the states whose fingerprints speak to it place the

@@ -50,9 +50,10 @@ pub struct Position {
     /// ln p(scan | earlier input): how well the radio map explains this scan; `None` for an
     /// epoch without a scan. Very low values mean the phone hears what the map does not expect.
     pub radio_log_evidence: Option<f64>,
-    /// How much better, per reading, the fingerprinted state that best explains this scan does
-    /// than a state with no fingerprint, nats (negative when none does better; states that
-    /// model none of the transmitters heard do not count); `None` for an epoch without a scan
+    /// How much better, per radio heard (an access point's several networks count once), the
+    /// fingerprinted state that best explains this scan does than a state with no fingerprint,
+    /// nats (negative when none does better; states that model none of the transmitters heard
+    /// do not count); `None` for an epoch without a scan
     /// or when no state models a transmitter heard above the clip level. Below the site's
     /// [`radio_fit_floor`](crate::site::Calibration::radio_fit_floor) the map does not explain
     /// the scan and the engine positions by the motion alone.

@@ -159,6 +159,11 @@ pub struct RadioMap {
     all_absent: [Vec<f64>; 2],
     /// Radio kind of each transmitter (index into `all_absent`).
     kinds: Vec<u8>,
+    /// Groups of two or more transmitters that one radio sends (an access point's several
+    /// networks): [`with_shared_radios`](Self::with_shared_radios).
+    shared_radios: Vec<Vec<u32>>,
+    /// Each transmitter's weight in a scan's likelihood: 1 / the size of its group, 1 alone.
+    weights: Vec<f64>,
 }
 
 /// Index of a transmitter's radio in [`RadioMap`]'s per-kind tables: a WiFi scan says nothing
@@ -270,10 +275,6 @@ impl RadioMap {
         }
         let unheard_ln_absent = model.ln_absent(&unheard, clip_dbm);
         let kinds: Vec<u8> = ids.iter().map(kind).collect();
-        let mut all_absent = [0u8, 1].map(|k| {
-            let count = kinds.iter().filter(|&&x| x == k).count();
-            vec![unheard_ln_absent * count as f64; state_count]
-        });
         // Bucket by transmitter (a counting sort: O(entries), where sorting took a quarter of
         // the load time of a 10 000-state site), keeping the given order within a bucket.
         let mut starts = vec![0usize; ids.len() + 1];
@@ -284,19 +285,10 @@ impl RadioMap {
             starts[t + 1] += starts[t];
         }
         let mut fill = starts.clone();
-        let table = LnCdfTable::get();
         let (mut lowest, mut highest) = (i32::MAX, i32::MIN);
         // (state, mean, spread index), bucketed, until the words are written.
         let mut entries = vec![(0u32, 0i16, 0u16); quantised.len()];
         for (state, tx, mean, std) in quantised {
-            // ln p(absent) by the table, as scoring takes it: the exact ln Φ per entry was
-            // half the load time of a 10 000-state site.
-            let (mean_dbm, std_db) = (level(mean), level(std));
-            let ln_absent = match model {
-                RssiModel::CensoredGaussian => table.ln_cdf((clip_dbm - mean_dbm) / std_db),
-                RssiModel::NaiveGaussian => model.ln_absent(&Gaussian { mean_dbm, std_db }, clip_dbm),
-            };
-            all_absent[kinds[tx as usize] as usize][state as usize] += ln_absent - unheard_ln_absent;
             entries[fill[tx as usize]] = (state, mean, spread_of[usize::from(std)]);
             fill[tx as usize] += 1;
             (lowest, highest) = (lowest.min(i32::from(mean)), highest.max(i32::from(mean)));
@@ -343,7 +335,8 @@ impl RadioMap {
         run_starts.push(runs.len() as u32);
         runs.push((words.len() as u32, 0));
         runs.shrink_to_fit();
-        Ok(Self {
+        let weights = vec![1.0; ids.len()];
+        let mut map = Self {
             model,
             clip_dbm,
             unheard,
@@ -355,9 +348,84 @@ impl RadioMap {
             run_starts,
             layout,
             spreads,
-            all_absent,
+            all_absent: [Vec::new(), Vec::new()],
             kinds,
-        })
+            shared_radios: Vec::new(),
+            weights,
+        };
+        map.all_absent = map.absent_sums(state_count);
+        Ok(map)
+    }
+
+    /// The same map with `radios` as the groups of transmitters that one radio sends: an
+    /// access point that serves several networks reports each under its own BSSID, at the
+    /// same level from the same antenna, so a scan hears the same reading several times.
+    /// Each member then weighs 1 / the group's size in a scan's likelihood, so that the radio
+    /// counts once, as eq. 9's product over independent transmitters assumes
+    /// (docs/tuning.md#shared-radios). Fails, with a message, on a group of fewer than two, a
+    /// transmitter index out of range, or a transmitter in two groups.
+    pub fn with_shared_radios(mut self, radios: Vec<Vec<u32>>) -> Result<Self, String> {
+        if radios.is_empty() && self.shared_radios.is_empty() {
+            return Ok(self);
+        }
+        let mut weights = vec![1.0; self.ids.len()];
+        for (k, radio) in radios.iter().enumerate() {
+            if radio.len() < 2 {
+                return Err(format!(
+                    "radio {k} lists {} transmitters; a shared radio lists two or more",
+                    radio.len()
+                ));
+            }
+            for &t in radio {
+                match weights.get_mut(t as usize) {
+                    None => return Err(format!("radio {k} lists transmitter {t}, which does not exist")),
+                    Some(w) if *w != 1.0 => return Err(format!("transmitter {t} is in two radios")),
+                    Some(w) => *w = 1.0 / radio.len() as f64,
+                }
+            }
+        }
+        self.weights = weights;
+        self.shared_radios = radios;
+        self.all_absent = self.absent_sums(self.state_count());
+        Ok(self)
+    }
+
+    /// The groups of transmitters that one radio sends ([`with_shared_radios`](Self::with_shared_radios)).
+    pub fn shared_radios(&self) -> &[Vec<u32>] {
+        &self.shared_radios
+    }
+
+    /// How many radios `observations` heard: each transmitter counts its weight, so the
+    /// networks of one access point count once.
+    pub fn radios_heard(&self, observations: &[(u32, f64)]) -> f64 {
+        observations.iter().map(|&(t, _)| self.weights[t as usize]).sum()
+    }
+
+    /// Per radio kind, per state: ln p(every transmitter of that kind absent | state), each
+    /// transmitter at its weight. By the table, as scoring takes it: the exact ln Φ per entry
+    /// was half the load time of a 10 000-state site.
+    fn absent_sums(&self, state_count: usize) -> [Vec<f64>; 2] {
+        let mut sums = [0u8, 1].map(|k| {
+            let weight: f64 =
+                (self.kinds.iter().zip(&self.weights)).filter(|(&x, _)| x == k).map(|(_, w)| w).sum();
+            vec![self.unheard_ln_absent * weight; state_count]
+        });
+        let table = LnCdfTable::get();
+        for t in 0..self.ids.len() {
+            let (sum, weight) = (&mut sums[usize::from(self.kinds[t])], self.weights[t]);
+            for (state, mean, spread) in self.entries(t as u32) {
+                let std_db = level(self.spreads[spread].steps);
+                let mean_dbm = level(mean);
+                let ln_absent = match self.model {
+                    RssiModel::CensoredGaussian => table.ln_cdf((self.clip_dbm - mean_dbm) / std_db),
+                    RssiModel::NaiveGaussian => {
+                        self.model.ln_absent(&Gaussian { mean_dbm, std_db }, self.clip_dbm)
+                    }
+                };
+                sum[state] += weight * (ln_absent - self.unheard_ln_absent);
+            }
+        }
+        sums
     }
 
     /// The likelihood model.
@@ -424,6 +492,8 @@ impl RadioMap {
             + self.by_id.allocation_size()
             + self.spreads.capacity() * std::mem::size_of::<Spread>()
             + self.all_absent.iter().map(|v| v.capacity() * 8).sum::<usize>()
+            + self.weights.capacity() * 8
+            + self.shared_radios.iter().map(|r| r.capacity() * 4).sum::<usize>()
     }
 
     /// Matches a scan's readings to the map's transmitters, dropping (and counting) unknown,
@@ -476,20 +546,21 @@ impl RadioMap {
         for &(t, rssi) in observations {
             // What hearing `rssi` changes for a state using the unheard model...
             let unheard_delta = self.unheard_delta(rssi);
+            let weight = self.weights[t as usize];
             // ...and, for states that model this transmitter, the difference to their own.
             // A reading at or below the clip level is ln p(absent) for every model: no change.
             if rssi <= self.clip_dbm {
                 continue;
             }
             match self.model {
-                RssiModel::CensoredGaussian => self.add_censored(t, rssi, unheard_delta, out),
+                RssiModel::CensoredGaussian => self.add_censored(t, rssi, unheard_delta, weight, out),
                 RssiModel::NaiveGaussian => {
                     for (state, mean, spread) in self.entries(t) {
                         let spread = &self.spreads[spread];
                         let mean = f64::from(mean) * LEVEL_STEP_DB;
                         let (z, z_clip) =
                             ((rssi - mean) * spread.inverse, (self.clip_dbm - mean) * spread.inverse);
-                        out[state] += 0.5 * (z_clip * z_clip - z * z) - unheard_delta;
+                        out[state] += weight * (0.5 * (z_clip * z_clip - z * z) - unheard_delta);
                     }
                 }
             }
@@ -497,8 +568,11 @@ impl RadioMap {
         for v in out.iter_mut() {
             *v += terms.shared;
         }
-        let absent = self.kinds.iter().filter(|&&k| terms.scanned[usize::from(k)]).count();
-        absent as f64 * self.unheard_ln_absent + terms.shared
+        let absent: f64 = (self.kinds.iter().zip(&self.weights))
+            .filter(|(&k, _)| terms.scanned[usize::from(k)])
+            .map(|(_, w)| w)
+            .sum();
+        absent * self.unheard_ln_absent + terms.shared
     }
 
     /// Which states' fingerprints say nothing about a scan, from what
@@ -520,10 +594,11 @@ impl RadioMap {
 
     /// Adds, at each state that models transmitter `t`, what hearing it at `rssi` changes
     /// against the unheard model: ln φ((r - μ)/σ) - ln σ - ln Φ((c - μ)/σ) - `unheard_delta`,
-    /// with (r - μ)/σ = w + (r - c)/σ for w = (c - μ)/σ. Out of line: on its own the loop keeps
-    /// its values in registers (docs/tuning.md#engine-speed).
+    /// with (r - μ)/σ = w + (r - c)/σ for w = (c - μ)/σ, times the transmitter's `weight`. Out
+    /// of line: on its own the loop keeps its values in registers
+    /// (docs/tuning.md#engine-speed).
     #[inline(never)]
-    fn add_censored(&self, t: u32, rssi: f64, unheard_delta: f64, out: &mut [f64]) {
+    fn add_censored(&self, t: u32, rssi: f64, unheard_delta: f64, weight: f64, out: &mut [f64]) {
         let (layout, table) = (self.layout, LnCdfTable::get());
         let above_clip = rssi - self.clip_dbm;
         let shared = ln_std_normal_pdf(0.0) - unheard_delta;
@@ -535,7 +610,7 @@ impl RadioMap {
                 let spread = &self.spreads[spread];
                 let w = spread.clip_at_lowest - f64::from(field) * spread.clip_per_step;
                 let z = w + above_clip * spread.inverse;
-                out[state] += shared - 0.5 * z * z - spread.ln - table.ln_cdf(w);
+                out[state] += weight * (shared - 0.5 * z * z - spread.ln - table.ln_cdf(w));
             }
         }
     }
@@ -551,7 +626,7 @@ impl RadioMap {
         let mut terms = ScanTerms { scanned: [false; 2], shared: 0.0 };
         for &(t, rssi) in observations {
             terms.scanned[self.kinds[t as usize] as usize] = true;
-            terms.shared += self.unheard_delta(rssi);
+            terms.shared += self.weights[t as usize] * self.unheard_delta(rssi);
         }
         terms
     }
@@ -618,8 +693,67 @@ mod tests {
                 Some(&(_, rssi)) => map.model().ln_heard(&model_of(t), rssi, -100.0),
                 None if scanned(t) => map.model().ln_absent(&model_of(t), -100.0),
                 None => 0.0,
-            })
+            } * map.weights[t as usize])
             .sum()
+    }
+
+    #[test]
+    fn the_networks_of_one_radio_count_as_one_transmitter() {
+        // Transmitters 1 and 2 are one radio: the same model wherever either is modelled.
+        let one =
+            vec![(0, 0, g(-60.0, 4.0)), (0, 1, g(-80.0, 5.0)), (1, 0, g(-75.0, 3.0)), (1, 1, g(-65.0, 4.0))];
+        let two: Vec<_> =
+            one.iter().copied().chain(one.iter().filter(|e| e.1 == 1).map(|e| (e.0, 2, e.2))).collect();
+        let alone = RadioMap::new(
+            RssiModel::CensoredGaussian,
+            -100.0,
+            g(-115.0, 5.0),
+            vec![wifi(0), wifi(1)],
+            2,
+            one,
+        )
+        .unwrap();
+        let shared = RadioMap::new(
+            RssiModel::CensoredGaussian,
+            -100.0,
+            g(-115.0, 5.0),
+            vec![wifi(0), wifi(1), wifi(2)],
+            2,
+            two,
+        )
+        .unwrap()
+        .with_shared_radios(vec![vec![1, 2]])
+        .unwrap();
+        for (heard, twice) in [
+            (vec![(0, -62.0), (1, -70.0)], vec![(0, -62.0), (1, -70.0), (2, -70.0)]),
+            (vec![(0, -62.0)], vec![(0, -62.0)]),
+        ] {
+            let (mut a, mut b) = (vec![0.0; 2], vec![0.0; 2]);
+            assert_relative_eq!(
+                alone.ln_likelihood(&heard, &mut a),
+                shared.ln_likelihood(&twice, &mut b),
+                epsilon = 1e-9
+            );
+            for s in 0..2 {
+                assert_relative_eq!(a[s], b[s], epsilon = 1e-9);
+            }
+            assert_relative_eq!(alone.radios_heard(&heard), shared.radios_heard(&twice));
+        }
+        assert_eq!(shared.shared_radios(), [vec![1, 2]]);
+    }
+
+    #[test]
+    fn shared_radios_must_name_two_or_more_existing_transmitters_once() {
+        let map = || small_map(RssiModel::CensoredGaussian);
+        assert!(map().with_shared_radios(vec![vec![0]]).unwrap_err().contains("two or more"));
+        assert!(map().with_shared_radios(vec![vec![0, 3]]).unwrap_err().contains("does not exist"));
+        assert!(map()
+            .with_shared_radios(vec![vec![0, 1], vec![1, 2]])
+            .unwrap_err()
+            .contains("in two radios"));
+        assert!(map().with_shared_radios(vec![vec![0, 0]]).unwrap_err().contains("in two radios"));
+        let plain = map().with_shared_radios(Vec::new()).unwrap();
+        assert_eq!(plain.radios_heard(&[(0, -60.0), (1, -70.0)]), 2.0);
     }
 
     #[test]
@@ -637,21 +771,25 @@ mod tests {
         assert_eq!(silent(&[(2, -100.0)]), [true, true]);
     }
 
+    /// With every transmitter a radio of its own, and with 0 and 2 one radio (each weighing
+    /// one half in the product).
     #[test]
     fn sparse_likelihood_equals_dense_product() {
         for model in [RssiModel::CensoredGaussian, RssiModel::NaiveGaussian] {
-            let map = small_map(model);
-            for heard in
+            let grouped = small_map(model).with_shared_radios(vec![vec![0, 2]]).unwrap();
+            assert_eq!(grouped.weights, [0.5, 1.0, 0.5]);
+            for (map, heard) in [small_map(model), grouped].iter().flat_map(|map| {
                 [vec![(0, -62.0), (1, -79.0)], vec![(2, -92.0)], vec![(0, -100.0), (2, -99.0)], vec![]]
-            {
+                    .map(|heard| (map, heard))
+            }) {
                 let mut out = vec![0.0; 2];
                 let unheard = map.ln_likelihood(&heard, &mut out);
                 // Each heard transmitter's ln p(absent) comes from the table (≤ 2e-6 off).
                 for s in 0..2 {
-                    assert_relative_eq!(out[s as usize], brute_force(&map, &heard, s), epsilon = 1e-5);
+                    assert_relative_eq!(out[s as usize], brute_force(map, &heard, s), epsilon = 1e-5);
                 }
                 // A state the map has no fingerprint for (there is no state 9).
-                assert_relative_eq!(unheard, brute_force(&map, &heard, 9), epsilon = 1e-9);
+                assert_relative_eq!(unheard, brute_force(map, &heard, 9), epsilon = 1e-9);
             }
         }
     }

@@ -160,6 +160,7 @@ impl Site {
                     salt_check: h.salt_check.clone(),
                 }),
                 max_reading_age_ms: self.max_reading_age_ns.map(|ns| ns.div_ceil(NS_PER_MS)),
+                shared_radios: self.radio.shared_radios().to_vec(),
                 transmitters: self.radio.transmitters().to_vec(),
             },
             states: self
@@ -338,7 +339,9 @@ impl Site {
             states.len(),
             entries,
         )
-        .map_err(|m| invalid("radio.transmitters", m))?;
+        .map_err(|m| invalid("radio.transmitters", m))?
+        .with_shared_radios(file.radio.shared_radios)
+        .map_err(|m| invalid("radio.shared_radios", m))?;
         if !(file.north.site_rotation_rad.is_finite() && file.north.declination_rad.is_finite()) {
             return Err(invalid("north", "angles must be finite"));
         }
@@ -371,6 +374,7 @@ impl Site {
             radio.state_count(),
             radio.fingerprints(),
         )
+        .and_then(|map| map.with_shared_radios(radio.shared_radios().to_vec()))
         .map_err(|m| invalid("radio.transmitters", m))?;
         Ok(Site {
             radio: map,

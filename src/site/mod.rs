@@ -193,7 +193,7 @@ pub struct Calibration {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub step_length: Option<crate::sensors::StepLengthModel>,
     /// The least radio fit ([`Position::radio_fit`](crate::Position::radio_fit)) of a scan
-    /// heard on the map, nats per reading: below it the map does not explain the scan (the
+    /// heard on the map, nats per radio heard: below it the map does not explain the scan (the
     /// phone is probably beyond the surveyed area), the engine leans on the motion and its
     /// radii grow with the distance walked. The survey's calibration takes the 5th percentile
     /// over held-out epochs on the map, and 0 when that is below 0
@@ -644,6 +644,16 @@ impl Site {
     /// used, or the file does not say (before format version 4).
     pub fn max_reading_age_ns(&self) -> Option<u64> {
         self.max_reading_age_ns
+    }
+
+    /// The site with `radios` as the groups of its transmitters (by index) that one radio
+    /// sends, each counted once in a scan's likelihood ([`RadioMap::with_shared_radios`]).
+    pub fn with_shared_radios(mut self, radios: Vec<Vec<u32>>) -> Result<Site, SiteError> {
+        self.radio = self
+            .radio
+            .with_shared_radios(radios)
+            .map_err(|message| SiteError::Invalid { path: "radio.shared_radios".into(), message })?;
+        Ok(self)
     }
 
     /// The site with the survey's reading-age limit ([`max_reading_age_ns`](Self::max_reading_age_ns)).

@@ -88,6 +88,7 @@ impl Site {
             states.len(),
             triples,
         )
+        .and_then(|map| map.with_shared_radios(radio.shared_radios().to_vec()))
         .expect("pseudo states add valid, distinct (state, transmitter) pairs to a valid map");
         let mut site =
             Site::from_parts(self.name.clone(), self.floors.clone(), states, edges, map, self.north);

@@ -11,9 +11,10 @@ use serde::{Deserialize, Serialize};
 /// [`OLDEST_FORMAT_VERSION`], and refuses a newer one ([`SiteError::NewerFormat`]). Version 2
 /// holds the optional fields added within version 1, version 3 adds the optional geo anchor
 /// and floor levels, version 4 the survey's reading-age limit, version 5 the calibrated M of
-/// the estimate, version 6 the floor probability's calibration
-/// (docs/site-files.md#versioning): each version's files are files of the next.
-pub const FORMAT_VERSION: u32 = 6;
+/// the estimate, version 6 the floor probability's calibration, version 7 the transmitters
+/// that share a radio (docs/site-files.md#versioning): each version's files are files of the
+/// next.
+pub const FORMAT_VERSION: u32 = 7;
 
 /// The oldest site-file format this build reads.
 pub const OLDEST_FORMAT_VERSION: u32 = 1;
@@ -81,6 +82,9 @@ pub(super) struct RadioFile {
     /// fingerprints were fitted, ms.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub(super) max_reading_age_ms: Option<u64>,
+    /// Since version 7: groups of transmitter indices that one radio sends.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub(super) shared_radios: Vec<Vec<u32>>,
     pub(super) transmitters: Vec<TransmitterId>,
 }
 

@@ -325,7 +325,12 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         }
         None => println!("not geo-referenced (a floor has no plan)"),
     }
-    println!("{} transmitters; site written to {}", report.transmitters, args.out.display());
+    println!(
+        "{} transmitters ({} radios send two or more); site written to {}",
+        report.transmitters,
+        report.shared_radios,
+        args.out.display()
+    );
     ExitCode::SUCCESS
 }
 

@@ -156,12 +156,19 @@ impl PreparedSurvey<'_> {
         };
         // Builder ids are state indices. The site keeps the reading-age limit its fingerprints
         // were fitted with, for the engines on it to apply.
+        // The shared radios among the transmitters these states read.
+        let radios: Vec<Vec<u32>> = (self.shared_radios.iter())
+            .map(|g| g.iter().map(|&t| local[t as usize]).filter(|&t| t != u32::MAX).collect::<Vec<_>>())
+            .filter(|g| g.len() >= 2)
+            .collect();
         let site = builder
             .build_fitted(build, ids, triples)?
+            .with_shared_radios(radios)?
             .with_zones(zones)?
             .with_max_reading_age_ns(Some(options.max_reading_age_ns));
         let transmitters = site.radio().transmitters().len();
-        Ok((site, SurveyReport { floors: reports, transmitters }))
+        let shared_radios = site.radio().shared_radios().len();
+        Ok((site, SurveyReport { floors: reports, transmitters, shared_radios }))
     }
 }
 

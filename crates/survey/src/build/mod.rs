@@ -18,6 +18,7 @@ use waymark::site::{Anchor, BuildOptions, LatLon, North, Site, SiteBuilder, Site
 mod assemble;
 mod fit;
 mod prepare;
+mod radios;
 #[cfg(test)]
 mod tests;
 
@@ -151,6 +152,9 @@ pub struct SurveyReport {
     pub floors: Vec<FloorSurvey>,
     /// Transmitters in the radio map.
     pub transmitters: usize,
+    /// Radios that send two or more of them, each counted once in a scan's likelihood
+    /// (docs/tuning.md#shared-radios).
+    pub shared_radios: usize,
 }
 
 /// A storey's elevation rank from its name: `B2` → −2, `B1` → −1, `F1`/`1F`/`L1` → 0,

@@ -115,6 +115,9 @@ pub struct PreparedSurvey<'a> {
     pub(super) options: SurveyOptions,
     /// Every transmitter read in a positioned scan, sorted (the radio map's order).
     pub(super) transmitters: Vec<TransmitterId>,
+    /// Groups of `transmitters` that one radio sends, found in every walk's scans (a
+    /// property of the hardware, so a site of some of the walks keeps them).
+    pub(super) shared_radios: Vec<Vec<u32>>,
     pub(super) floors: Vec<PreparedFloor<'a>>,
 }
 
@@ -247,11 +250,16 @@ impl<'a> PreparedSurvey<'a> {
                 plan_cells,
             });
         }
+        let shared_radios = super::radios::shared_radios(
+            out.iter().flat_map(|f| &f.walks).flat_map(|w| &w.scans).map(Vec::as_slice),
+            transmitters.len(),
+        );
         Ok(PreparedSurvey {
             name: name.to_owned(),
             north,
             options: options.clone(),
             transmitters,
+            shared_radios,
             floors: out,
         })
     }
