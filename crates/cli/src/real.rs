@@ -426,7 +426,7 @@ fn print_calibration(c: &calibrate::CalibrationReport) {
         bands.join("; ")
     };
     println!(
-        "radio fit floor {} nats per reading (5th percentile of {} held-out scans on the map); held-out walks replayed as shipped:",
+        "radio fit floor {} nats per radio heard (5th percentile of {} held-out scans on the map); held-out walks replayed as shipped:",
         c.radio_fit_floor.map_or("-".into(), |f| format!("{f:.2}")),
         c.radio_fit_scans
     );

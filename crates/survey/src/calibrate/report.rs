@@ -177,7 +177,7 @@ pub struct CalibrationReport {
     /// The held-out epochs on the map, replayed with the engine as shipped, as one band: by
     /// construction their radii hold the truth at about 68% and 95%.
     pub on_map: OffMapReport,
-    /// The radio fit floor chosen ([`Calibration::radio_fit_floor`]), nats per reading: none
+    /// The radio fit floor chosen ([`Calibration::radio_fit_floor`]), nats per radio heard: none
     /// from fewer than [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) scans (a 5% percentile then rests on ten below).
     pub radio_fit_floor: Option<f64>,
     /// Held-out scans on the map the floor was chosen from.
