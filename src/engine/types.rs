@@ -53,8 +53,8 @@ pub struct Position {
     /// How much better, per radio heard (an access point's several networks count once), the
     /// fingerprinted state that best explains this scan does than a state with no fingerprint,
     /// nats (negative when none does better; states that model none of the transmitters heard
-    /// do not count); `None` for an epoch without a scan
-    /// or when no state models a transmitter heard above the clip level. Below the site's
+    /// do not count); `None` for an epoch without a scan or when no state models a transmitter
+    /// heard above the clip level. Below the site's
     /// [`radio_fit_floor`](crate::site::Calibration::radio_fit_floor) the map does not explain
     /// the scan and the engine positions by the motion alone.
     pub radio_fit: Option<f64>,

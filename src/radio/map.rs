@@ -164,6 +164,9 @@ pub struct RadioMap {
     shared_radios: Vec<Vec<u32>>,
     /// Each transmitter's weight in a scan's likelihood: 1 / the size of its group, 1 alone.
     weights: Vec<f64>,
+    /// Per radio kind, the transmitters' summed weights: how many radios of that kind a scan
+    /// hearing none of them misses.
+    kind_weights: [f64; 2],
 }
 
 /// Index of a transmitter's radio in [`RadioMap`]'s per-kind tables: a WiFi scan says nothing
@@ -336,6 +339,8 @@ impl RadioMap {
         runs.push((words.len() as u32, 0));
         runs.shrink_to_fit();
         let weights = vec![1.0; ids.len()];
+        let kind_weights = [0, 1].map(|k| kinds.iter().filter(|&&x| x == k).count() as f64);
+        let all_absent = kind_weights.map(|w| vec![unheard_ln_absent * w; state_count]);
         let mut map = Self {
             model,
             clip_dbm,
@@ -348,12 +353,17 @@ impl RadioMap {
             run_starts,
             layout,
             spreads,
-            all_absent: [Vec::new(), Vec::new()],
+            all_absent,
             kinds,
             shared_radios: Vec::new(),
             weights,
+            kind_weights,
         };
-        map.all_absent = map.absent_sums(state_count);
+        let mut sums = std::mem::take(&mut map.all_absent);
+        for t in 0..map.ids.len() {
+            map.add_absent_terms(t, 1.0, &mut sums);
+        }
+        map.all_absent = sums;
         Ok(map)
     }
 
@@ -384,9 +394,24 @@ impl RadioMap {
                 }
             }
         }
+        // Only the transmitters whose weight changed move the absent sums.
+        let mut sums = std::mem::take(&mut self.all_absent);
+        let mut kind_change = [0.0; 2];
+        for (t, (&new, &old)) in weights.iter().zip(&self.weights).enumerate() {
+            if new != old {
+                self.add_absent_terms(t, new - old, &mut sums);
+                kind_change[usize::from(self.kinds[t])] += new - old;
+            }
+        }
+        for (k, change) in kind_change.into_iter().enumerate() {
+            if change != 0.0 {
+                sums[k].iter_mut().for_each(|v| *v += self.unheard_ln_absent * change);
+                self.kind_weights[k] += change;
+            }
+        }
+        self.all_absent = sums;
         self.weights = weights;
         self.shared_radios = radios;
-        self.all_absent = self.absent_sums(self.state_count());
         Ok(self)
     }
 
@@ -401,31 +426,23 @@ impl RadioMap {
         observations.iter().map(|&(t, _)| self.weights[t as usize]).sum()
     }
 
-    /// Per radio kind, per state: ln p(every transmitter of that kind absent | state), each
-    /// transmitter at its weight. By the table, as scoring takes it: the exact ln Φ per entry
+    /// Adds to `sums` (per radio kind, per state: ln p(every transmitter of that kind absent |
+    /// state)) `factor` times what transmitter `t` changes there against the unheard model, at
+    /// each state that models it. By the table, as scoring takes it: the exact ln Φ per entry
     /// was half the load time of a 10 000-state site.
-    fn absent_sums(&self, state_count: usize) -> [Vec<f64>; 2] {
-        let mut sums = [0u8, 1].map(|k| {
-            let weight: f64 =
-                (self.kinds.iter().zip(&self.weights)).filter(|(&x, _)| x == k).map(|(_, w)| w).sum();
-            vec![self.unheard_ln_absent * weight; state_count]
-        });
+    fn add_absent_terms(&self, t: usize, factor: f64, sums: &mut [Vec<f64>; 2]) {
         let table = LnCdfTable::get();
-        for t in 0..self.ids.len() {
-            let (sum, weight) = (&mut sums[usize::from(self.kinds[t])], self.weights[t]);
-            for (state, mean, spread) in self.entries(t as u32) {
-                let std_db = level(self.spreads[spread].steps);
-                let mean_dbm = level(mean);
-                let ln_absent = match self.model {
-                    RssiModel::CensoredGaussian => table.ln_cdf((self.clip_dbm - mean_dbm) / std_db),
-                    RssiModel::NaiveGaussian => {
-                        self.model.ln_absent(&Gaussian { mean_dbm, std_db }, self.clip_dbm)
-                    }
-                };
-                sum[state] += weight * (ln_absent - self.unheard_ln_absent);
-            }
+        let sum = &mut sums[usize::from(self.kinds[t])];
+        for (state, mean, spread) in self.entries(t as u32) {
+            let (mean_dbm, std_db) = (level(mean), level(self.spreads[spread].steps));
+            let ln_absent = match self.model {
+                RssiModel::CensoredGaussian => table.ln_cdf((self.clip_dbm - mean_dbm) / std_db),
+                RssiModel::NaiveGaussian => {
+                    self.model.ln_absent(&Gaussian { mean_dbm, std_db }, self.clip_dbm)
+                }
+            };
+            sum[state] += factor * (ln_absent - self.unheard_ln_absent);
         }
-        sums
     }
 
     /// The likelihood model.
@@ -568,10 +585,7 @@ impl RadioMap {
         for v in out.iter_mut() {
             *v += terms.shared;
         }
-        let absent: f64 = (self.kinds.iter().zip(&self.weights))
-            .filter(|(&k, _)| terms.scanned[usize::from(k)])
-            .map(|(_, w)| w)
-            .sum();
+        let absent: f64 = (0..2).filter(|&k| terms.scanned[k]).map(|k| self.kind_weights[k]).sum();
         absent * self.unheard_ln_absent + terms.shared
     }
 

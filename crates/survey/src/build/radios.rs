@@ -7,8 +7,9 @@
 
 use std::collections::HashMap;
 
-/// Two transmitters are one radio only when heard together in at least this many scans: the
-/// difference's spread below rests on at least that many readings.
+/// Two transmitters are one radio only when heard together in at least this many scans, so
+/// that the difference's spread below rests on that many readings; the pairs measured in
+/// docs/tuning.md#shared-radios rest on as many.
 const MIN_SCANS_TOGETHER: u32 = 20;
 /// ... in at least this share of the scans that hear the more often heard of the two, so that
 /// transmitters that merely meet now and then are not joined (docs/tuning.md#shared-radios) ...
@@ -18,8 +19,8 @@ const MIN_SHARE_TOGETHER: f64 = 0.8;
 /// of unrelated transmitters (docs/tuning.md#shared-radios).
 const MAX_DIFFERENCE_SD_DB: f64 = 3.0;
 /// Only readings of a scan this close are paired, dB: three times the spread allowed, so a
-/// pair of one radio is paired in nearly every scan, and a scan of 200 readings makes a few
-/// thousand pairs instead of 20 000.
+/// pair of one radio is paired in nearly every scan while a scan pairs each reading with its
+/// neighbours in level only, not with every other reading.
 const PAIR_WINDOW_DB: f64 = 3.0 * MAX_DIFFERENCE_SD_DB;
 
 /// The groups of two or more transmitters (indices below `transmitters`) that one radio sends,
