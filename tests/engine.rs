@@ -701,8 +701,8 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
 }
 
 /// Engines sharing scan likelihoods (the calibration's replays) give the positions of engines
-/// computing their own, to the bit, whatever γ each runs at; a memo of another site, even an
-/// equal one, is refused.
+/// computing their own, to the bit, whatever γ each runs at and on a copy of the site with
+/// another calibration; a memo of another site, even an equal one, is refused.
 #[test]
 fn shared_scan_likelihoods_change_no_position() {
     use waymark::SharedEmissions;
@@ -725,6 +725,15 @@ fn shared_scan_likelihoods_change_no_position() {
             assert_eq!(own.push_scan(&s).map(|e| e.position), sharing.push_scan(&s).map(|e| e.position));
             assert_eq!(own.posterior(), sharing.posterior());
         }
+    }
+    // A copy of the site with another calibration shares its radio map, and so the memo.
+    let calibration = waymark::site::Calibration { radio_fit_floor: Some(1.0), ..*site.calibration() };
+    let copy = Arc::new(site.as_ref().clone().with_calibration(calibration).unwrap());
+    let mut own = Engine::new(Arc::clone(&copy), EngineConfig::default()).unwrap();
+    let mut sharing = Engine::new(copy, EngineConfig::default()).unwrap();
+    sharing.share_emissions(Arc::clone(&shared)).unwrap();
+    for s in &walk {
+        assert_eq!(own.push_scan(s).map(|e| e.position), sharing.push_scan(s).map(|e| e.position));
     }
     let mut other = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
     assert!(other.share_emissions(shared).is_err());

@@ -206,7 +206,8 @@ impl Engine {
     /// For the survey's calibration, not apps: takes each scan's likelihoods from `shared`,
     /// which the other engines replaying walks on this same site fill, instead of computing
     /// them again ([`SharedEmissions`]). The positions are the same to the bit. `Err` when
-    /// `shared` is of another site (another allocation, even if equal).
+    /// `shared` is of another radio map (another allocation, even if equal: a site and its
+    /// copies share theirs).
     #[doc(hidden)]
     pub fn share_emissions(&mut self, shared: Arc<SharedEmissions>) -> Result<(), Error> {
         if !shared.is_of(&self.site) {

@@ -255,7 +255,7 @@ impl ScanTiming {
     }
 }
 
-/// Scan likelihoods shared by the engines an evaluation runs on one site: the survey's
+/// Scan likelihoods shared by the engines an evaluation runs on one site and its copies: the survey's
 /// calibration replays each held-out walk at every γ and motion mask (`waymark-survey`,
 /// `calibrate`), and ln p(o | s) of a scan (Hoang eqs. 9-10) depends on the site and the
 /// resolved scan only, so the engines of one site compute it once per scan and copy it
@@ -266,8 +266,9 @@ impl ScanTiming {
 #[doc(hidden)]
 #[derive(Debug)]
 pub struct SharedEmissions {
-    /// The site the likelihoods are of, held weakly so that its address names it.
-    site: Weak<Site>,
+    /// The radio map the likelihoods are of, held weakly so that its address names it: a site
+    /// and its copies with another calibration share it.
+    radio: Weak<RadioMap>,
     /// Per resolved scan (its observations, RSSI as bits): ln p(o | s) per state and the
     /// likelihood of hearing nothing, as `RadioMap::ln_likelihood` returned them.
     memo: Mutex<HashMap<Vec<(u32, u64)>, ScanLikelihoods>>,
@@ -278,13 +279,14 @@ type ScanLikelihoods = Arc<(Box<[f64]>, f64)>;
 
 impl SharedEmissions {
     /// An empty memo for the engines on `site`.
-    pub fn new(site: &Arc<Site>) -> Arc<Self> {
-        Arc::new(Self { site: Arc::downgrade(site), memo: Mutex::default() })
+    pub fn new(site: &Site) -> Arc<Self> {
+        Arc::new(Self { radio: Arc::downgrade(site.shared_radio_map()), memo: Mutex::default() })
     }
 
-    /// Whether these are the likelihoods of `site` (the same allocation, not an equal site).
-    pub(super) fn is_of(&self, site: &Arc<Site>) -> bool {
-        std::ptr::eq(self.site.as_ptr(), Arc::as_ptr(site))
+    /// Whether these are the likelihoods of `site`'s radio map (the same allocation, which its
+    /// copies share, not an equal map).
+    pub(super) fn is_of(&self, site: &Site) -> bool {
+        std::ptr::eq(self.radio.as_ptr(), Arc::as_ptr(site.shared_radio_map()))
     }
 
     /// ln p(o | s) of `observations` into `out`, and the likelihood of hearing nothing: from the

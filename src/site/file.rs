@@ -377,7 +377,7 @@ impl Site {
         .and_then(|map| map.with_shared_radios(radio.shared_radios().to_vec()))
         .map_err(|m| invalid("radio.transmitters", m))?;
         Ok(Site {
-            radio: map,
+            radio: std::sync::Arc::new(map),
             id_hashing: Some(IdHashing { salt_check: salt.check_value() }),
             ..self.clone()
         })

@@ -195,7 +195,8 @@ pub struct Calibration {
     /// The least radio fit ([`Position::radio_fit`](crate::Position::radio_fit)) of a scan
     /// heard on the map, nats per radio heard: below it the map does not explain the scan (the
     /// phone is probably beyond the surveyed area), the engine leans on the motion and its
-    /// radii grow with the distance walked. The survey's calibration takes the 5th percentile
+    /// radii grow with the distance walked. The survey's calibration takes a quantile (5% or 20%,
+    /// whichever its held-out walks replayed as shipped err least with) of the fits
     /// over held-out epochs on the map, and 0 when that is below 0
     /// (docs/tuning.md#radio-fit-floor).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -484,7 +485,11 @@ pub struct Site {
     /// take 32 GB.
     adjacency_starts: Vec<u32>,
     adjacency: Vec<u32>,
-    radio: RadioMap,
+    /// Shared by the site's copies (the survey's calibration replays each held-out site with
+    /// many calibrations, each on a copy): a copy is cheap, and engines on copies with the same
+    /// map may share their scan likelihoods
+    /// ([`SharedEmissions`](crate::SharedEmissions)).
+    radio: Arc<RadioMap>,
     /// The survey's reading-age limit, ns ([`Site::max_reading_age_ns`]).
     max_reading_age_ns: Option<u64>,
     north: North,
@@ -562,7 +567,7 @@ impl Site {
             edges,
             adjacency_starts,
             adjacency,
-            radio,
+            radio: Arc::new(radio),
             max_reading_age_ns: None,
             north,
             anchor: None,
@@ -636,6 +641,11 @@ impl Site {
         &self.radio
     }
 
+    /// The radio map as its copies share it ([`SharedEmissions`](crate::SharedEmissions)).
+    pub(crate) fn shared_radio_map(&self) -> &Arc<RadioMap> {
+        &self.radio
+    }
+
     /// Readings last measured longer than this before their scan were left out of the
     /// fingerprints, as not heard (Android re-reports cached access points): engines on the
     /// site leave them out too unless configured otherwise
@@ -649,9 +659,9 @@ impl Site {
     /// The site with `radios` as the groups of its transmitters (by index) that one radio
     /// sends, each counted once in a scan's likelihood ([`RadioMap::with_shared_radios`]).
     pub fn with_shared_radios(mut self, radios: Vec<Vec<u32>>) -> Result<Site, SiteError> {
-        self.radio = self
-            .radio
+        self.radio = Arc::unwrap_or_clone(self.radio)
             .with_shared_radios(radios)
+            .map(Arc::new)
             .map_err(|message| SiteError::Invalid { path: "radio.shared_radios".into(), message })?;
         Ok(self)
     }
