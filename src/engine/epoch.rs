@@ -296,9 +296,9 @@ impl Engine {
 }
 
 /// Unexplained scans in a row after which the estimate may leave the surveyed map for its
-/// unsurveyed states. One is not enough: the site's radio fit floor is the 5th percentile of
-/// scans on the map, so one scan in twenty on the map falls below it
-/// (docs/tuning.md#unsurveyed-states).
+/// unsurveyed states. One is not enough: the site's radio fit floor is a low quantile of the
+/// fits of scans on the map (5% or 20%, chosen per site), so some scans on the map fall below
+/// it (docs/tuning.md#unsurveyed-states).
 const UNSURVEYED_AFTER_SCANS: u32 = 2;
 
 /// The largest of `ln_emission` over the states neither in `unsurveyed` (sorted indices) nor

@@ -425,10 +425,15 @@ fn print_calibration(c: &calibrate::CalibrationReport) {
             .collect();
         bands.join("; ")
     };
+    let candidates: Vec<String> = (c.radio_fit_floor_mean_error_m.iter())
+        .map(|(share, floor, error)| format!("{:.0}%: {floor:.2} nats, {error:.2} m", 100.0 * share))
+        .collect();
     println!(
-        "radio fit floor {} nats per radio heard (5th percentile of {} held-out scans on the map); held-out walks replayed as shipped:",
+        "radio fit floor {} nats per radio heard (the {} quantile of the fits of {} held-out scans on the map, of least held-out error as shipped among {}); held-out walks replayed as shipped:",
         c.radio_fit_floor.map_or("-".into(), |f| format!("{f:.2}")),
-        c.radio_fit_scans
+        c.radio_fit_floor_share.map_or("-".into(), |s| format!("{:.0}%", 100.0 * s)),
+        c.radio_fit_scans,
+        candidates.join(", ")
     );
     println!("  {}", bands(&c.on_map));
     println!("  beyond the held-out map, by distance beyond it | {}", bands(&c.off_map));

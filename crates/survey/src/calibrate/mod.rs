@@ -204,20 +204,41 @@ pub fn calibration_steps(floors: &[FloorData], options: &CalibrationOptions) -> 
     2 * floors.iter().map(|f| f.survey.len()).sum::<usize>() + radius
 }
 
-/// Quantile of the radio fits of held-out scans on the map taken as the floor below which the
-/// map does not explain a scan: a one-sided test at 5%, one scan on the map in twenty called
-/// unexplained (`docs/tuning.md#radio-fit-floor`).
-const RADIO_FIT_FLOOR_QUANTILE: f64 = 0.05;
-
-/// The radio fit floor from the sorted fits of held-out scans on the map: their
-/// [`RADIO_FIT_FLOOR_QUANTILE`], and never below 0. A fit of 0 is a scan the best fingerprint
-/// explains no better than no fingerprint at all, which is what "unexplained" means; on a
-/// sparse survey a state fitted from near-empty scans scores about that for any scan, so the
-/// held-out fits never fall below it and the quantile came out just under 0: no scan was then
-/// ever unexplained, and walkers beyond the map were pulled onto that state on another floor
+/// Shares of the held-out scans on the map that a radio fit floor may call unexplained: the
+/// floor's candidates are those quantiles of their fits, and the held-out walks replayed with
+/// the engine as shipped choose between them, as they choose γ. 5% is a one-sided test at 5%,
+/// one scan on the map in twenty; 20% the lower quintile. Where the survey is sparse, a scan on
+/// the map fits worse, and its 5% quantile let walkers beyond the map be pulled onto whatever
+/// fitted least badly. Each candidate costs the calibration two replays of every walk
 /// (`docs/tuning.md#radio-fit-floor`).
-fn radio_fit_floor(sorted_fits: &[f64]) -> f64 {
-    quantile(sorted_fits, RADIO_FIT_FLOOR_QUANTILE).max(0.0)
+const RADIO_FIT_FLOOR_SHARES: [f64; 2] = [0.05, 0.2];
+
+/// A candidate radio fit floor from the sorted fits of held-out scans on the map: their
+/// quantile at `share`, and never below 0. A fit of 0 is a scan the best fingerprint explains
+/// no better than no fingerprint at all, which is what "unexplained" means; on a sparse survey
+/// a state fitted from near-empty scans scores about that for any scan, so the held-out fits
+/// never fall below it and the quantile came out just under 0: no scan was then ever
+/// unexplained, and walkers beyond the map were pulled onto that state on another floor
+/// (`docs/tuning.md#radio-fit-floor`).
+fn radio_fit_floor(sorted_fits: &[f64], share: f64) -> f64 {
+    quantile(sorted_fits, share).max(0.0)
+}
+
+/// The candidate floors ([`RADIO_FIT_FLOOR_SHARES`]) from the sorted fits, with the share each
+/// is the quantile at, the same floor once: none from fewer than
+/// [`MIN_SCENARIO_EPOCHS`] fits (a 5% quantile then rests on ten below).
+fn radio_fit_floor_candidates(sorted_fits: &[f64]) -> Vec<(f64, Option<f64>)> {
+    if sorted_fits.len() < MIN_SCENARIO_EPOCHS {
+        return vec![(0.0, None)];
+    }
+    let mut candidates: Vec<(f64, Option<f64>)> = Vec::new();
+    for share in RADIO_FIT_FLOOR_SHARES {
+        let floor = radio_fit_floor(sorted_fits, share);
+        if !matches!(candidates.last(), Some(c) if c.1 == Some(floor)) {
+            candidates.push((share, Some(floor)));
+        }
+    }
+    candidates
 }
 
 /// Calibrates a site from its survey walks: the walkers' step length and the site's north
@@ -459,21 +480,20 @@ pub fn survey_calibrated(
     calibration.sparse_scans.rssi_weight = own_gamma(&sparse_curve, sparse_best, calibration.rssi_weight);
     report.sparse_scans.gamma = sparse_curve;
     fits_on_map.sort_by(f64::total_cmp);
-    calibration.radio_fit_floor =
-        (fits_on_map.len() >= MIN_SCENARIO_EPOCHS).then(|| radio_fit_floor(&fits_on_map));
-    report.radio_fit_floor = calibration.radio_fit_floor;
+    let floor_candidates = radio_fit_floor_candidates(&fits_on_map);
     report.radio_fit_scans = fits_on_map.len();
     report.rssi_weight = calibration.rssi_weight;
     report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
     report.rssi_weight_by_scenario = calibration.rssi_weight_by_scenario;
-    // The held-out walks again with the engine as shipped (every calibrated value, the radio
-    // fit floor included) but no radius factor, steady and throttled: the posterior's own
-    // radii as the engine will report them, each epoch at the γ the engine gives it (the
-    // first scan's without a movement likelihood, and the floor's, which the calibration's
-    // runs above, each at one γ throughout, do not give it), for the radius factors of the
-    // scenarios it positions epochs in and of the sparse bands; and how it does off the map.
-    // Fitted on the runs above instead, the factors did not hold on the engine as shipped
-    // (`docs/tuning.md#radius-factors`).
+    // The held-out walks again with the engine as shipped (every calibrated value) but no
+    // radius factor, steady and throttled, with each candidate radio fit floor: the steady
+    // replays choose the floor, by least mean error, as γ is chosen. At that floor they give
+    // the posterior's own radii as the engine will report them, each epoch at the γ the engine
+    // gives it (the first scan's without a movement likelihood, and the floor's, which the
+    // calibration's runs above, each at one γ throughout, do not give it), for the radius
+    // factors of the scenarios it positions epochs in and of the sparse bands; and how it does
+    // off the map. Fitted on the runs above instead, the factors did not hold on the engine as
+    // shipped (`docs/tuning.md#radius-factors`).
     let unscaled = Calibration {
         accuracy_scale: None,
         accuracy_scale_by_scenario: Default::default(),
@@ -485,29 +505,59 @@ pub fn survey_calibrated(
         floor_reliability: Default::default(),
         ..calibration
     };
-    let shipped: Vec<(Vec<Tag>, Vec<Tag>)> = parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
-        let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
-        let fits = prepared.fit(&keep, Some(&full), 1);
-        let site = prepared.assemble(&fits).ok().map(|(s, _)| s);
-        let tags = site.and_then(|site| {
-            let trace = &floors[f].survey[w];
-            let mapped = OnMap::new(&site, f);
-            let run = |calibration: Calibration, replay_options: &ReplayOptions| -> Option<Vec<Tag>> {
-                let site = site
-                    .clone()
-                    .with_calibration(calibration)
-                    .and_then(|s| s.with_floor_rssi_weights(&weights));
-                let mut engine = Engine::new(Arc::new(site.ok()?), options.calibration_engine()).ok()?;
-                Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
-            };
-            Some((
-                run(unscaled, &options.calibration_replay())?,
-                run(unscaled, &options.calibration_throttled_replay())?,
-            ))
+    // Per walk, per candidate floor: (steady, throttled); empty where a replay failed.
+    let by_floor: Vec<Vec<(Vec<Tag>, Vec<Tag>)>> =
+        parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
+            let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
+            let fits = prepared.fit(&keep, Some(&full), 1);
+            let site = prepared.assemble(&fits).ok().map(|(s, _)| s);
+            let tags = site.and_then(|site| {
+                let trace = &floors[f].survey[w];
+                let mapped = OnMap::new(&site, f);
+                // Its copies share its radio map, so their engines share the scan likelihoods.
+                let shared = SharedEmissions::new(&site);
+                let run = |floor: Option<f64>, replay_options: &ReplayOptions| -> Option<Vec<Tag>> {
+                    let mut calibration = unscaled;
+                    calibration.radio_fit_floor = floor;
+                    let site = site
+                        .clone()
+                        .with_calibration(calibration)
+                        .and_then(|s| s.with_floor_rssi_weights(&weights));
+                    let mut engine = Engine::new(Arc::new(site.ok()?), options.calibration_engine()).ok()?;
+                    // Of a copy of this site, with its radio map: cannot fail.
+                    let _ = engine.share_emissions(Arc::clone(&shared));
+                    Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
+                };
+                (floor_candidates.iter())
+                    .map(|&(_, floor)| {
+                        Some((
+                            run(floor, &options.calibration_replay())?,
+                            run(floor, &options.calibration_throttled_replay())?,
+                        ))
+                    })
+                    .collect::<Option<Vec<_>>>()
+            });
+            progress();
+            tags.unwrap_or_default()
         });
-        progress();
-        tags.unwrap_or_default()
-    });
+    // The floor of least mean error over the steady held-out epochs, the smaller share on a tie.
+    let complete: Vec<&Vec<(Vec<Tag>, Vec<Tag>)>> =
+        by_floor.iter().filter(|c| c.len() == floor_candidates.len()).collect();
+    report.radio_fit_floor_mean_error_m = (floor_candidates.iter().enumerate())
+        .filter_map(|(k, &(share, floor))| {
+            let epochs = complete.iter().flat_map(|c| &c[k].0);
+            let (total, n) = epochs.fold((0.0, 0), |(t, n), e| (t + e.scored.penalised_m(), n + 1));
+            Some((share, floor?, total / n.max(1) as f64))
+        })
+        .collect();
+    let chosen = (report.radio_fit_floor_mean_error_m.iter().enumerate())
+        .min_by(|a, b| a.1 .2.total_cmp(&b.1 .2).then(a.0.cmp(&b.0)))
+        .map_or(0, |(k, _)| k);
+    calibration.radio_fit_floor = floor_candidates.get(chosen).and_then(|c| c.1);
+    report.radio_fit_floor = calibration.radio_fit_floor;
+    report.radio_fit_floor_share = calibration.radio_fit_floor.and(floor_candidates.get(chosen).map(|c| c.0));
+    let shipped: Vec<(Vec<Tag>, Vec<Tag>)> =
+        by_floor.into_iter().map(|c| c.into_iter().nth(chosen).unwrap_or_default()).collect();
     for (f, floor_report) in report.floors.iter_mut().enumerate() {
         let mine = jobs.iter().zip(&shipped).filter(|((ff, _), _)| *ff == f);
         let tags =
@@ -577,10 +627,26 @@ mod tests {
     fn the_radio_fit_floor_is_the_held_out_quantile_and_never_below_zero() {
         // Twenty fits from 0.5 up: the 5th percentile is the first.
         let fits: Vec<f64> = (0..20).map(|i| 0.5 + 0.1 * f64::from(i)).collect();
-        assert_eq!(radio_fit_floor(&fits), 0.5);
+        assert_eq!(radio_fit_floor(&fits, 0.05), 0.5);
         // Held-out fits that never fall below a near-empty state's -0.04: no better than no
         // fingerprint is unexplained.
         let fits: Vec<f64> = (0..20).map(|i| -0.04 + 0.1 * f64::from(i)).collect();
-        assert_eq!(radio_fit_floor(&fits), 0.0);
+        assert_eq!(radio_fit_floor(&fits, 0.05), 0.0);
+    }
+
+    #[test]
+    fn the_candidate_floors_are_quantiles_each_once() {
+        // 200 fits 0.01 apart from -0.2: the 5% and 20% quantiles, 0 for one below.
+        let fits: Vec<f64> = (0..200).map(|i| -0.2 + 0.01 * f64::from(i)).collect();
+        let candidates = radio_fit_floor_candidates(&fits);
+        let floors: Vec<(f64, f64)> = candidates.iter().map(|&(s, f)| (s, f.unwrap())).collect();
+        assert_eq!(floors.len(), 2, "{floors:?}");
+        assert_eq!(floors[0], (0.05, 0.0), "the 5% quantile is below 0");
+        assert!((floors[1].1 - quantile(&fits, 0.2)).abs() < 1e-12 && floors[1].0 == 0.2);
+        // Both quantiles below 0: one candidate.
+        let low: Vec<f64> = fits.iter().map(|f| f - 1.0).collect();
+        assert_eq!(radio_fit_floor_candidates(&low), vec![(0.05, Some(0.0))]);
+        // Too few fits for a 5% quantile: no floor.
+        assert_eq!(radio_fit_floor_candidates(&fits[..MIN_SCENARIO_EPOCHS - 1]), vec![(0.0, None)]);
     }
 }

@@ -180,6 +180,11 @@ pub struct CalibrationReport {
     /// The radio fit floor chosen ([`Calibration::radio_fit_floor`]), nats per radio heard: none
     /// from fewer than [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) scans (a 5% percentile then rests on ten below).
     pub radio_fit_floor: Option<f64>,
+    /// The share of the held-out scans on the map whose fit quantile that floor is.
+    pub radio_fit_floor_share: Option<f64>,
+    /// Each candidate floor: (share, floor in nats per radio heard, mean error of the steady
+    /// held-out epochs replayed as shipped with it, m, floor penalty included).
+    pub radio_fit_floor_mean_error_m: Vec<(f64, f64, f64)>,
     /// Held-out scans on the map the floor was chosen from.
     pub radio_fit_scans: usize,
     /// Sites surveyed for the leave-one-walk-out (one per survey walk).
