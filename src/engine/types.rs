@@ -255,14 +255,14 @@ impl ScanTiming {
     }
 }
 
-/// Scan likelihoods shared by the engines an evaluation runs on one site and its copies: the survey's
-/// calibration replays each held-out walk at every γ and motion mask (`waymark-survey`,
-/// `calibrate`), and ln p(o | s) of a scan (Hoang eqs. 9-10) depends on the site and the
-/// resolved scan only, so the engines of one site compute it once per scan and copy it
-/// thereafter (`docs/tuning.md#evaluation-speed`). Not for apps: an app runs one engine per
-/// site, which never sees a scan twice. Hand it to engines with
-/// [`Engine::share_emissions`]; it holds every distinct scan's likelihoods (8 bytes per
-/// state each) until dropped.
+/// Scan likelihoods shared by the engines an evaluation runs on one site and its copies: the
+/// survey's calibration replays each held-out walk at every γ and motion mask
+/// (`waymark-survey`, `calibrate`), and ln p(o | s) of a scan (Hoang eqs. 9-10) depends on the
+/// radio map and the resolved scan only, so the engines of one map compute it once per scan
+/// and copy it thereafter (`docs/tuning.md#evaluation-speed`). Not for apps: an app runs one
+/// engine per site, which never sees a scan twice. Hand it to engines with
+/// [`Engine::share_emissions`]; it holds every distinct scan's likelihoods (8 bytes per state
+/// each) until dropped.
 #[doc(hidden)]
 #[derive(Debug)]
 pub struct SharedEmissions {
