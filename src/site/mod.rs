@@ -510,7 +510,7 @@ pub struct Site {
 
 /// The walking-distance tables of a site, per radius: the whole graph's and the surveyed
 /// map's ([`ReachTable::build_surveyed`]).
-type ReachTables = (Arc<ReachTable>, Option<Arc<ReachTable>>);
+pub type ReachTables = (Arc<ReachTable>, Option<Arc<ReachTable>>);
 
 /// [`Site::reach_tables`]'s memory: the tables of the latest few radii asked for, shared by
 /// every engine on the site, since building them is costly (docs/tuning.md#unsurveyed-states).
@@ -593,6 +593,27 @@ impl Site {
             Arc::new(ReachTable::build(self, radius_m)),
             ReachTable::build_surveyed(self, radius_m).map(Arc::new),
         );
+        if cache.len() >= REACH_CACHE_RADII {
+            cache.remove(0);
+        }
+        cache.push((key, tables.clone()));
+        tables
+    }
+
+    /// [`reach_tables`](Self::reach_tables), taking every row it can from `base`'s tables at
+    /// the same radius: `base` is a site surveyed over the same grid, such as the site of every
+    /// survey walk for a site surveyed without one of them, which differs from it only around
+    /// that walk's path. The tables are the same, entry for entry, as those built from scratch
+    /// (docs/tuning.md#evaluation-speed).
+    pub fn reach_tables_from(&self, base: &Site, radius_m: f64) -> ReachTables {
+        let theirs = base.reach_tables(radius_m);
+        let key = radius_m.to_bits();
+        let mut cache = self.reach_tables.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
+        if let Some((_, tables)) = cache.iter().find(|(k, _)| *k == key) {
+            return tables.clone();
+        }
+        let (whole, surveyed) = ReachTable::build_both_reusing(self, radius_m, base, &theirs);
+        let tables = (Arc::new(whole), surveyed.map(Arc::new));
         if cache.len() >= REACH_CACHE_RADII {
             cache.remove(0);
         }

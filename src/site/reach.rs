@@ -4,7 +4,7 @@
 
 use super::{Neighbours, Site, StateKind};
 use std::cmp::Ordering;
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, HashMap};
 
 /// For each state, the states within `radius_m` walking distance, and its graph neighbours at
 /// any distance.
@@ -18,7 +18,7 @@ use std::collections::BinaryHeap;
 /// 16 bits on a site of at most 65 536 states, and the distance as an index into the table's
 /// distinct distances when it has at most 256 of them (a grid's few edge lengths make few
 /// sums within the radius); both exact (docs/tuning.md#engine-speed).
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct ReachTable {
     radius_m: f64,
     /// Index where state `i`'s entries begin (32 bits: see [`entry_index`]).
@@ -30,7 +30,7 @@ pub struct ReachTable {
 }
 
 /// The entries' states.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 enum Targets {
     /// On a site of at most 65 536 states.
     Narrow(Vec<u16>),
@@ -38,7 +38,7 @@ enum Targets {
 }
 
 /// The entries' walking distances, m.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 enum Distances {
     /// Indices into `values`, the distinct distances in increasing order, so that the codes of
     /// a distance-sorted run increase too.
@@ -212,7 +212,7 @@ fn entry_index(index: usize) -> u32 {
 impl ReachTable {
     /// Runs a Dijkstra bounded at `radius_m` from every state.
     pub fn build(site: &Site, radius_m: f64) -> Self {
-        Self::build_over(site, radius_m, false)
+        Self::build_over(site, radius_m, false, None)
     }
 
     /// The table of the surveyed map alone, when the site has
@@ -224,10 +224,32 @@ impl ReachTable {
         site.states()
             .iter()
             .any(|s| s.kind == StateKind::Unsurveyed)
-            .then(|| Self::build_over(site, radius_m, true))
+            .then(|| Self::build_over(site, radius_m, true, None))
     }
 
-    fn build_over(site: &Site, radius_m: f64, surveyed_only: bool) -> Self {
+    /// [`build`](Self::build) and [`build_surveyed`](Self::build_surveyed) of `site`, taking
+    /// each row it can from `base`'s tables of `base_site` at the same radius instead of
+    /// running its Dijkstra: the same tables, entry for entry ([`Reuse`]).
+    pub(super) fn build_both_reusing(
+        site: &Site,
+        radius_m: f64,
+        base_site: &Site,
+        base: &super::ReachTables,
+    ) -> (Self, Option<Self>) {
+        let matched = Match::new(site, base_site);
+        fn reuse<'a>(table: Option<&'a ReachTable>, radius_m: f64, matched: &'a Match) -> Option<Reuse<'a>> {
+            let base = table.filter(|t| t.radius_m == radius_m)?;
+            Some(Reuse { base, matched })
+        }
+        let whole = Self::build_over(site, radius_m, false, reuse(Some(&base.0), radius_m, &matched));
+        let surveyed =
+            site.states().iter().any(|s| s.kind == StateKind::Unsurveyed).then(|| {
+                Self::build_over(site, radius_m, true, reuse(base.1.as_deref(), radius_m, &matched))
+            });
+        (whole, surveyed)
+    }
+
+    fn build_over(site: &Site, radius_m: f64, surveyed_only: bool, reuse: Option<Reuse>) -> Self {
         let n = site.states().len();
         let mut starts = Vec::with_capacity(n + 1);
         let mut sorted_from = Vec::with_capacity(n);
@@ -242,6 +264,14 @@ impl ReachTable {
         let unsurveyed: Vec<bool> = site.states().iter().map(|s| s.kind == StateKind::Unsurveyed).collect();
         for source in 0..n {
             starts.push(entry_index(targets.len()));
+            if let Some(row) = reuse.as_ref().and_then(|r| r.row(source)) {
+                sorted_from.push(starts[source] + entry_index(row.near));
+                for (j, d) in row.entries {
+                    targets.push(j);
+                    distances.push(d, &mut code_of);
+                }
+                continue;
+            }
             entries.clear();
             let neighbours = |u: usize| {
                 if surveyed_only && unsurveyed[u] {
@@ -360,6 +390,95 @@ impl ReachTable {
     }
 }
 
+/// How the states of a site correspond to those of a base site over the same grid (a site
+/// the survey built without some of its walks, and the site of them all), for
+/// [`ReachTable::build_both_reusing`].
+struct Match {
+    /// Per base state: its state in the site (`u32::MAX`: none).
+    from_base: Vec<u32>,
+    /// Per base state: whether the site has it with the same kind and the same edges, in the
+    /// same order, to the same states.
+    unchanged: Vec<bool>,
+    /// Per state of the site: its base state (`u32::MAX`: none).
+    to_base: Vec<u32>,
+}
+
+impl Match {
+    fn new(site: &Site, base: &Site) -> Self {
+        let key = |s: &super::State| (s.floor, s.position.x.to_bits(), s.position.y.to_bits());
+        let index: HashMap<_, u32> =
+            base.states().iter().enumerate().map(|(i, s)| (key(s), i as u32)).collect();
+        let to_base: Vec<u32> =
+            site.states().iter().map(|s| index.get(&key(s)).copied().unwrap_or(u32::MAX)).collect();
+        let mut from_base = vec![u32::MAX; base.states().len()];
+        let mut unchanged = vec![false; base.states().len()];
+        for (i, &b) in to_base.iter().enumerate() {
+            if b == u32::MAX {
+                continue;
+            }
+            from_base[b as usize] = i as u32;
+            let mine = site.neighbours(i).map(|(j, length)| (to_base[j as usize], length.to_bits()));
+            let theirs = base.neighbours(b as usize).map(|(j, length)| (j, length.to_bits()));
+            unchanged[b as usize] =
+                site.states()[i].kind == base.states()[b as usize].kind && mine.eq(theirs);
+        }
+        // Whether a step may be taken depends on the kinds at both ends (`build_over`'s
+        // `blocked` and `skip`): a state beside one that changed kind is changed too.
+        let kept = unchanged.clone();
+        for (b, same) in unchanged.iter_mut().enumerate() {
+            *same = *same
+                && base.neighbours(b).all(|(j, _)| {
+                    kept[j as usize]
+                        || from_base[j as usize] != u32::MAX
+                            && site.states()[from_base[j as usize] as usize].kind
+                                == base.states()[j as usize].kind
+                });
+        }
+        // The rows taken keep the base's order only if the site numbers the unchanged states
+        // in the base's order: otherwise take none.
+        let mut order = to_base.iter().filter(|&&b| b != u32::MAX && unchanged[b as usize]);
+        let mut last = None;
+        if !order.all(|&b| last.replace(b) < Some(b)) {
+            unchanged.fill(false);
+        }
+        Match { from_base, unchanged, to_base }
+    }
+}
+
+/// A base table to take rows from. A state's row is the base row of its base state when that
+/// state and every state in its row are unchanged ([`Match`]): a path within the radius then
+/// runs through unchanged states only, each with the same edges, so the Dijkstra finds the
+/// same states at the same distances, and the site orders the unchanged states of a row as the
+/// base does (the survey numbers states floor by floor, surveyed then unsurveyed, each in cell
+/// order), so the entries come in the same order.
+struct Reuse<'a> {
+    base: &'a ReachTable,
+    matched: &'a Match,
+}
+
+/// A row taken from the base table: its entries in the site's states, and how many of them
+/// come before the distance-sorted part.
+struct Row<I> {
+    entries: I,
+    near: usize,
+}
+
+impl Reuse<'_> {
+    fn row(&self, source: usize) -> Option<Row<impl Iterator<Item = (u32, f32)> + '_>> {
+        let m = self.matched;
+        let b = *m.to_base.get(source)?;
+        if b == u32::MAX {
+            return None;
+        }
+        let reach = self.base.reachable(b as usize, self.base.radius_m);
+        if !reach.iter().all(|(j, _)| m.unchanged[j as usize]) {
+            return None;
+        }
+        let near = self.base.near_count(b as usize);
+        Some(Row { entries: reach.iter().map(|(j, d)| (m.from_base[j as usize], d)), near })
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -394,6 +513,63 @@ mod tests {
         // A neighbour beyond the radius is still reachable (its edge is 7 m).
         assert_eq!(table.reachable(3, 1.0).iter().collect::<Vec<_>>(), [(3, 0.0), (2, 2.0), (4, 7.0)]);
         assert!(ReachTable::build_surveyed(&site, 5.0).is_none(), "no unsurveyed states");
+    }
+
+    /// A 14 x 10 grid of 1 m cells, 8-connected but through a wall between x = 4 and 5 for
+    /// y < 8: `kind` says which cells are surveyed (`Some(true)`), unsurveyed or absent. States
+    /// come floor by floor, surveyed then unsurveyed, each in cell order, as the survey numbers
+    /// them; edges in cell order.
+    fn grid_site(kind: impl Fn(i32, i32) -> Option<bool>) -> Site {
+        let mut b = SiteBuilder::new("grid");
+        let f = b.floor("G", 0.0);
+        let cells: Vec<(i32, i32)> = (0..10).flat_map(|y| (0..14).map(move |x| (x, y))).collect();
+        let mut id = std::collections::BTreeMap::new();
+        for surveyed in [true, false] {
+            for &(x, y) in cells.iter().filter(|&&(x, y)| kind(x, y) == Some(surveyed)) {
+                let at = Point2::new(f64::from(x), f64::from(y));
+                let state = if surveyed { b.fitted_state(f, at, 1) } else { b.unsurveyed_state(f, at) };
+                id.insert((x, y), state);
+            }
+        }
+        for &(x, y) in &cells {
+            for (dx, dy) in [(1, 0), (-1, 1), (0, 1), (1, 1)] {
+                let wall = y < 8 && (x.min(x + dx), x.max(x + dx)) == (4, 5);
+                if let (Some(&a), Some(&c), false) = (id.get(&(x, y)), id.get(&(x + dx, y + dy)), wall) {
+                    b.edge(a, c, None);
+                }
+            }
+        }
+        b.build(Default::default()).unwrap()
+    }
+
+    #[test]
+    fn tables_built_from_a_base_sites_rows_are_those_built_from_scratch() {
+        // Unsurveyed beyond x = 9 and above y = 7, where the way around the wall is.
+        let base = grid_site(|x, y| Some(x < 10 && y < 8));
+        // Without a patch of cells, and another patch no longer surveyed.
+        let site = grid_site(|x, y| {
+            let hole = (11..=13).contains(&x) && (1..=3).contains(&y);
+            // And (5, 7), beside the way around the wall: a path from a surveyed state west of
+            // the wall, which may not leave unsurveyed space for a surveyed state, may now
+            // enter it.
+            let lost = ((6..=8).contains(&x) && y <= 2) || (x, y) == (5, 7);
+            (!hole).then_some(x < 10 && y < 8 && !lost)
+        });
+        for radius in [3.0, 5.0] {
+            let (whole, surveyed) =
+                ReachTable::build_both_reusing(&site, radius, &base, &base.reach_tables(radius));
+            assert_eq!(whole, ReachTable::build(&site, radius));
+            assert_eq!(surveyed, ReachTable::build_surveyed(&site, radius));
+            // Some rows were taken from the base, not all.
+            let matched = Match::new(&site, &base);
+            let table = base.reach_tables(radius).0;
+            let reuse = Reuse { base: &table, matched: &matched };
+            let taken = (0..site.states().len()).filter(|&i| reuse.row(i).is_some()).count();
+            assert!(taken > 0 && taken < site.states().len(), "{taken}");
+        }
+        // Through the site's cache, and from the site itself.
+        assert_eq!(*site.reach_tables_from(&base, 5.0).0, ReachTable::build(&site, 5.0));
+        assert_eq!(*base.reach_tables_from(&base, 5.0).0, ReachTable::build(&base, 5.0));
     }
 
     /// A corridor with 400 different edge lengths has more than 256 distinct walking

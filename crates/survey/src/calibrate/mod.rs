@@ -191,6 +191,14 @@ fn parallel_map_in<T: Sync, R: Send>(
     done.into_iter().map(|(_, r)| r).collect()
 }
 
+/// Builds a held-out site's walking-distance tables at the calibration engine's radius from
+/// those of `whole`, the site of every walk, which it differs from only around the walk left
+/// out: the same tables, at a fraction of the cost of building each from scratch
+/// (`docs/tuning.md#evaluation-speed`).
+fn held_out_reach(site: &Site, whole: &Site, options: &CalibrationOptions) {
+    site.reach_tables_from(whole, options.calibration_engine().reach_radius_m);
+}
+
 /// Steps of the survey's calibration, for progress: one per survey walk (each is held out
 /// once) and one per fold and radius of the fingerprint radius's cross-validation: at most,
 /// since its search usually stops after three or four radii (the bar then ends early).
@@ -289,6 +297,9 @@ pub fn survey_calibrated(
     let prepared = PreparedSurvey::new("eval", &inputs, north, &survey_options)?;
     let full = prepared.fit(&|_, _| true, None, options.threads);
     let (site, survey) = prepared.assemble(&full)?;
+    // The site of every walk, whose walking-distance tables each held-out site takes its rows
+    // from (`held_out_reach`).
+    let whole = site.clone();
     // Every survey walk held out once, replayed at each γ with the motion as the sensors give
     // it and with the motion withheld.
     // Each picks the γ of its scenario; all four fit the radius factors of every scenario.
@@ -308,6 +319,7 @@ pub fn survey_calibrated(
         let fits = prepared.fit(&keep, Some(&full), 1);
         let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
         let result = site.map(|site| {
+            held_out_reach(&site, &whole, options);
             let site = Arc::new(site);
             // The scan likelihoods of this walk on this site, computed by its first replay.
             let shared = SharedEmissions::new(&site);
@@ -512,6 +524,7 @@ pub fn survey_calibrated(
             let fits = prepared.fit(&keep, Some(&full), 1);
             let site = prepared.assemble(&fits).ok().map(|(s, _)| s);
             let tags = site.and_then(|site| {
+                held_out_reach(&site, &whole, options);
                 let trace = &floors[f].survey[w];
                 let mapped = OnMap::new(&site, f);
                 // Its copies share its radio map, so their engines share the scan likelihoods.
