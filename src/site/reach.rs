@@ -397,7 +397,8 @@ struct Match {
     /// Per base state: its state in the site (`u32::MAX`: none).
     from_base: Vec<u32>,
     /// Per base state: whether the site has it with the same kind and the same edges, in the
-    /// same order, to the same states.
+    /// same order, to the same states, each of the same kind; all false when the site does
+    /// not number these states in the base's order.
     unchanged: Vec<bool>,
     /// Per state of the site: its base state (`u32::MAX`: none).
     to_base: Vec<u32>,
