@@ -582,22 +582,10 @@ impl Site {
 
     /// The walking-distance tables within `radius_m`: the whole graph's and, when the site has
     /// [`StateKind::Unsurveyed`] states, the surveyed map's. Built once per radius and shared.
-    pub fn reach_tables(&self, radius_m: f64) -> (Arc<ReachTable>, Option<Arc<ReachTable>>) {
-        let key = radius_m.to_bits();
-        // A panic while building leaves the cache as it was: recover it.
-        let mut cache = self.reach_tables.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
-        if let Some((_, tables)) = cache.iter().find(|(k, _)| *k == key) {
-            return tables.clone();
-        }
-        let tables = (
-            Arc::new(ReachTable::build(self, radius_m)),
-            ReachTable::build_surveyed(self, radius_m).map(Arc::new),
-        );
-        if cache.len() >= REACH_CACHE_RADII {
-            cache.remove(0);
-        }
-        cache.push((key, tables.clone()));
-        tables
+    pub fn reach_tables(&self, radius_m: f64) -> ReachTables {
+        self.cached_reach_tables(radius_m, || {
+            (ReachTable::build(self, radius_m), ReachTable::build_surveyed(self, radius_m))
+        })
     }
 
     /// [`reach_tables`](Self::reach_tables), taking every row it can from `base`'s tables at
@@ -606,13 +594,24 @@ impl Site {
     /// that walk's path. The tables are the same, entry for entry, as those built from scratch
     /// (docs/tuning.md#evaluation-speed).
     pub fn reach_tables_from(&self, base: &Site, radius_m: f64) -> ReachTables {
+        // Before this site's cache is locked: `base` may share it.
         let theirs = base.reach_tables(radius_m);
+        self.cached_reach_tables(radius_m, || ReachTable::build_both_reusing(self, radius_m, base, &theirs))
+    }
+
+    /// The cached tables of `radius_m`, or those `build` makes, cached.
+    fn cached_reach_tables(
+        &self,
+        radius_m: f64,
+        build: impl FnOnce() -> (ReachTable, Option<ReachTable>),
+    ) -> ReachTables {
         let key = radius_m.to_bits();
+        // A panic while building leaves the cache as it was: recover it.
         let mut cache = self.reach_tables.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if let Some((_, tables)) = cache.iter().find(|(k, _)| *k == key) {
             return tables.clone();
         }
-        let (whole, surveyed) = ReachTable::build_both_reusing(self, radius_m, base, &theirs);
+        let (whole, surveyed) = build();
         let tables = (Arc::new(whole), surveyed.map(Arc::new));
         if cache.len() >= REACH_CACHE_RADII {
             cache.remove(0);

@@ -297,9 +297,8 @@ pub fn survey_calibrated(
     let prepared = PreparedSurvey::new("eval", &inputs, north, &survey_options)?;
     let full = prepared.fit(&|_, _| true, None, options.threads);
     let (site, survey) = prepared.assemble(&full)?;
-    // The site of every walk, whose walking-distance tables each held-out site takes its rows
-    // from (`held_out_reach`).
-    let whole = site.clone();
+    // The site of every walk: each held-out site takes its walking-distance rows from it.
+    let whole = &site;
     // Every survey walk held out once, replayed at each γ with the motion as the sensors give
     // it and with the motion withheld.
     // Each picks the γ of its scenario; all four fit the radius factors of every scenario.
@@ -319,7 +318,7 @@ pub fn survey_calibrated(
         let fits = prepared.fit(&keep, Some(&full), 1);
         let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
         let result = site.map(|site| {
-            held_out_reach(&site, &whole, options);
+            held_out_reach(&site, whole, options);
             let site = Arc::new(site);
             // The scan likelihoods of this walk on this site, computed by its first replay.
             let shared = SharedEmissions::new(&site);
@@ -524,7 +523,7 @@ pub fn survey_calibrated(
             let fits = prepared.fit(&keep, Some(&full), 1);
             let site = prepared.assemble(&fits).ok().map(|(s, _)| s);
             let tags = site.and_then(|site| {
-                held_out_reach(&site, &whole, options);
+                held_out_reach(&site, whole, options);
                 let trace = &floors[f].survey[w];
                 let mapped = OnMap::new(&site, f);
                 // Its copies share its radio map, so their engines share the scan likelihoods.
