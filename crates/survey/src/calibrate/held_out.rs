@@ -131,13 +131,17 @@ impl OnMap {
     }
 }
 
-/// The radius factors (68%, 95%) that make `points`' radii hold their truth at those shares:
-/// the 68th percentile of (error − `beyond_radio_m`) ÷ the posterior's 68% radius, and the 95th
-/// of the same over its 95% radius. `beyond_radio_m` is taken off first because the engine
+/// The radius factors (68%, 95%) that make the radii hold their truth at those shares: the
+/// 68th percentile of (error − `beyond_radio_m`) ÷ the posterior's 68% radius over the epochs
+/// `on_map`, and the 95th of the same over its 95% radius over `every` epoch, on the map and
+/// beyond it. A walk left out is off its map far more often than a walker on a surveyed site,
+/// so the typical epoch is measured on the map; the 95% radius is about the tail, which is
+/// where the engine is lost, so it counts the epochs off the map too
+/// (`docs/tuning.md#radius-factors`). `beyond_radio_m` is taken off first because the engine
 /// adds it after the factor (`Engine::locate`). `None` without points or with a factor that is
 /// not finite and positive.
-pub(super) fn radius_factors(points: &[&Tag]) -> Option<[f64; 2]> {
-    let ratio = |q: f64, radius: fn(&Tag) -> f64| {
+pub(super) fn radius_factors(on_map: &[&Tag], every: &[&Tag]) -> Option<[f64; 2]> {
+    let ratio = |points: &[&Tag], q: f64, radius: fn(&Tag) -> f64| {
         let mut r: Vec<f64> = points
             .iter()
             .map(|t| (t.scored.error_m - t.beyond_radio_m) / (radius(t) - t.beyond_radio_m).max(1e-9))
@@ -145,7 +149,8 @@ pub(super) fn radius_factors(points: &[&Tag]) -> Option<[f64; 2]> {
         r.sort_by(f64::total_cmp);
         quantile(&r, q)
     };
-    let scale = [ratio(0.68, |t| t.scored.accuracy_m), ratio(0.95, |t| t.scored.accuracy_95_m)];
+    let scale =
+        [ratio(on_map, 0.68, |t| t.scored.accuracy_m), ratio(every, 0.95, |t| t.scored.accuracy_95_m)];
     scale.iter().all(|s| s.is_finite() && *s > 0.0).then_some(scale)
 }
 
@@ -231,11 +236,27 @@ mod tests {
     fn fitted_factors_hold_their_shares_with_the_walked_distance_added_after() {
         let tags: Vec<Tag> = (0..100).map(|k| tag(f64::from(k) * 0.1, 2.0, f64::from(k % 3))).collect();
         let points: Vec<&Tag> = tags.iter().collect();
-        let scale = radius_factors(&points).unwrap();
+        let scale = radius_factors(&points, &points).unwrap();
         let calibration = Calibration { accuracy_scale: Some(scale), ..Calibration::default() };
         let held = |k: usize| tags.iter().filter(|t| t.holds(&calibration)[k]).count();
         assert!((68..=70).contains(&held(0)), "{scale:?} {}", held(0));
         assert!((95..=97).contains(&held(1)), "{scale:?} {}", held(1));
+    }
+
+    /// The 68% factor is measured on the map alone and the 95% factor over every epoch: the
+    /// walks' epochs beyond the map widen the 95% radius and leave the 68% one as it was.
+    #[test]
+    fn the_95_percent_factor_counts_the_epochs_off_the_map() {
+        let on: Vec<Tag> = (0..100).map(|k| tag(f64::from(k) * 0.1, 2.0, 0.0)).collect();
+        let off: Vec<Tag> = (0..20).map(|_| Tag { beyond_map_m: 5.0, ..tag(40.0, 2.0, 0.0) }).collect();
+        let on_map: Vec<&Tag> = on.iter().collect();
+        let every: Vec<&Tag> = on.iter().chain(&off).collect();
+        let alone = radius_factors(&on_map, &on_map).unwrap();
+        let [f68, f95] = radius_factors(&on_map, &every).unwrap();
+        assert_eq!(f68, alone[0]);
+        // The 114th of 120 ratios is one of the 20 off the map: 40 m over a 4 m 95% radius.
+        assert_eq!(f95, 10.0);
+        assert!(alone[1] < 2.5, "{alone:?}");
     }
 
     /// Each band's share is its right epochs with two pseudo-epochs at its lower edge, and

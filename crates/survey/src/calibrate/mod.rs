@@ -406,6 +406,8 @@ pub fn survey_calibrated(
     // Per floor.
     let mut weights = Vec::with_capacity(floors.len());
     let mut by_scenario: [Vec<&Tag>; 4] = Default::default();
+    // The same with the epochs off the map, for the 95% factors.
+    let mut every_by_scenario: [Vec<&Tag>; 4] = Default::default();
     let mut off_map: Vec<&Tag> = Vec::new();
     let mut fits_on_map: Vec<f64> = Vec::new();
     for (f, floor) in floors.iter().enumerate() {
@@ -442,6 +444,7 @@ pub fn survey_calibrated(
             for walk in &mine_tagged {
                 for (m, run) in walk[chosen].iter().take(THROTTLED).enumerate() {
                     for t in run.iter().filter(|t| t.scenario == scenario) {
+                        every_by_scenario[scenario.index()].push(t);
                         if t.beyond_map_m > 0.0 {
                             if m == 0 {
                                 report.epochs_off_map += 1;
@@ -480,9 +483,9 @@ pub fn survey_calibrated(
     // scenarios the engine as shipped positions enough epochs in get theirs from its own
     // replays below.
     for scenario in MdiScenario::ALL {
-        let points = &by_scenario[scenario.index()];
+        let (points, every) = (&by_scenario[scenario.index()], &every_by_scenario[scenario.index()]);
         report.scenario_epochs[scenario.index()] = points.len();
-        let scale = if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points) } else { None };
+        let scale = if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points, every) } else { None };
         calibration.accuracy_scale_by_scenario.set(scenario, scale);
     }
     // Sparse scans: their own γ when it beats the site-wide one on the throttled replays by
@@ -578,25 +581,30 @@ pub fn survey_calibrated(
     }
     let tags: Vec<&Tag> = shipped.iter().flat_map(|s| &s.0).collect();
     let on: Vec<&Tag> = tags.iter().copied().filter(|t| t.beyond_map_m == 0.0).collect();
-    calibration.accuracy_scale = radius_factors(&on);
+    calibration.accuracy_scale = radius_factors(&on, &tags);
     report.epochs = on.len();
     for scenario in MdiScenario::ALL {
         let points: Vec<&Tag> = on.iter().copied().filter(|t| t.scenario == scenario).collect();
         if points.len() >= MIN_SCENARIO_EPOCHS {
+            let every: Vec<&Tag> = tags.iter().copied().filter(|t| t.scenario == scenario).collect();
             report.scenario_epochs[scenario.index()] = points.len();
-            calibration.accuracy_scale_by_scenario.set(scenario, radius_factors(&points));
+            calibration.accuracy_scale_by_scenario.set(scenario, radius_factors(&points, &every));
         }
     }
-    let mut by_band: [Vec<&Tag>; SPARSE_BANDS] = Default::default();
+    // Per band: (on the map, every epoch).
+    let mut by_band: [(Vec<&Tag>, Vec<&Tag>); SPARSE_BANDS] = Default::default();
     for t in shipped.iter().flat_map(|s| &s.1) {
-        if let (Some(band), true) = (t.band, t.beyond_map_m == 0.0) {
-            by_band[band].push(t);
+        if let Some(band) = t.band {
+            if t.beyond_map_m == 0.0 {
+                by_band[band].0.push(t);
+            }
+            by_band[band].1.push(t);
         }
     }
-    for (band, points) in by_band.iter().enumerate() {
+    for (band, (points, every)) in by_band.iter().enumerate() {
         report.sparse_scans.epochs_by_since[band] = points.len();
         calibration.sparse_scans.accuracy_scale_by_since[band] =
-            if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points) } else { None };
+            if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points, every) } else { None };
     }
     // The floor probability, on a site of several floors: how often the floor was right per
     // band of the posterior's mass on it, over the held-out epochs on the map of both replays,
