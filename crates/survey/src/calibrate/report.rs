@@ -149,12 +149,13 @@ pub struct CalibrationReport {
     pub rssi_weight_by_scenario: waymark::site::PerScenario<f64>,
     /// Per floor, in site order: the γ each floor gets.
     pub floors: Vec<FloorCalibrationReport>,
-    /// The radius factors chosen (68%, 95%), over the held-out epochs on the map (`OnMap`)
-    /// replayed with the engine as shipped (every calibrated value but the factors, the motion
-    /// as the sensors give it): the fallback for a scenario without its own.
+    /// The radius factors chosen (68%, 95%), over the held-out walks replayed with the engine
+    /// as shipped (every calibrated value but the factors, the motion as the sensors give it):
+    /// the 68% over their epochs on the map (`OnMap`), the 95% over all of them
+    /// (`docs/tuning.md#radius-factors`). The fallback for a scenario without its own.
     pub accuracy_scale: Option<[f64; 2]>,
-    /// The factors per motion scenario, over the held-out epochs on the map the engine
-    /// positioned in that scenario: from the replays with the engine as shipped when they have
+    /// The factors per motion scenario, over the held-out epochs the engine positioned in that
+    /// scenario (the 68% over those on the map, as above): from the replays with the engine as shipped when they have
     /// at least [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) in it, else from the
     /// calibration's replays with the motion as the sensors give it, withheld, distance only
     /// and heading only, at each floor's γ; a scenario with fewer than that in both has none.
@@ -162,10 +163,10 @@ pub struct CalibrationReport {
     /// Those epochs per scenario ([`MdiScenario::ALL`](waymark::sensors::MdiScenario::ALL) order).
     pub scenario_epochs: [usize; 4],
     /// Held-out epochs on the map replayed with the engine as shipped: what
-    /// `accuracy_scale` was fitted on.
+    /// `accuracy_scale`'s 68% factor was fitted on.
     pub epochs: usize,
-    /// Held-out epochs left out of the radius factors: their truth was off the held-out
-    /// site's map (`OnMap`).
+    /// Held-out epochs left out of the 68% radius factors (the 95% ones count them): their
+    /// truth was off the held-out site's map (`OnMap`).
     pub epochs_off_map: usize,
     /// How the engine did on those epochs as shipped (every calibrated value, the radio fit
     /// floor included, radii with the chosen factors): what a walk that leaves the surveyed
