@@ -3,6 +3,7 @@
 //! reported accuracy radius held the truth, and room-level accuracy (El Gemayel et al. §II-B:
 //! the share of epochs whose most likely zone is the true one).
 
+use crate::scoring::quantile;
 use serde::Serialize;
 
 /// One scored epoch.
@@ -44,15 +45,6 @@ pub struct ErrorSummary {
     /// (El Gemayel et al. §II-B), over the epochs scored by zone; `None` when none was.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub zone_hit: Option<f64>,
-}
-
-/// The `q`-quantile (0..=1) of sorted values, nearest rank.
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = (q * sorted.len() as f64).ceil().max(1.0) as usize;
-    sorted[rank.min(sorted.len()) - 1]
 }
 
 impl ErrorSummary {
