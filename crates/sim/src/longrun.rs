@@ -272,12 +272,8 @@ fn radio_scan(scan: &Scan) -> ffi::RadioScan {
 
 /// Nearest-rank quantile of unsorted values (sorts them).
 fn quantile(values: &mut [f64], q: f64) -> f64 {
-    if values.is_empty() {
-        return f64::NAN;
-    }
     values.sort_by(f64::total_cmp);
-    let rank = (q * values.len() as f64).ceil().max(1.0) as usize;
-    values[rank.min(values.len()) - 1]
+    waymark_survey::scoring::quantile(values, q)
 }
 
 /// Runs the long session; `progress` sees each interval as it completes.

@@ -57,6 +57,7 @@ use waymark::site::{Site, PSEUDO_SPACING_M};
 use waymark::Engine;
 use waymark::EngineConfig;
 use waymark::Error;
+use waymark_survey::scoring::quantile;
 
 use super::longrun::{BATCH_SAMPLES, SCAN_INTERVAL_NS};
 
@@ -527,15 +528,6 @@ fn run_result(
         error_at_recovery_m: None,
         filter_restarts: disturbed.restarts,
     }
-}
-
-/// Nearest-rank quantile of sorted values.
-fn quantile(sorted: &[f64], q: f64) -> f64 {
-    if sorted.is_empty() {
-        return f64::NAN;
-    }
-    let rank = (q * sorted.len() as f64).ceil().max(1.0) as usize;
-    sorted[rank.min(sorted.len()) - 1]
 }
 
 fn distribution(epochs: &[Option<usize>], after_epochs: usize) -> RecoveryDistribution {

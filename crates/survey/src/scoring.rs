@@ -80,8 +80,9 @@ impl Scored {
     }
 }
 
-/// Nearest-rank quantile of sorted values.
-pub(crate) fn quantile(sorted: &[f64], q: f64) -> f64 {
+/// Nearest-rank quantile of sorted values: the smallest value with at least a share `q` of
+/// them at or below it; NaN without values.
+pub fn quantile(sorted: &[f64], q: f64) -> f64 {
     if sorted.is_empty() {
         return f64::NAN;
     }
