@@ -191,9 +191,10 @@ fn parallel_map_in<T: Sync, R: Send>(
     done.into_iter().map(|(_, r)| r).collect()
 }
 
-/// Builds a held-out site's walking-distance tables at the calibration engine's radius from
-/// those of `whole`, the site of every walk, which it differs from only around the walk left
-/// out: the same tables, at a fraction of the cost of building each from scratch
+/// Builds a held-out site's walking-distance tables at the calibration engine's radius into
+/// the site's cache, where its engines find them, taking the rows it can from those of
+/// `whole`, the site of every walk, which it differs from only around the walk left out: the
+/// same tables, at a fraction of the cost of building each from scratch
 /// (`docs/tuning.md#evaluation-speed`).
 fn held_out_reach(site: &Site, whole: &Site, options: &CalibrationOptions) {
     site.reach_tables_from(whole, options.calibration_engine().reach_radius_m);
