@@ -65,6 +65,19 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     let floor = &calibration.floors[0];
     assert_eq!(floor.gamma.len(), calibrate::GAMMA_GRID.len());
     assert_eq!(floor.gamma.iter().map(|p| p.walks_preferring).sum::<usize>(), floor.walks);
+    // γ again on the walks the others cover end to end, replayed as shipped at every γ: their
+    // least where they have enough epochs, else the first curve's.
+    let least = |curve: &[(f64, f64)]| curve.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map(|p| p.0);
+    let searched = least(&calibration.gamma_mean_error_m).unwrap();
+    let covered = &calibration.gamma_covered_mean_error_m;
+    assert!(calibration.covered_walks <= 12 && (calibration.covered_walks == 0) == covered.is_empty());
+    let full_grid = covered.iter().map(|p| p.0).eq(calibrate::GAMMA_GRID);
+    assert!(covered.is_empty() || full_grid, "{covered:?}");
+    if calibration.covered_epochs >= calibrate::MIN_SCENARIO_EPOCHS {
+        assert_eq!(Some(gamma), least(covered));
+    } else {
+        assert_eq!(gamma, searched, "{calibration:?}");
+    }
     // One floor: its best γ is the site-wide one, so it records none of its own.
     assert_eq!(floor.best_rssi_weight, Some(gamma));
     let floor_gamma = floor.rssi_weight;
@@ -124,11 +137,12 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     let unanchored = site.clone().with_anchor(None).unwrap();
     assert!(calibrate::coverage_geojson(&unanchored, &calibration).is_none());
 
-    // Sparse scans: the held-out walks replayed throttled at every γ, their own γ only when it
-    // beats the site-wide one beyond its standard error, and a band's radius factors where it
-    // has enough epochs on the map.
+    // Sparse scans: the covered walks replayed throttled at the same γ, their own γ only when
+    // it beats the site-wide one beyond its standard error, and a band's radius factors where
+    // it has enough epochs on the map.
     let sparse = &calibration.sparse_scans;
-    assert_eq!(sparse.gamma.len(), calibrate::GAMMA_GRID.len(), "{sparse:?}");
+    let tried: Vec<f64> = covered.iter().map(|p| p.0).collect();
+    assert_eq!(sparse.gamma.iter().map(|p| p.gamma).collect::<Vec<_>>(), tried, "{sparse:?}");
     assert!(sparse.epochs_by_since.iter().sum::<usize>() > 0, "{sparse:?}");
     for (band, &n) in sparse.epochs_by_since.iter().enumerate() {
         let own = sparse.calibration.accuracy_scale_by_since[band];

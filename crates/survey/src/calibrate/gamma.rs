@@ -13,7 +13,8 @@ pub const GAMMA_GRID: [f64; 6] = [0.003, 0.01, 0.03, 0.1, 0.3, 1.0];
 /// posterior's mean averages across its modes (docs/tuning.md#mixture-components-m).
 pub const ESTIMATE_STATES_GRID: [usize; 5] = [1, 3, 10, 30, 100];
 
-/// The γ of least mean error per floor from each walk's held-out epochs, with the jackknife.
+/// The mean error at each γ of [`GAMMA_GRID`] that `walks` have epochs at (run `mask` of each
+/// walk's held-out epochs), with the jackknife, and the position in that curve of its least.
 pub(super) fn gamma_curve(walks: &[&HeldOut], mask: usize) -> (Vec<GammaPoint>, Option<usize>) {
     let sums: Vec<Vec<(f64, usize)>> = walks
         .iter()
@@ -55,7 +56,9 @@ pub(super) fn gamma_curve(walks: &[&HeldOut], mask: usize) -> (Vec<GammaPoint>, 
             points[k].1.walks_preferring += 1;
         }
     }
-    let best = points.iter().min_by(|a, b| a.1.mean_error_m.total_cmp(&b.1.mean_error_m)).map(|p| p.0);
+    let best = (points.iter().enumerate())
+        .min_by(|a, b| a.1 .1.mean_error_m.total_cmp(&b.1 .1.mean_error_m))
+        .map(|(k, _)| k);
     (points.into_iter().map(|p| p.1).collect(), best)
 }
 

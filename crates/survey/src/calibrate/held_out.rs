@@ -7,8 +7,8 @@ use waymark::sensors::MdiScenario;
 use waymark::site::{scaled_radii, Calibration, FloorReliability, StateKind, FLOOR_BANDS, FLOOR_MISS_BANDS};
 use waymark::{ScanTiming, Site};
 
-/// Per walk, per γ, per run of the calibration (`survey_calibrated`'s `masks`, then
-/// [`THROTTLED`]): the held-out epochs.
+/// Per walk, per γ, per run of the calibration (`survey_calibrated`'s `masks`; the as-shipped
+/// replays of `shipped` use the first two for steady and throttled scans): the held-out epochs.
 pub(super) type HeldOut = Vec<[Vec<Scored>; RUNS]>;
 
 /// One survey walk held out: its replays on the site surveyed without it.
@@ -27,13 +27,8 @@ pub(super) struct WalkHeldOut {
 /// Per run of the calibration: each held-out epoch (`Tag`).
 pub(super) type Tagged = [Vec<Tag>; RUNS];
 
-/// Runs of each held-out walk at each γ: the four motion masks, then the sensors' motion with
-/// throttled scans.
-pub(super) const RUNS: usize = 5;
-
-/// The run of the held-out walks with the scans throttled as Android 9+ throttles a foreground
-/// app ([`ANDROID_THROTTLE_NS`](crate::replay::ANDROID_THROTTLE_NS)).
-pub(super) const THROTTLED: usize = 4;
+/// Runs of each held-out walk at each γ: the four motion masks.
+pub(super) const RUNS: usize = 4;
 
 /// A held-out epoch, with what the calibration sorts it by.
 #[derive(Clone, Debug)]

@@ -8,6 +8,7 @@ mod gamma;
 mod held_out;
 mod radius;
 mod report;
+mod shipped;
 
 pub use floors::{parse_survey_fraction, survey_inputs, survey_subset, FloorData};
 pub use gamma::{ESTIMATE_STATES_GRID, GAMMA_GRID};
@@ -23,14 +24,13 @@ use crate::replay::{replay, MotionMask, ReplayOptions};
 use crate::scoring::{live_estimates, quantile, score, Scored};
 use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
 use gamma::{gamma_curve, own_gamma};
-use held_out::{
-    floor_reliability, radius_factors, tag, HeldOut, OnMap, Tag, Tagged, WalkHeldOut, RUNS, THROTTLED,
-};
+use held_out::{floor_reliability, radius_factors, tag, HeldOut, Tag, Tagged, WalkHeldOut, RUNS};
 use radius::calibrate_fingerprint_radius;
+use shipped::{covered_replays, CoveredGamma, HeldOutSite};
 use std::sync::Arc;
 use waymark::sensors::MdiScenario;
 use waymark::site::{Calibration, FloorReliability, North, Site, SparseScans, SPARSE_BANDS};
-use waymark::{Engine, EngineConfig, SharedEmissions};
+use waymark::{Engine, EngineConfig};
 
 /// Why a site could not be read or calibrated.
 #[derive(Debug, thiserror::Error)]
@@ -209,8 +209,9 @@ pub fn calibration_steps(floors: &[FloorData], options: &CalibrationOptions) -> 
     } else {
         0
     };
-    // The leave-one-walk-out pass, then the shipped engine's pass.
-    2 * floors.iter().map(|f| f.survey.len()).sum::<usize>() + radius
+    // The leave-one-walk-out pass, the walks it finds covered end to end again, then the
+    // shipped engine's pass.
+    3 * floors.iter().map(|f| f.survey.len()).sum::<usize>() + radius
 }
 
 /// Shares of the held-out scans on the map that a radio fit floor may call unexplained: the
@@ -315,16 +316,13 @@ pub fn survey_calibrated(
     let grid: &'static [usize] =
         if options.engine.estimate_states.is_none() { &ESTIMATE_STATES_GRID } else { &[] };
     let held_out: Vec<Option<WalkHeldOut>> = parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
-        let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
-        let fits = prepared.fit(&keep, Some(&full), 1);
-        let site = prepared.assemble(&fits).ok().and_then(|(s, _)| s.with_calibration(calibration).ok());
-        let result = site.map(|site| {
-            held_out_reach(&site, whole, options);
+        let held = HeldOutSite::build(&prepared, &full, whole, options, (f, w));
+        let site = held.as_ref().and_then(|h| h.site.clone().with_calibration(calibration).ok());
+        let result = held.zip(site).map(|(held, site)| {
             let site = Arc::new(site);
             // The scan likelihoods of this walk on this site, computed by its first replay.
-            let shared = SharedEmissions::new(&site);
+            let (shared, mapped) = (&held.shared, &held.mapped);
             let trace = &floors[f].survey[w];
-            let mapped = OnMap::new(&site, f);
             let mut tagged = Vec::with_capacity(GAMMA_GRID.len());
             // Per γ, per M of `grid`: the epochs of the first run.
             let mut by_m = Vec::with_capacity(GAMMA_GRID.len());
@@ -338,15 +336,12 @@ pub fn survey_calibrated(
                         let Ok(mut engine) = Engine::new(Arc::clone(&site), config) else {
                             return Vec::new();
                         };
-                        // Of this very site: cannot fail.
-                        let _ = engine.share_emissions(Arc::clone(&shared));
-                        let replay_options = match masks.get(run) {
-                            Some(&mask) => ReplayOptions {
-                                mask,
-                                estimate_states_grid: if run == 0 { grid } else { &[] },
-                                ..options.calibration_replay()
-                            },
-                            None => options.calibration_throttled_replay(),
+                        // Of a copy of this very site: cannot fail.
+                        let _ = engine.share_emissions(Arc::clone(shared));
+                        let replay_options = ReplayOptions {
+                            mask: masks[run],
+                            estimate_states_grid: if run == 0 { grid } else { &[] },
+                            ..options.calibration_replay()
                         };
                         let r = replay(&mut engine, trace, &replay_options);
                         if run == 0 {
@@ -354,7 +349,7 @@ pub fn survey_calibrated(
                                 .map(|p| score(trace, f, &live_estimates(p)).0)
                                 .collect();
                         }
-                        tag(trace, f, &mapped, &r.positions)
+                        tag(trace, f, mapped, &r.positions)
                     });
                     let plain = std::array::from_fn(|m| runs[m].iter().map(|t| t.scored).collect());
                     tagged.push(runs);
@@ -362,7 +357,7 @@ pub fn survey_calibrated(
                     plain
                 })
                 .collect();
-            WalkHeldOut { scored: per_gamma, refitted: fits.refitted(), tagged, by_m }
+            WalkHeldOut { scored: per_gamma, refitted: held.refitted, tagged, by_m }
         });
         progress();
         result
@@ -379,9 +374,12 @@ pub fn survey_calibrated(
         pooled_still.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
     calibration.rssi_weight = best.map(|k| pooled[k].gamma);
     calibration.rssi_weight_without_movement = best_still.map(|k| pooled_still[k].gamma);
-    // M: the grid's of least pooled held-out error at that γ.
-    if let Some(g) = best.and_then(|k| GAMMA_GRID.iter().position(|&x| x == pooled[k].gamma)) {
-        report.estimate_states_mean_error_m = (grid.iter().enumerate())
+    // M: the grid's of least pooled held-out error at a γ, and those errors.
+    let estimate_states_at = |gamma: Option<f64>| -> (Vec<(usize, f64)>, Option<u32>) {
+        let Some(g) = gamma.and_then(|gamma| GAMMA_GRID.iter().position(|&x| x == gamma)) else {
+            return (Vec::new(), None);
+        };
+        let curve: Vec<(usize, f64)> = (grid.iter().enumerate())
             .filter_map(|(k, &m)| {
                 let epochs =
                     held_out.iter().flatten().flat_map(|h| h.by_m.get(g).and_then(|by_m| by_m.get(k)));
@@ -391,11 +389,9 @@ pub fn survey_calibrated(
                 (n > 0).then(|| (m, total / n as f64))
             })
             .collect();
-        calibration.estimate_states = (report.estimate_states_mean_error_m.iter())
-            .min_by(|a, b| a.1.total_cmp(&b.1))
-            .map(|p| p.0 as u32);
-    }
-    report.estimate_states = calibration.estimate_states;
+        let least = curve.iter().min_by(|a, b| a.1.total_cmp(&b.1)).map(|p| p.0 as u32);
+        (curve, least)
+    };
     // Distance only and heading only: their own γ when it beats the γ without movement on
     // their own held-out curve by more than its standard error (`own_gamma`).
     for (mask, scenario) in [(2, MdiScenario::Distance), (3, MdiScenario::HeadingSpeed)] {
@@ -404,20 +400,79 @@ pub fn survey_calibrated(
         calibration.rssi_weight_by_scenario.set(scenario, own);
         report.gamma_by_scenario.set(scenario, Some(curve));
     }
+    let floor_walks = |f: usize| -> Vec<&HeldOut> {
+        (jobs.iter().zip(&held_out))
+            .filter(|((ff, _), _)| *ff == f)
+            .filter_map(|(_, h)| h.as_ref().map(|h| &h.scored))
+            .collect()
+    };
+    // Each floor's own γ without a movement likelihood, as the site-wide one.
+    let still: Vec<Option<f64>> = (0..floors.len())
+        .map(|f| {
+            let (curve, best) = gamma_curve(&floor_walks(f), 1);
+            own_gamma(&curve, best, calibration.rssi_weight_without_movement)
+        })
+        .collect();
+    // The radio fit floor's candidates: quantiles of the fits of the held-out scans on the
+    // map. A scan's fit is the map's, before γ weighs it, so any γ's replays give the same.
+    let mut fits_on_map: Vec<f64> = (held_out.iter().flatten())
+        .flat_map(|h| h.tagged.first())
+        .flat_map(|runs| &runs[0])
+        .filter(|t| t.beyond_map_m == 0.0)
+        .filter_map(|t| t.radio_fit)
+        .collect();
+    fits_on_map.sort_by(f64::total_cmp);
+    let floor_candidates = radio_fit_floor_candidates(&fits_on_map);
+    report.radio_fit_scans = fits_on_map.len();
+    // γ with a movement likelihood again, on the held-out walks that the rest of the survey
+    // covers end to end, replayed with the engine as shipped (the first scan and the gaps at
+    // the γ without one, the lower candidate radio fit floor, M at the γ above) at each γ of
+    // the grid, steady and throttled. A walk left out takes its stretch of
+    // map with it where no other walk went; the walks that then leave their map and come back
+    // want the radio weighed more to find it again, which the site surveyed from every walk
+    // does not ask of a walker where it was surveyed: the same reason the 68% radius factor
+    // is fitted on the map (`docs/tuning.md#gamma`). Kept from the replays above where the
+    // covered walks have fewer than `MIN_SCENARIO_EPOCHS` epochs.
+    let covered: Vec<bool> = (held_out.iter())
+        .map(|h| h.as_ref().and_then(|h| h.tagged.first()).is_some_and(|runs| shipped::covered(&runs[0])))
+        .collect();
+    let first_look = Calibration {
+        estimate_states: estimate_states_at(calibration.rssi_weight).1,
+        radio_fit_floor: floor_candidates[0].1,
+        ..calibration
+    };
+    let first_weights: Vec<[Option<f64>; 2]> = still.iter().map(|&s| [None, s]).collect();
+    let replays = covered_replays(
+        (&prepared, &full, whole),
+        (floors, &jobs, &covered),
+        (first_look, &first_weights),
+        options,
+        progress,
+    );
+    let as_shipped = CoveredGamma::of(&replays, &jobs, floors.len());
+    let enough = as_shipped.epochs >= MIN_SCENARIO_EPOCHS;
+    if enough {
+        calibration.rssi_weight = as_shipped.best.or(calibration.rssi_weight);
+        // Scans far apart: their own γ when it beats the site-wide one on the throttled
+        // replays by more than its standard error.
+        calibration.sparse_scans.rssi_weight = as_shipped.sparse_gamma(calibration.rssi_weight);
+    }
+    report.covered_walks = as_shipped.walks;
+    report.covered_epochs = as_shipped.epochs;
+    report.gamma_covered_mean_error_m = as_shipped.curve.iter().map(|p| (p.gamma, p.mean_error_m)).collect();
+    report.sparse_scans.gamma = as_shipped.sparse_curve.clone();
+    let (m_curve, m) = estimate_states_at(calibration.rssi_weight);
+    report.estimate_states_mean_error_m = m_curve;
+    calibration.estimate_states = m;
+    report.estimate_states = calibration.estimate_states;
     // Per floor.
     let mut weights = Vec::with_capacity(floors.len());
     let mut by_scenario: [Vec<&Tag>; 4] = Default::default();
     // The same with the epochs off the map, for the 95% factors.
     let mut every_by_scenario: [Vec<&Tag>; 4] = Default::default();
     let mut off_map: Vec<&Tag> = Vec::new();
-    let mut fits_on_map: Vec<f64> = Vec::new();
     for (f, floor) in floors.iter().enumerate() {
-        let mine: Vec<&HeldOut> = jobs
-            .iter()
-            .zip(&held_out)
-            .filter(|((ff, _), _)| *ff == f)
-            .filter_map(|(_, h)| h.as_ref().map(|h| &h.scored))
-            .collect();
+        let mine = floor_walks(f);
         let mine_tagged: Vec<&Vec<Tagged>> = jobs
             .iter()
             .zip(&held_out)
@@ -426,7 +481,10 @@ pub fn survey_calibrated(
             .collect();
         let (curve, best) = gamma_curve(&mine, 0);
         let (curve_still, best_still) = gamma_curve(&mine, 1);
-        let gamma = own_gamma(&curve, best, calibration.rssi_weight);
+        // The floor's own γ on the curve the site-wide one was chosen on.
+        let (deciding, deciding_best) =
+            if enough { as_shipped.floors[f].clone() } else { (curve.clone(), best) };
+        let gamma = own_gamma(&deciding, deciding_best, calibration.rssi_weight);
         let g = gamma.or(calibration.rssi_weight).and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
         let gamma_still = own_gamma(&curve_still, best_still, calibration.rssi_weight_without_movement);
         let g_still = gamma_still.or(calibration.rssi_weight_without_movement);
@@ -443,7 +501,7 @@ pub fn survey_calibrated(
         for scenario in MdiScenario::ALL {
             let Some(chosen) = chosen[scenario.index()] else { continue };
             for walk in &mine_tagged {
-                for (m, run) in walk[chosen].iter().take(THROTTLED).enumerate() {
+                for (m, run) in walk[chosen].iter().enumerate() {
                     for t in run.iter().filter(|t| t.scenario == scenario) {
                         every_by_scenario[scenario.index()].push(t);
                         if t.beyond_map_m > 0.0 {
@@ -452,9 +510,6 @@ pub fn survey_calibrated(
                                 off_map.push(t);
                             }
                             continue;
-                        }
-                        if m == 0 {
-                            fits_on_map.extend(t.radio_fit);
                         }
                         by_scenario[scenario.index()].push(t);
                     }
@@ -466,14 +521,11 @@ pub fn survey_calibrated(
             walks: mine.iter().filter(|w| w.iter().any(|m| !m[0].is_empty())).count(),
             epochs: g.map_or(0, |g| mine.iter().map(|w| w[g][0].len()).sum()),
             rssi_weight: gamma,
-            rssi_weight_without_movement: own_gamma(
-                &curve_still,
-                best_still,
-                calibration.rssi_weight_without_movement,
-            ),
-            best_rssi_weight: best.map(|k| curve[k].gamma),
-            jackknife_se_m: best.map(|k| curve[k].jackknife_se_m),
+            rssi_weight_without_movement: still[f],
+            best_rssi_weight: deciding_best.map(|k| deciding[k].gamma),
+            jackknife_se_m: deciding_best.map(|k| deciding[k].jackknife_se_m),
             gamma: curve,
+            gamma_covered: if enough { deciding } else { Vec::new() },
             gamma_without_movement: curve_still,
             coverage: Coverage::default(),
         };
@@ -489,14 +541,6 @@ pub fn survey_calibrated(
         let scale = if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points, every) } else { None };
         calibration.accuracy_scale_by_scenario.set(scenario, scale);
     }
-    // Sparse scans: their own γ when it beats the site-wide one on the throttled replays by
-    // more than its standard error.
-    let (sparse_curve, sparse_best) = gamma_curve(&walks, THROTTLED);
-    calibration.sparse_scans.rssi_weight = own_gamma(&sparse_curve, sparse_best, calibration.rssi_weight);
-    report.sparse_scans.gamma = sparse_curve;
-    fits_on_map.sort_by(f64::total_cmp);
-    let floor_candidates = radio_fit_floor_candidates(&fits_on_map);
-    report.radio_fit_scans = fits_on_map.len();
     report.rssi_weight = calibration.rssi_weight;
     report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
     report.rssi_weight_by_scenario = calibration.rssi_weight_by_scenario;
@@ -523,26 +567,11 @@ pub fn survey_calibrated(
     // Per walk, per candidate floor: (steady, throttled); empty where a replay failed.
     let by_floor: Vec<Vec<(Vec<Tag>, Vec<Tag>)>> =
         parallel_map_by_cost(&jobs, options.threads, cost, |&(f, w)| {
-            let keep = |ff: usize, ww: usize| !(ff == f && ww == w);
-            let fits = prepared.fit(&keep, Some(&full), 1);
-            let site = prepared.assemble(&fits).ok().map(|(s, _)| s);
-            let tags = site.and_then(|site| {
-                held_out_reach(&site, whole, options);
+            let tags = HeldOutSite::build(&prepared, &full, whole, options, (f, w)).and_then(|held| {
                 let trace = &floors[f].survey[w];
-                let mapped = OnMap::new(&site, f);
-                // Its copies share its radio map, so their engines share the scan likelihoods.
-                let shared = SharedEmissions::new(&site);
-                let run = |floor: Option<f64>, replay_options: &ReplayOptions| -> Option<Vec<Tag>> {
-                    let mut calibration = unscaled;
-                    calibration.radio_fit_floor = floor;
-                    let site = site
-                        .clone()
-                        .with_calibration(calibration)
-                        .and_then(|s| s.with_floor_rssi_weights(&weights));
-                    let mut engine = Engine::new(Arc::new(site.ok()?), options.calibration_engine()).ok()?;
-                    // Of a copy of this site, with its radio map: cannot fail.
-                    let _ = engine.share_emissions(Arc::clone(&shared));
-                    Some(tag(trace, f, &mapped, &replay(&mut engine, trace, replay_options).positions))
+                let run = |floor: Option<f64>, replay_options: &ReplayOptions| {
+                    let calibration = Calibration { radio_fit_floor: floor, ..unscaled };
+                    held.replay(calibration, &weights, options, replay_options, trace, f)
                 };
                 (floor_candidates.iter())
                     .map(|&(_, floor)| {

@@ -31,15 +31,21 @@ pub struct FloorCalibrationReport {
     pub epochs: usize,
     /// The error curve over γ with the motion as the sensors give it.
     pub gamma: Vec<GammaPoint>,
+    /// The curve the floor's own γ is chosen on: its held-out walks that the rest of the survey
+    /// covers end to end, replayed as shipped at each γ (`CalibrationReport::gamma_covered_mean_error_m`);
+    /// empty when `gamma` decided.
+    pub gamma_covered: Vec<GammaPoint>,
     /// The same with the motion withheld.
     pub gamma_without_movement: Vec<GammaPoint>,
-    /// The floor's own γ, recorded in the site file: its least mean held-out error, kept only
-    /// when it beats the site-wide γ by more than its standard error (`own_gamma`); `None`: the
-    /// floor runs at the site-wide γ.
+    /// The floor's own γ, recorded in the site file: its least mean held-out error on the curve
+    /// that decided (`gamma_covered`, else `gamma`), kept only when it beats the site-wide γ
+    /// there by more than its standard error (`own_gamma`); `None`: the floor runs at the
+    /// site-wide γ.
     pub rssi_weight: Option<f64>,
     /// The same for epochs without a movement likelihood.
     pub rssi_weight_without_movement: Option<f64>,
-    /// The γ of least mean held-out error on this floor, whether kept or not.
+    /// The γ of least mean held-out error on this floor on the curve that decided, whether kept
+    /// or not.
     pub best_rssi_weight: Option<f64>,
     /// Jackknife standard error of the mean error at that γ, m.
     pub jackknife_se_m: Option<f64>,
@@ -137,7 +143,18 @@ pub struct CalibrationReport {
     pub estimate_states_mean_error_m: Vec<(usize, f64)>,
     /// The M of least error there (Hoang eq. 4).
     pub estimate_states: Option<u32>,
-    /// The γ of least pooled error: the site-wide γ, for floors without their own.
+    /// Held-out walks that the rest of the survey covers end to end (each of their epochs on
+    /// the map the other walks made), and their epochs: what γ is chosen on again.
+    pub covered_walks: usize,
+    /// See `covered_walks`.
+    pub covered_epochs: usize,
+    /// Those walks replayed with the engine as shipped at each γ of the grid: mean error at
+    /// each, m (floor penalty included). Its least
+    /// is the site-wide γ when the walks have at least
+    /// [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) epochs (`docs/tuning.md#gamma`).
+    pub gamma_covered_mean_error_m: Vec<(f64, f64)>,
+    /// The site-wide γ, for floors without their own: the least of
+    /// `gamma_covered_mean_error_m`, or of `gamma_mean_error_m` where too few walks are covered.
     pub rssi_weight: Option<f64>,
     /// The same for epochs without a movement likelihood.
     pub rssi_weight_without_movement: Option<f64>,
@@ -212,7 +229,9 @@ pub struct CalibrationReport {
 /// held-out walk replayed again at each γ with one scan every 30 s reaching the engine.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SparseScansReport {
-    /// All floors pooled: held-out error per γ, every epoch of those replays.
+    /// All floors pooled: held-out error per γ of the walks covered end to end, replayed as
+    /// shipped with one scan every 30 s (`CalibrationReport::gamma_covered_mean_error_m`'s
+    /// replays, throttled).
     pub gamma: Vec<GammaPoint>,
     /// Held-out epochs on the map in the sparse regime at the γ they get, per band of time
     /// since the sparse scan (`SINCE_SPARSE_SCAN_BANDS_S`): the radius factors of a band with
