@@ -77,7 +77,7 @@ pub(super) fn own_gamma(curve: &[GammaPoint], best: Option<usize>, site_wide: Op
 }
 
 #[cfg(test)]
-mod tests {
+pub(super) mod tests {
     use super::*;
 
     #[test]
@@ -100,19 +100,21 @@ mod tests {
         assert_eq!(own_gamma(&lone, Some(0), Some(0.1)), None);
     }
 
+    /// A scored epoch on the right floor with this error.
+    pub(in crate::calibrate) fn scored(error_m: f64) -> Scored {
+        Scored {
+            error_m,
+            accuracy_m: 1.0,
+            accuracy_95_m: 2.0,
+            floor_correct: true,
+            zone_correct: None,
+            in_zone: None,
+            floor_probability: None,
+        }
+    }
+
     fn points(errors: &[f64]) -> Vec<Scored> {
-        errors
-            .iter()
-            .map(|&error_m| Scored {
-                error_m,
-                accuracy_m: 1.0,
-                accuracy_95_m: 2.0,
-                floor_correct: true,
-                zone_correct: None,
-                in_zone: None,
-                floor_probability: None,
-            })
-            .collect()
+        errors.iter().map(|&e| scored(e)).collect()
     }
 
     /// Three walks scored at the first two γ of the grid (with the motion; nothing without).

@@ -171,7 +171,7 @@ const _: () = assert!(RUNS > SPARSE);
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::scoring::Scored;
+    use crate::calibrate::gamma::tests::scored;
     use waymark::sensors::MdiScenario;
 
     fn tag(beyond_map_m: f64) -> Tag {
@@ -183,18 +183,6 @@ mod tests {
             radio_fit: None,
             band: None,
             beyond_radio_m: 0.0,
-        }
-    }
-
-    fn scored(error_m: f64) -> Scored {
-        Scored {
-            error_m,
-            accuracy_m: 1.0,
-            accuracy_95_m: 2.0,
-            floor_correct: true,
-            zone_correct: None,
-            in_zone: None,
-            floor_probability: None,
         }
     }
 
