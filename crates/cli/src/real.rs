@@ -8,7 +8,7 @@ use std::time::Instant;
 use waymark::sensors::MdiScenario;
 use waymark::{Engine, EngineConfig, Salt, Site};
 use waymark_eval::real::{self as evaluation, EvalOptions, CONFIGURATIONS};
-use waymark_survey::calibrate::{self, CalibrationError, CalibrationOptions, FloorData};
+use waymark_survey::calibrate::{self, CalibrationOptions, FloorData, WalkSplit};
 use waymark_survey::io::Trace;
 use waymark_survey::replay::{self as replaying, ReplayOptions};
 
@@ -48,7 +48,8 @@ impl SaltArgs {
 #[derive(clap::Args)]
 pub struct SurveyArgs {
     /// Floor folders of one building (each with `path_data_files/`, and `floor_info.json` +
-    /// `geojson_map.json` if there is a plan). Every walk in them is a survey walk.
+    /// `geojson_map.json` if there is a plan), or one folder of GetSensorData logfiles. Every
+    /// walk in them is a survey walk.
     #[arg(required = true)]
     floors: Vec<PathBuf>,
     /// Where to write the site file.
@@ -76,7 +77,7 @@ pub struct ReplayArgs {
     /// The site file (from `waymark survey`).
     #[arg(long)]
     site: PathBuf,
-    /// The walk (a competition-format text file).
+    /// The walk (a competition-format text file, or a GetSensorData logfile).
     walk: PathBuf,
     /// Where to write the track: `.json` for JSON, anything else CSV. Default: CSV on stdout.
     /// On a geo-referenced site (with an anchor) each row has `lat` and `lon`, WGS84 degrees.
@@ -137,9 +138,15 @@ enum SiteCommand {
 #[derive(clap::Args)]
 pub struct EvalArgs {
     /// Floor folders of one building: given together, they make one multi-floor site and the
-    /// engine must find the floor itself.
+    /// engine must find the floor itself. Or one folder of GetSensorData logfiles (the IPIN
+    /// competitions' format), split by `--split`.
     #[arg(required = true)]
     floors: Vec<PathBuf>,
+    /// How a folder of GetSensorData logfiles splits into survey and test walks:
+    /// `phone:MODEL` (that phone's walks survey), `repetitions:1,3` (those repetitions survey).
+    /// Floor folders split by file index whatever this says.
+    #[arg(long, default_value = "repetitions:1,3")]
+    split: WalkSplit,
     /// Print one JSON object instead of the tables.
     #[arg(long)]
     json: bool,
@@ -218,23 +225,12 @@ fn fail(verb: &str, e: impl std::fmt::Display) -> ExitCode {
     ExitCode::FAILURE
 }
 
-fn load_floors(dirs: &[PathBuf], max_walks: Option<usize>) -> Result<Vec<FloorData>, CalibrationError> {
-    dirs.iter().map(|d| FloorData::load(d, max_walks)).collect()
-}
-
 pub fn survey(args: &SurveyArgs) -> ExitCode {
-    let floors = match load_floors(&args.floors, None) {
+    // Every walk surveys.
+    let floors = match calibrate::load_building(&args.floors, &WalkSplit::All, None) {
         Ok(f) => f,
         Err(e) => return fail("survey", e),
     };
-    // Every walk surveys: fold the split's test walks back in.
-    let floors: Vec<FloorData> = floors
-        .into_iter()
-        .map(|mut f| {
-            f.survey.append(&mut f.test);
-            f
-        })
-        .collect();
     // A coverage map needs WGS84, which only plans for every floor give: say so before the
     // calibration's minutes, not after.
     if args.coverage_out.is_some() {
@@ -484,7 +480,7 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
         Ok(s) => Arc::new(s),
         Err(e) => return fail("replay", e),
     };
-    let trace = match Trace::read(&args.walk) {
+    let trace = match waymark_survey::io::read_walk(&args.walk, &site) {
         Ok(t) => t,
         Err(e) => return fail("replay", e),
     };
@@ -651,7 +647,7 @@ fn progress_bar(hidden: bool, len: u64, message: &'static str) -> ProgressBar {
 
 pub fn eval(args: &EvalArgs) -> ExitCode {
     let started = Instant::now();
-    let floors = match load_floors(&args.floors, args.max_walks) {
+    let floors = match calibrate::load_building(&args.floors, &args.split, args.max_walks) {
         Ok(f) => f,
         Err(e) => return fail("eval", e),
     };

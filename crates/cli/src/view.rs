@@ -12,7 +12,7 @@ use std::sync::Arc;
 use waymark::site::{LatLon, StateKind, PSEUDO_SPACING_M};
 use waymark::{Engine, EngineConfig, Site};
 use waymark_sim as sim;
-use waymark_survey::io::{FloorPlan, FloorPlanError, Trace, TraceError};
+use waymark_survey::io::{FloorPlan, FloorPlanError, TraceError};
 use waymark_survey::replay::{self as replaying, ReplayOptions};
 
 /// The page: markup with `{{style}}`, `{{data}}` and `{{script}}`, each filled once.
@@ -223,16 +223,20 @@ fn demo(seed: u64, walk_length_m: f64) -> Result<(Arc<Site>, Track), ViewError> 
 }
 
 /// Replays a recorded walk with the engine `waymark replay` builds (stale readings dropped at
-/// the age limit the site's survey applied, the site's calibrated γ). Its waypoints, linear between them, are
-/// the truth on the site floor its header names.
+/// the age limit the site's survey applied, the site's calibrated γ). Its waypoints, linear
+/// between them, are the truth on the floor they give (GetSensorData) or else on the site
+/// floor its header names.
 fn replay_walk(site: &Arc<Site>, path: &Path, site_salt: Option<waymark::Salt>) -> Result<Track, ViewError> {
-    let trace = Trace::read(path)?;
+    let trace = waymark_survey::io::read_walk(path, site)?;
     let config = EngineConfig { rssi_weight: None, site_salt, ..EngineConfig::default() };
     let mut engine = Engine::new(Arc::clone(site), config)?;
     let replay = replaying::replay(&mut engine, &trace, &ReplayOptions::default());
-    let truth_floor =
+    // The floor its waypoints give (a GetSensorData walk's), else the one its header names.
+    let own_floors = trace.waypoints.iter().any(|w| w.floor.is_some());
+    let header_floor =
         trace.floor_name.as_deref().and_then(|name| site.floors().iter().position(|f| f.name == name));
-    if truth_floor.is_none() {
+    let truth_floor = |t: u64| if own_floors { trace.floor_at(t) } else { header_floor };
+    if !own_floors && header_floor.is_none() {
         eprintln!(
             "waymark view: {}: its floor ({}) is not one of the site's; the truth is left out",
             path.display(),
@@ -248,7 +252,9 @@ fn replay_walk(site: &Arc<Site>, path: &Path, site_salt: Option<waymark::Salt>) 
             x: p.x,
             y: p.y,
             accuracy_m: p.accuracy_m,
-            truth: truth_floor.and_then(|f| trace.position_at(p.timestamp_ns).map(|(x, y)| (f, x, y))),
+            truth: truth_floor(p.timestamp_ns)
+                .filter(|&f| f < site.floors().len())
+                .and_then(|f| trace.position_at(p.timestamp_ns).map(|(x, y)| (f, x, y))),
         })
         .collect();
     Ok(Track { source: format!("walk {}", trace.name), epochs })

@@ -44,7 +44,12 @@ pub fn walk(
     }
     let waypoints: Vec<Waypoint> = labelled
         .iter()
-        .map(|&k| Waypoint { timestamp_ns: times[k], x: scale * points[k].0, y: scale * points[k].1 })
+        .map(|&k| Waypoint {
+            timestamp_ns: times[k],
+            x: scale * points[k].0,
+            y: scale * points[k].1,
+            floor: None,
+        })
         .collect();
     let steps = match (waypoints.first(), waypoints.last()) {
         (Some(a), Some(b)) => {

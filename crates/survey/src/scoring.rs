@@ -187,8 +187,12 @@ impl ZoneTruth {
 /// Calibration uses the epochs: every position the engine reports is one a radius must hold.
 pub fn score(trace: &Trace, floor: usize, estimates: &[Estimate]) -> (Vec<Scored>, Vec<Scored>) {
     let scored = scorer(floor, None);
-    let epochs =
-        estimates.iter().filter_map(|e| trace.position_at(e.timestamp_ns).map(|p| scored(e, p))).collect();
+    let epochs = estimates
+        .iter()
+        .filter_map(|e| {
+            trace.position_at(e.timestamp_ns).map(|p| scored(e, p, trace.floor_at(e.timestamp_ns)))
+        })
+        .collect();
     (epochs, score_waypoints(trace, estimates, &scored))
 }
 
@@ -209,7 +213,8 @@ pub fn score_scans(
         .wifi_scans
         .iter()
         .filter_map(|s| {
-            Some(scored(latest_at(estimates, s.timestamp_ns)?, trace.position_at(s.timestamp_ns)?))
+            let truth = trace.position_at(s.timestamp_ns)?;
+            Some(scored(latest_at(estimates, s.timestamp_ns)?, truth, trace.floor_at(s.timestamp_ns)))
         })
         .collect();
     (scans, score_waypoints(trace, estimates, &scored))
@@ -224,18 +229,23 @@ fn latest_at(estimates: &[Estimate], timestamp_ns: u64) -> Option<&Estimate> {
 fn score_waypoints(
     trace: &Trace,
     estimates: &[Estimate],
-    scored: &impl Fn(&Estimate, (f64, f64)) -> Scored,
+    scored: &impl Fn(&Estimate, (f64, f64), Option<usize>) -> Scored,
 ) -> Vec<Scored> {
     trace
         .waypoints
         .iter()
-        .filter_map(|w| latest_at(estimates, w.timestamp_ns).map(|e| scored(e, (w.x, w.y))))
+        .filter_map(|w| latest_at(estimates, w.timestamp_ns).map(|e| scored(e, (w.x, w.y), w.floor)))
         .collect()
 }
 
-/// An estimate against the truth (x, y) on `floor`.
-fn scorer(floor: usize, zones: Option<&ZoneTruth>) -> impl Fn(&Estimate, (f64, f64)) -> Scored + '_ {
-    move |e: &Estimate, (x, y): (f64, f64)| {
+/// An estimate against the truth (x, y) on the floor the walk's truth gives there, else on
+/// `floor`, the walk's own ([`Trace::floor_at`]).
+fn scorer(
+    floor: usize,
+    zones: Option<&ZoneTruth>,
+) -> impl Fn(&Estimate, (f64, f64), Option<usize>) -> Scored + '_ {
+    move |e: &Estimate, (x, y): (f64, f64), at: Option<usize>| {
+        let floor = at.unwrap_or(floor);
         let truth = zones.map(|z| z.zone_at(floor, x, y));
         Scored {
             error_m: (e.x - x).hypot(e.y - y),

@@ -45,7 +45,9 @@ impl PreparedSurvey<'_> {
         for (f, (floor, kept)) in self.floors.iter().zip(&fits.kept).enumerate() {
             let index = builder.floor(
                 &floor.name,
-                floor_rank(&floor.name).unwrap_or(reports.len() as i32) as f64 * STOREY_HEIGHT_M,
+                floor.geo.map(|g| g.level).or_else(|| floor_rank(&floor.name)).unwrap_or(reports.len() as i32)
+                    as f64
+                    * STOREY_HEIGHT_M,
             );
             let mut report = FloorSurvey { name: floor.name.clone(), ..FloorSurvey::default() };
             let walks: Vec<&PreparedWalk> =
@@ -143,7 +145,8 @@ impl PreparedSurvey<'_> {
             reports.push(report);
         }
         let plans: Vec<Option<&FloorPlan>> = self.floors.iter().map(|f| f.plan).collect();
-        let (anchor, floors) = geo_reference(&plans);
+        let walked: Vec<Option<WalkedGeo>> = self.floors.iter().map(|f| f.geo).collect();
+        let (anchor, floors) = geo_reference_or_walked(&plans, &walked);
         for (f, (level, origin_m)) in floors.into_iter().enumerate() {
             builder.floor_geo(f, level, origin_m);
         }

@@ -110,6 +110,19 @@ pub struct SurveyFloor<'a> {
     pub plan: Option<&'a FloorPlan>,
     /// Survey walks on this floor.
     pub walks: Vec<&'a Trace>,
+    /// Where the floor is on the Earth when its walks' truth is WGS84 rather than a plan's
+    /// frame (GetSensorData's `POSI`): used where the plans give no geo-reference.
+    pub geo: Option<WalkedGeo>,
+}
+
+/// A floor geo-referenced by its walks: the building's anchor, whose frame every floor's walks
+/// were placed in, and the floor's level.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WalkedGeo {
+    /// The site frame: one for every floor of the building.
+    pub anchor: Anchor,
+    /// The floor number the walks give (0 ground, negative below).
+    pub level: i32,
 }
 
 /// What the survey found, per floor.
@@ -186,6 +199,29 @@ pub type FloorGeo = (Option<i32>, [f64; 2]);
 /// floor has a plan with a box of some extent (a floor without one has no place on the
 /// Earth); the levels are the plans' `floor_num` either way.
 pub fn geo_reference(plans: &[Option<&FloorPlan>]) -> (Option<Anchor>, Vec<FloorGeo>) {
+    geo_reference_or_walked(plans, &vec![None; plans.len()])
+}
+
+/// [`geo_reference`] from the plans; where they give no anchor and every floor is
+/// geo-referenced by its walks in one frame ([`WalkedGeo`]), that frame, each floor's origin
+/// at the site's and its level the walks'.
+pub fn geo_reference_or_walked(
+    plans: &[Option<&FloorPlan>],
+    walked: &[Option<WalkedGeo>],
+) -> (Option<Anchor>, Vec<FloorGeo>) {
+    let from_plans = plans_geo_reference(plans);
+    if from_plans.0.is_some() {
+        return from_plans;
+    }
+    match walked.first() {
+        Some(Some(first)) if walked.iter().all(|w| w.is_some_and(|w| w.anchor == first.anchor)) => {
+            (Some(first.anchor), walked.iter().flatten().map(|w| (Some(w.level), [0.0, 0.0])).collect())
+        }
+        _ => from_plans,
+    }
+}
+
+fn plans_geo_reference(plans: &[Option<&FloorPlan>]) -> (Option<Anchor>, Vec<FloorGeo>) {
     let levels = plans.iter().map(|p| p.and_then(|p| p.level));
     let unanchored = || levels.clone().map(|l| (l, [0.0, 0.0])).collect();
     let Some(Some(first)) = plans.first() else { return (None, unanchored()) };

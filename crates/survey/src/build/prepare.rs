@@ -54,6 +54,7 @@ impl PlanCell {
 pub(super) struct PreparedFloor<'a> {
     pub(super) name: String,
     pub(super) plan: Option<&'a FloorPlan>,
+    pub(super) geo: Option<WalkedGeo>,
     pub(super) walks: Vec<PreparedWalk>,
     pub(super) cells: BTreeMap<Cell, CandidateCell>,
     /// With a plan: each candidate cell and each cell within the unsurveyed margin of one,
@@ -245,6 +246,7 @@ impl<'a> PreparedSurvey<'a> {
             out.push(PreparedFloor {
                 name: floor.name.clone(),
                 plan: floor.plan,
+                geo: floor.geo,
                 walks: prepared_walks,
                 cells,
                 plan_cells,

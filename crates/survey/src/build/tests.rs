@@ -8,8 +8,8 @@ fn walk(name: &str, from: (f64, f64), to: (f64, f64), seconds: u64) -> Trace {
     let ap = |k: u8| TransmitterId::wifi(&format!("aa:bb:cc:dd:ee:{k:02x}")).unwrap();
     let mut trace = Trace { name: name.into(), ..Trace::default() };
     trace.waypoints = vec![
-        Waypoint { timestamp_ns: 0, x: from.0, y: from.1 },
-        Waypoint { timestamp_ns: seconds * ns, x: to.0, y: to.1 },
+        Waypoint { timestamp_ns: 0, x: from.0, y: from.1, floor: None },
+        Waypoint { timestamp_ns: seconds * ns, x: to.0, y: to.1, floor: None },
     ];
     for t in 1..seconds {
         let f = t as f64 / seconds as f64;
@@ -39,7 +39,7 @@ fn floor_ranks() {
 #[test]
 fn states_sit_on_the_grid_along_the_walks_with_fitted_fingerprints() {
     let walks = [walk("a", (0.0, 1.0), (20.0, 1.0), 20), walk("b", (20.0, 1.0), (0.0, 1.0), 20)];
-    let floor = SurveyFloor { name: "F1".into(), plan: None, walks: walks.iter().collect() };
+    let floor = SurveyFloor { name: "F1".into(), plan: None, walks: walks.iter().collect(), geo: None };
     let (site, report) = survey("test", &[floor], North::default(), &SurveyOptions::default()).unwrap();
     assert_eq!(report.floors[0].walks, 2);
     assert_eq!(report.floors[0].scans, 38);
@@ -78,7 +78,8 @@ fn walls_cut_edges_unless_somebody_walked_through() {
         ..FloorPlan::default()
     };
     let walks = [walk("a", (0.0, 0.0), (8.0, 0.0), 8), walk("b", (12.0, 0.0), (20.0, 0.0), 8)];
-    let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
+    let floor =
+        SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect(), geo: None };
     let (site, report) = survey(
         "test",
         &[floor],
@@ -92,7 +93,8 @@ fn walls_cut_edges_unless_somebody_walked_through() {
     assert!(site.neighbours(left).all(|(n, _)| site.states()[n as usize].position.x <= 8.0));
     // Walking through the wall (here, through the whole room) opens it.
     let walks = [walk("c", (0.0, 0.0), (20.0, 0.0), 20)];
-    let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
+    let floor =
+        SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect(), geo: None };
     let (_, report) = survey(
         "test",
         &[floor],
@@ -126,7 +128,8 @@ fn named_plan_polygons_become_zones() {
     ];
     let plan = FloorPlan { width_m: 60.0, height_m: 20.0, outline: vec![], rooms, ..FloorPlan::default() };
     let walks = [walk("a", (0.0, 0.0), (20.0, 0.0), 20)];
-    let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
+    let floor =
+        SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect(), geo: None };
     // The unsurveyed states around the walk join the polygons they are in, too.
     let options = SurveyOptions { unsurveyed_margin_m: 6.0, ..SurveyOptions::default() };
     let (site, report) = survey("test", &[floor], North::default(), &options).unwrap();
@@ -147,7 +150,7 @@ fn named_plan_polygons_become_zones() {
     let zoned = (0..site.states().len()).filter(|&i| site.zone_of(i).is_some()).count();
     assert_eq!(report.floors[0].zoned_states, zoned);
     // Without a plan, no zones.
-    let floor = SurveyFloor { name: "F1".into(), plan: None, walks: walks.iter().collect() };
+    let floor = SurveyFloor { name: "F1".into(), plan: None, walks: walks.iter().collect(), geo: None };
     assert!(survey("test", &[floor], North::default(), &SurveyOptions::default())
         .unwrap()
         .0
@@ -172,8 +175,13 @@ fn a_site_without_a_walk_reusing_fits_is_the_survey_without_it() {
         walk("e", (22.0, 0.0), (28.0, 0.0), 6),
     ];
     let floors = [
-        SurveyFloor { name: "F1".into(), plan: None, walks: walks[..4].iter().collect() },
-        SurveyFloor { name: "F2".into(), plan: None, walks: vec![&walks[0], &walks[1], &walks[4]] },
+        SurveyFloor { name: "F1".into(), plan: None, walks: walks[..4].iter().collect(), geo: None },
+        SurveyFloor {
+            name: "F2".into(),
+            plan: None,
+            walks: vec![&walks[0], &walks[1], &walks[4]],
+            geo: None,
+        },
     ];
     let options = SurveyOptions::default();
     let prepared = PreparedSurvey::new("test", &floors, North::default(), &options).unwrap();
@@ -249,7 +257,8 @@ fn unsurveyed_states_fill_the_floor_within_the_margin() {
         rooms: vec![],
         ..FloorPlan::default()
     };
-    let floor = SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect() };
+    let floor =
+        SurveyFloor { name: "F1".into(), plan: Some(&plan), walks: walks.iter().collect(), geo: None };
     let options = SurveyOptions { unsurveyed_margin_m: 8.0, ..SurveyOptions::default() };
     let (site, report) = survey("test", std::slice::from_ref(&floor), North::default(), &options).unwrap();
     let (surveyed, unsurveyed): (Vec<_>, Vec<_>) =
@@ -288,7 +297,7 @@ fn unsurveyed_states_fill_the_floor_within_the_margin() {
 
 #[test]
 fn no_walks_is_a_typed_error() {
-    let floor = SurveyFloor { name: "F1".into(), plan: None, walks: vec![] };
+    let floor = SurveyFloor { name: "F1".into(), plan: None, walks: vec![], geo: None };
     assert!(survey("x", &[floor], North::default(), &SurveyOptions::default()).is_err());
 }
 

@@ -10,7 +10,10 @@ mod radius;
 mod report;
 mod shipped;
 
-pub use floors::{parse_survey_fraction, survey_inputs, survey_subset, FloorData};
+pub use floors::{
+    is_gsd_building, load_building, load_gsd_building, parse_survey_fraction, survey_inputs, survey_subset,
+    FloorData, WalkSplit,
+};
 pub use gamma::{ESTIMATE_STATES_GRID, GAMMA_GRID};
 pub use held_out::MIN_SCENARIO_EPOCHS;
 pub use radius::{RadiusPoint, FINGERPRINT_RADIUS_FOLDS, FINGERPRINT_RADIUS_GRID};
@@ -49,6 +52,9 @@ pub enum CalibrationError {
     /// The survey could not build a site.
     #[error(transparent)]
     Site(#[from] waymark::site::SiteError),
+    /// The walks give nothing to survey.
+    #[error("{0}")]
+    Empty(String),
 }
 
 /// How a site is surveyed and calibrated, and its walks replayed.

@@ -36,6 +36,19 @@ pub struct Waypoint {
     pub x: f64,
     /// North, m, in the floor's frame.
     pub y: f64,
+    /// The floor the walker was on, as an index into the building's floors, where the walk's
+    /// format says (GetSensorData's `POSI` lines, [`super::gsd`]); `None`: the floor the walk
+    /// was filed under. An index past the site's floors is a level no survey walk reached.
+    pub floor: Option<usize>,
+}
+
+/// One barometer reading.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct PressureSample {
+    /// Time, ns.
+    pub timestamp_ns: u64,
+    /// Air pressure, hPa (= mbar).
+    pub hpa: f64,
 }
 
 /// What reading a walk skipped, by reason.
@@ -79,6 +92,9 @@ pub struct Trace {
     pub beacons: Vec<(u64, Reading)>,
     /// Written by the SDK's survey recorder: scans are whole as pushed, not folded.
     pub grouped_scans: bool,
+    /// Barometer readings, hPa, in time order (GetSensorData's `PRES`; none in the Indoor
+    /// Location Competition's walks).
+    pub pressure: Vec<PressureSample>,
     /// What was skipped.
     pub stats: ReadStats,
 }
@@ -187,7 +203,7 @@ impl Trace {
             let values = &fields[fields.len().min(2)..];
             let ok = match kind {
                 "TYPE_WAYPOINT" => numbers::<2>(values)
-                    .map(|[x, y]| trace.waypoints.push(Waypoint { timestamp_ns: t, x, y })),
+                    .map(|[x, y]| trace.waypoints.push(Waypoint { timestamp_ns: t, x, y, floor: None })),
                 "TYPE_ACCELEROMETER" => push_sample(&mut trace.accelerometer, t, values),
                 "TYPE_GYROSCOPE" => push_sample(&mut trace.gyroscope, t, values),
                 "TYPE_MAGNETIC_FIELD" => push_sample(&mut trace.magnetometer, t, values),
@@ -269,6 +285,51 @@ impl Trace {
                 Some((a.x + f * (b.x - a.x), a.y + f * (b.y - a.y)))
             }
             _ => None,
+        }
+    }
+
+    /// The floor index the walk's truth gives at `timestamp_ns` ([`Waypoint::floor`]): that of
+    /// the waypoint nearer in time, within the waypoints' span; `None` outside it or where the
+    /// format gives no floor.
+    pub fn floor_at(&self, timestamp_ns: u64) -> Option<usize> {
+        let w = &self.waypoints;
+        let k = w.partition_point(|p| p.timestamp_ns <= timestamp_ns);
+        match (k.checked_sub(1).map(|i| &w[i]), w.get(k)) {
+            (Some(a), _) if a.timestamp_ns == timestamp_ns => a.floor,
+            (Some(a), Some(b)) => {
+                if timestamp_ns - a.timestamp_ns <= b.timestamp_ns - timestamp_ns {
+                    a.floor
+                } else {
+                    b.floor
+                }
+            }
+            _ => None,
+        }
+    }
+
+    /// The part of the walk from `from_ns` to `to_ns` (both included): every stream and the
+    /// waypoints cut to that span, the rest as it was.
+    pub fn between(&self, from_ns: u64, to_ns: u64) -> Trace {
+        fn cut<T: Clone>(items: &[T], time: impl Fn(&T) -> u64, from_ns: u64, to_ns: u64) -> Vec<T> {
+            let start = items.partition_point(|i| time(i) < from_ns);
+            let end = items.partition_point(|i| time(i) <= to_ns).max(start);
+            items[start..end].to_vec()
+        }
+        let sample = |s: &SensorSample| s.timestamp_ns;
+        Trace {
+            waypoints: cut(&self.waypoints, |w| w.timestamp_ns, from_ns, to_ns),
+            accelerometer: cut(&self.accelerometer, sample, from_ns, to_ns),
+            gyroscope: cut(&self.gyroscope, sample, from_ns, to_ns),
+            magnetometer: cut(&self.magnetometer, sample, from_ns, to_ns),
+            wifi_scans: cut(&self.wifi_scans, |s| s.timestamp_ns, from_ns, to_ns),
+            beacons: cut(&self.beacons, |b| b.0, from_ns, to_ns),
+            pressure: cut(&self.pressure, |p| p.timestamp_ns, from_ns, to_ns),
+            name: self.name.clone(),
+            site_id: self.site_id.clone(),
+            floor_name: self.floor_name.clone(),
+            device: self.device.clone(),
+            grouped_scans: self.grouped_scans,
+            stats: self.stats,
         }
     }
 
