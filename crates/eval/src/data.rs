@@ -1,7 +1,8 @@
-//! Where tests and tools find the competition's site-1 floors (docs/testing.md#real-data):
-//! unpacked under the workspace's `target/ilc/site1/`, else unpacked there from the archive
-//! `ilc20-site1/<floor>.tar.xz` in the folder `WAYMARK_DATA` names or, without it, in `data/`
-//! of a folder beside the checkout.
+//! Where tests and tools find the real data (docs/testing.md#real-data): the competition's
+//! site-1 floors unpacked under the workspace's `target/ilc/site1/`, and the IPIN 2023 museum's
+//! logfiles under `target/ipin/ipin2023-t3/`; else unpacked there from their archives
+//! (`ilc20-site1/<floor>.tar.xz`, `ipin2023-t3/ipin2023-t3.tar.xz`) in the folder
+//! `WAYMARK_DATA` names or, without it, in `data/` of a folder beside the checkout.
 
 use std::path::{Path, PathBuf};
 
@@ -12,29 +13,47 @@ pub fn site1_floor(workspace: &Path, floor: &str) -> Option<PathBuf> {
     if unpacked.join("path_data_files").is_dir() {
         return Some(unpacked);
     }
-    let Some(archive) = archive(workspace, floor) else {
-        eprintln!("skipping: ilc20-site1/{floor}.tar.xz not found (docs/testing.md#real-data)");
-        return None;
+    unpack(workspace, &Path::new("ilc20-site1").join(format!("{floor}.tar.xz")), "target/ilc")
+        .then_some(unpacked)
+}
+
+/// The IPIN 2023 museum's logfiles (`ipin2023-t3/`, GetSensorData) unpacked under
+/// `<workspace>/target/ipin/ipin2023-t3/`, or `None`, saying why on stderr.
+pub fn ipin2023_t3(workspace: &Path) -> Option<PathBuf> {
+    let unpacked = workspace.join("target/ipin/ipin2023-t3");
+    if unpacked.join("logfiles").is_dir() {
+        return Some(unpacked);
+    }
+    unpack(workspace, Path::new("ipin2023-t3/ipin2023-t3.tar.xz"), "target/ipin").then_some(unpacked)
+}
+
+/// Unpacks the data archive `relative` into `<workspace>/<into>`; false, saying why on stderr,
+/// when it is not found or cannot be unpacked.
+fn unpack(workspace: &Path, relative: &Path, into: &str) -> bool {
+    let Some(archive) = archive(workspace, relative) else {
+        eprintln!("skipping: {} not found (docs/testing.md#real-data)", relative.display());
+        return false;
     };
-    let into = workspace.join("target/ilc");
-    std::fs::create_dir_all(&into).ok()?;
+    let into = workspace.join(into);
+    if std::fs::create_dir_all(&into).is_err() {
+        return false;
+    }
     let status = std::process::Command::new("tar").arg("-xJf").arg(&archive).arg("-C").arg(&into).status();
     match status {
-        Ok(s) if s.success() => Some(unpacked),
+        Ok(s) if s.success() => true,
         _ => {
             eprintln!("skipping: could not unpack {}", archive.display());
-            None
+            false
         }
     }
 }
 
-/// The archive of one floor: in `$WAYMARK_DATA/ilc20-site1/`, or without that variable in
-/// `data/ilc20-site1/` of a folder beside the checkout.
-fn archive(workspace: &Path, floor: &str) -> Option<PathBuf> {
-    let relative = Path::new("ilc20-site1").join(format!("{floor}.tar.xz"));
+/// A data archive, `relative` to the data folder: `$WAYMARK_DATA`, or without that variable
+/// `data/` of a folder beside the checkout.
+fn archive(workspace: &Path, relative: &Path) -> Option<PathBuf> {
     if let Some(data) = std::env::var_os("WAYMARK_DATA") {
         return Some(Path::new(&data).join(relative)).filter(|a| a.is_file());
     }
     let beside = workspace.canonicalize().ok()?.parent()?.read_dir().ok()?;
-    beside.flatten().map(|e| e.path().join("data").join(&relative)).find(|a| a.is_file())
+    beside.flatten().map(|e| e.path().join("data").join(relative)).find(|a| a.is_file())
 }
