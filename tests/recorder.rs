@@ -100,7 +100,7 @@ proptest! {
                 Call::Waypoint { dt, x, y, floor } => {
                     waypoint_clock += dt;
                     recorder.mark_waypoint(waypoint_clock, x, y, FLOORS[floor]).unwrap();
-                    waypoints.push((FLOORS[floor].to_owned(), Waypoint { timestamp_ns: waypoint_clock, x, y }));
+                    waypoints.push((FLOORS[floor].to_owned(), Waypoint { timestamp_ns: waypoint_clock, x, y, floor: None }));
                 }
             }
         }
