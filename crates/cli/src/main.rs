@@ -2,6 +2,7 @@
 //! accuracy. `waymark demo` runs the engine on a built-in simulated office.
 
 mod bench;
+mod benchmark;
 mod hmm;
 mod real;
 mod route;
@@ -41,6 +42,10 @@ enum Command {
     /// Survey on the survey walks of the given floors, replay the test walks through every
     /// configuration, and print the errors (split: file i is a test walk when i % 5 == 4).
     Eval(real::EvalArgs),
+    /// The accuracy benchmark over buildings: every row (a building and a split of its walks)
+    /// evaluated as `eval` does, a table per row and the mean over buildings; with
+    /// `--baseline`, whether a change is kept (docs/benchmark.md).
+    Benchmark(benchmark::BenchmarkArgs),
     /// Speed and memory at building scale (1 000 to 50 000 states), as one JSON object.
     Bench(bench::BenchArgs),
     /// Site files: pack into the binary encoding apps ship (`site pack`) and back to JSON
@@ -187,6 +192,7 @@ fn main() -> ExitCode {
         Command::Replay(args) => real::replay(&args),
         Command::Eval(args) => real::eval(&args),
         Command::Bench(args) => bench::bench(&args),
+        Command::Benchmark(args) => benchmark::benchmark(&args),
         Command::Site(args) => real::site(&args),
         Command::Hmm(args) => hmm::hmm(&args),
         Command::View(args) => view::view(&args),

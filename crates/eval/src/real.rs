@@ -215,7 +215,7 @@ pub struct HabitsComparison {
     pub configurations: BTreeMap<String, ConfigurationReport>,
 }
 
-/// One test walk's estimates per configuration, for plots.
+/// One test walk's estimates per configuration, for plots, and its scored points.
 #[derive(Clone, Debug, Default)]
 pub struct WalkResult {
     /// Floor index.
@@ -224,6 +224,10 @@ pub struct WalkResult {
     pub name: String,
     /// Estimates per configuration key.
     pub estimates: BTreeMap<String, Vec<Estimate>>,
+    /// Per configuration key, the points this walk adds to [`ConfigurationReport::pooled`]:
+    /// what a resampling over walks draws from
+    /// ([`bootstrap_se`](crate::benchmark::bootstrap_se)).
+    pub scored: BTreeMap<String, Vec<Scored>>,
 }
 
 /// Builds the site from the survey walks of `floors` (one multi-floor site).
@@ -380,17 +384,19 @@ pub fn evaluate_on(
         result
     };
     let cost = |&(_, trace): &(usize, &Trace)| replay_cost(trace);
-    let results: Vec<WalkResult> = parallel_map_by_cost(&jobs, options.calibration.threads, cost, run_walk);
+    let mut results: Vec<WalkResult> =
+        parallel_map_by_cost(&jobs, options.calibration.threads, cost, run_walk);
     let mut reports = BTreeMap::new();
     for key in CONFIGURATIONS.iter().filter(|k| wanted(k)) {
         let mut pooled = Vec::new();
         let mut at_waypoints = Vec::new();
         let mut per_floor: BTreeMap<String, Vec<Scored>> = BTreeMap::new();
-        for (result, &(f, trace)) in results.iter().zip(&jobs) {
+        for (result, &(f, trace)) in results.iter_mut().zip(&jobs) {
             let Some(estimates) = result.estimates.get(*key) else { continue };
             let (epochs, waypoints) = score_scans(trace, f, estimates, zone_truth.as_ref());
             per_floor.entry(floors[f].name.clone()).or_default().extend_from_slice(&epochs);
-            pooled.extend(epochs);
+            pooled.extend_from_slice(&epochs);
+            result.scored.insert(key.to_string(), epochs);
             at_waypoints.extend(waypoints);
         }
         reports.insert(

@@ -21,6 +21,12 @@ pub struct Metrics {
     pub rmse_m: f64,
     /// Median error, m.
     pub p50_m: f64,
+    /// 75th percentile, m, a wrong floor adding [`FLOOR_PENALTY_M`] as in `mean_m`: the IPIN
+    /// competitions' accuracy score, the third quartile of the errors with 15 m per floor of
+    /// difference (Potortì et al., "Comparing the performance of indoor localization systems
+    /// through the EvAAL framework", Sensors 17(10) 2327, 2017). Here a wrong floor adds
+    /// 15 m whatever the difference, which is the same for adjacent floors.
+    pub p75_m: f64,
     /// 90th percentile, m.
     pub p90_m: f64,
     /// Largest error, m.
@@ -106,6 +112,7 @@ impl Metrics {
             mean_m: errors.iter().sum::<f64>() / n as f64,
             rmse_m: (errors.iter().map(|e| e * e).sum::<f64>() / n as f64).sqrt(),
             p50_m: quantile(&errors, 0.5),
+            p75_m: quantile(&errors, 0.75),
             p90_m: quantile(&errors, 0.9),
             max_m: errors[n - 1],
             accuracy_68_hit: share(&|p| p.error_m <= p.accuracy_m),
@@ -335,5 +342,19 @@ mod tests {
         assert!((m.floor_hit - 1.0 / 3.0).abs() < 1e-12);
         let none = Metrics::new(&[point(true, None)]);
         assert_eq!((none.floor_probability_mean, none.floor_brier), (None, None));
+    }
+
+    /// IPIN's score is the nearest-rank third quartile of the errors, a wrong floor counting
+    /// 15 m more.
+    #[test]
+    fn the_ipin_score_is_the_third_quartile_with_the_floor_penalty() {
+        let at = |error_m: f64, floor_correct: bool| Scored { error_m, ..point(floor_correct, None) };
+        let right: Vec<Scored> = [4.0, 1.0, 3.0, 2.0].iter().map(|&e| at(e, true)).collect();
+        assert_eq!(Metrics::new(&right).p75_m, 3.0);
+        // 1 m on the wrong floor is 16 m, now the largest: the quartile moves to 4 m.
+        let wrong = [at(1.0, false), at(2.0, true), at(3.0, true), at(4.0, true)];
+        assert_eq!(Metrics::new(&wrong).p75_m, 4.0);
+        let worse = [at(1.0, false), at(2.0, false), at(3.0, true), at(4.0, true)];
+        assert_eq!(Metrics::new(&worse).p75_m, 16.0);
     }
 }

@@ -1,0 +1,739 @@
+//! The accuracy benchmark over buildings (`docs/benchmark.md`): a list of rows, each a building,
+//! a split of its walks into survey and test walks, and the share of survey walks kept; each
+//! row surveyed, calibrated and evaluated as `waymark eval` does it
+//! ([`survey_calibrated`], then [`evaluate_on`]); the figures of each configuration with the
+//! walk-bootstrap standard error of its mean; the mean over buildings; and the rule a change to
+//! the engine is judged by against a baseline run ([`compare`]).
+
+use crate::real::{evaluate_on, EvalError, EvalOptions};
+use rand::rngs::ChaCha8Rng;
+use rand::{RngExt, SeedableRng};
+use serde::{Deserialize, Serialize};
+use statrs::statistics::Statistics;
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Instant;
+use waymark_survey::calibrate::{survey_calibrated, CalibrationError, FloorData};
+use waymark_survey::scoring::{Metrics, Scored};
+
+/// Where the rows' data is read from.
+#[derive(Clone, Debug)]
+pub struct DataSource {
+    /// The checkout: data unpacked under its `target/`, or found as [`crate::data`] says.
+    pub workspace: PathBuf,
+    /// Only the first N walk files of each floor (a quick look, not the benchmark).
+    pub max_walks: Option<usize>,
+}
+
+/// Why a row's data could not be loaded.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// The data is not on this machine: the row is skipped.
+    #[error("{0}")]
+    Absent(String),
+    /// The data is there but could not be read.
+    #[error(transparent)]
+    Calibration(#[from] CalibrationError),
+}
+
+/// Reads a row's floors, split into survey and test walks (one multi-floor site).
+pub type Loader = fn(&DataSource) -> Result<Vec<FloorData>, LoadError>;
+
+/// One row of the benchmark: a building, a split of its walks, and the share of each floor's
+/// survey walks the site is surveyed from. A value, so that a building's rows are a few lines
+/// of [`ROWS`].
+#[derive(Clone, Copy, Debug)]
+pub struct Row {
+    /// The building, as the data names it (`ilc20-site1`); the mean over buildings groups by it.
+    pub building: &'static str,
+    /// The split, unique within the building (`F=1`).
+    pub split: &'static str,
+    /// The share F (0 < F ≤ 1) of each floor's survey walks kept
+    /// ([`FloorData::keep_survey_fraction`]), as `waymark eval --survey-fraction`.
+    pub survey_fraction: f64,
+    /// Reads the row's floors.
+    pub load: Loader,
+}
+
+impl Row {
+    /// `building/split`, as `--rows` names it.
+    pub fn name(&self) -> String {
+        format!("{}/{}", self.building, self.split)
+    }
+
+    /// The row's floors, its survey fraction applied.
+    pub fn floors(&self, source: &DataSource) -> Result<Vec<FloorData>, LoadError> {
+        let mut floors = (self.load)(source)?;
+        for floor in &mut floors {
+            floor.keep_survey_fraction(self.survey_fraction);
+        }
+        Ok(floors)
+    }
+}
+
+/// The floors of the Indoor Location Competition 2.0's site 1 the evaluation uses, as one
+/// site (`docs/testing.md#real-data`).
+pub const SITE1_FLOORS: [&str; 5] = ["B1", "F1", "F2", "F3", "F4"];
+
+/// Site 1's five floors ([`SITE1_FLOORS`]), split as `waymark eval` splits them (file i of a
+/// floor is a test walk when i % 5 == 4).
+pub fn ilc20_site1(source: &DataSource) -> Result<Vec<FloorData>, LoadError> {
+    SITE1_FLOORS
+        .iter()
+        .map(|floor| {
+            let dir = crate::data::site1_floor(&source.workspace, floor)
+                .ok_or_else(|| LoadError::Absent(format!("ilc20-site1/{floor} not found")))?;
+            Ok(FloorData::load(&dir, source.max_walks)?)
+        })
+        .collect()
+}
+
+/// Every row of the benchmark, in the order it runs them: the five floors surveyed from all
+/// their survey walks and from half of them (`docs/benchmark.md#rows`).
+pub const ROWS: [Row; 2] = [
+    Row { building: "ilc20-site1", split: "F=1", survey_fraction: 1.0, load: ilc20_site1 },
+    Row { building: "ilc20-site1", split: "F=0.5", survey_fraction: 0.5, load: ilc20_site1 },
+];
+
+/// Resamples of the walk bootstrap. An SE needs a few hundred (Efron & Tibshirani, *An
+/// Introduction to the Bootstrap*, 1993, §6.4: seldom more than 200); 1000 keeps the SE's own
+/// resampling error near 2% (about 1/√(2B) for a statistic near normal).
+pub const BOOTSTRAP_RESAMPLES: usize = 1000;
+
+/// Seed of the walk bootstrap: fixed, so a run's SE does not move when nothing else does, and
+/// the same for every configuration of a row, which then resample the same walks.
+pub const BOOTSTRAP_SEED: u64 = 59;
+
+/// The walk-bootstrap standard error of a pooled mean: `walks` holds each walk's (Σ penalised
+/// error, points); the walks are drawn with replacement as many times as there are, the pooled
+/// mean Σ errors / Σ points recomputed, `resamples` times, and the standard deviation of those
+/// means returned (Efron & Tibshirani 1993, eq. 6.6). Walks, not points, are resampled: the
+/// errors along one walk are not independent. Walks without points take no part (they add
+/// nothing to the pooled mean). `None` without any walk with points, or under 2 resamples.
+pub fn bootstrap_se(walks: &[(f64, usize)], resamples: usize, seed: u64) -> Option<f64> {
+    let walks: Vec<(f64, usize)> = walks.iter().copied().filter(|w| w.1 > 0).collect();
+    if walks.is_empty() || resamples < 2 {
+        return None;
+    }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let means: Vec<f64> = (0..resamples)
+        .map(|_| {
+            let (sum, points) = (0..walks.len()).fold((0.0, 0usize), |(sum, points), _| {
+                let (s, n) = walks[rng.random_range(0..walks.len())];
+                (sum + s, points + n)
+            });
+            sum / points as f64
+        })
+        .collect();
+    // Identical walks give identical means, whose spread is 0 exactly.
+    if means.iter().all(|&m| m == means[0]) {
+        return Some(0.0);
+    }
+    Some(means.iter().std_dev())
+}
+
+/// One configuration's figures in one row.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct Figures {
+    /// Mean error, m, a wrong floor adding 15 m ([`Metrics::mean_m`]).
+    pub mean_m: f64,
+    /// 90th percentile, m.
+    pub p90_m: f64,
+    /// IPIN's score: the 75th percentile, m ([`Metrics::p75_m`]).
+    pub p75_m: f64,
+    /// Share of points within the reported 68% radius.
+    pub accuracy_68_hit: f64,
+    /// Share within the reported 95% radius.
+    pub accuracy_95_hit: f64,
+    /// Share on the right floor.
+    pub floor_hit: f64,
+    /// Walk-bootstrap standard error of `mean_m`, m ([`bootstrap_se`]); `null` without walks.
+    pub mean_se_m: Option<f64>,
+    /// Points scored.
+    pub epochs: usize,
+}
+
+impl Figures {
+    /// From the pooled metrics and each test walk's scored points.
+    pub fn new(pooled: &Metrics, walks: &[&[Scored]]) -> Figures {
+        let sums: Vec<(f64, usize)> =
+            walks.iter().map(|w| (w.iter().map(Scored::penalised_m).sum(), w.len())).collect();
+        Figures {
+            mean_m: pooled.mean_m,
+            p90_m: pooled.p90_m,
+            p75_m: pooled.p75_m,
+            accuracy_68_hit: pooled.accuracy_68_hit,
+            accuracy_95_hit: pooled.accuracy_95_hit,
+            floor_hit: pooled.floor_hit,
+            mean_se_m: bootstrap_se(&sums, BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED),
+            epochs: pooled.epochs,
+        }
+    }
+}
+
+/// One row's outcome.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct RowReport {
+    /// [`Row::building`].
+    pub building: String,
+    /// [`Row::split`].
+    pub split: String,
+    /// [`Row::survey_fraction`].
+    pub survey_fraction: f64,
+    /// Why the row was not evaluated (its data is absent); absent when it was.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub skipped: Option<String>,
+    /// Test walks replayed.
+    #[serde(default)]
+    pub test_walks: usize,
+    /// Wall-clock time of the row (reading, survey and calibration, replays), s.
+    #[serde(default)]
+    pub seconds: f64,
+    /// Per configuration key.
+    #[serde(default)]
+    pub configurations: BTreeMap<String, Figures>,
+}
+
+impl RowReport {
+    /// `row` not evaluated, for `reason`.
+    pub fn skipped(row: &Row, reason: String) -> RowReport {
+        RowReport {
+            building: row.building.into(),
+            split: row.split.into(),
+            survey_fraction: row.survey_fraction,
+            skipped: Some(reason),
+            test_walks: 0,
+            seconds: 0.0,
+            configurations: BTreeMap::new(),
+        }
+    }
+
+    /// `building/split`.
+    pub fn name(&self) -> String {
+        format!("{}/{}", self.building, self.split)
+    }
+}
+
+/// Surveys and calibrates a site from the survey walks of `floors` and replays their test
+/// walks, as `waymark eval` does: [`survey_calibrated`], then [`evaluate_on`] with the options
+/// the survey made the site with. `calibrating` ticks once per calibration step
+/// ([`calibration_steps`](waymark_survey::calibrate::calibration_steps)), `replaying` once per
+/// test walk. `started` is when the row began (its reading counts in [`RowReport::seconds`]).
+pub fn evaluate_row(
+    row: &Row,
+    floors: &[FloorData],
+    options: &EvalOptions,
+    started: Instant,
+    calibrating: &(dyn Fn() + Sync),
+    replaying: &(dyn Fn() + Sync),
+) -> Result<RowReport, EvalError> {
+    let (site, _, calibration) = survey_calibrated(floors, &options.calibration, calibrating)?;
+    let options = options.surveyed_with(&calibration);
+    let (configurations, walks) = evaluate_on(&Arc::new(site), floors, &options, replaying)?;
+    let configurations = configurations
+        .iter()
+        .map(|(key, report)| {
+            let scored: Vec<&[Scored]> =
+                walks.iter().filter_map(|w| w.scored.get(key).map(Vec::as_slice)).collect();
+            (key.clone(), Figures::new(&report.pooled, &scored))
+        })
+        .collect();
+    Ok(RowReport {
+        building: row.building.into(),
+        split: row.split.into(),
+        survey_fraction: row.survey_fraction,
+        skipped: None,
+        test_walks: walks.len(),
+        seconds: started.elapsed().as_secs_f64(),
+        configurations,
+    })
+}
+
+/// One configuration's figures averaged over buildings ([`building_mean`]).
+#[derive(Clone, Debug, Default, PartialEq, Serialize, Deserialize)]
+pub struct MeanFigures {
+    /// Mean error, m.
+    pub mean_m: f64,
+    /// IPIN's score, m.
+    pub p75_m: f64,
+    /// Share within the reported 68% radius.
+    pub accuracy_68_hit: f64,
+    /// Share within the reported 95% radius.
+    pub accuracy_95_hit: f64,
+    /// Share on the right floor.
+    pub floor_hit: f64,
+}
+
+impl MeanFigures {
+    fn of(f: &Figures) -> MeanFigures {
+        MeanFigures {
+            mean_m: f.mean_m,
+            p75_m: f.p75_m,
+            accuracy_68_hit: f.accuracy_68_hit,
+            accuracy_95_hit: f.accuracy_95_hit,
+            floor_hit: f.floor_hit,
+        }
+    }
+
+    /// The plain average of `figures`, each field on its own.
+    fn average(figures: &[MeanFigures]) -> MeanFigures {
+        let n = figures.len() as f64;
+        let mean = |field: fn(&MeanFigures) -> f64| figures.iter().map(field).sum::<f64>() / n;
+        MeanFigures {
+            mean_m: mean(|f| f.mean_m),
+            p75_m: mean(|f| f.p75_m),
+            accuracy_68_hit: mean(|f| f.accuracy_68_hit),
+            accuracy_95_hit: mean(|f| f.accuracy_95_hit),
+            floor_hit: mean(|f| f.floor_hit),
+        }
+    }
+}
+
+/// The evaluated rows of `rows` (not skipped) by building, in name order.
+fn by_building(rows: &[RowReport]) -> BTreeMap<&str, Vec<&RowReport>> {
+    let mut buildings: BTreeMap<&str, Vec<&RowReport>> = BTreeMap::new();
+    for row in rows.iter().filter(|r| r.skipped.is_none()) {
+        buildings.entry(&row.building).or_default().push(row);
+    }
+    buildings
+}
+
+/// The mean over buildings, per configuration: each building's evaluated rows averaged (every
+/// split and survey fraction of it alike), then the buildings averaged, each counting once
+/// however many rows it has; each figure averaged on its own. A configuration counts only when
+/// every evaluated row has it. Returns the means and the buildings they are over.
+pub fn building_mean(rows: &[RowReport]) -> (BTreeMap<String, MeanFigures>, Vec<String>) {
+    let buildings = by_building(rows);
+    let evaluated: Vec<&RowReport> = buildings.values().flatten().copied().collect();
+    let Some(first) = evaluated.first() else { return (BTreeMap::new(), Vec::new()) };
+    let mut mean = BTreeMap::new();
+    for key in first.configurations.keys() {
+        if !evaluated.iter().all(|r| r.configurations.contains_key(key)) {
+            continue;
+        }
+        let per_building: Vec<MeanFigures> = buildings
+            .values()
+            .map(|rows| {
+                let figures: Vec<MeanFigures> =
+                    rows.iter().map(|r| MeanFigures::of(&r.configurations[key])).collect();
+                MeanFigures::average(&figures)
+            })
+            .collect();
+        mean.insert(key.clone(), MeanFigures::average(&per_building));
+    }
+    (mean, buildings.keys().map(|b| b.to_string()).collect())
+}
+
+/// What `waymark benchmark --json` writes.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct BenchmarkReport {
+    /// Every row asked for, evaluated or skipped, in the order run.
+    pub rows: Vec<RowReport>,
+    /// Per configuration key, the mean over buildings ([`building_mean`]).
+    pub mean: BTreeMap<String, MeanFigures>,
+    /// The buildings `mean` is over: those with an evaluated row.
+    pub buildings: Vec<String>,
+    /// `--max-walks`, when the run read only the first walks of each floor: not the benchmark.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_walks: Option<usize>,
+}
+
+impl BenchmarkReport {
+    /// From the rows, with their mean over buildings.
+    pub fn new(rows: Vec<RowReport>, max_walks: Option<usize>) -> BenchmarkReport {
+        let (mean, buildings) = building_mean(&rows);
+        BenchmarkReport { rows, mean, buildings, max_walks }
+    }
+
+    /// A report as written by `--out` or `--json`.
+    pub fn read(path: &Path) -> Result<BenchmarkReport, String> {
+        let text =
+            std::fs::read_to_string(path).map_err(|e| format!("cannot read {}: {e}", path.display()))?;
+        serde_json::from_str(&text).map_err(|e| format!("{}: not a benchmark report: {e}", path.display()))
+    }
+}
+
+/// One mean error against the baseline's, m.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Change {
+    /// `building/split`, or the building.
+    pub name: String,
+    /// The baseline's mean error.
+    pub baseline_m: f64,
+    /// This run's.
+    pub current_m: f64,
+    /// The baseline's walk-bootstrap standard error of it, when known.
+    pub baseline_se_m: Option<f64>,
+}
+
+impl Change {
+    /// This run's mean minus the baseline's (negative: better).
+    pub fn delta_m(&self) -> f64 {
+        self.current_m - self.baseline_m
+    }
+
+    /// Whether this run is worse by more than the baseline's standard error (by anything at
+    /// all when it has none).
+    pub fn worse_beyond_se(&self) -> bool {
+        self.delta_m() > self.baseline_se_m.unwrap_or(0.0)
+    }
+}
+
+/// Whether a change is kept.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Verdict {
+    /// The mean over buildings improves and no building is worse beyond its standard error.
+    Keep,
+    /// Why not.
+    Reject(String),
+}
+
+/// One configuration's mean error in two benchmark runs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct Comparison {
+    /// The configuration key.
+    pub configuration: String,
+    /// Per row evaluated in both runs with this configuration.
+    pub rows: Vec<Change>,
+    /// Per building, over those rows: the rows' means averaged, and the rows' standard errors
+    /// averaged.
+    pub buildings: Vec<Change>,
+    /// Over buildings, equally weighted; no standard error.
+    pub mean: Option<Change>,
+    /// Rows of either run not compared (skipped, or in one run only).
+    pub not_compared: Vec<String>,
+    /// The rule's answer.
+    pub verdict: Verdict,
+}
+
+/// `configuration`'s mean error in `current` against `baseline`, and the rule a change is
+/// judged by (`docs/benchmark.md#rule`): kept only when the mean over buildings improves and no
+/// building gets worse by more than its walk-bootstrap standard error.
+///
+/// Only rows evaluated in both runs count, matched by building and split, and the means are
+/// taken again over them (not the reports' own `mean`, which may be over other rows). A
+/// building's standard error is the average of its rows' (the baseline's): its rows share
+/// test walks, so their errors move together, and the average is the standard error of their
+/// mean when they move as one, an upper bound otherwise. Runs that read different walks
+/// (`max_walks`) are not compared.
+pub fn compare(baseline: &BenchmarkReport, current: &BenchmarkReport, configuration: &str) -> Comparison {
+    fn evaluated<'a>(row: &'a RowReport, configuration: &str) -> Option<&'a Figures> {
+        row.configurations.get(configuration).filter(|_| row.skipped.is_none())
+    }
+    let figures = |row| evaluated(row, configuration);
+    let mut rows = Vec::new();
+    let mut not_compared = Vec::new();
+    let mut compared_buildings: BTreeMap<&str, Vec<Change>> = BTreeMap::new();
+    for old in &baseline.rows {
+        let new = current.rows.iter().find(|r| r.building == old.building && r.split == old.split);
+        match (figures(old), new.and_then(figures)) {
+            (Some(a), Some(b)) => {
+                let change = Change {
+                    name: old.name(),
+                    baseline_m: a.mean_m,
+                    current_m: b.mean_m,
+                    baseline_se_m: a.mean_se_m,
+                };
+                compared_buildings.entry(&old.building).or_default().push(change.clone());
+                rows.push(change);
+            }
+            _ => not_compared.push(old.name()),
+        }
+    }
+    for new in &current.rows {
+        if !baseline.rows.iter().any(|r| r.building == new.building && r.split == new.split) {
+            not_compared.push(new.name());
+        }
+    }
+    let average = |values: &mut dyn Iterator<Item = f64>| {
+        let (sum, n) = values.fold((0.0, 0usize), |(s, n), v| (s + v, n + 1));
+        sum / n as f64
+    };
+    let buildings: Vec<Change> = compared_buildings
+        .iter()
+        .map(|(building, changes)| Change {
+            name: building.to_string(),
+            baseline_m: average(&mut changes.iter().map(|c| c.baseline_m)),
+            current_m: average(&mut changes.iter().map(|c| c.current_m)),
+            baseline_se_m: changes
+                .iter()
+                .map(|c| c.baseline_se_m)
+                .collect::<Option<Vec<f64>>>()
+                .map(|se| average(&mut se.into_iter())),
+        })
+        .collect();
+    let mean = (!buildings.is_empty()).then(|| Change {
+        name: "mean over buildings".into(),
+        baseline_m: average(&mut buildings.iter().map(|c| c.baseline_m)),
+        current_m: average(&mut buildings.iter().map(|c| c.current_m)),
+        baseline_se_m: None,
+    });
+    let verdict = if baseline.max_walks != current.max_walks {
+        Verdict::Reject(format!(
+            "the runs read different walks (max_walks {:?} against {:?})",
+            baseline.max_walks, current.max_walks
+        ))
+    } else if let Some(mean) = &mean {
+        let worse: Vec<String> = buildings
+            .iter()
+            .filter(|b| b.worse_beyond_se())
+            .map(|b| {
+                format!(
+                    "{} is worse by {:.3} m, beyond its walk-bootstrap SE {}",
+                    b.name,
+                    b.delta_m(),
+                    b.baseline_se_m.map_or("(none)".into(), |se| format!("{se:.3} m"))
+                )
+            })
+            .collect();
+        if mean.delta_m() >= 0.0 {
+            Verdict::Reject(format!("the mean over buildings does not improve ({:+.3} m)", mean.delta_m()))
+        } else if !worse.is_empty() {
+            Verdict::Reject(worse.join("; "))
+        } else {
+            Verdict::Keep
+        }
+    } else {
+        Verdict::Reject(format!("no row has `{configuration}` evaluated in both runs"))
+    };
+    Comparison { configuration: configuration.into(), rows, buildings, mean, not_compared, verdict }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use approx::assert_relative_eq;
+
+    fn figures(mean_m: f64, mean_se_m: Option<f64>) -> Figures {
+        Figures {
+            mean_m,
+            p90_m: 2.0 * mean_m,
+            p75_m: 1.5 * mean_m,
+            accuracy_68_hit: 0.6,
+            accuracy_95_hit: 0.9,
+            floor_hit: 1.0,
+            mean_se_m,
+            epochs: 100,
+        }
+    }
+
+    fn row(building: &str, split: &str, configurations: &[(&str, f64, f64)]) -> RowReport {
+        RowReport {
+            building: building.into(),
+            split: split.into(),
+            survey_fraction: 1.0,
+            skipped: None,
+            test_walks: 10,
+            seconds: 1.0,
+            configurations: configurations
+                .iter()
+                .map(|&(key, mean, se)| (key.to_string(), figures(mean, Some(se))))
+                .collect(),
+        }
+    }
+
+    /// Walks alike in their errors leave nothing to resample: the SE is 0.
+    #[test]
+    fn identical_walks_have_no_bootstrap_error() {
+        let walks = vec![(12.5, 5); 8];
+        assert_eq!(bootstrap_se(&walks, BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED), Some(0.0));
+        // One walk is every resample.
+        assert_eq!(bootstrap_se(&[(3.0, 2)], 100, 1), Some(0.0));
+        assert_eq!(bootstrap_se(&[], 100, 1), None);
+        assert_eq!(bootstrap_se(&[(0.0, 0)], 100, 1), None, "a walk without points is not drawn");
+        assert_eq!(bootstrap_se(&[(1.0, 1), (2.0, 1)], 1, 1), None);
+    }
+
+    /// Two walks of n points with means a and b: a resample holds k ~ Binomial(2, ½) copies of
+    /// the first, so its pooled mean is b + (a − b)·k/2, whose SD is |a − b|/2 · √(½), the
+    /// binomial's SD being √(2·½·½) = √½. Walks without points are left out.
+    #[test]
+    fn two_walks_resample_to_the_binomial_spread() {
+        let (a, b, n) = (2.0, 6.0, 10);
+        let walks = [(a * n as f64, n), (0.0, 0), (b * n as f64, n)];
+        let se = bootstrap_se(&walks, 20_000, 7).unwrap();
+        assert_relative_eq!(se, (a - b).abs() / 2.0 * 0.5f64.sqrt(), max_relative = 0.03);
+    }
+
+    /// Many walks of one point each: the bootstrap SE of a mean tends, as the resamples grow,
+    /// to the plug-in SD (divided by n) over √n; here within its resampling error.
+    #[test]
+    fn many_walks_resample_to_the_plug_in_standard_error() {
+        let values: Vec<f64> = (0..40).map(|i| f64::from(i % 7) * 1.5 + f64::from(i % 3)).collect();
+        let n = values.len() as f64;
+        let mean = values.iter().sum::<f64>() / n;
+        let plug_in = (values.iter().map(|v| (v - mean).powi(2)).sum::<f64>() / n).sqrt() / n.sqrt();
+        let walks: Vec<(f64, usize)> = values.iter().map(|&v| (v, 1)).collect();
+        let se = bootstrap_se(&walks, BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED).unwrap();
+        // B = 1000: the SE's own relative error is about 1/√(2B) ≈ 2%; 3 of those.
+        assert_relative_eq!(se, plug_in, max_relative = 0.07);
+        // Fixed seed: the same figure every run.
+        assert_eq!(Some(se), bootstrap_se(&walks, BOOTSTRAP_RESAMPLES, BOOTSTRAP_SEED));
+    }
+
+    /// Figures take the pooled metrics as they are, and the SE from the walks' points.
+    #[test]
+    fn figures_take_the_pooled_metrics_and_resample_the_walks() {
+        let point = |error_m: f64, floor_correct: bool| Scored {
+            error_m,
+            accuracy_m: 2.0,
+            accuracy_95_m: 4.0,
+            floor_correct,
+            zone_correct: None,
+            in_zone: None,
+            floor_probability: None,
+        };
+        let first = [point(1.0, true), point(3.0, true)];
+        let second = [point(1.0, false), point(5.0, true)];
+        let all: Vec<Scored> = first.iter().chain(&second).copied().collect();
+        let pooled = Metrics::new(&all);
+        let f = Figures::new(&pooled, &[&first, &second]);
+        assert_eq!((f.mean_m, f.p75_m, f.epochs), ((1.0 + 3.0 + 16.0 + 5.0) / 4.0, 5.0, 4));
+        // Walk means 2 and 10.5 m, two points each: SD |a − b|/2·√½ ≈ 3.0 m.
+        let se = f.mean_se_m.unwrap();
+        assert!((2.6..3.4).contains(&se), "{se}");
+    }
+
+    /// A building's rows are averaged first, then buildings count equally.
+    #[test]
+    fn the_mean_is_over_buildings_each_counting_once() {
+        let rows = vec![
+            row("a", "F=1", &[("forward-auto", 2.0, 0.1), ("wifi-knn", 8.0, 0.3)]),
+            row("a", "F=0.5", &[("forward-auto", 4.0, 0.1), ("wifi-knn", 10.0, 0.3)]),
+            row("b", "both", &[("forward-auto", 7.0, 0.2), ("wifi-knn", 12.0, 0.4)]),
+            RowReport::skipped(&ROWS[0], "absent".into()),
+        ];
+        let (mean, buildings) = building_mean(&rows);
+        assert_eq!(buildings, ["a", "b"]);
+        // (mean(2, 4) + 7) / 2, not (2 + 4 + 7) / 3.
+        assert_relative_eq!(mean["forward-auto"].mean_m, 5.0);
+        assert_relative_eq!(mean["forward-auto"].p75_m, 7.5);
+        assert_relative_eq!(mean["wifi-knn"].mean_m, 10.5);
+        assert_relative_eq!(mean["wifi-knn"].accuracy_68_hit, 0.6);
+        // A configuration some row lacks is in no mean; no rows, no mean.
+        let mut partial = rows.clone();
+        partial[2].configurations.remove("wifi-knn");
+        assert_eq!(building_mean(&partial).0.keys().collect::<Vec<_>>(), ["forward-auto"]);
+        assert_eq!(building_mean(&rows[3..]), (BTreeMap::new(), Vec::new()));
+    }
+
+    /// Keep only when the mean over buildings improves and no building is worse beyond its
+    /// walk-bootstrap SE.
+    #[test]
+    fn the_verdict_follows_the_rule() {
+        let report = |a: f64, b: f64| {
+            BenchmarkReport::new(
+                vec![
+                    row("a", "F=1", &[("forward-auto", a, 0.1)]),
+                    row("a", "F=0.5", &[("forward-auto", a + 1.0, 0.3)]),
+                    row("b", "both", &[("forward-auto", b, 0.2)]),
+                ],
+                None,
+            )
+        };
+        let baseline = report(4.0, 8.0);
+        // Both better.
+        let c = compare(&baseline, &report(3.8, 7.9), "forward-auto");
+        assert_eq!(c.verdict, Verdict::Keep);
+        assert_eq!((c.rows.len(), c.buildings.len()), (3, 2));
+        assert_relative_eq!(c.buildings[0].baseline_se_m.unwrap(), 0.2);
+        assert_relative_eq!(c.mean.as_ref().unwrap().delta_m(), -0.15, epsilon = 1e-12);
+        // b worse within its SE (0.2), a much better: kept.
+        assert_eq!(compare(&baseline, &report(3.0, 8.15), "forward-auto").verdict, Verdict::Keep);
+        // b worse beyond its SE though the mean improves: rejected, naming b.
+        let Verdict::Reject(why) = compare(&baseline, &report(3.0, 8.3), "forward-auto").verdict else {
+            panic!("kept")
+        };
+        assert!(why.starts_with("b is worse by 0.300 m") && !why.contains("a is"), "{why}");
+        // Every building within its SE but the mean not better: rejected.
+        let Verdict::Reject(why) = compare(&baseline, &report(4.05, 7.95), "forward-auto").verdict else {
+            panic!("kept")
+        };
+        assert!(why.contains("does not improve"), "{why}");
+        // Nothing to compare, or different walks read: rejected.
+        assert!(matches!(compare(&baseline, &report(3.0, 7.0), "wifi-knn").verdict, Verdict::Reject(_)));
+        let quick = BenchmarkReport { max_walks: Some(5), ..report(3.0, 7.0) };
+        assert!(matches!(compare(&baseline, &quick, "forward-auto").verdict, Verdict::Reject(_)));
+    }
+
+    /// Only rows evaluated in both runs are compared, and the means are taken again over them.
+    #[test]
+    fn only_rows_evaluated_in_both_runs_are_compared() {
+        let baseline = BenchmarkReport::new(
+            vec![
+                row("a", "F=1", &[("forward-auto", 4.0, 0.1)]),
+                row("b", "both", &[("forward-auto", 8.0, 0.2)]),
+            ],
+            None,
+        );
+        let mut skipped_b = RowReport::skipped(&ROWS[0], "absent".into());
+        skipped_b.building = "b".into();
+        skipped_b.split = "both".into();
+        let current = BenchmarkReport::new(
+            vec![row("a", "F=1", &[("forward-auto", 3.9, 0.1)]), skipped_b, row("c", "x", &[])],
+            None,
+        );
+        let c = compare(&baseline, &current, "forward-auto");
+        assert_eq!(c.not_compared, ["b/both", "c/x"]);
+        assert_eq!(c.buildings.len(), 1);
+        assert_relative_eq!(c.mean.unwrap().delta_m(), -0.1, epsilon = 1e-12);
+        assert_eq!(c.verdict, Verdict::Keep);
+    }
+
+    /// The JSON has the documented shape and reads back as written.
+    #[test]
+    fn the_report_is_the_documented_json_and_reads_back() {
+        let report = BenchmarkReport::new(
+            vec![
+                row("ilc20-site1", "F=1", &[("forward-auto", 4.0, 0.1)]),
+                RowReport::skipped(&ROWS[1], "ilc20-site1/B1 not found".into()),
+            ],
+            None,
+        );
+        let json = serde_json::to_value(&report).unwrap();
+        let keys = |v: &serde_json::Value| {
+            let mut keys: Vec<String> = v.as_object().unwrap().keys().cloned().collect();
+            keys.sort();
+            keys
+        };
+        assert_eq!(keys(&json), ["buildings", "mean", "rows"]);
+        let row = &json["rows"][0];
+        assert_eq!(
+            keys(row),
+            ["building", "configurations", "seconds", "split", "survey_fraction", "test_walks"]
+        );
+        assert_eq!(
+            keys(&row["configurations"]["forward-auto"]),
+            [
+                "accuracy_68_hit",
+                "accuracy_95_hit",
+                "epochs",
+                "floor_hit",
+                "mean_m",
+                "mean_se_m",
+                "p75_m",
+                "p90_m"
+            ]
+        );
+        assert_eq!(json["rows"][1]["skipped"], "ilc20-site1/B1 not found");
+        assert_eq!(json["rows"][1]["split"], "F=0.5");
+        assert_eq!(
+            keys(&json["mean"]["forward-auto"]),
+            ["accuracy_68_hit", "accuracy_95_hit", "floor_hit", "mean_m", "p75_m"]
+        );
+        assert_eq!(json["buildings"], serde_json::json!(["ilc20-site1"]));
+        let back: BenchmarkReport = serde_json::from_str(&serde_json::to_string(&report).unwrap()).unwrap();
+        assert_eq!(back, report);
+    }
+
+    /// Row names are unique, and every survey fraction is one `--survey-fraction` accepts.
+    #[test]
+    fn the_rows_are_named_uniquely_with_valid_fractions() {
+        let mut names: Vec<String> = ROWS.iter().map(Row::name).collect();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), ROWS.len());
+        assert!(ROWS.iter().all(|r| r.survey_fraction > 0.0 && r.survey_fraction <= 1.0));
+    }
+}
