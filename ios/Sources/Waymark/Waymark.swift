@@ -641,6 +641,11 @@ fileprivate struct FfiConverterData: FfiConverterRustBuffer {
 
 /**
  * Receives Waymark's log records (implemented in Kotlin or Swift).
+ *
+ * Called on the thread that logged, after the Waymark call it logged in has released its
+ * locks and just before that call returns (or, for a record logged outside any call, at
+ * once); never from two threads' records interleaved within one call. It may call the engine
+ * or close it. Records it causes are delivered after it returns. See docs/errors.md#callbacks.
  */
 public protocol LogSink: AnyObject, Sendable {
     
@@ -652,6 +657,11 @@ public protocol LogSink: AnyObject, Sendable {
 }
 /**
  * Receives Waymark's log records (implemented in Kotlin or Swift).
+ *
+ * Called on the thread that logged, after the Waymark call it logged in has released its
+ * locks and just before that call returns (or, for a record logged outside any call, at
+ * once); never from two threads' records interleaved within one call. It may call the engine
+ * or close it. Records it causes are delivered after it returns. See docs/errors.md#callbacks.
  */
 open class LogSinkImpl: LogSink, @unchecked Sendable {
     fileprivate let handle: UInt64
@@ -7178,7 +7188,9 @@ public func FfiConverterTypeTransmitterIdString_lower(_ value: TransmitterIdStri
 
 /**
  * Sends Waymark's log records at `level` and above to `sink` (on Android, with no sink, to
- * logcat under the tag "waymark"). Safe to call again: the latest sink and level win.
+ * logcat under the tag "waymark"). Safe to call again, from a sink too: the latest sink and
+ * level win. A record logged inside a Waymark call reaches the sink when that call has
+ * released its locks (docs/errors.md#callbacks).
  */
 public func initLogging(sink: LogSink?, level: LogLevel)  {try! rustCall() {
         uniffiCallStatus in
@@ -7214,7 +7226,7 @@ private let initializationResult: InitializationResult = {
     if bindings_contract_version != scaffolding_contract_version {
         return InitializationResult.contractVersionMismatch
     }
-    if (uniffi_waymark_checksum_func_init_logging() != 18123) {
+    if (uniffi_waymark_checksum_func_init_logging() != 22633) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_func_version() != 18717) {

@@ -436,19 +436,25 @@ impl From<&engine::InputStats> for waymark_input_stats {
 /// passed to it by that thread, after the current one, so such a call may return before its
 /// position reaches the callback; every position has reached it by the time all calls have
 /// returned. A callback may call the engine (what it makes is delivered after the current
-/// call returns, by the same thread).
+/// call returns, by the same thread), replace or clear the callbacks, and free the engine: then
+/// no callback of it is called again, and it is freed when the calls running on it return
+/// (docs/errors.md#callbacks).
 pub type waymark_position_callback =
     Option<unsafe extern "C" fn(userdata: *mut c_void, position: *const waymark_position)>;
 
 /// Called with every status change and every failed call, as `waymark_position_callback` is
-/// (in one order with the positions, from the same thread, never at the same time as it).
+/// (in one order with the positions, from the same thread, never at the same time as it), and
+/// may do what it may: call the engine, or free it (on a rejected input too).
 pub type waymark_status_callback =
     Option<unsafe extern "C" fn(userdata: *mut c_void, status: *const waymark_status)>;
 
 /// Called with each log record at the level given to `waymark_set_log_callback` or above:
 /// `level` a `waymark_log_level`, `target` the Rust module it came from and `message` the
 /// text, both NUL-terminated and valid only during the call. Called from any thread that
-/// calls Waymark, possibly from several at once.
+/// calls Waymark, possibly from several at once, on the thread that logged: a record logged
+/// during a Waymark call is delivered when that call has released its locks, just before it
+/// returns (at most 1000 records per call; then one `WARN` record counts the ones dropped). So it may call Waymark, free an engine, or set the log callback; what it calls
+/// does not change the returning call's `waymark_last_error`. See docs/errors.md#callbacks.
 pub type waymark_log_callback = Option<
     unsafe extern "C" fn(userdata: *mut c_void, level: u32, target: *const c_char, message: *const c_char),
 >;
