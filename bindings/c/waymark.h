@@ -677,15 +677,15 @@ typedef struct {
   /**
    * The user's own step length, m, used in place of the step length model the site was
    * surveyed with; NaN (the default): the site's surveyed model, or 0.7 m on a site
-   * without one.
+   * without one. Outside 0.1-2.5 m: `WAYMARK_RESULT_INVALID_CONFIG`.
    */
   double step_length_m;
   /**
-   * Magnetic declination at the site, degrees east; NaN: the site file's.
+   * Magnetic declination at the site, degrees east, within ±180; NaN: the site file's.
    */
   double declination_deg;
   /**
-   * True azimuth of the site's +y axis, degrees; NaN: the site file's.
+   * True azimuth of the site's +y axis, degrees, within ±360; NaN: the site file's.
    */
   double site_rotation_deg;
   /**
@@ -1033,9 +1033,10 @@ waymark_result waymark_engine_confirm_position(waymark_engine *engine,
 waymark_result waymark_engine_zone_count(const waymark_engine *engine, size_t *count);
 
 /**
- * Copies the name of zone `zone` into `buf` (NUL-terminated, truncated to `len` bytes; `buf`
- * may be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL). A
- * zone index out of range returns `InputRejected`.
+ * Copies the name of zone `zone` into `buf` (NUL-terminated UTF-8; a name longer than
+ * `len - 1` bytes is cut at the last whole character that fits, never inside one; `buf` may
+ * be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL): the name
+ * was cut when `*name_len >= len`. A zone index out of range returns `InputRejected`.
  */
 waymark_result waymark_engine_zone_name(const waymark_engine *engine,
                                         size_t zone,
@@ -1088,7 +1089,8 @@ waymark_result waymark_engine_set_status_callback(waymark_engine *engine,
 
 /**
  * Copies the calling thread's last error message into `buf` (NUL-terminated, truncated to
- * `len`) and returns the message's full length in bytes. `buf` may be NULL to ask the length.
+ * `len` at a character boundary) and returns the message's full length in bytes. `buf` may be
+ * NULL to ask the length.
  */
 size_t waymark_last_error(char *buf, size_t len);
 

@@ -480,7 +480,19 @@ fn readings(
     beacons: *const waymark_beacon_reading,
     beacon_count: usize,
 ) -> Result<Vec<Reading>, Rejected> {
-    let mut readings = Vec::with_capacity(wifi_count + beacon_count);
+    // Counts that no array can have are refused before any memory is touched or reserved.
+    let fits = |count: usize, size: usize| count.checked_mul(size).is_some_and(|b| b <= isize::MAX as usize);
+    let total = wifi_count.checked_add(beacon_count);
+    let mut readings = Vec::new();
+    let reserved = total.is_some_and(|n| readings.try_reserve_exact(n).is_ok());
+    if !reserved
+        || !fits(wifi_count, std::mem::size_of::<waymark_wifi_reading>())
+        || !fits(beacon_count, std::mem::size_of::<waymark_beacon_reading>())
+    {
+        return Err(Rejected::Input(format!(
+            "{wifi_count} WiFi and {beacon_count} beacon readings cannot be held in memory"
+        )));
+    }
     if wifi_count > 0 {
         // SAFETY: checked non-NULL by the caller; the app guarantees `wifi_count` elements.
         for w in unsafe { std::slice::from_raw_parts(wifi, wifi_count) } {
@@ -638,9 +650,10 @@ pub extern "C" fn waymark_engine_zone_count(
     })
 }
 
-/// Copies the name of zone `zone` into `buf` (NUL-terminated, truncated to `len` bytes; `buf`
-/// may be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL). A
-/// zone index out of range returns `InputRejected`.
+/// Copies the name of zone `zone` into `buf` (NUL-terminated UTF-8; a name longer than
+/// `len - 1` bytes is cut at the last whole character that fits, never inside one; `buf` may
+/// be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL): the name
+/// was cut when `*name_len >= len`. A zone index out of range returns `InputRejected`.
 #[no_mangle]
 pub extern "C" fn waymark_engine_zone_name(
     engine: *const waymark_engine,
@@ -780,7 +793,8 @@ fn replace_callback<T>(
 }
 
 /// Copies the calling thread's last error message into `buf` (NUL-terminated, truncated to
-/// `len`) and returns the message's full length in bytes. `buf` may be NULL to ask the length.
+/// `len` at a character boundary) and returns the message's full length in bytes. `buf` may be
+/// NULL to ask the length.
 #[no_mangle]
 pub extern "C" fn waymark_last_error(buf: *mut c_char, len: usize) -> usize {
     let message = LAST_ERROR.with(|e| e.borrow().clone());
@@ -788,11 +802,14 @@ pub extern "C" fn waymark_last_error(buf: *mut c_char, len: usize) -> usize {
     message.len()
 }
 
-/// Copies `text` into `buf`, NUL-terminated and truncated to `len` bytes; nothing when `buf`
-/// is NULL or `len` 0.
+/// Copies `text` into `buf`, NUL-terminated and truncated to `len` bytes at a character
+/// boundary (what it writes is always whole UTF-8); nothing when `buf` is NULL or `len` 0.
 fn copy_string(text: &str, buf: *mut c_char, len: usize) {
     if !buf.is_null() && len > 0 {
-        let n = text.len().min(len - 1);
+        let mut n = text.len().min(len - 1);
+        while !text.is_char_boundary(n) {
+            n -= 1; // 0 is a boundary
+        }
         // SAFETY: `buf` points to `len` writable bytes (the caller's contract, as the header
         // documents for each function taking a buffer); n < len.
         unsafe {

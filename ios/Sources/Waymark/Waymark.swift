@@ -2806,7 +2806,8 @@ public struct EngineOptions: Equatable, Hashable {
     /**
      * The user's own step length in metres, used in place of the step length model the site
      * was surveyed with (for an app that knows its user's stride). `null` / `nil`: the
-     * site's surveyed model, or 0.7 m on a site without one.
+     * site's surveyed model, or 0.7 m on a site without one. Outside 0.1-2.5 m:
+     * `InvalidConfig`.
      */
     public var stepLengthM: Double?
     /**
@@ -2821,11 +2822,13 @@ public struct EngineOptions: Equatable, Hashable {
      */
     public var track: Bool
     /**
-     * Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+     * Magnetic declination at the site, degrees east, within ±180; `null` / `nil`: the site
+     * file's.
      */
     public var declinationDeg: Double?
     /**
-     * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+     * True azimuth of the site's +y axis, degrees, within ±360; `null` / `nil`: the site
+     * file's.
      */
     public var siteRotationDeg: Double?
     /**
@@ -2846,7 +2849,8 @@ public struct EngineOptions: Equatable, Hashable {
         /**
          * The user's own step length in metres, used in place of the step length model the site
          * was surveyed with (for an app that knows its user's stride). `null` / `nil`: the
-         * site's surveyed model, or 0.7 m on a site without one.
+         * site's surveyed model, or 0.7 m on a site without one. Outside 0.1-2.5 m:
+         * `InvalidConfig`.
          */stepLengthM: Double? = nil, 
         /**
          * How many epochs behind the newest the fixed-lag estimate is.
@@ -2858,10 +2862,12 @@ public struct EngineOptions: Equatable, Hashable {
          * and no `TrackRevised` comes. The positions are the same either way.
          */track: Bool = true, 
         /**
-         * Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+         * Magnetic declination at the site, degrees east, within ±180; `null` / `nil`: the site
+         * file's.
          */declinationDeg: Double? = nil, 
         /**
-         * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+         * True azimuth of the site's +y axis, degrees, within ±360; `null` / `nil`: the site
+         * file's.
          */siteRotationDeg: Double? = nil, 
         /**
          * The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes

@@ -118,11 +118,11 @@ pub struct waymark_engine_options {
     pub fixed_lag_epochs: u32,
     /// The user's own step length, m, used in place of the step length model the site was
     /// surveyed with; NaN (the default): the site's surveyed model, or 0.7 m on a site
-    /// without one.
+    /// without one. Outside 0.1-2.5 m: `WAYMARK_RESULT_INVALID_CONFIG`.
     pub step_length_m: f64,
-    /// Magnetic declination at the site, degrees east; NaN: the site file's.
+    /// Magnetic declination at the site, degrees east, within ±180; NaN: the site file's.
     pub declination_deg: f64,
-    /// True azimuth of the site's +y axis, degrees; NaN: the site file's.
+    /// True azimuth of the site's +y axis, degrees, within ±360; NaN: the site file's.
     pub site_rotation_deg: f64,
     /// The salt of a site file whose transmitter ids are hashed (docs/privacy.md):
     /// `site_salt_len` bytes (at least 16; the bytes the salt file's hex digits stand for),
