@@ -643,9 +643,9 @@ fileprivate struct FfiConverterData: FfiConverterRustBuffer {
  * Receives Waymark's log records (implemented in Kotlin or Swift).
  *
  * Called on the thread that logged, after the Waymark call it logged in has released its
- * locks and just before that call returns (or, for a record logged outside any call, at
- * once); never from two threads' records interleaved within one call. It may call the engine
- * or close it. Records it causes are delivered after it returns. See docs/errors.md#callbacks.
+ * locks and just before that call returns (a record logged outside any call: at once),
+ * possibly on several threads at once. It may call the engine or close it; the records its
+ * own calls make are delivered after it returns. See docs/errors.md#callbacks.
  */
 public protocol LogSink: AnyObject, Sendable {
     
@@ -659,9 +659,9 @@ public protocol LogSink: AnyObject, Sendable {
  * Receives Waymark's log records (implemented in Kotlin or Swift).
  *
  * Called on the thread that logged, after the Waymark call it logged in has released its
- * locks and just before that call returns (or, for a record logged outside any call, at
- * once); never from two threads' records interleaved within one call. It may call the engine
- * or close it. Records it causes are delivered after it returns. See docs/errors.md#callbacks.
+ * locks and just before that call returns (a record logged outside any call: at once),
+ * possibly on several threads at once. It may call the engine or close it; the records its
+ * own calls make are delivered after it returns. See docs/errors.md#callbacks.
  */
 open class LogSinkImpl: LogSink, @unchecked Sendable {
     fileprivate let handle: UInt64
