@@ -5,6 +5,18 @@ use crate::error::Error;
 use crate::sensors::{MotionConfig, StepLengthModel};
 use serde::{Deserialize, Serialize};
 
+/// The step lengths an app may give as its user's own (`step_length_override` as a constant,
+/// the FFI's `step_length_m`), m: wider than any walking step (about 0.3 m for a small child
+/// to about 1 m for a long stride), so only a unit mistake or garbage is refused.
+pub const STEP_LENGTH_OVERRIDE_RANGE_M: std::ops::RangeInclusive<f64> = 0.1..=2.5;
+
+/// The largest magnitude of a `north` override's declination, degrees: an angle between two
+/// directions is at most half a turn.
+pub const MAX_DECLINATION_DEG: f64 = 180.0;
+
+/// The largest magnitude of a `north` override's site rotation, degrees: one turn.
+pub const MAX_SITE_ROTATION_DEG: f64 = 360.0;
+
 /// Which transition model the HMM uses.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -461,10 +473,32 @@ impl EngineConfig {
             MotionConfig { step_length: model, ..self.motion.clone() }
                 .validate()
                 .map_err(|e| Error::InvalidConfig(format!("step_length_override: {e}")))?;
+            if let StepLengthModel::Constant { length_m } = model {
+                if !STEP_LENGTH_OVERRIDE_RANGE_M.contains(&length_m) {
+                    let range = &STEP_LENGTH_OVERRIDE_RANGE_M;
+                    return fail(format!(
+                        "step_length_override: a step length must be in [{}, {}] m (got {length_m})",
+                        range.start(),
+                        range.end()
+                    ));
+                }
+            }
         }
         if let Some(n) = self.north {
             if !(n.declination_rad.is_finite() && n.site_rotation_rad.is_finite()) {
                 return fail("north: angles must be finite".into());
+            }
+            let (declination_deg, rotation_deg) =
+                (n.declination_rad.to_degrees(), n.site_rotation_rad.to_degrees());
+            if declination_deg.abs() > MAX_DECLINATION_DEG {
+                return fail(format!(
+                    "north: declination must be within ±{MAX_DECLINATION_DEG}° (got {declination_deg}°)"
+                ));
+            }
+            if rotation_deg.abs() > MAX_SITE_ROTATION_DEG {
+                return fail(format!(
+                    "north: site rotation must be within ±{MAX_SITE_ROTATION_DEG}° (got {rotation_deg}°)"
+                ));
             }
         }
         let h = &self.hipe;
@@ -595,5 +629,35 @@ mod tests {
             ..EngineConfig::default()
         };
         assert!(bad.validate().unwrap_err().to_string().contains("step_length_override"));
+    }
+
+    /// A step length or north override far out of any plausible range (1e300, a unit mistake)
+    /// is an invalid config, not an engine that walks to another continent.
+    #[test]
+    fn implausible_overrides_are_refused() {
+        let step = |length_m| EngineConfig {
+            step_length_override: Some(StepLengthModel::Constant { length_m }),
+            ..EngineConfig::default()
+        };
+        for ok in [0.1, 0.7, 2.5] {
+            assert!(step(ok).validate().is_ok(), "{ok} m");
+        }
+        for bad in [1e300, 70.0, 0.05] {
+            let e = step(bad).validate().unwrap_err().to_string();
+            assert!(e.contains("step_length_override") && e.contains("2.5"), "{bad} m: {e}");
+        }
+        let north = |declination_deg: f64, rotation_deg: f64| EngineConfig {
+            north: Some(crate::site::North {
+                declination_rad: declination_deg.to_radians(),
+                site_rotation_rad: rotation_deg.to_radians(),
+            }),
+            ..EngineConfig::default()
+        };
+        assert!(north(-180.0, 360.0).validate().is_ok());
+        assert!(north(12.5, -90.0).validate().is_ok());
+        for (d, r) in [(1e300, 0.0), (181.0, 0.0), (0.0, 1e300), (0.0, -361.0)] {
+            let e = north(d, r).validate().unwrap_err().to_string();
+            assert!(e.contains("north:"), "{d}, {r}: {e}");
+        }
     }
 }

@@ -226,6 +226,86 @@ static void garbage(waymark_engine *engine) {
     CHECK(waymark_engine_advance(engine, t, &p) == WAYMARK_RESULT_OK && reentrant_calls == 2, "cleared");
 }
 
+/* The C ABI's edges (issue 60): options no person or compass has, a zone name cut inside a
+ * character, reading counts whose sum overflows. */
+static void abi_edges(const char *json, size_t len) {
+    waymark_engine *engine = NULL;
+    waymark_engine_options options;
+    const double steps[] = {1e300, 70.0, 0.01};
+    for (size_t i = 0; i < COUNT(steps); i++) {
+        waymark_engine_options_default(&options);
+        options.step_length_m = steps[i];
+        CHECK(waymark_engine_new_with_options((const uint8_t *)json, len, &options, &engine) ==
+                      WAYMARK_RESULT_INVALID_CONFIG && engine == NULL,
+              "step length %g m", steps[i]);
+    }
+    waymark_engine_options_default(&options);
+    options.declination_deg = 1e300;
+    CHECK(waymark_engine_new_with_options((const uint8_t *)json, len, &options, &engine) ==
+                  WAYMARK_RESULT_INVALID_CONFIG && engine == NULL,
+          "declination 1e300");
+    waymark_engine_options_default(&options);
+    options.site_rotation_deg = -1e300;
+    CHECK(waymark_engine_new_with_options((const uint8_t *)json, len, &options, &engine) ==
+                  WAYMARK_RESULT_INVALID_CONFIG && engine == NULL,
+          "site rotation -1e300");
+    waymark_engine_options_default(&options);
+    options.step_length_m = 0.75;
+    options.declination_deg = -12.5;
+    options.site_rotation_deg = 270;
+    CHECK(waymark_engine_new_with_options((const uint8_t *)json, len, &options, &engine) == WAYMARK_RESULT_OK,
+          "plausible options");
+    if (engine) {
+        /* Counts whose sum overflows, or whose arrays no memory holds: refused before any
+         * reading is touched (the pointers are not NULL but point to one reading each). */
+        waymark_wifi_reading w = {"02:00:00:00:00:00", -60.0, 0};
+        waymark_beacon_reading b = {NULL, 0, 0, -60.0, 0, "02:00:00:00:00:01"};
+        CHECK(waymark_engine_push_scan(engine, 10, &w, SIZE_MAX, &b, 1, NULL) == WAYMARK_RESULT_INPUT_REJECTED,
+              "wifi_count + beacon_count overflows");
+        CHECK(waymark_engine_push_scan(engine, 10, &w, SIZE_MAX / 2, &b, SIZE_MAX / 2, NULL) ==
+                  WAYMARK_RESULT_INPUT_REJECTED,
+              "counts no memory holds");
+        CHECK(waymark_engine_push_scan(engine, 10, &w, 1, &b, 1, NULL) == WAYMARK_RESULT_OK, "then a real scan");
+        waymark_engine_free(engine);
+        engine = NULL;
+    }
+
+    /* A zone name of multi-byte characters: "caf\u00e9 \u2615" is 9 bytes (c a f, 2 for the
+     * e-acute, a space, 3 for the cup). */
+    const char *from = "\"name\":\"aisle\"", *to = "\"name\":\"caf\xc3\xa9 \xe2\x98\x95\"";
+    const char *at = strstr(json, from);
+    CHECK(at != NULL, "the site has a zone named aisle");
+    if (!at) return;
+    size_t head = (size_t)(at - json), tail = len - head - strlen(from);
+    size_t utf8_len = head + strlen(to) + tail;
+    char *utf8 = malloc(utf8_len);
+    if (!utf8) return;
+    memcpy(utf8, json, head);
+    memcpy(utf8 + head, to, strlen(to));
+    memcpy(utf8 + head + strlen(to), at + strlen(from), tail);
+    CHECK(waymark_engine_new((const uint8_t *)utf8, utf8_len, &engine) == WAYMARK_RESULT_OK, "site with UTF-8");
+    free(utf8);
+    if (!engine) return;
+    size_t zone = SIZE_MAX, zones = 0, name_len = 0;
+    waymark_engine_zone_count(engine, &zones);
+    char name[16];
+    for (size_t z = 0; z < zones; z++) {
+        waymark_engine_zone_name(engine, z, name, sizeof name, NULL);
+        if (strcmp(name, "caf\xc3\xa9 \xe2\x98\x95") == 0) zone = z;
+    }
+    CHECK(zone != SIZE_MAX, "the UTF-8 zone is there");
+    /* Room for 4 bytes and the NUL cuts inside the e-acute, for 8 inside the cup: only whole
+     * characters are written. */
+    char five[5], nine[9];
+    CHECK(waymark_engine_zone_name(engine, zone, five, sizeof five, &name_len) == WAYMARK_RESULT_OK &&
+              strcmp(five, "caf") == 0 && name_len == 9,
+          "cut before the e-acute: \"%s\" (%zu)", five, name_len);
+    CHECK(waymark_engine_zone_name(engine, zone, nine, sizeof nine, &name_len) == WAYMARK_RESULT_OK &&
+              strcmp(nine, "caf\xc3\xa9 ") == 0 && name_len == 9,
+          "cut before the cup: \"%s\" (%zu)", nine, name_len);
+    waymark_engine_free(engine);
+}
+
 /* Habits after the garbage: learning from that history works, and garbage models are refused
  * with a code while the engine's model stays as it was. */
 static void habit_garbage(waymark_engine *engine) {
@@ -281,6 +361,7 @@ int main(int argc, char **argv) {
     char *json = site_argument(argc, argv, &len);
     sites(argv[1], json, len);
     null_engine();
+    abi_edges(json, len);
 
     waymark_engine *engine = NULL;
     CHECK(waymark_engine_new((const uint8_t *)json, len, &engine) == WAYMARK_RESULT_OK, "site");

@@ -574,7 +574,9 @@ typedef struct {
  * passed to it by that thread, after the current one, so such a call may return before its
  * position reaches the callback; every position has reached it by the time all calls have
  * returned. A callback may call the engine (what it makes is delivered after the current
- * call returns, by the same thread).
+ * call returns, by the same thread), replace or clear the callbacks, and free the engine: then
+ * no callback of it is called again, and it is freed when the calls running on it return
+ * (docs/errors.md#callbacks).
  */
 typedef void (*waymark_position_callback)(void *userdata, const waymark_position *position);
 
@@ -653,7 +655,8 @@ typedef struct {
 
 /**
  * Called with every status change and every failed call, as `waymark_position_callback` is
- * (in one order with the positions, from the same thread, never at the same time as it).
+ * (in one order with the positions, from the same thread, never at the same time as it), and
+ * may do what it may: call the engine, or free it (on a rejected input too).
  */
 typedef void (*waymark_status_callback)(void *userdata, const waymark_status *status);
 
@@ -674,15 +677,15 @@ typedef struct {
   /**
    * The user's own step length, m, used in place of the step length model the site was
    * surveyed with; NaN (the default): the site's surveyed model, or 0.7 m on a site
-   * without one.
+   * without one. Outside 0.1-2.5 m: `WAYMARK_RESULT_INVALID_CONFIG`.
    */
   double step_length_m;
   /**
-   * Magnetic declination at the site, degrees east; NaN: the site file's.
+   * Magnetic declination at the site, degrees east, within ±180; NaN: the site file's.
    */
   double declination_deg;
   /**
-   * True azimuth of the site's +y axis, degrees; NaN: the site file's.
+   * True azimuth of the site's +y axis, degrees, within ±360; NaN: the site file's.
    */
   double site_rotation_deg;
   /**
@@ -754,7 +757,10 @@ typedef struct {
  * Called with each log record at the level given to `waymark_set_log_callback` or above:
  * `level` a `waymark_log_level`, `target` the Rust module it came from and `message` the
  * text, both NUL-terminated and valid only during the call. Called from any thread that
- * calls Waymark, possibly from several at once.
+ * calls Waymark, possibly from several at once, on the thread that logged: a record logged
+ * during a Waymark call is delivered when that call has released its locks, just before it
+ * returns (at most 1000 records per call; then one `WARN` record counts the ones dropped). So it may call Waymark, free an engine, or set the log callback; what it calls
+ * does not change the returning call's `waymark_last_error`. See docs/errors.md#callbacks.
  */
 typedef void (*waymark_log_callback)(void *userdata,
                                      uint32_t level,
@@ -907,7 +913,10 @@ extern "C" {
 #endif // __cplusplus
 
 /**
- * Frees an engine. NULL is ignored.
+ * Frees an engine. NULL is ignored. Call it once, when no other thread is calling the engine.
+ * It may be called from inside the engine's own callbacks (position, status or log): then no
+ * callback of the engine is called after it, and the engine is freed when the calls running
+ * on it (the one whose callback this is) return (docs/errors.md#callbacks).
  */
 void waymark_engine_free(waymark_engine *engine);
 
@@ -1024,9 +1033,10 @@ waymark_result waymark_engine_confirm_position(waymark_engine *engine,
 waymark_result waymark_engine_zone_count(const waymark_engine *engine, size_t *count);
 
 /**
- * Copies the name of zone `zone` into `buf` (NUL-terminated, truncated to `len` bytes; `buf`
- * may be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL). A
- * zone index out of range returns `InputRejected`.
+ * Copies the name of zone `zone` into `buf` (NUL-terminated UTF-8; a name longer than
+ * `len - 1` bytes is cut at the last whole character that fits, never inside one; `buf` may
+ * be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL): the name
+ * was cut when `*name_len >= len`. A zone index out of range returns `InputRejected`.
  */
 waymark_result waymark_engine_zone_name(const waymark_engine *engine,
                                         size_t zone,
@@ -1079,7 +1089,8 @@ waymark_result waymark_engine_set_status_callback(waymark_engine *engine,
 
 /**
  * Copies the calling thread's last error message into `buf` (NUL-terminated, truncated to
- * `len`) and returns the message's full length in bytes. `buf` may be NULL to ask the length.
+ * `len` at a character boundary) and returns the message's full length in bytes. `buf` may be
+ * NULL to ask the length.
  */
 size_t waymark_last_error(char *buf, size_t len);
 
@@ -1230,7 +1241,9 @@ waymark_result waymark_engine_fix_error(const waymark_engine *engine, waymark_fi
  * logcat, tag "waymark"). Safe to call again: the latest callback and level win. A record
  * being logged on another thread while this is called may still reach the previous callback,
  * so keep its userdata valid for the life of the process (a static). A level that does not
- * exist returns `WAYMARK_RESULT_INVALID_CONFIG`.
+ * exist returns `WAYMARK_RESULT_INVALID_CONFIG`. A panic Waymark caught (`WAYMARK_RESULT_PANIC`)
+ * arrives as an `ERROR` record, "Waymark panicked at FILE:LINE: MESSAGE", and is not printed
+ * on stderr. When and on which thread records arrive: `waymark_log_callback`.
  */
 waymark_result waymark_set_log_callback(uint32_t level,
                                         waymark_log_callback callback,

@@ -32,12 +32,54 @@ use crate::sensors::SensorSample;
 use crate::site::Site;
 use std::cell::RefCell;
 use std::ffi::{c_char, c_void, CStr, CString};
+use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 
 /// An engine. Opaque; create with `waymark_engine_new_with_options`, free with
 /// `waymark_engine_free`. Thread-safe: any thread may call any function on it.
 pub struct waymark_engine {
     handle: Handle<Callbacks>,
+    /// [`CALL`] for each call running on the engine, plus [`FREED`] once `waymark_engine_free`
+    /// was called: a free while calls run (from a callback) is done by the last of them to
+    /// return (docs/errors.md#callbacks).
+    calls: AtomicUsize,
+}
+
+/// `waymark_engine::calls`: `waymark_engine_free` was called.
+const FREED: usize = 1;
+/// `waymark_engine::calls`: one call running.
+const CALL: usize = 2;
+
+/// A call running on an engine: frees the engine when it is the last one to return and
+/// `waymark_engine_free` was called meanwhile.
+struct Running(*mut waymark_engine);
+
+impl waymark_engine {
+    fn new(handle: Handle<Callbacks>) -> Self {
+        Self { handle, calls: AtomicUsize::new(0) }
+    }
+}
+
+impl Running {
+    /// A call on `engine`, a live handle from `waymark_engine_new*` (not NULL).
+    fn enter(engine: *const waymark_engine) -> Self {
+        // SAFETY: the caller checked `engine` is not NULL; it is alive (the header's contract).
+        unsafe { &*engine }.calls.fetch_add(CALL, Ordering::SeqCst);
+        Self(engine.cast_mut())
+    }
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        // SAFETY: the engine is alive: this call's CALL in `calls` keeps `waymark_engine_free`
+        // from freeing it, and only the call that removes the last CALL after FREED frees it.
+        let before = unsafe { &*self.0 }.calls.fetch_sub(CALL, Ordering::SeqCst);
+        if before == CALL | FREED {
+            // SAFETY: the engine came from `Box::into_raw` (`waymark_engine_new*`); FREED is set
+            // and no call runs on it any more, so nothing else refers to it.
+            drop(unsafe { Box::from_raw(self.0) });
+        }
+    }
 }
 
 /// The app's callbacks, as `waymark_engine_set_callback` and
@@ -190,12 +232,22 @@ fn fail_with(e: &PositioningError) -> waymark_result {
     fail(e.into(), e.to_string())
 }
 
-/// Runs `body`, turning a panic into `waymark_result::Panic`.
+/// Runs `body`, turning a panic into `waymark_result::Panic` (its message goes to the log
+/// callback, not to stderr). The log records `body` made reach the log callback when it has
+/// returned, with no lock held; what the log callback calls does not change this call's
+/// `waymark_last_error` (docs/errors.md#callbacks).
 fn boundary(body: impl FnOnce() -> waymark_result) -> waymark_result {
-    match std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)) {
+    let hold = crate::ffi::logging::hold();
+    let code = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)) {
         Ok(code) => code,
         Err(_) => fail(waymark_result::Panic, "Waymark panicked; the call had no effect"),
+    };
+    if hold.will_flush() {
+        let message = LAST_ERROR.with(|e| std::mem::take(&mut *e.borrow_mut()));
+        drop(hold);
+        LAST_ERROR.with(|e| *e.borrow_mut() = message);
     }
+    code
 }
 
 /// Writes `value` to `out` when it is not NULL.
@@ -207,15 +259,27 @@ fn write<T>(out: *mut T, value: T) {
     }
 }
 
-/// Frees an engine. NULL is ignored.
+/// Frees an engine. NULL is ignored. Call it once, when no other thread is calling the engine.
+/// It may be called from inside the engine's own callbacks (position, status or log): then no
+/// callback of the engine is called after it, and the engine is freed when the calls running
+/// on it (the one whose callback this is) return (docs/errors.md#callbacks).
 #[no_mangle]
 pub extern "C" fn waymark_engine_free(engine: *mut waymark_engine) {
     let _ = boundary(|| {
-        if !engine.is_null() {
-            // SAFETY: `engine` came from `waymark_engine_new*` (Box::into_raw) and is freed
-            // once, as the header requires.
-            drop(unsafe { Box::from_raw(engine) });
-        }
+        // SAFETY: a non-NULL `engine` came from `waymark_engine_new*` (Box::into_raw) and is
+        // not freed yet (the header's contract), so it is alive.
+        let Some(alive) = (unsafe { engine.as_ref() }) else {
+            return waymark_result::Ok;
+        };
+        // A call of its own, so that whichever call returns last frees it, this one or one
+        // that a callback freeing the engine runs inside.
+        let running = Running::enter(engine);
+        // No callback of it is called again (it may be freed inside one, with its userdata).
+        let callbacks = alive.handle.listeners();
+        *lock(&callbacks.position) = None;
+        *lock(&callbacks.status) = None;
+        alive.calls.fetch_or(FREED, Ordering::SeqCst);
+        drop(running);
         waymark_result::Ok
     });
 }
@@ -228,10 +292,12 @@ fn with_handle(
     boundary(|| {
         // SAFETY: a non-NULL `engine` is a live handle from `waymark_engine_new*` (the header's
         // contract); `waymark_engine` is Sync, so a shared reference from any thread is fine.
-        let Some(engine) = (unsafe { engine.as_ref() }) else {
+        let Some(alive) = (unsafe { engine.as_ref() }) else {
             return fail(waymark_result::NullParameter, "engine must not be NULL");
         };
-        body(&engine.handle)
+        // Keeps the engine alive should a callback free it (`waymark_engine_free`).
+        let _running = Running::enter(engine);
+        body(&alive.handle)
     })
 }
 
@@ -414,7 +480,19 @@ fn readings(
     beacons: *const waymark_beacon_reading,
     beacon_count: usize,
 ) -> Result<Vec<Reading>, Rejected> {
-    let mut readings = Vec::with_capacity(wifi_count + beacon_count);
+    // Counts that no array can have are refused before any memory is touched or reserved.
+    let fits = |count: usize, size: usize| count.checked_mul(size).is_some_and(|b| b <= isize::MAX as usize);
+    let total = wifi_count.checked_add(beacon_count);
+    let mut readings = Vec::new();
+    let reserved = total.is_some_and(|n| readings.try_reserve_exact(n).is_ok());
+    if !reserved
+        || !fits(wifi_count, std::mem::size_of::<waymark_wifi_reading>())
+        || !fits(beacon_count, std::mem::size_of::<waymark_beacon_reading>())
+    {
+        return Err(Rejected::Input(format!(
+            "{wifi_count} WiFi and {beacon_count} beacon readings cannot be held in memory"
+        )));
+    }
     if wifi_count > 0 {
         // SAFETY: checked non-NULL by the caller; the app guarantees `wifi_count` elements.
         for w in unsafe { std::slice::from_raw_parts(wifi, wifi_count) } {
@@ -572,9 +650,10 @@ pub extern "C" fn waymark_engine_zone_count(
     })
 }
 
-/// Copies the name of zone `zone` into `buf` (NUL-terminated, truncated to `len` bytes; `buf`
-/// may be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL). A
-/// zone index out of range returns `InputRejected`.
+/// Copies the name of zone `zone` into `buf` (NUL-terminated UTF-8; a name longer than
+/// `len - 1` bytes is cut at the last whole character that fits, never inside one; `buf` may
+/// be NULL with `len` 0) and its full length in bytes into `*name_len` (may be NULL): the name
+/// was cut when `*name_len >= len`. A zone index out of range returns `InputRejected`.
 #[no_mangle]
 pub extern "C" fn waymark_engine_zone_name(
     engine: *const waymark_engine,
@@ -714,7 +793,8 @@ fn replace_callback<T>(
 }
 
 /// Copies the calling thread's last error message into `buf` (NUL-terminated, truncated to
-/// `len`) and returns the message's full length in bytes. `buf` may be NULL to ask the length.
+/// `len` at a character boundary) and returns the message's full length in bytes. `buf` may be
+/// NULL to ask the length.
 #[no_mangle]
 pub extern "C" fn waymark_last_error(buf: *mut c_char, len: usize) -> usize {
     let message = LAST_ERROR.with(|e| e.borrow().clone());
@@ -722,11 +802,14 @@ pub extern "C" fn waymark_last_error(buf: *mut c_char, len: usize) -> usize {
     message.len()
 }
 
-/// Copies `text` into `buf`, NUL-terminated and truncated to `len` bytes; nothing when `buf`
-/// is NULL or `len` 0.
+/// Copies `text` into `buf`, NUL-terminated and truncated to `len` bytes at a character
+/// boundary (what it writes is always whole UTF-8); nothing when `buf` is NULL or `len` 0.
 fn copy_string(text: &str, buf: *mut c_char, len: usize) {
     if !buf.is_null() && len > 0 {
-        let n = text.len().min(len - 1);
+        let mut n = text.len().min(len - 1);
+        while !text.is_char_boundary(n) {
+            n -= 1; // 0 is a boundary
+        }
         // SAFETY: `buf` points to `len` writable bytes (the caller's contract, as the header
         // documents for each function taking a buffer); n < len.
         unsafe {

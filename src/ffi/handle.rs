@@ -158,7 +158,8 @@ impl<L: Listeners> Handle<L> {
     /// with no lock held. A panic inside becomes `Internal`, and what the call staged is
     /// dropped; the engine is then unusable (it may be half-changed): every later
     /// call fails with `Internal` too. A failure is also reported to the listeners, after what
-    /// the call published.
+    /// the call published. The log records the call made reach the log sink last, when the
+    /// outermost Waymark call on this thread ends ([`super::logging`]).
     pub(crate) fn call<T>(
         &self,
         f: impl FnOnce(&mut Engine) -> Result<T, PositioningError>,
@@ -180,6 +181,9 @@ impl<L: Listeners> Handle<L> {
         breaks: bool,
         f: impl FnOnce(&mut Engine) -> Result<T, PositioningError>,
     ) -> Result<T, PositioningError> {
+        // Log records (and a caught panic's message) wait until the lock is released
+        // (docs/errors.md#callbacks): a log sink may call the engine.
+        let _hold = super::logging::hold();
         let result = {
             let mut engine = lock(&self.engine);
             let result = if self.broken.load(Ordering::SeqCst) {
@@ -288,6 +292,7 @@ impl<L: Listeners> Handle<L> {
     /// Input rejected before it reached the engine (a malformed transmitter id): reported to
     /// the listeners as the engine's own rejections are, and returned.
     pub(crate) fn reject(&self, error: PositioningError) -> PositioningError {
+        let _hold = super::logging::hold();
         self.events.push(Event::Error(error.clone()));
         self.deliver();
         error
@@ -342,5 +347,71 @@ mod tests {
         assert!(given.site_calibration);
         let negative = Options { step_length_m: Some(-0.7), ..Options::default() }.config(&site).unwrap();
         assert!(negative.validate().is_err(), "the engine refuses it as an invalid config");
+    }
+
+    /// Listeners that hear nothing.
+    struct Deaf;
+
+    impl Listeners for Deaf {
+        fn deliver(&self, _: &Event, _: &Site) {}
+    }
+
+    /// What a log sink saw: each record the test's thread logged, and whether the engine's
+    /// lock was free when the record arrived.
+    struct Sink {
+        handle: Arc<Handle<Deaf>>,
+        thread: std::thread::ThreadId,
+        seen: Mutex<Vec<(String, bool)>>,
+    }
+
+    impl crate::ffi::logging::LogSink for Sink {
+        fn log(&self, _level: crate::ffi::logging::LogLevel, target: String, message: String) {
+            let _ = target;
+            if std::thread::current().id() == self.thread {
+                let unlocked =
+                    !matches!(self.handle.engine.try_lock(), Err(std::sync::TryLockError::WouldBlock));
+                lock(&self.seen).push((message, unlocked));
+            }
+        }
+    }
+
+    /// Log records made under the engine's lock reach the sink after it is released, so a sink
+    /// may call the engine (docs/errors.md#callbacks); a caught panic becomes an `Error` record;
+    /// past `MAX_HELD_RECORDS` in one call, records are dropped and counted. One test: the
+    /// sink is global.
+    #[test]
+    fn log_records_reach_the_sink_after_the_lock_is_released() {
+        use crate::ffi::logging::{hold, init_logging, LogLevel, MAX_HELD_RECORDS};
+        let mut b = SiteBuilder::new("one");
+        let f = b.floor("G", 0.0);
+        b.state(f, nalgebra::Point2::new(0.0, 0.0), vec![]);
+        let site = Arc::new(b.build(BuildOptions::default()).unwrap());
+        let handle = Arc::new(Handle::new(site, &Options::default(), Deaf).unwrap());
+        let sink = Arc::new(Sink {
+            handle: Arc::clone(&handle),
+            thread: std::thread::current().id(),
+            seen: Mutex::new(Vec::new()),
+        });
+        init_logging(Some(sink.clone()), LogLevel::Debug);
+
+        assert!(handle.push_scan(&Scan { timestamp_ns: 5, readings: vec![] }).is_err());
+        assert!(handle.call(|_| -> Result<(), _> { panic!("panic inside the lock") }).is_err());
+        assert_eq!(lock(&sink.seen).len(), 2);
+        let call = hold();
+        for k in 0..MAX_HELD_RECORDS + 3 {
+            log::debug!(target: "waymark::held_cap", "record {k}");
+        }
+        let held = lock(&sink.seen).len();
+        drop(call);
+        assert_eq!(held, 2, "held until the call ends");
+        init_logging(None, LogLevel::Error);
+
+        let seen = std::mem::take(&mut *lock(&sink.seen));
+        assert!(seen.iter().all(|(_, unlocked)| *unlocked), "a record arrived under the lock: {seen:?}");
+        assert!(seen[0].0.starts_with("scan rejected"), "{:?}", seen[0]);
+        assert!(seen[1].0.starts_with("Waymark panicked at src/ffi/handle.rs"), "{:?}", seen[1]);
+        assert_eq!(seen.len(), 2 + MAX_HELD_RECORDS + 1);
+        assert_eq!(seen[2 + MAX_HELD_RECORDS - 1].0, format!("record {}", MAX_HELD_RECORDS - 1));
+        assert!(seen.last().unwrap().0.starts_with("3 log records dropped"), "{:?}", seen.last());
     }
 }

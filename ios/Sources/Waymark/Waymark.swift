@@ -641,6 +641,11 @@ fileprivate struct FfiConverterData: FfiConverterRustBuffer {
 
 /**
  * Receives Waymark's log records (implemented in Kotlin or Swift).
+ *
+ * Called on the thread that logged, after the Waymark call it logged in has released its
+ * locks and just before that call returns (a record logged outside any call: at once),
+ * possibly on several threads at once. It may call the engine or close it; the records its
+ * own calls make are delivered after it returns. See docs/errors.md#callbacks.
  */
 public protocol LogSink: AnyObject, Sendable {
     
@@ -652,6 +657,11 @@ public protocol LogSink: AnyObject, Sendable {
 }
 /**
  * Receives Waymark's log records (implemented in Kotlin or Swift).
+ *
+ * Called on the thread that logged, after the Waymark call it logged in has released its
+ * locks and just before that call returns (a record logged outside any call: at once),
+ * possibly on several threads at once. It may call the engine or close it; the records its
+ * own calls make are delivered after it returns. See docs/errors.md#callbacks.
  */
 open class LogSinkImpl: LogSink, @unchecked Sendable {
     fileprivate let handle: UInt64
@@ -2796,7 +2806,8 @@ public struct EngineOptions: Equatable, Hashable {
     /**
      * The user's own step length in metres, used in place of the step length model the site
      * was surveyed with (for an app that knows its user's stride). `null` / `nil`: the
-     * site's surveyed model, or 0.7 m on a site without one.
+     * site's surveyed model, or 0.7 m on a site without one. Outside 0.1-2.5 m:
+     * `InvalidConfig`.
      */
     public var stepLengthM: Double?
     /**
@@ -2811,11 +2822,13 @@ public struct EngineOptions: Equatable, Hashable {
      */
     public var track: Bool
     /**
-     * Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+     * Magnetic declination at the site, degrees east, within ±180; `null` / `nil`: the site
+     * file's.
      */
     public var declinationDeg: Double?
     /**
-     * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+     * True azimuth of the site's +y axis, degrees, within ±360; `null` / `nil`: the site
+     * file's.
      */
     public var siteRotationDeg: Double?
     /**
@@ -2836,7 +2849,8 @@ public struct EngineOptions: Equatable, Hashable {
         /**
          * The user's own step length in metres, used in place of the step length model the site
          * was surveyed with (for an app that knows its user's stride). `null` / `nil`: the
-         * site's surveyed model, or 0.7 m on a site without one.
+         * site's surveyed model, or 0.7 m on a site without one. Outside 0.1-2.5 m:
+         * `InvalidConfig`.
          */stepLengthM: Double? = nil, 
         /**
          * How many epochs behind the newest the fixed-lag estimate is.
@@ -2848,10 +2862,12 @@ public struct EngineOptions: Equatable, Hashable {
          * and no `TrackRevised` comes. The positions are the same either way.
          */track: Bool = true, 
         /**
-         * Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+         * Magnetic declination at the site, degrees east, within ±180; `null` / `nil`: the site
+         * file's.
          */declinationDeg: Double? = nil, 
         /**
-         * True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+         * True azimuth of the site's +y axis, degrees, within ±360; `null` / `nil`: the site
+         * file's.
          */siteRotationDeg: Double? = nil, 
         /**
          * The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes
@@ -7178,7 +7194,9 @@ public func FfiConverterTypeTransmitterIdString_lower(_ value: TransmitterIdStri
 
 /**
  * Sends Waymark's log records at `level` and above to `sink` (on Android, with no sink, to
- * logcat under the tag "waymark"). Safe to call again: the latest sink and level win.
+ * logcat under the tag "waymark"). Safe to call again, from a sink too: the latest sink and
+ * level win. A record logged inside a Waymark call reaches the sink when that call has
+ * released its locks (docs/errors.md#callbacks).
  */
 public func initLogging(sink: LogSink?, level: LogLevel)  {try! rustCall() {
         uniffiCallStatus in
@@ -7214,7 +7232,7 @@ private let initializationResult: InitializationResult = {
     if bindings_contract_version != scaffolding_contract_version {
         return InitializationResult.contractVersionMismatch
     }
-    if (uniffi_waymark_checksum_func_init_logging() != 18123) {
+    if (uniffi_waymark_checksum_func_init_logging() != 22633) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_func_version() != 18717) {

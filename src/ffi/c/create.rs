@@ -85,7 +85,7 @@ fn create(
     });
     match handle {
         Ok(handle) => {
-            write(out, Box::into_raw(Box::new(waymark_engine { handle })));
+            write(out, Box::into_raw(Box::new(waymark_engine::new(handle))));
             waymark_result::Ok
         }
         Err(e) => fail_with(&e),

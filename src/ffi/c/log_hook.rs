@@ -40,7 +40,9 @@ impl LogSink for CLogSink {
 /// logcat, tag "waymark"). Safe to call again: the latest callback and level win. A record
 /// being logged on another thread while this is called may still reach the previous callback,
 /// so keep its userdata valid for the life of the process (a static). A level that does not
-/// exist returns `WAYMARK_RESULT_INVALID_CONFIG`.
+/// exist returns `WAYMARK_RESULT_INVALID_CONFIG`. A panic Waymark caught (`WAYMARK_RESULT_PANIC`)
+/// arrives as an `ERROR` record, "Waymark panicked at FILE:LINE: MESSAGE", and is not printed
+/// on stderr. When and on which thread records arrive: `waymark_log_callback`.
 #[no_mangle]
 pub extern "C" fn waymark_set_log_callback(
     level: u32,

@@ -118,11 +118,11 @@ pub struct waymark_engine_options {
     pub fixed_lag_epochs: u32,
     /// The user's own step length, m, used in place of the step length model the site was
     /// surveyed with; NaN (the default): the site's surveyed model, or 0.7 m on a site
-    /// without one.
+    /// without one. Outside 0.1-2.5 m: `WAYMARK_RESULT_INVALID_CONFIG`.
     pub step_length_m: f64,
-    /// Magnetic declination at the site, degrees east; NaN: the site file's.
+    /// Magnetic declination at the site, degrees east, within ±180; NaN: the site file's.
     pub declination_deg: f64,
-    /// True azimuth of the site's +y axis, degrees; NaN: the site file's.
+    /// True azimuth of the site's +y axis, degrees, within ±360; NaN: the site file's.
     pub site_rotation_deg: f64,
     /// The salt of a site file whose transmitter ids are hashed (docs/privacy.md):
     /// `site_salt_len` bytes (at least 16; the bytes the salt file's hex digits stand for),
@@ -436,19 +436,25 @@ impl From<&engine::InputStats> for waymark_input_stats {
 /// passed to it by that thread, after the current one, so such a call may return before its
 /// position reaches the callback; every position has reached it by the time all calls have
 /// returned. A callback may call the engine (what it makes is delivered after the current
-/// call returns, by the same thread).
+/// call returns, by the same thread), replace or clear the callbacks, and free the engine: then
+/// no callback of it is called again, and it is freed when the calls running on it return
+/// (docs/errors.md#callbacks).
 pub type waymark_position_callback =
     Option<unsafe extern "C" fn(userdata: *mut c_void, position: *const waymark_position)>;
 
 /// Called with every status change and every failed call, as `waymark_position_callback` is
-/// (in one order with the positions, from the same thread, never at the same time as it).
+/// (in one order with the positions, from the same thread, never at the same time as it), and
+/// may do what it may: call the engine, or free it (on a rejected input too).
 pub type waymark_status_callback =
     Option<unsafe extern "C" fn(userdata: *mut c_void, status: *const waymark_status)>;
 
 /// Called with each log record at the level given to `waymark_set_log_callback` or above:
 /// `level` a `waymark_log_level`, `target` the Rust module it came from and `message` the
 /// text, both NUL-terminated and valid only during the call. Called from any thread that
-/// calls Waymark, possibly from several at once.
+/// calls Waymark, possibly from several at once, on the thread that logged: a record logged
+/// during a Waymark call is delivered when that call has released its locks, just before it
+/// returns (at most 1000 records per call; then one `WARN` record counts the ones dropped). So it may call Waymark, free an engine, or set the log callback; what it calls
+/// does not change the returning call's `waymark_last_error`. See docs/errors.md#callbacks.
 pub type waymark_log_callback = Option<
     unsafe extern "C" fn(userdata: *mut c_void, level: u32, target: *const c_char, message: *const c_char),
 >;

@@ -26,7 +26,8 @@ pub struct EngineOptions {
     pub transition: Option<TransitionKind>,
     /// The user's own step length in metres, used in place of the step length model the site
     /// was surveyed with (for an app that knows its user's stride). `null` / `nil`: the
-    /// site's surveyed model, or 0.7 m on a site without one.
+    /// site's surveyed model, or 0.7 m on a site without one. Outside 0.1-2.5 m:
+    /// `InvalidConfig`.
     #[uniffi(default = None)]
     pub step_length_m: Option<f64>,
     /// How many epochs behind the newest the fixed-lag estimate is.
@@ -38,10 +39,12 @@ pub struct EngineOptions {
     /// and no `TrackRevised` comes. The positions are the same either way.
     #[uniffi(default = true)]
     pub track: bool,
-    /// Magnetic declination at the site, degrees east; `null` / `nil`: the site file's.
+    /// Magnetic declination at the site, degrees east, within ±180; `null` / `nil`: the site
+    /// file's.
     #[uniffi(default = None)]
     pub declination_deg: Option<f64>,
-    /// True azimuth of the site's +y axis, degrees; `null` / `nil`: the site file's.
+    /// True azimuth of the site's +y axis, degrees, within ±360; `null` / `nil`: the site
+    /// file's.
     #[uniffi(default = None)]
     pub site_rotation_deg: Option<f64>,
     /// The salt of a site file whose transmitter ids are hashed (docs/privacy.md): the bytes

@@ -38,6 +38,7 @@ object RunTests {
         val classes = arrayOf(
             WaymarkTest::class.java, ConversionsTest::class.java, GeoConversionsTest::class.java,
             ConcurrencyTest::class.java, RobustnessTest::class.java, SiteFormatsTest::class.java,
+            CallbackContractTest::class.java,
             HabitsTest::class.java, RouteTest::class.java, SurveyRecorderTest::class.java,
             LocationClientTest::class.java,
         )
