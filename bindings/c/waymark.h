@@ -565,6 +565,13 @@ typedef struct {
    * Times the engine started over from "anywhere on the site".
    */
   uint64_t filter_restarts;
+  /**
+   * Inputs refused for a time too far ahead of the engine's clock: sensor samples more than
+   * 10 s ahead of the latest input taken (unless the stream's next sample confirms the
+   * jump, as after the phone slept), and any time above INT64_MAX ns, a negative time passed
+   * as unsigned. Each refusal also reaches the status callback as an `INPUT_REJECTED` error.
+   */
+  uint64_t timestamps_ahead;
 } waymark_input_stats;
 
 /**
@@ -913,7 +920,11 @@ void waymark_engine_free(waymark_engine *engine);
 
 /**
  * Accelerometer samples (m/s², gravity included), oldest first. Bad samples are dropped and
- * counted; `*accepted` (may be NULL) receives how many were taken.
+ * counted; `*accepted` (may be NULL) receives how many were taken. Samples whose time is too
+ * far ahead of the engine's clock (more than 10 s after the latest input taken, unless the
+ * stream's next sample confirms the jump, or above INT64_MAX) are refused, counted in
+ * `waymark_input_stats.timestamps_ahead` and reported to the status callback as an
+ * `INPUT_REJECTED` error; the call still returns `OK`.
  */
 waymark_result waymark_engine_push_accelerometer(waymark_engine *engine,
                                                  const waymark_sample *samples,
