@@ -28,6 +28,14 @@ pub enum InputError {
         /// The last accepted timestamp.
         last_ns: u64,
     },
+    /// A time after [`MAX_TIMESTAMP_NS`](crate::sensors::MAX_TIMESTAMP_NS): a negative
+    /// signed time passed as unsigned. Taken, it would put every later input out of order
+    /// (docs/errors.md#timestamps-ahead-of-the-clock).
+    #[error("timestamp {timestamp_ns} ns is past any phone's clock (a negative time passed as unsigned?)")]
+    TimeAhead {
+        /// The refused timestamp.
+        timestamp_ns: u64,
+    },
     /// A scan with no readings.
     #[error("the scan has no readings")]
     EmptyScan,

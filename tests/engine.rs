@@ -738,3 +738,45 @@ fn shared_scan_likelihoods_change_no_position() {
     let mut other = Engine::new(Arc::new(two_floor_site()), EngineConfig::default()).unwrap();
     assert!(other.share_emissions(shared).is_err());
 }
+
+/// One sample with a time far ahead (a negative Kotlin `Long` passed as `ULong`, a clock
+/// glitch) is refused and counted, not adopted as the clock every later sample would be out of
+/// order against; a real jump, confirmed by the stream's next sample, is taken
+/// (docs/errors.md#timestamps-ahead-of-the-clock).
+#[test]
+fn a_time_far_ahead_is_refused_and_counted_and_the_stream_goes_on() {
+    use waymark::sensors::SensorSample;
+    let at = |t: u64| SensorSample { timestamp_ns: t, x: 0.1, y: 0.2, z: 9.81 };
+    let ms = SECOND / 1000;
+    let mut engine = engine();
+    assert_eq!(
+        engine.push_accelerometer(&(1..=100).map(|k| at(k * 10 * ms)).collect::<Vec<_>>()).accepted,
+        100
+    );
+    let negative = engine.push_accelerometer(&[at(u64::MAX - 999)]);
+    assert_eq!((negative.accepted, negative.ahead), (0, 1));
+    let later: Vec<_> = (101..=10_200).map(|k| at(k * 10 * ms)).collect();
+    assert_eq!(engine.push_accelerometer(&later).accepted, 10_100);
+    // An hour ahead once, then back on time: refused, and the stream goes on.
+    let hour = 3600 * SECOND;
+    assert_eq!(engine.push_gyroscope(&[at(hour)]).ahead, 1);
+    assert_eq!(engine.push_gyroscope(&[at(102 * SECOND)]).accepted, 1);
+    // The phone slept for an hour: the stream's second sample confirms the jump.
+    let woke = engine.push_gyroscope(&[at(hour + 102 * SECOND), at(hour + 102 * SECOND + 10 * ms)]);
+    assert_eq!((woke.accepted, woke.ahead), (1, 1));
+    // Epochs may be minutes apart, so only a time no phone's clock shows is too far ahead.
+    let scan_at = |t| scan(t, &readings_at(0, 3.0));
+    assert_eq!(
+        engine.push_scan(&scan_at(u64::MAX - 8)),
+        Err(InputError::TimeAhead { timestamp_ns: u64::MAX - 8 })
+    );
+    assert!(matches!(engine.advance(u64::MAX), Err(InputError::TimeAhead { .. })));
+    engine.push_scan(&scan_at(hour + 103 * SECOND)).unwrap();
+    engine.push_scan(&scan_at(hour + 104 * SECOND)).unwrap();
+    let stats = engine.stats();
+    assert_eq!(
+        (stats.timestamps_ahead, stats.scans_accepted, stats.advances_rejected),
+        (5, 2, 0),
+        "counted once"
+    );
+}

@@ -103,7 +103,8 @@ fn a_panic_in_the_middle_of_an_epoch_leaves_the_core_engine_as_it_was() {
         // The engine runs on as one that never saw the call.
         let scan = Scan { timestamp_ns: MID + 2, ..last.scan.clone() };
         assert_eq!(engine.push_scan(&scan), twin.push_scan(&scan));
-        assert_eq!(engine.advance(u64::MAX), twin.advance(u64::MAX));
+        let end = waymark::sensors::MAX_TIMESTAMP_NS;
+        assert_eq!(engine.advance(end), twin.advance(end));
         assert_eq!(engine.snapshot(), twin.snapshot());
     }
 }
@@ -182,7 +183,8 @@ fn a_panic_in_the_middle_of_an_epoch_is_internal_and_changes_nothing_across_the_
         // The engine runs on as one that never saw the call.
         let p = engine.push_scan(ffi_scan(&last.scan, MID + 2)).unwrap();
         assert_eq!(p, twin.push_scan(ffi_scan(&last.scan, MID + 2)).unwrap());
-        assert_eq!(engine.advance(u64::MAX).unwrap(), twin.advance(u64::MAX).unwrap());
+        let end = waymark::sensors::MAX_TIMESTAMP_NS;
+        assert_eq!(engine.advance(end).unwrap(), twin.advance(end).unwrap());
         assert_eq!(engine.snapshot(), twin.snapshot());
         let positions = listener.positions.lock().unwrap();
         assert_eq!(positions.len(), heard.len() + 2);

@@ -540,6 +540,9 @@ enum Kind {
 
 /// Raises the one counter a rejected call raises.
 fn count(stats: &mut InputStats, kind: Kind, e: &InputError) {
+    if let InputError::TimeAhead { .. } = e {
+        return stats.timestamps_ahead += 1;
+    }
     match kind {
         Kind::Scan => {}
         Kind::Advance => return stats.advances_rejected += 1,
@@ -567,7 +570,8 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
         + s.scans_invalid_motion
         + s.advances_rejected
         + s.fixes_rejected
-        + s.feedback_rejected;
+        + s.feedback_rejected
+        + s.timestamps_ahead;
     let rest = InputStats {
         scans_out_of_order: 0,
         scans_empty: 0,
@@ -578,6 +582,7 @@ fn rejections(s: &InputStats) -> (u64, InputStats) {
         advances_rejected: 0,
         fixes_rejected: 0,
         feedback_rejected: 0,
+        timestamps_ahead: 0,
         ..s.clone()
     };
     (sum, rest)
@@ -654,7 +659,10 @@ fn run_core(
                     1 => engine.push_gyroscope(&batch),
                     _ => engine.push_magnetometer(&batch),
                 };
-                prop_assert_eq!(report.accepted + report.non_finite + report.out_of_order, batch.len());
+                prop_assert_eq!(
+                    report.accepted + report.non_finite + report.out_of_order + report.ahead,
+                    batch.len()
+                );
                 None
             }
             Call::Walk { ms } => {
@@ -666,7 +674,7 @@ fn run_core(
                     (engine.push_magnetometer(&m), m.len()),
                 ] {
                     prop_assert_eq!(report.non_finite, 0);
-                    prop_assert_eq!(report.accepted + report.out_of_order, n);
+                    prop_assert_eq!(report.accepted + report.out_of_order + report.ahead, n);
                 }
                 None
             }
@@ -918,22 +926,30 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                     .map(|&(when, [x, y, z])| MotionSample { timestamp_ns: clock.at(when), x, y, z })
                     .collect();
                 let n = batch.len();
+                let ahead = engine.input_stats().unwrap().timestamps_ahead;
                 let accepted = match stream {
                     0 => engine.push_accelerometer(batch),
                     1 => engine.push_gyroscope(batch),
                     _ => engine.push_magnetometer(batch),
                 };
                 prop_assert!(matches!(accepted, Ok(a) if a as usize <= n), "{:?}", accepted);
+                // Samples refused as too far ahead reach the listener as one error.
+                errors += usize::from(engine.input_stats().unwrap().timestamps_ahead > ahead);
                 None
             }
             Call::Walk { ms } => {
                 let [a, g, m] = clock.walk(*ms);
-                for (accepted, n) in [
-                    (engine.push_accelerometer(motion(&a)), a.len()),
-                    (engine.push_gyroscope(motion(&g)), g.len()),
-                    (engine.push_magnetometer(motion(&m)), m.len()),
-                ] {
+                type Push<'a> = &'a dyn Fn() -> Result<u32, PositioningError>;
+                let pushes: [(Push, usize); 3] = [
+                    (&|| engine.push_accelerometer(motion(&a)), a.len()),
+                    (&|| engine.push_gyroscope(motion(&g)), g.len()),
+                    (&|| engine.push_magnetometer(motion(&m)), m.len()),
+                ];
+                for (push, n) in pushes {
+                    let ahead = engine.input_stats().unwrap().timestamps_ahead;
+                    let accepted = push();
                     prop_assert!(matches!(accepted, Ok(k) if k as usize <= n), "{:?}", accepted);
+                    errors += usize::from(engine.input_stats().unwrap().timestamps_ahead > ahead);
                 }
                 None
             }

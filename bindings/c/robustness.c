@@ -380,8 +380,10 @@ int main(int argc, char **argv) {
                                                     COUNT(scan), NULL, 0, &p);
         CHECK(known(r) && r == WAYMARK_RESULT_OK && finite_position(&p), "scan %d after the garbage: %d", k, (int)r);
     }
-    CHECK(waymark_engine_advance(engine, UINT64_MAX, &p) == WAYMARK_RESULT_OK && finite_position(&p), "end of time");
-    CHECK(waymark_engine_advance(engine, UINT64_MAX, &p) == WAYMARK_RESULT_INPUT_REJECTED, "past the end of time");
+    /* Past any phone's clock (a negative int64 passed as unsigned): refused, not adopted. */
+    CHECK(waymark_engine_advance(engine, UINT64_MAX, &p) == WAYMARK_RESULT_INPUT_REJECTED, "past the clock");
+    CHECK(waymark_engine_advance(engine, INT64_MAX, &p) == WAYMARK_RESULT_OK && finite_position(&p), "end of time");
+    CHECK(waymark_engine_advance(engine, INT64_MAX, &p) == WAYMARK_RESULT_INPUT_REJECTED, "past the end of time");
     waymark_engine_free(engine);
     printf("%d passed, %d failed\n", checks - failures, failures);
     return failures ? 1 : 0;

@@ -133,14 +133,14 @@ static void walk(const char *site_path, const char *walk_path, const uint8_t *sa
           "injected panic");
     CHECK(waymark_engine_push_scan(engine, moved.timestamp_ns + 2, &known, 1, NULL, 0, NULL) == WAYMARK_RESULT_OK,
           "usable after a panic");
-    /* A panic half-way through an epoch (injected at UINT64_MAX - 8, after the engine has
+    /* A panic half-way through an epoch (injected at INT64_MAX - 8, after the engine has
      * stepped its filter and moved its clock) is undone: the same position, and no callback. */
     waymark_position kept, now;
     int heard = callbacks;
     CHECK(waymark_engine_position(engine, &kept) == WAYMARK_RESULT_OK, "position");
-    CHECK(waymark_engine_push_scan(engine, UINT64_MAX - 8, &known, 1, NULL, 0, NULL) == WAYMARK_RESULT_PANIC,
+    CHECK(waymark_engine_push_scan(engine, INT64_MAX - 8, &known, 1, NULL, 0, NULL) == WAYMARK_RESULT_PANIC,
           "panic half-way through a scan");
-    CHECK(waymark_engine_advance(engine, UINT64_MAX - 8, NULL) == WAYMARK_RESULT_PANIC,
+    CHECK(waymark_engine_advance(engine, INT64_MAX - 8, NULL) == WAYMARK_RESULT_PANIC,
           "panic half-way through an advance");
     CHECK(waymark_engine_position(engine, &now) == WAYMARK_RESULT_OK && now.timestamp_ns == kept.timestamp_ns &&
               now.x == kept.x && now.y == kept.y && now.accuracy_m == kept.accuracy_m,

@@ -1,8 +1,8 @@
 #!/usr/bin/env bash
 # The C ABI test: checks the committed header is what cbindgen makes from src/ffi/c.rs, builds
-# the library, compiles bindings/c/test.c, robustness.c, threads.c and callbacks.c against the
-# header and the library (shared and static), and runs them under valgrind: zero errors, zero
-# leaks. Then checks that the shared library imports no networking function
+# the library, compiles bindings/c/test.c, robustness.c, threads.c, callbacks.c and hostile.c
+# against the header and the library (shared and static), and runs them under valgrind: zero
+# errors, zero leaks. Then checks that the shared library imports no networking function
 # (scripts/check-no-network.sh).
 set -euo pipefail
 repo=$(cd "$(dirname "$0")/../.." && pwd)
@@ -50,7 +50,7 @@ flags=(-std=c11 -Wall -Wextra -Werror -O1 -g -pthread -I bindings/c)
 python3 scripts/readme-snippet.py c-quickstart > "$work/readme_quickstart.c"
 gcc "${flags[@]}" -c "$work/readme_quickstart.c" -o "$work/readme_quickstart.o"
 echo "README C quickstart compiles"
-for test in test robustness threads callbacks; do
+for test in test robustness threads callbacks hostile; do
     gcc "${flags[@]}" "bindings/c/$test.c" -L "$target/debug" -lwaymark -lm -o "$work/${test}_shared"
     gcc "${flags[@]}" "bindings/c/$test.c" "$target/debug/libwaymark.a" -lpthread -ldl -lm -o "$work/${test}_static"
 done
@@ -67,6 +67,8 @@ valgrind_suite() {
         "$work/site.wmsite"
     echo "-- bad input, $kind library under valgrind"
     LD_LIBRARY_PATH="$target/debug" "${vg[@]}" "$work/robustness_$kind" "$work/site.json"
+    echo "-- hostile input: failing storage, times far ahead, $kind library under valgrind"
+    LD_LIBRARY_PATH="$target/debug" "${vg[@]}" "$work/hostile_$kind" "$work/site.json"
     echo "-- threads pushing at once, $kind library under valgrind"
     LD_LIBRARY_PATH="$target/debug" "${vg[@]}" "$work/threads_$kind" "$work/site.json"
     echo "-- callbacks that free the engine, call it from the log hook, $kind library under valgrind"

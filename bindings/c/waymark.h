@@ -565,6 +565,13 @@ typedef struct {
    * Times the engine started over from "anywhere on the site".
    */
   uint64_t filter_restarts;
+  /**
+   * Inputs refused for a time too far ahead of the engine's clock: sensor samples more than
+   * 10 s ahead of the latest input taken (unless the stream's next sample confirms the
+   * jump, as after the phone slept), and any time above INT64_MAX ns, a negative time passed
+   * as unsigned. Each refusal also reaches the status callback as an `INPUT_REJECTED` error.
+   */
+  uint64_t timestamps_ahead;
 } waymark_input_stats;
 
 /**
@@ -768,7 +775,8 @@ typedef void (*waymark_log_callback)(void *userdata,
                                      const char *message);
 
 /**
- * What a recording took and dropped (`waymark_recorder_get_summary`, `_finish`).
+ * What a recording wrote and dropped (`waymark_recorder_get_summary`, `_finish`). Only what
+ * is in the files is counted: a call that failed counts nothing.
  */
 typedef struct {
   /**
@@ -776,8 +784,10 @@ typedef struct {
    */
   uint64_t samples;
   /**
-   * Samples dropped for a NaN, infinite or absurd value, or a time not after their
-   * stream's previous sample.
+   * Samples dropped for a NaN, infinite or absurd value, a time not after their stream's
+   * previous sample, or a time too far ahead of the recording's clock (more than 10 s after
+   * the latest input written, unless the stream's next sample confirms the jump, or above
+   * INT64_MAX).
    */
   uint64_t samples_dropped;
   /**
@@ -922,7 +932,11 @@ void waymark_engine_free(waymark_engine *engine);
 
 /**
  * Accelerometer samples (m/s², gravity included), oldest first. Bad samples are dropped and
- * counted; `*accepted` (may be NULL) receives how many were taken.
+ * counted; `*accepted` (may be NULL) receives how many were taken. Samples whose time is too
+ * far ahead of the engine's clock (more than 10 s after the latest input taken, unless the
+ * stream's next sample confirms the jump, or above INT64_MAX) are refused, counted in
+ * `waymark_input_stats.timestamps_ahead` and reported to the status callback as an
+ * `INPUT_REJECTED` error; the call still returns `OK`.
  */
 waymark_result waymark_engine_push_accelerometer(waymark_engine *engine,
                                                  const waymark_sample *samples,
@@ -1250,10 +1264,17 @@ waymark_result waymark_set_log_callback(uint32_t level,
                                         void *userdata);
 
 /**
- * Begins a recording into the folder `directory` (created if missing); nothing is written
- * before the first waypoint. `walk_name` names its files (letters, digits, `-`, `_`, `.`,
- * spaces); `site_id` and `device` (may be NULL) go into their headers. On success `*out`
- * holds the recorder. Fails with `INPUT_REJECTED` for a name that cannot be used.
+ * Begins a recording into the folder `directory` (created if missing). `walk_name` names its
+ * files (letters, digits, `-`, `_`, `.`, inner spaces); `site_id` and `device` (may be NULL)
+ * go into their headers. On success `*out` holds the recorder. Fails with `INPUT_REJECTED`
+ * for a name that cannot be used.
+ *
+ * Every call that returns `OK` has handed its lines to the OS before it returns, so a killed
+ * app loses none of them; they are synced to storage at least once a second while calls come,
+ * and at each new file and at `_finish`. Before the first waypoint the lines go to
+ * `DIRECTORY/.WALK.pending`, then into the first walk file. Files only ever hold whole lines.
+ * A call that returns `IO` wrote nothing, and every later call returns `IO` too until
+ * `waymark_recorder_resume` succeeds (docs/surveying.md#durability).
  */
 waymark_result waymark_recorder_new(const char *directory,
                                     const char *walk_name,
@@ -1262,8 +1283,8 @@ waymark_result waymark_recorder_new(const char *directory,
                                     waymark_recorder **out);
 
 /**
- * Frees a recorder, closing its file (without its end line if `_finish` was not called). NULL
- * is ignored.
+ * Frees a recorder, closing its file (without its end line if `_finish` did not succeed).
+ * NULL is ignored.
  */
 void waymark_recorder_free(waymark_recorder *recorder);
 
@@ -1316,17 +1337,28 @@ waymark_result waymark_recorder_mark_waypoint(const waymark_recorder *recorder,
                                               const char *floor);
 
 /**
- * What was taken and dropped so far, into `*out`.
+ * What was written and dropped so far, into `*out`. Works after an `IO` error too.
  */
 waymark_result waymark_recorder_get_summary(const waymark_recorder *recorder,
                                             waymark_recording_summary *out);
 
 /**
- * Closes the files; `*out` (may be NULL) receives what was recorded. `NO_WAYPOINTS` when no
- * waypoint was marked (nothing was written); later calls return `FINISHED`.
+ * Writes the last file's end line, syncs and closes it; `*out` (may be NULL) receives what
+ * was recorded. `NO_WAYPOINTS` when no waypoint was marked: no walk file exists yet, and the
+ * recording goes on (mark a waypoint, then finish). `IO` when the end line cannot be written,
+ * or after an earlier `IO` until `waymark_recorder_resume` succeeds: the recording goes on,
+ * and `_finish` may be called again. Once it returned `OK`, later calls return `FINISHED`.
  */
 waymark_result waymark_recorder_finish(const waymark_recorder *recorder,
                                        waymark_recording_summary *out);
+
+/**
+ * Acknowledges an `IO` error and takes input again: cuts the file back to its last whole line
+ * if the failed write could not, and syncs it. Returns `IO` while the storage still refuses
+ * (the error stays; call it again later), `FINISHED` after `_finish`, else `OK` (also when
+ * there was no error). The calls that returned `IO` wrote nothing: push their input again.
+ */
+waymark_result waymark_recorder_resume(const waymark_recorder *recorder);
 
 /**
  * The path of walk file `index` (0 for the first) into `buf` of `len` bytes, NUL-terminated,

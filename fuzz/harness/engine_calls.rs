@@ -445,7 +445,9 @@ fn rejection(
     fixture: &Fixture,
     motion_valid: bool,
 ) -> Option<&'static str> {
-    if last_epoch.is_some_and(|last| scan.timestamp_ns <= last) {
+    if scan.timestamp_ns > waymark::sensors::MAX_TIMESTAMP_NS {
+        Some("time ahead")
+    } else if last_epoch.is_some_and(|last| scan.timestamp_ns <= last) {
         Some("out of order")
     } else if !motion_valid {
         Some("invalid motion")
@@ -465,6 +467,7 @@ fn rejection(
 
 fn error_kind(e: &InputError) -> &'static str {
     match e {
+        InputError::TimeAhead { .. } => "time ahead",
         InputError::OutOfOrder { .. } => "out of order",
         InputError::EmptyScan => "empty",
         InputError::NonFiniteRssi { .. } => "non-finite",
@@ -593,7 +596,8 @@ impl Session<'_> {
             1 => self.core.push_gyroscope(batch),
             _ => self.core.push_magnetometer(batch),
         };
-        assert_eq!(report.accepted + report.non_finite + report.out_of_order, batch.len(), "{report:?}");
+        let dropped = report.non_finite + report.out_of_order + report.ahead;
+        assert_eq!(report.accepted + dropped, batch.len(), "{report:?}");
         let Some(ffi) = &self.ffi else { return };
         let samples = motion_samples(batch);
         let taken = match kind {
@@ -681,8 +685,9 @@ impl Session<'_> {
     }
 
     fn advance(&mut self, timestamp_ns: u64) {
-        let rejected = |last: Option<u64>| last.is_some_and(|last| timestamp_ns <= last);
-        let why = rejected(self.core_last).then_some("out of order");
+        let ahead = timestamp_ns > waymark::sensors::MAX_TIMESTAMP_NS;
+        let rejected = |last: Option<u64>| ahead || last.is_some_and(|last| timestamp_ns <= last);
+        let why = rejected(self.core_last).then_some(if ahead { "time ahead" } else { "out of order" });
         let core = self.core_epoch(timestamp_ns, why, |e| e.advance(timestamp_ns));
         let ffi_rejected = rejected(self.ffi_last);
         self.ffi_epoch(timestamp_ns, ffi_rejected, core.as_ref(), |e| e.advance(timestamp_ns));
@@ -802,7 +807,8 @@ pub fn run(data: &[u8]) {
                     s.core_epoch(input.core.timestamp_ns, why, |e| e.push_scan_with_motion(&input.core, &m));
                 } else {
                     let t = clock.time(&mut c);
-                    let why = s.core_last.is_some_and(|last| t <= last).then_some("out of order");
+                    let ahead = (t > waymark::sensors::MAX_TIMESTAMP_NS).then_some("time ahead");
+                    let why = ahead.or(s.core_last.is_some_and(|last| t <= last).then_some("out of order"));
                     let why = why.or((!valid).then_some("invalid motion"));
                     s.core_epoch(t, why, |e| e.advance_with_motion(t, &m));
                 }

@@ -1,28 +1,41 @@
 //! The inputs an engine takes: inertial batches, scans, advances without radio, position
 //! fixes and user feedback, each epoch run atomically.
 
-use super::{Engine, Epoch, Held, Position};
+use super::{Engine, Epoch, Held, InputStats, Position};
 use crate::error::InputError;
 use crate::fix::{self, PositionFix};
 use crate::history::EpochInput;
 use crate::radio::Scan;
-use crate::sensors::{BatchReport, MotionState, MotionUpdate, SensorSample};
+use crate::sensors::{
+    BatchReport, MotionState, MotionUpdate, SensorSample, ACCEL, GYRO, MAG, MAX_TIMESTAMP_NS,
+};
 
 impl Engine {
     /// Takes a batch of accelerometer samples (m/s², gravity included, phone frame). Samples
-    /// with a NaN or infinite value, or not after the previous one, are dropped and counted.
+    /// with a NaN or infinite value, or not after the previous one, are dropped and counted;
+    /// samples too far ahead of the engine's clock are refused and counted in
+    /// [`InputStats::timestamps_ahead`](super::InputStats::timestamps_ahead)
+    /// (docs/errors.md#timestamps-ahead-of-the-clock).
     pub fn push_accelerometer(&mut self, batch: &[SensorSample]) -> BatchReport {
-        self.tracker.push_accelerometer(batch)
+        self.push_samples(ACCEL, batch)
     }
 
     /// Takes a batch of gyroscope samples (rad/s, phone frame); bad samples as above.
     pub fn push_gyroscope(&mut self, batch: &[SensorSample]) -> BatchReport {
-        self.tracker.push_gyroscope(batch)
+        self.push_samples(GYRO, batch)
     }
 
     /// Takes a batch of magnetometer samples (µT, phone frame); bad samples as above.
     pub fn push_magnetometer(&mut self, batch: &[SensorSample]) -> BatchReport {
-        self.tracker.push_magnetometer(batch)
+        self.push_samples(MAG, batch)
+    }
+
+    /// The engine's clock is the latest time it took: its epochs' and its sensor streams'.
+    fn push_samples(&mut self, stream: usize, batch: &[SensorSample]) -> BatchReport {
+        let epoch_ns = self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns);
+        let report = self.tracker.push(stream, batch, epoch_ns);
+        self.stats.timestamps_ahead += report.ahead as u64;
+        report
     }
 
     /// Takes a WiFi or BLE scan: one epoch of the HMM, with the motion the inertial sensors
@@ -47,6 +60,7 @@ impl Engine {
         let result = self.scan_epoch(scan, motion);
         if let Err(e) = &result {
             let counter = match e {
+                InputError::TimeAhead { .. } => &mut self.stats.timestamps_ahead,
                 InputError::OutOfOrder { .. } => &mut self.stats.scans_out_of_order,
                 InputError::EmptyScan => &mut self.stats.scans_empty,
                 InputError::NonFiniteRssi { .. } => &mut self.stats.scans_non_finite,
@@ -92,7 +106,7 @@ impl Engine {
     ) -> Result<Epoch, InputError> {
         let result = self.motion_epoch(timestamp_ns, motion);
         if let Err(e) = &result {
-            self.stats.advances_rejected += 1;
+            self.count_rejected(e, |stats| &mut stats.advances_rejected);
             log::debug!("advance rejected: {e}");
         }
         result
@@ -155,7 +169,7 @@ impl Engine {
     pub fn push_fix(&mut self, fix: &PositionFix) -> Result<Epoch, InputError> {
         let result = self.fix_epoch(fix);
         if let Err(e) = &result {
-            self.stats.fixes_rejected += 1;
+            self.count_rejected(e, |stats| &mut stats.fixes_rejected);
             log::debug!("position fix rejected: {e}");
         }
         result
@@ -224,7 +238,7 @@ impl Engine {
     ) -> Result<Epoch, InputError> {
         let result = self.feedback_epoch(timestamp_ns, states);
         if let Err(e) = &result {
-            self.stats.feedback_rejected += 1;
+            self.count_rejected(e, |stats| &mut stats.feedback_rejected);
             log::debug!("feedback rejected: {e}");
         }
         result
@@ -364,8 +378,22 @@ impl Engine {
         }
     }
 
-    /// Input must come after the latest epoch, held or not.
+    /// Counts a refused input once: in `timestamps_ahead` for a time too far ahead, else in
+    /// its own counter.
+    fn count_rejected(&mut self, e: &InputError, counter: impl FnOnce(&mut InputStats) -> &mut u64) {
+        *match e {
+            InputError::TimeAhead { .. } => &mut self.stats.timestamps_ahead,
+            _ => counter(&mut self.stats),
+        } += 1;
+    }
+
+    /// Input must come after the latest epoch, held or not, and by a time a phone's clock can
+    /// show: epochs may be minutes apart (sparse scans), so only a time past
+    /// [`MAX_TIMESTAMP_NS`] is too far ahead (docs/errors.md#timestamps-ahead-of-the-clock).
     pub(super) fn check_time(&self, timestamp_ns: u64) -> Result<(), InputError> {
+        if timestamp_ns > MAX_TIMESTAMP_NS {
+            return Err(InputError::TimeAhead { timestamp_ns });
+        }
         match self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns) {
             Some(last_ns) if timestamp_ns <= last_ns => Err(InputError::OutOfOrder { timestamp_ns, last_ns }),
             _ => Ok(()),

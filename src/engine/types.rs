@@ -201,6 +201,12 @@ pub struct InputStats {
     /// User feedback rejected: a timestamp before the last epoch, an unknown zone or floor, a
     /// NaN or infinite coordinate, a radius not > 0, or no state within the radius.
     pub feedback_rejected: u64,
+    /// Inputs refused for a timestamp too far ahead of the engine's clock: sensor samples more
+    /// than `max_backlog_s` ahead of the latest input taken (unless the stream's next sample
+    /// confirms the jump), and any input past [`MAX_TIMESTAMP_NS`](crate::sensors::MAX_TIMESTAMP_NS)
+    /// (docs/errors.md#timestamps-ahead-of-the-clock). Each refused input is counted here
+    /// only, not also in its kind's counter.
+    pub timestamps_ahead: u64,
 }
 
 /// Everything an engine holds that decides its later answers, for tests that check a call

@@ -367,7 +367,7 @@ fn push_samples(
             return fail(waymark_result::NullParameter, "samples must not be NULL when count > 0");
         };
         let converted = sensor_samples(batch);
-        match handle.call(|e| Ok(push(e, &converted).accepted)) {
+        match handle.push_samples(|e| push(e, &converted)) {
             Ok(n) => {
                 write(accepted, n);
                 waymark_result::Ok
@@ -377,7 +377,11 @@ fn push_samples(
     })
 }
 /// Accelerometer samples (m/s², gravity included), oldest first. Bad samples are dropped and
-/// counted; `*accepted` (may be NULL) receives how many were taken.
+/// counted; `*accepted` (may be NULL) receives how many were taken. Samples whose time is too
+/// far ahead of the engine's clock (more than 10 s after the latest input taken, unless the
+/// stream's next sample confirms the jump, or above INT64_MAX) are refused, counted in
+/// `waymark_input_stats.timestamps_ahead` and reported to the status callback as an
+/// `INPUT_REJECTED` error; the call still returns `OK`.
 #[no_mangle]
 pub extern "C" fn waymark_engine_push_accelerometer(
     engine: *mut waymark_engine,

@@ -289,6 +289,27 @@ impl<L: Listeners> Handle<L> {
         })
     }
 
+    /// A sensor batch given to `push`: how many samples it took. The call succeeds even when
+    /// samples were refused for a time too far ahead of the engine's clock, so the listeners
+    /// hear of those as an `InputRejected` error (docs/errors.md#timestamps-ahead-of-the-clock).
+    pub(crate) fn push_samples(
+        &self,
+        push: impl FnOnce(&mut Engine) -> crate::sensors::BatchReport,
+    ) -> Result<usize, PositioningError> {
+        let events = Arc::clone(&self.events);
+        self.call(|engine| {
+            let report = push(engine);
+            if report.ahead > 0 {
+                let reason = format!(
+                    "{} sensor samples refused: their time is too far ahead of the engine's clock",
+                    report.ahead
+                );
+                events.stage(Event::Error(PositioningError::InputRejected { reason }));
+            }
+            Ok(report.accepted)
+        })
+    }
+
     /// Input rejected before it reached the engine (a malformed transmitter id): reported to
     /// the listeners as the engine's own rejections are, and returned.
     pub(crate) fn reject(&self, error: PositioningError) -> PositioningError {

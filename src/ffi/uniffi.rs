@@ -211,22 +211,25 @@ impl PositioningEngine {
     }
 
     /// Accelerometer samples, oldest first. Bad samples are dropped and counted; returns how
-    /// many were taken.
+    /// many were taken. Samples whose time is too far ahead of the engine's clock (more than
+    /// 10 s after the latest input, unless the stream's next sample confirms the jump, or a
+    /// negative `Long` passed as unsigned) are refused, counted in
+    /// `InputStats.timestampsAhead` and reported to the listener as an `InputRejected` error.
     pub fn push_accelerometer(&self, batch: Vec<MotionSample>) -> Result<u32, PositioningError> {
         let batch = samples(&batch);
-        self.handle.call(|e| Ok(e.push_accelerometer(&batch).accepted as u32))
+        Ok(self.handle.push_samples(|e| e.push_accelerometer(&batch))? as u32)
     }
 
     /// Gyroscope samples, oldest first; as `push_accelerometer`.
     pub fn push_gyroscope(&self, batch: Vec<MotionSample>) -> Result<u32, PositioningError> {
         let batch = samples(&batch);
-        self.handle.call(|e| Ok(e.push_gyroscope(&batch).accepted as u32))
+        Ok(self.handle.push_samples(|e| e.push_gyroscope(&batch))? as u32)
     }
 
     /// Magnetometer samples, oldest first; as `push_accelerometer`.
     pub fn push_magnetometer(&self, batch: Vec<MotionSample>) -> Result<u32, PositioningError> {
         let batch = samples(&batch);
-        self.handle.call(|e| Ok(e.push_magnetometer(&batch).accepted as u32))
+        Ok(self.handle.push_samples(|e| e.push_magnetometer(&batch))? as u32)
     }
 
     /// A WiFi / BLE scan: one positioning epoch. Push the sensor batches up to the scan's time

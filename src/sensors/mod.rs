@@ -16,16 +16,20 @@
 //! ([`MotionTracker`]: buffering, time ordering, epochs). Their measured accuracy on simulated
 //! phones is in `docs/tuning.md#step-detector` and `#heading-filter`.
 
+mod clock;
 mod config;
 mod filter;
 mod heading;
 mod step;
 mod tracker;
 
+pub(crate) use clock::refuse_ahead;
+pub use clock::MAX_TIMESTAMP_NS;
 pub use config::{EarthField, MotionConfig, StepDetectorKind, StepLengthModel};
 pub use filter::wrap_angle;
 pub use heading::{compass_azimuth, field_dip, gyro_yaw_rate};
 pub use tracker::{HeadingEstimate, MotionStats, MotionTracker, StepEvent, StreamStats};
+pub(crate) use tracker::{ACCEL, GYRO, MAG};
 
 use serde::{Deserialize, Serialize};
 
@@ -197,6 +201,10 @@ pub struct BatchReport {
     /// Samples dropped for a timestamp not after the stream's previous sample, or older than
     /// what the tracker has already processed.
     pub out_of_order: usize,
+    /// Samples refused for a timestamp too far ahead of the clock: past
+    /// [`MAX_TIMESTAMP_NS`], or more than `max_backlog_s` after the latest input taken, unless
+    /// the stream's next sample confirms the jump (docs/errors.md#timestamps-ahead-of-the-clock).
+    pub ahead: usize,
 }
 
 impl MotionUpdate {

@@ -5,7 +5,7 @@ use super::config::{MotionConfig, StepLengthModel};
 use super::filter::{s_to_ns, wrap_angle};
 use super::heading::HeadingTracker;
 use super::step::{GaitStep, GaitValidator, StepDetector};
-use super::{BatchReport, MdiScenario, MotionState, MotionUpdate, SensorSample};
+use super::{refuse_ahead, BatchReport, MdiScenario, MotionState, MotionUpdate, SensorSample};
 use crate::error::Error;
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -22,6 +22,8 @@ pub struct StreamStats {
     /// Samples dropped for a timestamp not after the stream's previous one, or not after the
     /// end of the last update.
     pub out_of_order: u64,
+    /// Samples refused for a timestamp too far ahead of the clock ([`BatchReport::ahead`]).
+    pub ahead: u64,
     /// Accepted samples dropped, oldest first, because the stream was buffered for longer than
     /// `max_backlog_s` without an update.
     pub overflowed: u64,
@@ -88,9 +90,9 @@ struct StepTag {
     magnetic: Option<(f64, f64)>,
 }
 
-const ACCEL: usize = 0;
-const GYRO: usize = 1;
-const MAG: usize = 2;
+pub(crate) const ACCEL: usize = 0;
+pub(crate) const GYRO: usize = 1;
+pub(crate) const MAG: usize = 2;
 
 /// Turns raw accelerometer, gyroscope and magnetometer batches into one [`MotionUpdate`] per
 /// epoch. Streams arrive in separate batches in any interleaving; `update(until_ns)` processes
@@ -102,6 +104,8 @@ pub struct MotionTracker {
     config: MotionConfig,
     buffers: [VecDeque<SensorSample>; 3],
     last_pushed_ns: [Option<u64>; 3],
+    /// Each stream's last sample refused as ahead of the clock, which the next may confirm.
+    refused_ahead_ns: [Option<u64>; 3],
     processed_until_ns: Option<u64>,
     max_backlog_ns: u64,
     max_backlog_samples: usize,
@@ -132,6 +136,7 @@ impl MotionTracker {
             max_gap_ns: s_to_ns(config.max_gap_s),
             buffers: Default::default(),
             last_pushed_ns: [None; 3],
+            refused_ahead_ns: [None; 3],
             processed_until_ns: None,
             stats: MotionStats::default(),
             detector: StepDetector::new(&config),
@@ -160,17 +165,17 @@ impl MotionTracker {
 
     /// Accelerometer samples (m/s², gravity included, phone frame).
     pub fn push_accelerometer(&mut self, batch: &[SensorSample]) -> BatchReport {
-        self.push(ACCEL, batch)
+        self.push(ACCEL, batch, None)
     }
 
     /// Gyroscope samples (rad/s, phone frame).
     pub fn push_gyroscope(&mut self, batch: &[SensorSample]) -> BatchReport {
-        self.push(GYRO, batch)
+        self.push(GYRO, batch, None)
     }
 
     /// Magnetometer samples (µT, phone frame, calibrated: Android's `TYPE_MAGNETIC_FIELD`).
     pub fn push_magnetometer(&mut self, batch: &[SensorSample]) -> BatchReport {
-        self.push(MAG, batch)
+        self.push(MAG, batch, None)
     }
 
     fn stream_stats(&mut self, stream: usize) -> &mut StreamStats {
@@ -181,8 +186,19 @@ impl MotionTracker {
         }
     }
 
-    fn push(&mut self, stream: usize, batch: &[SensorSample]) -> BatchReport {
+    /// Samples of `stream` (`ACCEL`, `GYRO`, `MAG`); `clock_ns`, the time of the latest input
+    /// taken outside the tracker (an engine's epochs), joins its own streams' in the clock a
+    /// sample may not run ahead of by more than `max_backlog_s`: the tracker holds no more of
+    /// a stream than that (docs/errors.md#timestamps-ahead-of-the-clock).
+    pub(crate) fn push(
+        &mut self,
+        stream: usize,
+        batch: &[SensorSample],
+        clock_ns: Option<u64>,
+    ) -> BatchReport {
         let mut report = BatchReport::default();
+        let mut clock_ns =
+            self.last_pushed_ns.iter().chain([&self.processed_until_ns, &clock_ns]).flatten().max().copied();
         for s in batch {
             if !s.is_plausible() {
                 report.non_finite += 1;
@@ -194,9 +210,22 @@ impl MotionTracker {
                 report.out_of_order += 1;
                 continue;
             }
+            if refuse_ahead(s.timestamp_ns, clock_ns, self.max_backlog_ns, self.refused_ahead_ns[stream]) {
+                self.refused_ahead_ns[stream] = Some(s.timestamp_ns);
+                report.ahead += 1;
+                continue;
+            }
+            self.refused_ahead_ns[stream] = None;
             self.last_pushed_ns[stream] = Some(s.timestamp_ns);
+            clock_ns = Some(clock_ns.map_or(s.timestamp_ns, |c| c.max(s.timestamp_ns)));
             self.buffers[stream].push_back(*s);
             report.accepted += 1;
+        }
+        if report.ahead > 0 {
+            log::debug!(
+                "sensor stream {stream}: {} samples refused, too far ahead of the clock",
+                report.ahead
+            );
         }
         let mut overflowed = 0;
         let buffer = &mut self.buffers[stream];
@@ -217,6 +246,7 @@ impl MotionTracker {
         stats.accepted += report.accepted as u64;
         stats.non_finite += report.non_finite as u64;
         stats.out_of_order += report.out_of_order as u64;
+        stats.ahead += report.ahead as u64;
         stats.overflowed += overflowed;
         report
     }
@@ -510,13 +540,13 @@ mod tests {
             sample(30, 0.0, 0.0, 1e300),
             sample(40, 0.0, 0.0, 9.81),
         ]);
-        assert_eq!(r, BatchReport { accepted: 2, non_finite: 3, out_of_order: 2 });
+        assert_eq!(r, BatchReport { accepted: 2, non_finite: 3, out_of_order: 2, ahead: 0 });
         assert_eq!(m.push_gyroscope(&[]), BatchReport::default());
         let u = m.update(35);
         assert_eq!(u.steps, 0);
         // 40 is still buffered; 30 is now older than what was processed.
         let r = m.push_accelerometer(&[sample(30, 0.0, 0.0, 9.81), sample(50, 0.0, 0.0, 9.81)]);
-        assert_eq!(r, BatchReport { accepted: 1, non_finite: 0, out_of_order: 1 });
+        assert_eq!(r, BatchReport { accepted: 1, non_finite: 0, out_of_order: 1, ahead: 0 });
         m.update(100);
         assert_eq!(m.stats().accelerometer.processed, 3);
         assert_eq!(m.stats().accelerometer.non_finite, 3);

@@ -19,14 +19,17 @@ pub struct waymark_recorder {
     inner: Mutex<SurveyRecorder>,
 }
 
-/// What a recording took and dropped (`waymark_recorder_get_summary`, `_finish`).
+/// What a recording wrote and dropped (`waymark_recorder_get_summary`, `_finish`). Only what
+/// is in the files is counted: a call that failed counts nothing.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default)]
 pub struct waymark_recording_summary {
     /// Sensor samples written.
     pub samples: u64,
-    /// Samples dropped for a NaN, infinite or absurd value, or a time not after their
-    /// stream's previous sample.
+    /// Samples dropped for a NaN, infinite or absurd value, a time not after their stream's
+    /// previous sample, or a time too far ahead of the recording's clock (more than 10 s after
+    /// the latest input written, unless the stream's next sample confirms the jump, or above
+    /// INT64_MAX).
     pub samples_dropped: u64,
     /// Scans written.
     pub scans: u64,
@@ -41,7 +44,7 @@ pub struct waymark_recording_summary {
 fn summary(s: &RecordingStats) -> waymark_recording_summary {
     waymark_recording_summary {
         samples: s.samples,
-        samples_dropped: s.samples_non_finite + s.samples_out_of_order,
+        samples_dropped: s.samples_non_finite + s.samples_out_of_order + s.samples_ahead,
         scans: s.scans,
         scans_rejected: s.scans_rejected,
         waypoints: s.waypoints,
@@ -61,10 +64,17 @@ fn recorder_error(e: &RecorderError) -> waymark_result {
     fail(code, e.to_string())
 }
 
-/// Begins a recording into the folder `directory` (created if missing); nothing is written
-/// before the first waypoint. `walk_name` names its files (letters, digits, `-`, `_`, `.`,
-/// spaces); `site_id` and `device` (may be NULL) go into their headers. On success `*out`
-/// holds the recorder. Fails with `INPUT_REJECTED` for a name that cannot be used.
+/// Begins a recording into the folder `directory` (created if missing). `walk_name` names its
+/// files (letters, digits, `-`, `_`, `.`, inner spaces); `site_id` and `device` (may be NULL)
+/// go into their headers. On success `*out` holds the recorder. Fails with `INPUT_REJECTED`
+/// for a name that cannot be used.
+///
+/// Every call that returns `OK` has handed its lines to the OS before it returns, so a killed
+/// app loses none of them; they are synced to storage at least once a second while calls come,
+/// and at each new file and at `_finish`. Before the first waypoint the lines go to
+/// `DIRECTORY/.WALK.pending`, then into the first walk file. Files only ever hold whole lines.
+/// A call that returns `IO` wrote nothing, and every later call returns `IO` too until
+/// `waymark_recorder_resume` succeeds (docs/surveying.md#durability).
 #[no_mangle]
 pub extern "C" fn waymark_recorder_new(
     directory: *const c_char,
@@ -98,8 +108,8 @@ pub extern "C" fn waymark_recorder_new(
     })
 }
 
-/// Frees a recorder, closing its file (without its end line if `_finish` was not called). NULL
-/// is ignored.
+/// Frees a recorder, closing its file (without its end line if `_finish` did not succeed).
+/// NULL is ignored.
 #[no_mangle]
 pub extern "C" fn waymark_recorder_free(recorder: *mut waymark_recorder) {
     let _ = boundary(|| {
@@ -235,7 +245,7 @@ pub extern "C" fn waymark_recorder_mark_waypoint(
     })
 }
 
-/// What was taken and dropped so far, into `*out`.
+/// What was written and dropped so far, into `*out`. Works after an `IO` error too.
 #[no_mangle]
 pub extern "C" fn waymark_recorder_get_summary(
     recorder: *const waymark_recorder,
@@ -250,8 +260,11 @@ pub extern "C" fn waymark_recorder_get_summary(
     })
 }
 
-/// Closes the files; `*out` (may be NULL) receives what was recorded. `NO_WAYPOINTS` when no
-/// waypoint was marked (nothing was written); later calls return `FINISHED`.
+/// Writes the last file's end line, syncs and closes it; `*out` (may be NULL) receives what
+/// was recorded. `NO_WAYPOINTS` when no waypoint was marked: no walk file exists yet, and the
+/// recording goes on (mark a waypoint, then finish). `IO` when the end line cannot be written,
+/// or after an earlier `IO` until `waymark_recorder_resume` succeeds: the recording goes on,
+/// and `_finish` may be called again. Once it returned `OK`, later calls return `FINISHED`.
 #[no_mangle]
 pub extern "C" fn waymark_recorder_finish(
     recorder: *const waymark_recorder,
@@ -262,6 +275,18 @@ pub extern "C" fn waymark_recorder_finish(
             write(out, summary(&stats));
             waymark_result::Ok
         }
+        Err(e) => recorder_error(&e),
+    })
+}
+
+/// Acknowledges an `IO` error and takes input again: cuts the file back to its last whole line
+/// if the failed write could not, and syncs it. Returns `IO` while the storage still refuses
+/// (the error stays; call it again later), `FINISHED` after `_finish`, else `OK` (also when
+/// there was no error). The calls that returned `IO` wrote nothing: push their input again.
+#[no_mangle]
+pub extern "C" fn waymark_recorder_resume(recorder: *const waymark_recorder) -> waymark_result {
+    with_recorder(recorder, |r| match r.resume() {
+        Ok(()) => waymark_result::Ok,
         Err(e) => recorder_error(&e),
     })
 }

@@ -404,6 +404,11 @@ pub struct waymark_input_stats {
     pub feedback_rejected: u64,
     /// Times the engine started over from "anywhere on the site".
     pub filter_restarts: u64,
+    /// Inputs refused for a time too far ahead of the engine's clock: sensor samples more than
+    /// 10 s ahead of the latest input taken (unless the stream's next sample confirms the
+    /// jump, as after the phone slept), and any time above INT64_MAX ns, a negative time passed
+    /// as unsigned. Each refusal also reaches the status callback as an `INPUT_REJECTED` error.
+    pub timestamps_ahead: u64,
 }
 
 impl From<&engine::InputStats> for waymark_input_stats {
@@ -426,6 +431,7 @@ impl From<&engine::InputStats> for waymark_input_stats {
             feedback_accepted: s.feedback_accepted,
             feedback_rejected: s.feedback_rejected,
             filter_restarts: s.filter_restarts,
+            timestamps_ahead: s.timestamps_ahead,
         }
     }
 }

@@ -20,13 +20,16 @@ pub struct SurveyOptions {
     pub device: String,
 }
 
-/// What a recording took and dropped, and the files it wrote.
+/// What a recording wrote and dropped, and the files it wrote. Only what is in the files is
+/// counted: a call that threw counts nothing.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
 pub struct SurveySummary {
     /// Sensor samples written.
     pub samples: u64,
-    /// Samples dropped for a NaN, infinite or absurd value, or a time not after their
-    /// stream's previous sample.
+    /// Samples dropped for a NaN, infinite or absurd value, a time not after their stream's
+    /// previous sample, or a time too far ahead of the recording's clock (more than 10 s after
+    /// the latest input written, unless the stream's next sample confirms the jump, or a
+    /// negative `Long` passed as unsigned).
     pub samples_dropped: u64,
     /// Scans written.
     pub scans: u64,
@@ -38,12 +41,12 @@ pub struct SurveySummary {
     pub files: Vec<String>,
 }
 
-/// Why a recorder call failed. The recording goes on after any of them but `Io` on a full or
-/// missing disk.
+/// Why a recorder call failed. A call that throws writes nothing. After `Io` every call throws
+/// `Io` until `resume` succeeds.
 #[derive(Clone, Debug, PartialEq, thiserror::Error, uniffi::Error)]
 pub enum SurveyError {
     /// A walk file could not be created or written, or exists already (a recording never
-    /// overwrites one).
+    /// overwrites one). It sticks until `resume` succeeds.
     #[error("storage: {reason}")]
     Io {
         /// Which file and why.
@@ -57,9 +60,9 @@ pub enum SurveyError {
         /// Why.
         reason: String,
     },
-    /// `finish` was called before any waypoint: nothing in the walk has a position, so no
-    /// file was written.
-    #[error("no waypoint was marked; no file was written")]
+    /// `finish` was called before any waypoint: nothing in the walk has a position yet, so no
+    /// walk file exists. The recording goes on: mark a waypoint, then finish.
+    #[error("no waypoint was marked; no walk file was written yet")]
     NoWaypoints,
     /// The recording was finished.
     #[error("the recording is finished")]
@@ -88,6 +91,11 @@ impl From<RecorderError> for SurveyError {
 /// Records a survey walk: push the same sensor batches and scans as to a `PositioningEngine`,
 /// and `markWaypoint` where the surveyor stands; `finish` closes the files, which
 /// `waymark survey` turns into a site file (docs/surveying.md). Thread-safe.
+///
+/// Every call that returns has handed its lines to the OS, so a killed app loses none of them;
+/// they are synced to storage at least once a second while calls come, and at each new file
+/// and at `finish`. Files only ever hold whole lines. After an `Io` error every call throws
+/// until `resume` succeeds (docs/surveying.md#durability).
 #[derive(uniffi::Object)]
 pub struct SurveyRecorder {
     inner: Mutex<core::SurveyRecorder>,
@@ -95,8 +103,9 @@ pub struct SurveyRecorder {
 
 #[uniffi::export]
 impl SurveyRecorder {
-    /// A recording into `directory` (created if missing); nothing is written before the first
-    /// waypoint. Throws `InputRejected` for a walk name or site id that cannot be used.
+    /// A recording into `directory` (created if missing); before the first waypoint the lines
+    /// go to `directory/.WALK.pending`, then into the first walk file. Throws `InputRejected`
+    /// for a walk name or site id that cannot be used.
     #[uniffi::constructor]
     pub fn new(directory: String, options: SurveyOptions) -> Result<std::sync::Arc<Self>, SurveyError> {
         guarded(|| {
@@ -136,16 +145,30 @@ impl SurveyRecorder {
 
     /// The surveyor stands at (`x`, `y`) m on the plan of `floor` (the floor's name, as its
     /// folder is named: "F1", "B1"). A waypoint on another floor begins that floor's file.
+    /// Throws `InputRejected` for a floor name with a space at either end or a `.` at the end,
+    /// or one that differs only in case from a folder in the directory ("f1" beside "F1":
+    /// case-insensitive storage would merge them).
     pub fn mark_waypoint(&self, timestamp_ns: u64, x: f64, y: f64, floor: String) -> Result<(), SurveyError> {
         self.call(|r| Ok(r.mark_waypoint(timestamp_ns, x, y, &floor)?))
     }
 
-    /// What was taken and dropped so far.
+    /// What was written and dropped so far; works after an `Io` error too.
     pub fn summary(&self) -> Result<SurveySummary, SurveyError> {
         self.call(|r| Ok(summary(r.stats())))
     }
 
-    /// Closes the files and returns what was recorded; later calls throw `Finished`.
+    /// Acknowledges an `Io` error and takes input again: cuts the file back to its last whole
+    /// line if the failed write could not, and syncs it. Throws `Io` while the storage still
+    /// refuses (call it again later). The calls that threw wrote nothing: push their input
+    /// again.
+    pub fn resume(&self) -> Result<(), SurveyError> {
+        self.call(|r| Ok(r.resume()?))
+    }
+
+    /// Writes the last file's end line, syncs and closes it, and returns what was recorded.
+    /// Throws `NoWaypoints` before any waypoint and `Io` when the storage refuses; the recording
+    /// goes on after either, and `finish` may be called again. Once it returned, later calls
+    /// throw `Finished`.
     pub fn finish(&self) -> Result<SurveySummary, SurveyError> {
         self.call(|r| Ok(summary(&r.finish()?)))
     }
@@ -163,7 +186,7 @@ impl SurveyRecorder {
 fn summary(s: &core::RecordingStats) -> SurveySummary {
     SurveySummary {
         samples: s.samples,
-        samples_dropped: s.samples_non_finite + s.samples_out_of_order,
+        samples_dropped: s.samples_non_finite + s.samples_out_of_order + s.samples_ahead,
         scans: s.scans,
         scans_rejected: s.scans_rejected,
         waypoints: s.waypoints,

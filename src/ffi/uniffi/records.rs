@@ -490,6 +490,11 @@ pub struct InputStats {
     /// Times the engine started over from "anywhere on the site": after a gap too long to
     /// bridge, or when nothing could explain a scan.
     pub filter_restarts: u64,
+    /// Inputs refused for a time too far ahead of the engine's clock: sensor samples more than
+    /// 10 s ahead of the latest input taken (unless the stream's next sample confirms the
+    /// jump, as after the phone slept), and any time above 2^63 - 1 ns, a negative `Long`
+    /// passed as unsigned. Each refusal also reaches the listener as an `InputRejected` error.
+    pub timestamps_ahead: u64,
 }
 
 impl From<&engine::InputStats> for InputStats {
@@ -512,6 +517,7 @@ impl From<&engine::InputStats> for InputStats {
             feedback_accepted: s.feedback_accepted,
             feedback_rejected: s.feedback_rejected,
             filter_restarts: s.filter_restarts,
+            timestamps_ahead: s.timestamps_ahead,
         }
     }
 }

@@ -198,14 +198,21 @@ class RobustnessTest {
                     e.magnetometer.map { it.copy(timestampNs = it.timestampNs + d) }, e.wifi)
             }
             assertTrue(replay(engine, shifted) > 5)
-            // The end of the clock: accepted once, then everything is out of order.
-            assertTrue(finite(engine.advance(ULong.MAX_VALUE)))
+            // Past any phone's clock (a negative Long as ULong): refused, not adopted.
             try {
                 engine.advance(ULong.MAX_VALUE)
+                fail("an epoch past the end of the clock was accepted")
+            } catch (e: PositioningException.InputRejected) {
+            }
+            // The end of the clock: accepted once, then everything is out of order.
+            val end = Long.MAX_VALUE.toULong()
+            assertTrue(finite(engine.advance(end)))
+            try {
+                engine.advance(end)
                 fail("a second epoch at the end of the clock was accepted")
             } catch (e: PositioningException.InputRejected) {
             }
-            assertEquals(ULong.MAX_VALUE, engine.position()!!.timestampNs)
+            assertEquals(end, engine.position()!!.timestampNs)
             subscription.close()
             subscription.close() // twice: nothing
         }

@@ -304,12 +304,12 @@ class WaymarkTest {
         assertEquals(1, counter.errors.get())
         val position = engine.pushScan(RadioScan(10UL, wifi, emptyList()))
         assertEquals(1, counter.positions.get())
-        // A panic half-way through an epoch (this build, at ULong.MAX - 8, after the filter has
+        // A panic half-way through an epoch (this build, at Long.MAX_VALUE - 8, after the filter has
         // stepped and the listeners' position was made) is undone: the same position, no
         // position heard, the error heard; a scan and an advance alike.
         for (call in listOf<() -> Unit>(
-            { engine.pushScan(RadioScan(ULong.MAX_VALUE - 8UL, wifi, emptyList())) },
-            { engine.advance(ULong.MAX_VALUE - 8UL) },
+            { engine.pushScan(RadioScan(Long.MAX_VALUE.toULong() - 8UL, wifi, emptyList())) },
+            { engine.advance(Long.MAX_VALUE.toULong() - 8UL) },
         )) {
             try {
                 call()
