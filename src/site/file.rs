@@ -814,6 +814,35 @@ mod tests {
         );
     }
 
+    /// A second document or any other data after the site's is refused, never ignored: the
+    /// file loaded as its first document (issue 60, item 7). A UTF-8 byte order mark is skipped;
+    /// a UTF-16 one is named.
+    #[test]
+    fn data_after_the_document_is_refused_and_a_utf8_bom_skipped() {
+        for tail in ["{}", "x", "\0", &GOOD[..40]] {
+            let text = format!("{GOOD}\n{tail}");
+            match err(&text) {
+                SiteError::Syntax { line: 14, message, .. } => {
+                    assert!(message.contains("after the end of the site's JSON document"), "{message}")
+                }
+                other => panic!("{tail:?}: {other:?}"),
+            }
+            let packed = Site::from_json(GOOD.as_bytes()).unwrap().to_binary();
+            assert!(Site::from_bytes(&[&packed[..], tail.as_bytes()].concat()).is_err(), "binary + {tail:?}");
+        }
+        assert!(Site::from_json(format!("{GOOD} \n\t\r\n").as_bytes()).is_ok(), "white space may follow");
+        let with_bom = [&b"\xEF\xBB\xBF"[..], GOOD.as_bytes()].concat();
+        assert_eq!(
+            Site::from_bytes(&with_bom).unwrap().to_json(),
+            Site::from_json(GOOD.as_bytes()).unwrap().to_json()
+        );
+        let utf16 = [&b"\xFF\xFE"[..], GOOD.as_bytes()].concat();
+        match Site::from_bytes(&utf16).unwrap_err() {
+            SiteError::Syntax { message, .. } => assert!(message.contains("UTF-16"), "{message}"),
+            other => panic!("{other:?}"),
+        }
+    }
+
     #[test]
     fn io_error_names_the_path() {
         let e = Site::load("/nonexistent/site.json").unwrap_err();
