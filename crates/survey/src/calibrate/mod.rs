@@ -46,6 +46,9 @@ pub enum CalibrationError {
     /// A walk could not be read.
     #[error(transparent)]
     Trace(#[from] crate::io::TraceError),
+    /// A floor's plan is there but could not be read or is not valid.
+    #[error(transparent)]
+    Plan(#[from] crate::io::FloorPlanError),
     /// The survey could not build a site.
     #[error(transparent)]
     Site(#[from] waymark::site::SiteError),
