@@ -281,7 +281,9 @@ impl ReachTable {
         let mut touched: Vec<u32> = Vec::new();
         let mut heap = BinaryHeap::new();
         let unsurveyed: Vec<bool> = site.states().iter().map(|s| s.kind == StateKind::Unsurveyed).collect();
-        // Whether a state is the source or one of its neighbours, for the row being built.
+        // Whether a state is the source or one of its neighbours, for the row being built: a
+        // look-up, where searching the neighbours for every state reached made a row cost its
+        // length times the source's edges.
         let mut near_mark = vec![false; n];
         let too_many = |source: usize| {
             budget::over(
