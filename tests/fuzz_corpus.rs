@@ -39,6 +39,11 @@ fn site_file_corpus() {
 }
 
 #[test]
+fn site_cost_corpus() {
+    replay("site_cost", harness::site_cost::run);
+}
+
+#[test]
 fn ilc_trace_corpus() {
     replay("ilc_trace", harness::ilc_trace::run);
 }

@@ -5,6 +5,7 @@
  * normally afterwards. Calls after waymark_engine_free cannot be detected in C (the handle is
  * a dangling pointer) and are not tried. Usage: robustness site.json */
 #include <math.h>
+#include <stdarg.h>
 #include <stdint.h>
 #include <stdio.h>
 #include <stdlib.h>
@@ -87,6 +88,72 @@ static void sites(const char *site_path, const char *json, size_t len) {
     CHECK(waymark_last_error(one, 1) == n && one[0] == 0, "len 1 writes the NUL");
     CHECK(waymark_last_error(small, sizeof small) == n && strlen(small) == 3, "truncated");
     waymark_engine_free(NULL);
+}
+
+/* printf to buf + *at, never past cap; *at counts what would have been written. */
+static void append(char *buf, size_t cap, size_t *at, const char *format, ...) {
+    va_list args;
+    va_start(args, format);
+    int n = vsnprintf(buf + (*at < cap ? *at : cap), *at < cap ? cap - *at : 0, format, args);
+    va_end(args);
+    *at += n > 0 ? (size_t)n : 0;
+}
+
+/* The site budget and the site readers (issue 60, items 1, 7 and 10; docs/errors.md#site-limits):
+ * 20 000 states packed on a line 8/20 000 m apart, each within reach of every other, are refused
+ * with INVALID_SITE naming the limit, where they asked for 2.4 GB and aborted; data after the
+ * JSON document is refused, a UTF-8 byte order mark skipped; /dev/zero is refused after the
+ * first block it reads. */
+static void site_limits(const char *json, size_t len) {
+    waymark_engine *engine = NULL;
+    enum { STATES = 20000 };
+    /* About 130 bytes a state and its edge; append() stops at the end and the CHECK below
+     * fails if anything was cut. */
+    size_t cap = (size_t)STATES * 200 + 1000, at = 0;
+    char *dense = malloc(cap);
+    if (!dense) {
+        CHECK(0, "memory for the dense site");
+        return;
+    }
+    append(dense, cap, &at,
+           "{\"format_version\": 7, \"name\": \"dense\", \"floors\": [{\"name\": \"G\"}], \"radio\": "
+           "{\"clip_dbm\": -100, \"unheard\": {\"mean_dbm\": -110, \"std_db\": 5}, "
+           "\"transmitters\": [{\"wifi\": {\"bssid\": \"02:00:00:00:00:01\"}}]}, \"states\": [");
+    for (int i = 0; i < STATES; i++) {
+        append(dense, cap, &at,
+               "%s{\"id\": %d, \"floor\": 0, \"x\": %.9f, \"y\": 0, "
+               "\"fingerprint\": [{\"tx\": 0, \"mean_dbm\": -60, \"std_db\": 4}]}",
+               i ? "," : "", i, i * 8.0 / STATES);
+    }
+    append(dense, cap, &at, "], \"edges\": [");
+    for (int i = 1; i < STATES; i++) {
+        append(dense, cap, &at, "%s{\"from\": %d, \"to\": %d}", i > 1 ? "," : "", i - 1, i);
+    }
+    append(dense, cap, &at, "]}");
+    CHECK(at < cap, "the dense site fits its buffer");
+    CHECK(waymark_engine_new((const uint8_t *)dense, at, &engine) == WAYMARK_RESULT_INVALID_SITE, "dense site");
+    char message[512];
+    waymark_last_error(message, sizeof message);
+    CHECK(strstr(message, "MAX_REACHABLE_STATES") != NULL, "the limit is named: %s", message);
+    free(dense);
+    /* The site file followed by more data, and after a byte order mark. */
+    char *longer = malloc(len + 8);
+    if (longer) {
+        memcpy(longer, json, len);
+        memcpy(longer + len, "\n{}", 3);
+        CHECK(waymark_engine_new((const uint8_t *)longer, len + 3, &engine) == WAYMARK_RESULT_INVALID_SITE,
+              "trailing data");
+        waymark_last_error(message, sizeof message);
+        CHECK(strstr(message, "after the end") != NULL, "trailing data is named: %s", message);
+        memcpy(longer, "\xef\xbb\xbf", 3);
+        memcpy(longer + 3, json, len);
+        CHECK(waymark_engine_new((const uint8_t *)longer, len + 3, &engine) == WAYMARK_RESULT_OK, "a UTF-8 BOM");
+        waymark_engine_free(engine);
+        engine = NULL;
+        free(longer);
+    }
+    CHECK(waymark_engine_new_from_path("/dev/zero", &engine) == WAYMARK_RESULT_INVALID_SITE, "/dev/zero");
+    CHECK(engine == NULL, "no engine came out of a failure");
 }
 
 /* Every engine function with a NULL engine. */
@@ -360,6 +427,7 @@ int main(int argc, char **argv) {
     size_t len = 0;
     char *json = site_argument(argc, argv, &len);
     sites(argv[1], json, len);
+    site_limits(json, len);
     null_engine();
     abi_edges(json, len);
 

@@ -6,4 +6,5 @@ pub mod checks;
 pub mod cursor;
 pub mod engine_calls;
 pub mod ilc_trace;
+pub mod site_cost;
 pub mod site_file;

@@ -6,16 +6,21 @@
 use super::checks;
 use std::sync::Arc;
 use waymark::ffi::uniffi as ffi;
-use waymark::{Engine, EngineConfig, Error, InputError, Reading, Scan, Site};
+use waymark::{Engine, EngineConfig, Error, InputError, Reading, Scan, Site, SiteError};
 
 /// One fuzz input.
 pub fn run(data: &[u8]) {
     let parsed = Site::from_bytes(data);
+    // A site that loads but whose tables are over the site budget makes no engine
+    // (docs/errors.md#site-limits).
+    let over_budget = parsed.as_ref().is_ok_and(|site| {
+        matches!(site.reach_tables(EngineConfig::default().reach_radius_m), Err(SiteError::OverLimit { .. }))
+    });
     // The FFI constructors must agree with the core on what loads: the text one on JSON (text
     // never starts with the binary signature, which is not UTF-8), the bytes one on anything.
     let agree = |created: Result<_, ffi::PositioningError>| match created {
-        Ok(_) => assert!(parsed.is_ok(), "the FFI loaded a site the core refuses"),
-        Err(ffi::PositioningError::InvalidSite { .. }) => assert!(parsed.is_err()),
+        Ok(_) => assert!(parsed.is_ok() && !over_budget, "the FFI made an engine the core refuses"),
+        Err(ffi::PositioningError::InvalidSite { .. }) => assert!(parsed.is_err() || over_budget),
         Err(ffi::PositioningError::InvalidConfig { .. }) => assert!(parsed.is_ok()),
         Err(e) => panic!("unexpected FFI error: {e}"),
     };
@@ -43,6 +48,7 @@ pub fn run(data: &[u8]) {
         Ok(engine) => exercise(engine),
         // The site's calibration may hold a step-length model the tracker refuses.
         Err(Error::InvalidConfig(_)) => {}
+        Err(Error::Site(SiteError::OverLimit { .. })) => assert!(over_budget),
         Err(e) => panic!("unexpected engine error: {e}"),
     }
 }

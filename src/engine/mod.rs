@@ -145,12 +145,15 @@ impl Engine {
     /// A session on `site`. Takes the site's walking-distance tables ([`Site::reach_tables`]:
     /// built by the first engine at this radius, shared by the rest): all allocation happens
     /// here.
-    /// A site whose transmitter ids are hashed needs its salt in `config.site_salt`.
+    /// A site whose transmitter ids are hashed needs its salt in `config.site_salt`. A site
+    /// whose tables would pass the site budget is refused
+    /// ([`SiteError::OverLimit`](crate::SiteError::OverLimit),
+    /// docs/errors.md#site-limits).
     pub fn new(site: Arc<Site>, config: EngineConfig) -> Result<Self, Error> {
         config.validate()?;
         let id_hasher = site.scan_hasher(config.site_salt.as_ref())?;
         let n = site.states().len();
-        let (reach, map_reach) = site.reach_tables(config.reach_radius_m);
+        let (reach, map_reach) = site.reach_tables(config.reach_radius_m)?;
         let rssi_weight = config.floor_rssi_weights(&site);
         let site_rssi_weight = config.rssi_weight_for(&site);
         let scenario_rssi_weight = config.scenario_rssi_weights(&site);

@@ -10,6 +10,9 @@
 //! `{"name": "kitchen", "kind": "room", "states": [state ids]}`, each state in at most one
 //! zone. Files without `zones` are read, and written, exactly as before.
 
+use super::budget::{
+    self, MAX_EDGES_PER_STATE, MAX_FINGERPRINT_ENTRIES, MAX_STATES, MAX_TRANSMITTERS_PER_STATE,
+};
 use super::error::invalid;
 use super::schema::{
     parse_json, EdgeFile, FingerprintFile, Fingerprints, FloorFile, GaussianFile, IdHashFile, RadioFile,
@@ -212,8 +215,12 @@ impl Site {
         if file.states.is_empty() {
             return Err(invalid("states", "a site needs at least one state"));
         }
-        if u32::try_from(file.states.len()).is_err() {
-            return Err(invalid("states", "more states than a u32 can index"));
+        if file.states.len() > MAX_STATES {
+            return Err(budget::over(
+                "MAX_STATES",
+                MAX_STATES as u64,
+                format!("the site has {} states", file.states.len()),
+            ));
         }
         let radio = &file.radio;
         let max_reading_age_ms = radio.max_reading_age_ms;
@@ -227,6 +234,7 @@ impl Site {
         let mut states = Vec::with_capacity(file.states.len());
         let mut seen_in = vec![0usize; tx_count];
         let mut next_column_entry = 0;
+        let mut fingerprint_entries = 0;
         for (i, s) in file.states.iter().enumerate() {
             let at = |field: &str| format!("states[{i}].{field}");
             if let Some(first) = ids.insert(s.id, i) {
@@ -249,6 +257,21 @@ impl Site {
                 }
                 Fingerprints::Columns(c) => c.count(i),
             };
+            if count > MAX_TRANSMITTERS_PER_STATE {
+                return Err(budget::over(
+                    "MAX_TRANSMITTERS_PER_STATE",
+                    MAX_TRANSMITTERS_PER_STATE as u64,
+                    format!("{} models {count} transmitters", at("fingerprint")),
+                ));
+            }
+            fingerprint_entries += count;
+            if fingerprint_entries > MAX_FINGERPRINT_ENTRIES {
+                return Err(budget::over(
+                    "MAX_FINGERPRINT_ENTRIES",
+                    MAX_FINGERPRINT_ENTRIES as u64,
+                    format!("the fingerprints up to {} have more entries", at("fingerprint")),
+                ));
+            }
             for k in 0..count {
                 let (tx, mean_dbm, std_db) = match fingerprints {
                     Fingerprints::Nested => {
@@ -286,6 +309,7 @@ impl Site {
             });
         }
         let mut edges = Vec::with_capacity(file.edges.len());
+        let mut degree = vec![0u32; states.len()];
         for (k, e) in file.edges.iter().enumerate() {
             let at = |field: &str| format!("edges[{k}].{field}");
             let lookup = |id: u32, field: &str| {
@@ -294,6 +318,16 @@ impl Site {
             let (a, b) = (lookup(e.from, "from")?, lookup(e.to, "to")?);
             if a == b {
                 return Err(invalid(at("to"), "an edge must join two different states"));
+            }
+            for end in [a, b] {
+                degree[end] += 1;
+                if degree[end] as usize > MAX_EDGES_PER_STATE {
+                    return Err(budget::over(
+                        "MAX_EDGES_PER_STATE",
+                        MAX_EDGES_PER_STATE as u64,
+                        format!("edges[{k}] gives state id {} more edges", states[end].id),
+                    ));
+                }
             }
             let (sa, sb) = (&states[a], &states[b]);
             let length_m = match e.length_m {
@@ -812,6 +846,71 @@ mod tests {
         assert!(
             matches!(err(&level), SiteError::Invalid { path, .. } if path.starts_with("floors[0].level"))
         );
+    }
+
+    /// A second document or any other data after the site's is refused, never ignored: the
+    /// file loaded as its first document (issue 60, item 7). A UTF-8 byte order mark is skipped;
+    /// a UTF-16 one is named.
+    #[test]
+    fn data_after_the_document_is_refused_and_a_utf8_bom_skipped() {
+        for tail in ["{}", "x", "\0", &GOOD[..40]] {
+            let text = format!("{GOOD}\n{tail}");
+            match err(&text) {
+                SiteError::Syntax { line: 14, message, .. } => {
+                    assert!(message.contains("after the end of the site's JSON document"), "{message}")
+                }
+                other => panic!("{tail:?}: {other:?}"),
+            }
+            let packed = Site::from_json(GOOD.as_bytes()).unwrap().to_binary();
+            assert!(Site::from_bytes(&[&packed[..], tail.as_bytes()].concat()).is_err(), "binary + {tail:?}");
+        }
+        assert!(Site::from_json(format!("{GOOD} \n\t\r\n").as_bytes()).is_ok(), "white space may follow");
+        let with_bom = [&b"\xEF\xBB\xBF"[..], GOOD.as_bytes()].concat();
+        assert_eq!(
+            Site::from_bytes(&with_bom).unwrap().to_json(),
+            Site::from_json(GOOD.as_bytes()).unwrap().to_json()
+        );
+        let utf16 = [&b"\xFF\xFE"[..], GOOD.as_bytes()].concat();
+        match Site::from_bytes(&utf16).unwrap_err() {
+            SiteError::Syntax { message, .. } => assert!(message.contains("UTF-16"), "{message}"),
+            other => panic!("{other:?}"),
+        }
+    }
+
+    /// The limits checked at load name themselves (docs/errors.md#site-limits).
+    #[test]
+    fn edges_and_transmitters_per_state_are_limited() {
+        use crate::site::budget::{MAX_EDGES_PER_STATE, MAX_TRANSMITTERS_PER_STATE};
+        let over = |text: &str| match err(text) {
+            SiteError::OverLimit { name, .. } => name,
+            other => panic!("{other:?}"),
+        };
+        // A hub joined to more states than a state may have edges.
+        let spokes = MAX_EDGES_PER_STATE + 1;
+        let states: Vec<String> =
+            (0..=spokes).map(|i| format!(r#"{{"id": {i}, "floor": 0, "x": {i}, "y": 1}}"#)).collect();
+        let edges: Vec<String> = (1..=spokes).map(|i| format!(r#"{{"from": 0, "to": {i}}}"#)).collect();
+        let hub = format!(
+            r#"{{"format_version": 7, "name": "hub", "floors": [{{"name": "G"}}],
+                "radio": {{"clip_dbm": -100, "unheard": {{"mean_dbm": -115, "std_db": 5}}, "transmitters": []}},
+                "states": [{}], "edges": [{}]}}"#,
+            states.join(","),
+            edges.join(",")
+        );
+        assert_eq!(over(&hub), "MAX_EDGES_PER_STATE");
+        let fewer = hub.replace(&format!(r#",{{"from": 0, "to": {spokes}}}"#), "");
+        assert!(Site::from_json(fewer.as_bytes()).is_ok(), "the limit itself loads");
+        // A state modelling more transmitters than a state may.
+        let count = MAX_TRANSMITTERS_PER_STATE + 1;
+        let ids: Vec<String> = (0..count)
+            .map(|k| format!(r#"{{"wifi": {{"bssid": "02:00:00:00:{:02x}:{:02x}"}}}}"#, k >> 8, k & 255))
+            .collect();
+        let entries: Vec<String> =
+            (0..count).map(|k| format!(r#"{{"tx": {k}, "mean_dbm": -60, "std_db": 4}}"#)).collect();
+        let loud = GOOD
+            .replace(r#"{"wifi": {"bssid": "00:11:22:33:44:55"}}"#, &ids.join(","))
+            .replace(r#"{"tx": 0, "mean_dbm": -60, "std_db": 4}"#, &entries.join(","));
+        assert_eq!(over(&loud), "MAX_TRANSMITTERS_PER_STATE");
     }
 
     #[test]

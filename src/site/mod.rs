@@ -3,6 +3,7 @@
 //! versioned site file: JSON, or its binary encoding.
 
 mod binary;
+pub mod budget;
 mod builder;
 mod error;
 mod file;
@@ -582,10 +583,11 @@ impl Site {
 
     /// The walking-distance tables within `radius_m`: the whole graph's and, when the site has
     /// [`StateKind::Unsurveyed`] states, the surveyed map's. Built once per radius and shared.
-    pub fn reach_tables(&self, radius_m: f64) -> ReachTables {
-        self.cached_reach_tables(radius_m, || {
-            (ReachTable::build(self, radius_m), ReachTable::build_surveyed(self, radius_m))
-        })
+    /// Refused ([`SiteError::OverLimit`]) when they would pass the site budget
+    /// ([`budget::MAX_REACHABLE_STATES`], [`budget::MAX_REACH_ENTRIES`],
+    /// [`budget::MAX_REACH_EDGE_VISITS`]): the build stops there, having allocated no more.
+    pub fn reach_tables(&self, radius_m: f64) -> Result<ReachTables, SiteError> {
+        self.cached_reach_tables(radius_m, || ReachTable::build_both(self, radius_m, None))
     }
 
     /// [`reach_tables`](Self::reach_tables), taking every row it can from `base`'s tables at
@@ -593,31 +595,31 @@ impl Site {
     /// survey walk for a site surveyed without one of them, which differs from it only around
     /// that walk's path. The tables are the same, entry for entry, as those built from scratch
     /// (docs/tuning.md#evaluation-speed).
-    pub fn reach_tables_from(&self, base: &Site, radius_m: f64) -> ReachTables {
+    pub fn reach_tables_from(&self, base: &Site, radius_m: f64) -> Result<ReachTables, SiteError> {
         // Before this site's cache is locked: `base` may share it.
-        let theirs = base.reach_tables(radius_m);
-        self.cached_reach_tables(radius_m, || ReachTable::build_both_reusing(self, radius_m, base, &theirs))
+        let theirs = base.reach_tables(radius_m)?;
+        self.cached_reach_tables(radius_m, || ReachTable::build_both(self, radius_m, Some((base, &theirs))))
     }
 
     /// The cached tables of `radius_m`, or those `build` makes, cached.
     fn cached_reach_tables(
         &self,
         radius_m: f64,
-        build: impl FnOnce() -> (ReachTable, Option<ReachTable>),
-    ) -> ReachTables {
+        build: impl FnOnce() -> Result<(ReachTable, Option<ReachTable>), SiteError>,
+    ) -> Result<ReachTables, SiteError> {
         let key = radius_m.to_bits();
         // A panic while building leaves the cache as it was: recover it.
         let mut cache = self.reach_tables.0.lock().unwrap_or_else(std::sync::PoisonError::into_inner);
         if let Some((_, tables)) = cache.iter().find(|(k, _)| *k == key) {
-            return tables.clone();
+            return Ok(tables.clone());
         }
-        let (whole, surveyed) = build();
+        let (whole, surveyed) = build()?;
         let tables = (Arc::new(whole), surveyed.map(Arc::new));
         if cache.len() >= REACH_CACHE_RADII {
             cache.remove(0);
         }
         cache.push((key, tables.clone()));
-        tables
+        Ok(tables)
     }
 
     /// The site's name.
@@ -823,8 +825,12 @@ fn median_edge_length(edges: &[Edge]) -> f64 {
 
 impl Site {
     /// Loads a site file in either encoding: binary ([`Site::to_binary`]) when the bytes start
-    /// with its signature, JSON otherwise.
+    /// with its signature, JSON otherwise. More than [`budget::MAX_SITE_FILE_BYTES`] is
+    /// refused unread.
     pub fn from_bytes(bytes: &[u8]) -> Result<Site, SiteError> {
+        if bytes.len() as u64 > budget::MAX_SITE_FILE_BYTES {
+            return Err(file_too_large(bytes.len() as u64, budget::MAX_SITE_FILE_BYTES));
+        }
         if binary::is_binary(bytes) {
             binary::decode(bytes)
         } else {
@@ -832,18 +838,125 @@ impl Site {
         }
     }
 
-    /// Loads a site file from disk.
+    /// Loads a site file from disk. It reads no more than [`budget::MAX_SITE_FILE_BYTES`],
+    /// and stops after the first block when that does not begin like a site file in either
+    /// encoding (`/dev/zero`, an image).
     pub fn load(path: impl AsRef<Path>) -> Result<Site, SiteError> {
         let path = path.as_ref();
-        let bytes = std::fs::read(path)
-            .map_err(|e| SiteError::Io { path: path.display().to_string(), message: e.to_string() })?;
-        Site::from_bytes(&bytes)
+        Site::from_bytes(&read_site_file(path)?)
+    }
+}
+
+fn file_too_large(bytes: u64, limit: u64) -> SiteError {
+    let size = if bytes > limit { "larger".to_owned() } else { format!("{bytes} bytes") };
+    budget::over("MAX_SITE_FILE_BYTES", limit, format!("the site file is {size}"))
+}
+
+/// Bytes read before the start of a file is checked ([`read_bounded`]).
+const FIRST_BLOCK_BYTES: u64 = 64 * 1024;
+
+/// A site file's bytes ([`read_bounded`] up to [`budget::MAX_SITE_FILE_BYTES`]).
+fn read_site_file(path: &Path) -> Result<Vec<u8>, SiteError> {
+    let io = |e: std::io::Error| SiteError::Io { path: path.display().to_string(), message: e.to_string() };
+    let file = std::fs::File::open(path).map_err(io)?;
+    // The size the file says it has, to allocate once: only a hint (a device, a pipe or a
+    // file that grows says otherwise), so the reading is bounded as well.
+    let hint = file.metadata().map_or(0, |m| m.len());
+    read_bounded(file, hint, budget::MAX_SITE_FILE_BYTES, io)
+}
+
+/// Reads a site file of at most `limit` bytes, said to be `hint` bytes long: refused unread
+/// when the hint is over the limit, as soon as the reading passes it, or after the first block
+/// when that shows it is no site file ([`not_a_site_file`]). `io` names a failed read.
+fn read_bounded(
+    reader: impl std::io::Read,
+    hint: u64,
+    limit: u64,
+    io: impl Fn(std::io::Error) -> SiteError,
+) -> Result<Vec<u8>, SiteError> {
+    use std::io::Read;
+    if hint > limit {
+        return Err(file_too_large(hint, limit));
+    }
+    let mut limited = reader.take(limit + 1);
+    let mut bytes = Vec::with_capacity(FIRST_BLOCK_BYTES.min(hint + 1) as usize);
+    (&mut limited).take(FIRST_BLOCK_BYTES).read_to_end(&mut bytes).map_err(&io)?;
+    if let Some(e) = not_a_site_file(&bytes) {
+        return Err(e);
+    }
+    bytes.reserve((hint as usize + 1).saturating_sub(bytes.len()));
+    limited.read_to_end(&mut bytes).map_err(io)?;
+    if bytes.len() as u64 > limit {
+        return Err(file_too_large(bytes.len() as u64, limit));
+    }
+    Ok(bytes)
+}
+
+/// Why a file that begins with `start` cannot be a site file, if it cannot: neither the binary
+/// signature nor, after an optional byte order mark and white space, the `{` (or `[`) a JSON
+/// site file begins with. The error is the one the JSON reader gives at that byte.
+fn not_a_site_file(start: &[u8]) -> Option<SiteError> {
+    let signature = &binary::SIGNATURE[..start.len().min(binary::SIGNATURE.len())];
+    if start.starts_with(signature) {
+        return None;
+    }
+    let json = start.strip_prefix(schema::UTF8_BOM).unwrap_or(start);
+    match json.iter().find(|b| !b" \t\r\n".contains(b)) {
+        None | Some(b'{' | b'[') => None,
+        Some(_) => Site::from_json(start).err(),
     }
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// The reading stops at the limit, whatever the file said its size was, and after the
+    /// first block when that is no site file: `/dev/zero` made `Site::load` read about 0.5 GB
+    /// before it failed (issue 60, item 10).
+    #[test]
+    fn site_files_are_read_no_further_than_needed() {
+        let io = |e: std::io::Error| SiteError::Io { path: "test".into(), message: e.to_string() };
+        let read = |bytes: &[u8], hint: u64, limit: u64| read_bounded(bytes, hint, limit, io);
+        let json = [&b"{"[..], &[b' '; 200]].concat();
+        assert_eq!(read(&json, 0, 201).unwrap(), json, "a file that says it is empty (a pipe)");
+        for hint in [0, 10, 200] {
+            match read(&json, hint, 200) {
+                Err(SiteError::OverLimit { name: "MAX_SITE_FILE_BYTES", limit: 200, what }) => {
+                    assert_eq!(what, "the site file is larger")
+                }
+                other => panic!("{other:?}"),
+            }
+        }
+        assert!(matches!(read(&json, 500, 201), Err(SiteError::OverLimit { .. })), "refused unread");
+        // Never more than the first block of an endless stream that is no site file.
+        let mut counted = CountingReader { inner: std::io::repeat(0), read: 0 };
+        match read_bounded(&mut counted, 0, budget::MAX_SITE_FILE_BYTES, io) {
+            Err(SiteError::Syntax { line: 1, column: 1, .. }) => {}
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(counted.read, FIRST_BLOCK_BYTES);
+        // What may still be a site file is read on: either encoding's start, after white
+        // space and a byte order mark.
+        for start in [&binary::SIGNATURE[..3], &binary::SIGNATURE[..], b"\xEF\xBB\xBF \n{", b"", b"\t\r\n "] {
+            assert!(not_a_site_file(start).is_none(), "{start:?}");
+        }
+        assert!(not_a_site_file(b"\x89PNG\r\n").is_some());
+    }
+
+    /// Counts the bytes read through it.
+    struct CountingReader<R> {
+        inner: R,
+        read: u64,
+    }
+
+    impl<R: std::io::Read> std::io::Read for CountingReader<R> {
+        fn read(&mut self, buf: &mut [u8]) -> std::io::Result<usize> {
+            let n = self.inner.read(buf)?;
+            self.read += n as u64;
+            Ok(n)
+        }
+    }
 
     /// Each state's neighbours are the other ends of its edges, in the order of the site's
     /// edges, whichever end of an edge the state is.

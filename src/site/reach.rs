@@ -2,7 +2,8 @@
 //! ("shortest accessible distance ... stored as a look-up table"), by bounded Dijkstra on the
 //! walkable graph, so nobody walks through a wall.
 
-use super::{Neighbours, Site, StateKind};
+use super::budget::{self, ReachBudget, MAX_REACHABLE_STATES};
+use super::{Neighbours, Site, SiteError, StateKind};
 use std::cmp::Ordering;
 use std::collections::{BinaryHeap, HashMap};
 
@@ -209,47 +210,65 @@ fn entry_index(index: usize) -> u32 {
     u32::try_from(index).unwrap_or(u32::MAX)
 }
 
+/// A table built without a budget: only the budget refuses.
+fn unlimited(table: Result<ReachTable, SiteError>) -> ReachTable {
+    table.unwrap_or_else(|e| unreachable!("a table built without a budget was refused: {e}"))
+}
+
 impl ReachTable {
-    /// Runs a Dijkstra bounded at `radius_m` from every state.
+    /// Runs a Dijkstra bounded at `radius_m` from every state, with no limit on the table's
+    /// size: for tools and tests on sites they built. An engine's tables come from
+    /// [`Site::reach_tables`], within the site budget ([`budget`]).
     pub fn build(site: &Site, radius_m: f64) -> Self {
-        Self::build_over(site, radius_m, false, None)
+        unlimited(Self::build_over(site, radius_m, false, None, None))
     }
 
     /// The table of the surveyed map alone, when the site has
     /// [`StateKind::Unsurveyed`] states (`None` without): paths and targets keep to the other
     /// states, and an unsurveyed state reaches only itself. The engine predicts with it while
     /// the radio explains what it hears, so that the states at the map's edge do not leak mass
-    /// into space the radio has ruled out (docs/tuning.md#unsurveyed-states).
+    /// into space the radio has ruled out (docs/tuning.md#unsurveyed-states). No limit, as
+    /// [`build`](Self::build).
     pub fn build_surveyed(site: &Site, radius_m: f64) -> Option<Self> {
-        site.states()
-            .iter()
-            .any(|s| s.kind == StateKind::Unsurveyed)
-            .then(|| Self::build_over(site, radius_m, true, None))
+        has_unsurveyed(site).then(|| unlimited(Self::build_over(site, radius_m, true, None, None)))
     }
 
-    /// [`build`](Self::build) and [`build_surveyed`](Self::build_surveyed) of `site`, taking
-    /// each row it can from `base`'s tables of `base_site` at the same radius instead of
-    /// running its Dijkstra: the same tables, entry for entry ([`Reuse`]).
-    pub(super) fn build_both_reusing(
+    /// [`build`](Self::build) and [`build_surveyed`](Self::build_surveyed) of `site` within
+    /// one [`ReachBudget`] for the two: refused, before the budget is passed, when the site
+    /// is over a limit of [`budget`]. With a `base` (a site over the same grid and its tables),
+    /// each row it can is taken from the base's table at the same radius instead of running
+    /// its Dijkstra: the same tables, entry for entry ([`Reuse`]).
+    pub(super) fn build_both(
         site: &Site,
         radius_m: f64,
-        base_site: &Site,
-        base: &super::ReachTables,
-    ) -> (Self, Option<Self>) {
-        let matched = Match::new(site, base_site);
-        fn reuse<'a>(table: Option<&'a ReachTable>, radius_m: f64, matched: &'a Match) -> Option<Reuse<'a>> {
+        base: Option<(&Site, &super::ReachTables)>,
+    ) -> Result<(Self, Option<Self>), SiteError> {
+        let matched = base.map(|(base_site, tables)| (Match::new(site, base_site), tables));
+        let reuse = |surveyed: bool| {
+            let (matched, tables) = matched.as_ref()?;
+            let table = if surveyed { tables.1.as_deref() } else { Some(&*tables.0) };
             let base = table.filter(|t| t.radius_m == radius_m)?;
             Some(Reuse { base, matched })
-        }
-        let whole = Self::build_over(site, radius_m, false, reuse(Some(&base.0), radius_m, &matched));
-        let surveyed =
-            site.states().iter().any(|s| s.kind == StateKind::Unsurveyed).then(|| {
-                Self::build_over(site, radius_m, true, reuse(base.1.as_deref(), radius_m, &matched))
-            });
-        (whole, surveyed)
+        };
+        let budget = &mut ReachBudget::new();
+        let whole = Self::build_over(site, radius_m, false, reuse(false), Some(budget))?;
+        let surveyed = match has_unsurveyed(site) {
+            true => Some(Self::build_over(site, radius_m, true, reuse(true), Some(budget))?),
+            false => None,
+        };
+        Ok((whole, surveyed))
     }
 
-    fn build_over(site: &Site, radius_m: f64, surveyed_only: bool, reuse: Option<Reuse>) -> Self {
+    /// The table; with a budget, refused as soon as a state reaches more than
+    /// [`MAX_REACHABLE_STATES`] or the entries or the edges walked would pass what is left of
+    /// it: the table never grows past the budget, and a site over it costs little time.
+    fn build_over(
+        site: &Site,
+        radius_m: f64,
+        surveyed_only: bool,
+        reuse: Option<Reuse>,
+        mut budget: Option<&mut ReachBudget>,
+    ) -> Result<Self, SiteError> {
         let n = site.states().len();
         let mut starts = Vec::with_capacity(n + 1);
         let mut sorted_from = Vec::with_capacity(n);
@@ -262,9 +281,26 @@ impl ReachTable {
         let mut touched: Vec<u32> = Vec::new();
         let mut heap = BinaryHeap::new();
         let unsurveyed: Vec<bool> = site.states().iter().map(|s| s.kind == StateKind::Unsurveyed).collect();
+        // Whether a state is the source or one of its neighbours, for the row being built: a
+        // look-up, where searching the neighbours for every state reached made a row cost its
+        // length times the source's edges.
+        let mut near_mark = vec![false; n];
+        let too_many = |source: usize| {
+            budget::over(
+                "MAX_REACHABLE_STATES",
+                MAX_REACHABLE_STATES as u64,
+                format!(
+                    "states[{source}] (id {}) reaches more states within {radius_m} m",
+                    site.states()[source].id
+                ),
+            )
+        };
         for source in 0..n {
             starts.push(entry_index(targets.len()));
             if let Some(row) = reuse.as_ref().and_then(|r| r.row(source)) {
+                if let Some(budget) = budget.as_deref_mut() {
+                    budget.take_entries(row.len, radius_m)?;
+                }
                 sorted_from.push(starts[source] + entry_index(row.near));
                 for (j, d) in row.entries {
                     targets.push(j);
@@ -293,7 +329,11 @@ impl ReachTable {
                 if d > dist[u as usize] {
                     continue;
                 }
-                for (v, length) in neighbours(u as usize) {
+                let edges = neighbours(u as usize);
+                if let Some(budget) = budget.as_deref_mut() {
+                    budget.take_edge_visits(edges.len() as u64, radius_m)?;
+                }
+                for (v, length) in edges {
                     if skip(v) || blocked(u, v) {
                         continue;
                     }
@@ -306,29 +346,41 @@ impl ReachTable {
                         heap.push(Frontier(next, v));
                     }
                 }
+                if budget.is_some() && touched.len() > MAX_REACHABLE_STATES {
+                    return Err(too_many(source));
+                }
             }
             let near = neighbours(source);
-            let is_near = |j: u32| j as usize == source || near.clone().any(|(v, _)| v == j);
             // Self and neighbours first (a neighbour beyond the radius gets its edge length).
             entries.push((source as u32, 0.0));
+            near_mark[source] = true;
             for (v, length) in near.clone().filter(|&(v, _)| !skip(v)) {
-                if !entries.iter().any(|&(j, _)| j == v) {
+                if !near_mark[v as usize] {
+                    near_mark[v as usize] = true;
                     let d = dist[v as usize].min(length);
                     entries.push((v, d as f32));
                 }
             }
             sorted_from.push(starts[source] + entry_index(entries.len()));
             let from = entries.len();
-            entries.extend(touched.iter().filter(|&&j| !is_near(j)).map(|&j| (j, dist[j as usize] as f32)));
+            entries.extend(
+                touched.iter().filter(|&&j| !near_mark[j as usize]).map(|&j| (j, dist[j as usize] as f32)),
+            );
             entries[from..].sort_by(|a, b| a.1.total_cmp(&b.1).then(a.0.cmp(&b.0)));
-            for &(j, d) in &entries {
-                targets.push(j);
-                distances.push(d, &mut code_of);
+            if let Some(budget) = budget.as_deref_mut() {
+                budget.take_entries(entries.len(), radius_m)?;
             }
             for &j in &touched {
                 dist[j as usize] = f64::INFINITY;
             }
             touched.clear();
+            for &(j, _) in &entries[..from] {
+                near_mark[j as usize] = false;
+            }
+            for &(j, d) in &entries {
+                targets.push(j);
+                distances.push(d, &mut code_of);
+            }
         }
         starts.push(entry_index(targets.len()));
         distances.finish();
@@ -340,7 +392,7 @@ impl ReachTable {
             Distances::Coded { codes, .. } => codes.shrink_to_fit(),
             Distances::Plain(d) => d.shrink_to_fit(),
         }
-        Self { radius_m, starts, sorted_from, targets, distances }
+        Ok(Self { radius_m, starts, sorted_from, targets, distances })
     }
 
     /// The radius the table was built for, m.
@@ -388,6 +440,10 @@ impl ReachTable {
     pub fn is_empty(&self) -> bool {
         self.len() == 0
     }
+}
+
+fn has_unsurveyed(site: &Site) -> bool {
+    site.states().iter().any(|s| s.kind == StateKind::Unsurveyed)
 }
 
 /// How the states of a site correspond to those of a base site over the same grid (a site
@@ -457,10 +513,11 @@ struct Reuse<'a> {
     matched: &'a Match,
 }
 
-/// A row taken from the base table: its entries in the site's states, and how many of them
-/// come before the distance-sorted part.
+/// A row taken from the base table: its entries in the site's states, how many there are, and
+/// how many of them come before the distance-sorted part.
 struct Row<I> {
     entries: I,
+    len: usize,
     near: usize,
 }
 
@@ -476,7 +533,7 @@ impl Reuse<'_> {
             return None;
         }
         let near = self.base.near_count(b as usize);
-        Some(Row { entries: reach.iter().map(|(j, d)| (m.from_base[j as usize], d)), near })
+        Some(Row { entries: reach.iter().map(|(j, d)| (m.from_base[j as usize], d)), len: reach.len(), near })
     }
 }
 
@@ -557,20 +614,21 @@ mod tests {
             (!hole).then_some(x < 10 && y < 8 && !lost)
         });
         for radius in [3.0, 5.0] {
+            let base_tables = base.reach_tables(radius).unwrap();
             let (whole, surveyed) =
-                ReachTable::build_both_reusing(&site, radius, &base, &base.reach_tables(radius));
+                ReachTable::build_both(&site, radius, Some((&base, &base_tables))).unwrap();
             assert_eq!(whole, ReachTable::build(&site, radius));
             assert_eq!(surveyed, ReachTable::build_surveyed(&site, radius));
             // Some rows were taken from the base, not all.
             let matched = Match::new(&site, &base);
-            let table = base.reach_tables(radius).0;
+            let table = base_tables.0;
             let reuse = Reuse { base: &table, matched: &matched };
             let taken = (0..site.states().len()).filter(|&i| reuse.row(i).is_some()).count();
             assert!(taken > 0 && taken < site.states().len(), "{taken}");
         }
         // Through the site's cache, and from the site itself.
-        assert_eq!(*site.reach_tables_from(&base, 5.0).0, ReachTable::build(&site, 5.0));
-        assert_eq!(*base.reach_tables_from(&base, 5.0).0, ReachTable::build(&base, 5.0));
+        assert_eq!(*site.reach_tables_from(&base, 5.0).unwrap().0, ReachTable::build(&site, 5.0));
+        assert_eq!(*base.reach_tables_from(&base, 5.0).unwrap().0, ReachTable::build(&base, 5.0));
     }
 
     /// A corridor with 400 different edge lengths has more than 256 distinct walking
@@ -626,6 +684,48 @@ mod tests {
         }
     }
 
+    /// A table over a budget is refused as soon as it would pass it, naming the limit; the
+    /// same table within it is the unlimited one (docs/errors.md#site-limits).
+    #[test]
+    fn a_budget_refuses_the_table_that_would_pass_it() {
+        let site = corridor();
+        let refused = |entries: usize, visits: u64| {
+            let budget = &mut ReachBudget::of(entries, visits);
+            match ReachTable::build_over(&site, 5.0, false, None, Some(budget)) {
+                Err(SiteError::OverLimit { name, .. }) => Some(name),
+                Err(e) => panic!("{e}"),
+                Ok(table) => {
+                    assert_eq!(table, ReachTable::build(&site, 5.0));
+                    None
+                }
+            }
+        };
+        let table = ReachTable::build(&site, 5.0);
+        // Each popped state's edges: 1 + 2 + 2 + 2 + 1 per row of the corridor at most.
+        let visits: u64 = 5 * 2 * site.edges().len() as u64;
+        assert_eq!(refused(table.len(), visits), None);
+        assert_eq!(refused(table.len() - 1, visits), Some("MAX_REACH_ENTRIES"));
+        assert_eq!(refused(table.len(), 3), Some("MAX_REACH_EDGE_VISITS"));
+        // More states within reach of one than a row may hold.
+        let mut b = SiteBuilder::new("line");
+        let f = b.floor("G", 0.0);
+        let n = MAX_REACHABLE_STATES + 1;
+        let ids: Vec<u32> = (0..n)
+            .map(|i| b.state(f, Point2::new(i as f64 * 1e-3, 0.0), Vec::<TrainingScan>::new()))
+            .collect();
+        for w in ids.windows(2) {
+            b.edge(w[0], w[1], None);
+        }
+        let line = b.build(Default::default()).unwrap();
+        match line.reach_tables(9.0) {
+            Err(e @ SiteError::OverLimit { name: "MAX_REACHABLE_STATES", .. }) => {
+                assert!(e.to_string().contains("states[0] (id 0) reaches more states within 9 m"), "{e}")
+            }
+            other => panic!("{other:?}"),
+        }
+        assert_eq!(ReachTable::build(&line, 9.0).len(), n * n, "without a budget, every state");
+    }
+
     /// Surveyed states 0-1-2-3 around three sides of a square (4 m sides), unsurveyed 4 and 5
     /// across its open side: walking between surveyed states never cuts through unsurveyed
     /// space, walking from it may; the surveyed map's table leaves it out.
@@ -659,8 +759,8 @@ mod tests {
         assert!(map.reachable(0, 20.0).iter().all(|e| !u.contains(&e.0)));
         assert_eq!(map.reachable(u[0] as usize, 20.0).iter().collect::<Vec<_>>(), [(u[0], 0.0)]);
         // The site hands out the same tables to every engine.
-        let (a, a_map) = site.reach_tables(20.0);
-        let (b, _) = site.reach_tables(20.0);
+        let (a, a_map) = site.reach_tables(20.0).unwrap();
+        let (b, _) = site.reach_tables(20.0).unwrap();
         assert!(std::sync::Arc::ptr_eq(&a, &b));
         assert_eq!(a_map.map(|m| m.len()), Some(map.len()));
     }

@@ -172,15 +172,40 @@ fn check_version(bytes: &[u8]) -> Result<(), SiteError> {
     }
 }
 
+/// The UTF-8 byte order mark, which some editors (Windows Notepad) put before the text: a site
+/// file may begin with it, and the reader skips it (RFC 8259 §8.1 lets a parser ignore it).
+pub(super) const UTF8_BOM: &[u8] = b"\xEF\xBB\xBF";
+
 /// Parses (but does not validate) a JSON site file of a format version this build reads. A
 /// newer file is refused as such, not by the first field it has that this build does not know.
+/// The file is one JSON document, after an optional [`UTF8_BOM`]: anything but white space
+/// after it (a second document, a copy appended to the file) is refused, never ignored.
 pub(super) fn parse_json(bytes: &[u8]) -> Result<SiteFile, SiteError> {
+    let bytes = bytes.strip_prefix(UTF8_BOM).unwrap_or(bytes);
+    if bytes.starts_with(b"\xFE\xFF") || bytes.starts_with(b"\xFF\xFE") {
+        return Err(SiteError::Syntax {
+            line: 1,
+            column: 1,
+            message: "the file begins with a UTF-16 byte order mark: a site file is UTF-8".into(),
+        });
+    }
     let mut de = serde_json::Deserializer::from_slice(bytes);
     let parsed: Result<SiteFile, _> = serde_path_to_error::deserialize(&mut de);
     // The version is checked first only when the file does not parse as this version:
     // reading the document twice doubled the load time of a 10 000-state site.
     match parsed {
-        Ok(file) => version_error(u64::from(file.format_version)).map_or(Ok(file), Err),
+        Ok(file) => {
+            if let Err(e) = de.end() {
+                return Err(SiteError::Syntax {
+                    line: e.line(),
+                    column: e.column(),
+                    message: "data after the end of the site's JSON document (a second document, \
+                              or bytes appended to the file)"
+                        .into(),
+                });
+            }
+            version_error(u64::from(file.format_version)).map_or(Ok(file), Err)
+        }
         Err(e) => {
             check_version(bytes)?;
             let inner = e.inner();

@@ -73,3 +73,30 @@ pub fn zoned_site() -> Site {
 pub fn corridor_readings(f: usize, x: f64) -> Vec<(u8, f64)> {
     (0..3).map(|t| ((3 * f + t) as u8, -40.0 - 4.0 * (x - 6.0 * t as f64).abs())).collect()
 }
+
+/// The JSON of a small site that is costly to position on: `n` states packed on a line,
+/// `8 / n` m apart, each joined to the next and with one fingerprint entry, so that every
+/// state is within the default 9 m reach of every other (issue 60's reproduction: the
+/// walking-distance tables of 20 000 such states asked for 2.4 GB).
+pub fn dense_line_site_json(n: usize) -> String {
+    use std::fmt::Write;
+    let mut json = String::from(
+        r#"{"format_version": 7, "name": "dense", "floors": [{"name": "G"}], "radio": {"clip_dbm": -100,
+ "unheard": {"mean_dbm": -110, "std_db": 5}, "transmitters": [{"wifi": {"bssid": "02:00:00:00:00:01"}}]},
+ "states": ["#,
+    );
+    let spacing_m = 8.0 / n as f64;
+    for i in 0..n {
+        let comma = if i == 0 { "" } else { "," };
+        let x = i as f64 * spacing_m;
+        write!(json, r#"{comma}{{"id": {i}, "floor": 0, "x": {x}, "y": 0, "fingerprint": [{{"tx": 0, "mean_dbm": -60, "std_db": 4}}]}}"#)
+            .unwrap();
+    }
+    json.push_str(r#"], "edges": ["#);
+    for i in 1..n {
+        let comma = if i == 1 { "" } else { "," };
+        write!(json, r#"{comma}{{"from": {}, "to": {i}}}"#, i - 1).unwrap();
+    }
+    json.push_str("]}");
+    json
+}

@@ -515,7 +515,7 @@ pub fn survey_habits(
                 engine.history().iter().cloned().collect()
             });
         let sequences: Vec<&[EpochRecord]> = histories.iter().map(Vec::as_slice).collect();
-        let (reach, _) = site.reach_tables(config.reach_radius_m);
+        let (reach, _) = site.reach_tables(config.reach_radius_m)?;
         let mut model = HabitModel::new(site);
         let report = model.learn(site, &reach, &sequences, &config.habits)?;
         Ok::<_, EvalError>((model, report))

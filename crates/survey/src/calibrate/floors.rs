@@ -25,7 +25,8 @@ pub struct FloorData {
 
 impl FloorData {
     /// Reads a floor folder: `path_data_files/*.txt` (or `*.txt` directly inside), and
-    /// `floor_info.json` + `geojson_map.json` if present. `max_walks` keeps only the first
+    /// `floor_info.json` + `geojson_map.json` if present: a plan that is there must be valid
+    /// ([`FloorPlan::read_if_present`]), since a survey without its walls is another site. `max_walks` keeps only the first
     /// walks by name (a quick look; the split is applied after).
     pub fn load(dir: &Path, max_walks: Option<usize>) -> Result<FloorData, CalibrationError> {
         let walks_dir =
@@ -41,7 +42,7 @@ impl FloorData {
         let mut floor = FloorData {
             name: dir.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
             dir: dir.to_owned(),
-            plan: FloorPlan::read(dir).ok(),
+            plan: FloorPlan::read_if_present(dir)?,
             survey: Vec::new(),
             test: Vec::new(),
             geo: None,
@@ -294,6 +295,25 @@ pub fn survey_inputs(floors: &[FloorData]) -> Vec<SurveyFloor<'_>> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::floor_plan::tests::{floor_dir, plan_files};
+
+    /// A floor whose plan is there but not valid is refused, not surveyed without it
+    /// (issue 60, item 8: `FloorPlan::read(dir).ok()` built such sites without walls); a floor
+    /// with no plan at all is read as before.
+    #[test]
+    fn a_floor_with_an_invalid_plan_is_refused_and_one_without_a_plan_read() {
+        let (info, _) = plan_files("[]", "100");
+        let bad = floor_dir(Some(&info), Some(r#"{"type": "FeatureCollection"}"#));
+        match FloorData::load(bad.path(), None) {
+            Err(e @ CalibrationError::Plan(_)) => {
+                let message = e.to_string();
+                assert!(message.contains("geojson_map.json") && message.contains("features"), "{message}")
+            }
+            other => panic!("{other:?}"),
+        }
+        let none = floor_dir(None, None);
+        assert!(FloorData::load(none.path(), None).unwrap().plan.is_none());
+    }
 
     #[test]
     fn the_survey_subset_is_deterministic_even_and_of_the_documented_size() {

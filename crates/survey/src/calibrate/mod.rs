@@ -49,6 +49,9 @@ pub enum CalibrationError {
     /// A walk could not be read.
     #[error(transparent)]
     Trace(#[from] crate::io::TraceError),
+    /// A floor's plan is there but could not be read or is not valid.
+    #[error(transparent)]
+    Plan(#[from] crate::io::FloorPlanError),
     /// The survey could not build a site.
     #[error(transparent)]
     Site(#[from] waymark::site::SiteError),
@@ -201,9 +204,10 @@ fn parallel_map_in<T: Sync, R: Send>(
 /// the site's cache, where its engines find them, taking the rows it can from those of
 /// `whole`, the site of every walk, which it differs from only around the walk left out: the
 /// same tables, at a fraction of the cost of building each from scratch
-/// (`docs/tuning.md#evaluation-speed`).
+/// (`docs/tuning.md#evaluation-speed`). A site over the site budget is left without them: its
+/// engines are then refused with the budget's error (docs/errors.md#site-limits).
 fn held_out_reach(site: &Site, whole: &Site, options: &CalibrationOptions) {
-    site.reach_tables_from(whole, options.calibration_engine().reach_radius_m);
+    let _ = site.reach_tables_from(whole, options.calibration_engine().reach_radius_m);
 }
 
 /// Steps of the survey's calibration, for progress: one per survey walk (each is held out
