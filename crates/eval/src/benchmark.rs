@@ -14,7 +14,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
-use waymark_survey::calibrate::{survey_calibrated, CalibrationError, FloorData};
+use waymark_survey::calibrate::{
+    load_gsd_building, survey_calibrated, CalibrationError, FloorData, WalkSplit,
+};
 use waymark_survey::scoring::{Metrics, Scored};
 
 /// Where the rows' data is read from.
@@ -89,11 +91,38 @@ pub fn ilc20_site1(source: &DataSource) -> Result<Vec<FloorData>, LoadError> {
         .collect()
 }
 
+/// The IPIN 2023 museum's logfiles split by `split` ([`load_gsd_building`]).
+fn ipin2023_t3(source: &DataSource, split: WalkSplit) -> Result<Vec<FloorData>, LoadError> {
+    let dir = crate::data::ipin2023_t3(&source.workspace)
+        .ok_or_else(|| LoadError::Absent("ipin2023-t3 not found".into()))?;
+    Ok(load_gsd_building(&dir, &split, source.max_walks)?)
+}
+
+/// The museum surveyed with the SM-A520F and tested with the SM-G930F.
+pub fn ipin2023_t3_a520f(source: &DataSource) -> Result<Vec<FloorData>, LoadError> {
+    ipin2023_t3(source, WalkSplit::Phone("SM-A520F".into()))
+}
+
+/// The museum surveyed with the SM-G930F and tested with the SM-A520F.
+pub fn ipin2023_t3_g930f(source: &DataSource) -> Result<Vec<FloorData>, LoadError> {
+    ipin2023_t3(source, WalkSplit::Phone("SM-G930F".into()))
+}
+
+/// The museum surveyed from repetitions 1 and 3 of every route and tested on 2 and 4: both
+/// phones on both sides (the data's README).
+pub fn ipin2023_t3_both(source: &DataSource) -> Result<Vec<FloorData>, LoadError> {
+    ipin2023_t3(source, WalkSplit::Repetitions(vec![1, 3]))
+}
+
 /// Every row of the benchmark, in the order it runs them: the five floors surveyed from all
-/// their survey walks and from half of them (`docs/benchmark.md#rows`).
-pub const ROWS: [Row; 2] = [
+/// their survey walks and from half of them, and the museum surveyed with each phone and tested
+/// with the other, and with both phones on both sides (`docs/benchmark.md#rows`).
+pub const ROWS: [Row; 5] = [
     Row { building: "ilc20-site1", split: "F=1", survey_fraction: 1.0, load: ilc20_site1 },
     Row { building: "ilc20-site1", split: "F=0.5", survey_fraction: 0.5, load: ilc20_site1 },
+    Row { building: "ipin2023-t3", split: "A520F-surveys", survey_fraction: 1.0, load: ipin2023_t3_a520f },
+    Row { building: "ipin2023-t3", split: "G930F-surveys", survey_fraction: 1.0, load: ipin2023_t3_g930f },
+    Row { building: "ipin2023-t3", split: "both-phones", survey_fraction: 1.0, load: ipin2023_t3_both },
 ];
 
 /// Resamples of the walk bootstrap. An SE needs a few hundred (Efron & Tibshirani, *An

@@ -315,23 +315,28 @@ fn the_museum_reads_as_two_phones_three_floors_and_one_frame() {
     let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
     let Some(dir) = waymark_eval::data::ipin2023_t3(&workspace) else { return };
     let walks = |floors: &[FloorData]| floors.iter().map(|f| f.survey.len() + f.test.len()).sum::<usize>();
-    // Every walk surveys: 50 logfiles, two of them changing floors (trial 51 visits three
-    // floors, trial 52 two), so 53 walks on single floors.
-    let all = calibrate::load_building(&[dir.clone()], &calibrate::WalkSplit::All, None).expect("reads");
+    // Every walk surveys: 50 logfiles, two of them changing floors. Trial 51 goes
+    // 0, -1, -2, -1, 0, -1, -2, -1, 0 and trial 52 0, -2, 0, -2, 0; their stays of two points
+    // or more (seven and three) survey, so 48 + 10 walks on single floors.
+    let all = calibrate::load_building(std::slice::from_ref(&dir), &calibrate::WalkSplit::All, None)
+        .expect("reads");
     assert_eq!(all.iter().map(|f| f.name.as_str()).collect::<Vec<_>>(), ["L-2", "L-1", "L0"]);
-    assert_eq!(walks(&all), 53);
+    assert_eq!(walks(&all), 58);
+    // Each stay is at least ten seconds of walking: a few scans, hundreds of samples.
     for trace in all.iter().flat_map(|f| &f.survey) {
-        assert!(trace.waypoints.len() >= 2 && trace.wifi_scans.len() > 10, "{}", trace.name);
-        assert!(trace.accelerometer.len() > 1000 && !trace.pressure.is_empty(), "{}", trace.name);
-        assert!(!trace.beacons.is_empty(), "{}: the museum's iBeacons", trace.name);
+        assert!(trace.waypoints.len() >= 2 && trace.wifi_scans.len() >= 2, "{}", trace.name);
+        assert!(trace.accelerometer.len() > 100 && !trace.pressure.is_empty(), "{}", trace.name);
         // The frame is the museum's: a few hundred metres at most from its centre.
         assert!(trace.waypoints.iter().all(|w| w.x.hypot(w.y) < 200.0), "{}", trace.name);
     }
     // Cross-phone: one phone surveys, the other's 24 or 26 walks test.
     for (model, tests) in [("SM-A520F", 26), ("SM-G930F", 24)] {
-        let floors =
-            calibrate::load_building(&[dir.clone()], &calibrate::WalkSplit::Phone(model.into()), None)
-                .expect("reads");
+        let floors = calibrate::load_building(
+            std::slice::from_ref(&dir),
+            &calibrate::WalkSplit::Phone(model.into()),
+            None,
+        )
+        .expect("reads");
         assert_eq!(floors.iter().map(|f| f.test.len()).sum::<usize>(), tests, "{model}");
         for trace in floors.iter().flat_map(|f| &f.survey) {
             assert!(trace.device.as_deref().is_some_and(|d| d.ends_with(model)), "{}", trace.name);

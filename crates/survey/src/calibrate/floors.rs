@@ -162,7 +162,7 @@ fn gsd_files(dir: &Path) -> Result<Vec<PathBuf>, CalibrationError> {
 /// building: x east, y north, in metres from the mean of the survey walks' ground truth
 /// (WGS84 `POSI`), and a floor per level the survey walks visit. A survey walk that changes
 /// floors surveys each floor it stayed on, from its first to its last point there (the stairs
-/// between survey nothing); a test walk is filed under the floor it starts on and scored on
+/// between, and a stay of one point, survey nothing); a test walk is filed under the floor it starts on and scored on
 /// the floor each of its points gives ([`Waypoint::floor`](crate::io::Waypoint::floor)).
 /// `max_walks` keeps only the first files by name.
 pub fn load_gsd_building(
@@ -218,7 +218,8 @@ pub fn load_gsd_building(
     for walk in &survey {
         let trace = walk.trace(&anchor, &site_levels);
         let runs = walk.level_runs();
-        for &(level, from, to) in &runs {
+        // A stay of one point places no scan (it has no stretch to interpolate along).
+        for &(level, from, to) in runs.iter().filter(|r| runs.len() == 1 || r.1 < r.2) {
             let Some(f) = index(level) else { continue };
             floors[f].survey.push(if runs.len() == 1 { trace.clone() } else { trace.between(from, to) });
         }
