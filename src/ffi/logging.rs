@@ -4,9 +4,9 @@
 //!
 //! A record logged on a thread inside a Waymark call is held on that thread and handed to the
 //! sink when the call's outermost FFI frame ends, after every lock of Waymark's is released
-//! ([`hold`]; docs/errors.md#callbacks): a sink may call the engine, and a slow sink slows only
+//! (`hold`; docs/errors.md#callbacks): a sink may call the engine, and a slow sink slows only
 //! the thread it runs on. The same frame keeps panics it catches off the host's stderr
-//! ([`install_panic_hook`]).
+//! (`install_panic_hook`).
 
 use std::cell::RefCell;
 use std::collections::VecDeque;

@@ -189,7 +189,7 @@ impl FloorPlan {
     /// Maps a GeoJSON `FeatureCollection` onto `[0, width] × [0, height]`. The feature whose
     /// `type` property is `floor` is the outline (else the union of all features' bounding
     /// box frames the plan and there is no outline). Refused, naming the field, without a
-    /// `features` array, or with a polygon that is not valid ([`rings`]).
+    /// `features` array, or with a polygon that is not valid (`rings`).
     pub fn from_geojson(geojson: &Value, width_m: f64, height_m: f64) -> Result<FloorPlan, String> {
         let features = geojson["features"].as_array().ok_or("no `features` array")?;
         let mut shapes: Vec<(bool, String, Vec<LonLatPolygon>)> = Vec::new();
