@@ -22,7 +22,7 @@
 //! - Every other type (`AHRS`, `GNSS`, `LIGH`, `SOUN`...) is counted as ignored; malformed
 //!   lines are counted as malformed, never fatal.
 
-use super::ilc::{PressureSample, ReadStats, Trace, TraceError, Waypoint};
+use super::ilc::{sort_by_time, PressureSample, ReadStats, Trace, TraceError, Waypoint};
 use std::collections::BTreeMap;
 use std::path::Path;
 use waymark::radio::{Reading, Scan, TransmitterId};
@@ -310,15 +310,6 @@ impl GsdWalk {
         }
         runs
     }
-}
-
-/// Sorts `items` by `key` (stably) and returns how many were out of order.
-fn sort_by_time<T>(items: &mut [T], key: impl Fn(&T) -> u64) -> usize {
-    let out_of_order = items.windows(2).filter(|w| key(&w[1]) < key(&w[0])).count();
-    if out_of_order > 0 {
-        items.sort_by_key(|i| key(i));
-    }
-    out_of_order
 }
 
 #[cfg(test)]

@@ -445,7 +445,7 @@ impl Trace {
 }
 
 /// Sorts `items` by `key` (stably) and returns how many were out of order.
-fn sort_by_time<T>(items: &mut [T], key: impl Fn(&T) -> u64) -> usize {
+pub(super) fn sort_by_time<T>(items: &mut [T], key: impl Fn(&T) -> u64) -> usize {
     let out_of_order = items.windows(2).filter(|w| key(&w[1]) < key(&w[0])).count();
     if out_of_order > 0 {
         items.sort_by_key(|i| key(i));
