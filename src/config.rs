@@ -180,6 +180,11 @@ pub struct EngineConfig {
     /// measurements beat generic defaults. A user's own step length goes in
     /// `step_length_override`, which keeps the rest of the calibration.
     pub site_calibration: bool,
+    /// Whether the engine learns the phone's RSSI offset against the map from its scans and
+    /// corrects readings by it (docs/accuracy.md#device-offset): phone models read the same
+    /// signal several dB apart, and a map surveyed with one scores another's scans as if
+    /// every transmitter were nearer or farther than it is.
+    pub device_offset: bool,
     /// The user's own step length model, used in place of the site's surveyed one and of
     /// `motion.step_length` (an app that knows its user's stride, e.g. from their height).
     /// `None`: the site's, else `motion.step_length`.
@@ -230,6 +235,7 @@ impl Default for EngineConfig {
             accuracy_mass: 0.68,
             zone_hysteresis: ZoneHysteresis::default(),
             site_calibration: true,
+            device_offset: true,
             step_length_override: None,
             site_salt: None,
             history_epochs: 500,

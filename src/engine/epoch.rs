@@ -27,20 +27,29 @@ impl Engine {
             return Err(InputError::NoKnownTransmitter { unknown: resolved.unknown, stale: resolved.stale });
         }
         let radio = self.site.radio();
+        // The readings as the survey's phones would have read them (docs/accuracy.md#device-offset).
+        let corrected: Vec<(u32, f64)>;
+        let observations = if self.config.device_offset && self.device_offset.scans() > 0 {
+            let offset = self.device_offset;
+            corrected = resolved.observations.iter().map(|&(t, rssi)| (t, offset.correct(rssi))).collect();
+            &corrected
+        } else {
+            &resolved.observations
+        };
         let ln_unheard = match &self.shared_emissions {
-            Some(shared) => shared.ln_likelihood(radio, &resolved.observations, &mut self.ln_emission),
-            None => radio.ln_likelihood(&resolved.observations, &mut self.ln_emission),
+            Some(shared) => shared.ln_likelihood(radio, observations, &mut self.ln_emission),
+            None => radio.ln_likelihood(observations, &mut self.ln_emission),
         };
         // The fit of the map: the best fingerprinted state against none. Unsurveyed states score
         // the "no fingerprint" baseline itself, so counting them would never let the fit fall
         // below 0, and a site whose held-out fits reach 0 would never find a scan unexplained;
         // a state that models none of the transmitters heard is, for this scan, one with no
         // fingerprint too (docs/accuracy.md#off-the-map).
-        let silent: Vec<bool> = radio.silent_states(&resolved.observations, &self.ln_emission).collect();
+        let silent: Vec<bool> = radio.silent_states(observations, &self.ln_emission).collect();
         let best = best_fingerprinted(&self.ln_emission, &self.unsurveyed, &silent);
         // Per radio heard: an access point's several networks count once, as they do in the
         // likelihood (docs/tuning.md#shared-radios).
-        let radio_fit = (best - ln_unheard) / radio.radios_heard(&resolved.observations);
+        let radio_fit = (best - ln_unheard) / radio.radios_heard(observations);
         let below_floor = self.radio_fit_floor.is_some_and(|floor| radio_fit < floor);
         // Only with an estimate to carry on from: the first scan, unexplained or not, is all
         // there is to go on, and then only the states whose fingerprints speak to it place the
@@ -49,6 +58,18 @@ impl Engine {
         let unexplained = self.latest.is_some() && below_floor;
         let first_unexplained = self.latest.is_none() && below_floor && silent.contains(&false);
         let dropped = [resolved.unknown, resolved.duplicates, resolved.stale].map(|n| n as u64);
+        // The phone's offset as this scan measures it: against where the engine believed the
+        // phone was before the scan, so that the scan does not confirm its own reading; not
+        // from a scan the map does not explain (docs/accuracy.md#device-offset).
+        let offset_measurement = (self.config.device_offset && self.latest.is_some() && !below_floor)
+            .then(|| {
+                radio.offset_residual(
+                    &resolved.observations,
+                    self.filter.posterior(),
+                    self.device_offset.mean_db(),
+                )
+            })
+            .flatten();
         // Accepted from here on: the state changes.
         Ok(self.atomically(motion.is_none(), |engine| {
             let motion = engine.motion_until(scan.timestamp_ns, motion);
@@ -74,7 +95,11 @@ impl Engine {
                 }
             }
             engine.epoch_radio_fit = radio_fit.is_finite().then_some((radio_fit, unexplained));
-            engine.run_epoch(scan.timestamp_ns, EpochInput::Scan, None, &motion)
+            let epoch = engine.run_epoch(scan.timestamp_ns, EpochInput::Scan, None, &motion);
+            if let Some((residual, variance)) = offset_measurement {
+                engine.device_offset.update(residual, variance);
+            }
+            epoch
         }))
     }
 

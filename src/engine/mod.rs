@@ -16,7 +16,7 @@ use crate::error::Error;
 use crate::habits::{FixError, HabitError, HabitModel, HabitPrior, HabitReport};
 use crate::history::{EpochRecord, History};
 use crate::hmm::{estimate, FixedLagSmoother, ForwardFilter, ViterbiWindow};
-use crate::radio::ScanHasher;
+use crate::radio::{DeviceOffset, ScanHasher};
 use crate::sensors::{MotionStats, MotionTracker, MotionUpdate};
 use crate::site::{FloorReliability, ReachTable, Site, SparseScans};
 use std::sync::Arc;
@@ -109,6 +109,9 @@ pub struct Engine {
     presence: presence::Presence,
     /// When the latest accepted scan came, and how long after the one before.
     scan_timing: ScanTiming,
+    /// The phone's RSSI offset against the map, learned from this session's scans
+    /// ([`EngineConfig::device_offset`]).
+    device_offset: DeviceOffset,
     /// Scan likelihoods shared with the other engines of an evaluation on this site
     /// ([`Engine::share_emissions`]); `None` in an app.
     shared_emissions: Option<Arc<SharedEmissions>>,
@@ -202,6 +205,7 @@ impl Engine {
             floor_reliability,
             presence: presence::Presence::new(site_zones),
             scan_timing: ScanTiming::default(),
+            device_offset: DeviceOffset::default(),
             shared_emissions: None,
             config,
             undo: Undo::default(),
@@ -266,6 +270,15 @@ impl Engine {
     /// the walking-distance table's reach steps over it.
     pub fn history(&self) -> &std::collections::VecDeque<EpochRecord> {
         self.history.records()
+    }
+
+    /// The phone's RSSI offset against the site's map as this session has learned it
+    /// (docs/accuracy.md#device-offset): dB the phone reads above the survey's phones, with
+    /// its standard deviation. `None` before a scan has measured it, or with
+    /// [`EngineConfig::device_offset`] off.
+    pub fn device_offset(&self) -> Option<(f64, f64)> {
+        let offset = &self.device_offset;
+        (self.config.device_offset && offset.scans() > 0).then(|| (offset.mean_db(), offset.std_db()))
     }
 
     /// Counts of accepted and dropped input.

@@ -589,6 +589,53 @@ impl RadioMap {
         absent * self.unheard_ln_absent + terms.shared
     }
 
+    /// One scan's measurement of the phone's RSSI offset ([`super::DeviceOffset`],
+    /// docs/accuracy.md#device-offset): for each reading heard above the clip level, the
+    /// reading less the mean μ of the fingerprints of the states that model its transmitter,
+    /// weighted by `weights` (where the phone is believed to be, a distribution over states).
+    /// A transmitter counts only where the states that model it hold at least half the weight
+    /// (elsewhere the belief says little about what it should read), and where that mean, moved
+    /// by the current estimate `offset_db`, is two σ or more above the clip level (nearer it,
+    /// the phone hears only the readings that came out strong, and their residual is biased
+    /// upwards). Returns the mean residual and its variance, the mean σ²: one scan's residuals
+    /// share where the phone was believed to be, so they count as one reading, not as many
+    /// independent ones (were the belief a few metres off, every transmitter would say so
+    /// together); `None` when none counts.
+    pub fn offset_residual(
+        &self,
+        observations: &[(u32, f64)],
+        weights: &[f64],
+        offset_db: f64,
+    ) -> Option<(f64, f64)> {
+        let (mut sum, mut variance, mut n) = (0.0, 0.0, 0usize);
+        for &(t, rssi) in observations {
+            if rssi <= self.clip_dbm {
+                continue;
+            }
+            let (mut w, mut mean, mut var) = (0.0, 0.0, 0.0);
+            for (state, level, spread) in self.entries(t) {
+                let p = weights.get(state).copied().unwrap_or(0.0);
+                if p > 0.0 {
+                    let inverse = self.spreads[spread].inverse;
+                    w += p;
+                    mean += p * f64::from(level) * LEVEL_STEP_DB;
+                    var += p / (inverse * inverse);
+                }
+            }
+            if w < 0.5 {
+                continue;
+            }
+            let (mean, var) = (mean / w, var / w);
+            if mean + offset_db - self.clip_dbm < 2.0 * var.sqrt() {
+                continue;
+            }
+            sum += rssi - mean;
+            variance += var;
+            n += 1;
+        }
+        (n > 0).then(|| (sum / n as f64, variance / n as f64))
+    }
+
     /// Which states' fingerprints say nothing about a scan, from what
     /// [`ln_likelihood`](Self::ln_likelihood) wrote for it (`ln`): those that model none of
     /// the transmitters heard above the clip level. Such a state explains the scan as a state
