@@ -496,6 +496,24 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
         Err(e) => return fail("replay", e),
     };
     let replay = replaying::replay(&mut engine, &trace, &ReplayOptions::default());
+    if replay.positions.is_empty() {
+        // Input that gave no result is a failure, with what was read (docs/errors.md#the-command-line).
+        let s = &trace.stats;
+        return fail(
+            "replay",
+            format!(
+                "{}: no position: {} data lines read, {} malformed, {} of types Waymark does not use; \
+                 {} scans ({} rejected), {} accelerometer samples",
+                args.walk.display(),
+                s.lines,
+                s.malformed,
+                s.ignored,
+                trace.wifi_scans.len(),
+                replay.rejected_scans,
+                trace.accelerometer.len()
+            ),
+        );
+    }
     let floor_name = |f: usize| site.floors().get(f).map_or("?", |fl| fl.name.as_str()).to_owned();
     let json = args.out.as_ref().is_some_and(|p| p.extension().is_some_and(|e| e == "json"));
     let text = if json {

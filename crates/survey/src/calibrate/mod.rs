@@ -261,6 +261,31 @@ fn radio_fit_floor_candidates(sorted_fits: &[f64]) -> Vec<(f64, Option<f64>)> {
     candidates
 }
 
+/// Refuses survey walks that cannot place a single scan, saying what is wrong with them: a
+/// scan is placed between two waypoints, so at least one walk needs two of them and a scan in
+/// between (otherwise the survey would fail later with "a site needs at least one state").
+fn check_survey_walks(walks: &[&Trace]) -> Result<(), CalibrationError> {
+    let placed = |t: &&&Trace| {
+        let (Some(first), Some(last)) = (t.waypoints.first(), t.waypoints.last()) else { return false };
+        t.waypoints.len() >= 2
+            && t.wifi_scans.iter().any(|s| (first.timestamp_ns..=last.timestamp_ns).contains(&s.timestamp_ns))
+    };
+    if walks.iter().any(|t| placed(&t)) {
+        return Ok(());
+    }
+    let count = |f: fn(&Trace) -> bool| walks.iter().filter(|t| f(t)).count();
+    let lines: usize = walks.iter().map(|t| t.stats.lines).sum();
+    let malformed: usize = walks.iter().map(|t| t.stats.malformed).sum();
+    Err(CalibrationError::Empty(format!(
+        "no survey walk has a scan between two waypoints, so none places a fingerprint: {} walks read, \
+         {} with no waypoint, {} with one, {} with no WiFi or beacon scan; {lines} data lines, {malformed} malformed",
+        walks.len(),
+        count(|t| t.waypoints.is_empty()),
+        count(|t| t.waypoints.len() == 1),
+        count(|t| t.wifi_scans.is_empty() && t.beacons.is_empty()),
+    )))
+}
+
 /// Calibrates a site from its survey walks: the walkers' step length and the site's north
 /// (from waypoints and steps, [`crate::calibrate_motion`]), then γ per floor by
 /// leave-one-walk-out, Hoang §6.2's jackknife with a walk as the unit: each survey walk is
@@ -289,6 +314,7 @@ pub fn survey_calibrated(
 ) -> Result<(Site, SurveyReport, CalibrationReport), CalibrationError> {
     let mut report = CalibrationReport::default();
     let all: Vec<&Trace> = floors.iter().flat_map(|f| &f.survey).collect();
+    check_survey_walks(&all)?;
     let motion = crate::calibrate_motion(&all, &options.engine.motion);
     let north = motion.as_ref().map_or(options.north, |m| m.north());
     let mut calibration =
