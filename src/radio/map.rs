@@ -597,7 +597,9 @@ impl RadioMap {
     /// (elsewhere the belief says little about what it should read), and where that mean, moved
     /// by the current estimate `offset_db`, is two σ or more above the clip level (nearer it,
     /// the phone hears only the readings that came out strong, and their residual is biased
-    /// upwards). Returns the mean residual and its variance, the mean σ²: one scan's residuals
+    /// upwards). Returns the mean residual and its variance, the mean over the transmitters
+    /// of each reading's variance given the belief (its fingerprints' σ² and the spread of μ
+    /// over the believed states): one scan's residuals
     /// share where the phone was believed to be, so they count as one reading, not as many
     /// independent ones (were the belief a few metres off, every transmitter would say so
     /// together); `None` when none counts.
@@ -612,20 +614,27 @@ impl RadioMap {
             if rssi <= self.clip_dbm {
                 continue;
             }
-            let (mut w, mut mean, mut var) = (0.0, 0.0, 0.0);
+            // Σp, Σp·μ, Σp·μ² and Σp·σ² over the states that model the transmitter.
+            let (mut w, mut mean, mut square, mut var) = (0.0, 0.0, 0.0, 0.0);
             for (state, level, spread) in self.entries(t) {
                 let p = weights.get(state).copied().unwrap_or(0.0);
                 if p > 0.0 {
                     let inverse = self.spreads[spread].inverse;
+                    let mu = f64::from(level) * LEVEL_STEP_DB;
                     w += p;
-                    mean += p * f64::from(level) * LEVEL_STEP_DB;
+                    mean += p * mu;
+                    square += p * mu * mu;
                     var += p / (inverse * inverse);
                 }
             }
             if w < 0.5 {
                 continue;
             }
-            let (mean, var) = (mean / w, var / w);
+            // The reading's variance given the belief: the fingerprints' own σ² and how much μ
+            // varies over the believed states (the law of total variance), so that a vague
+            // belief measures little.
+            let mean = mean / w;
+            let var = var / w + (square / w - mean * mean).max(0.0);
             if mean + offset_db - self.clip_dbm < 2.0 * var.sqrt() {
                 continue;
             }

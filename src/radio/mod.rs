@@ -15,7 +15,7 @@ pub use hash::{
 };
 pub(crate) use map::quantise;
 pub use map::{RadioMap, ResolvedScan, LEVEL_STEP_DB, MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB};
-pub use offset::{DeviceOffset, DEVICE_OFFSET_PRIOR_STD_DB, MAX_DEVICE_OFFSET_DB};
+pub use offset::{DeviceOffset, DEVICE_OFFSET_PRIOR_STD_DB, DEVICE_OFFSET_Z, MAX_DEVICE_OFFSET_DB};
 
 use serde::{Deserialize, Serialize};
 use std::fmt;

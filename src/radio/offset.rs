@@ -16,6 +16,10 @@
 /// about 1-2 dB), and mean 0, the survey's own phones.
 pub const DEVICE_OFFSET_PRIOR_STD_DB: f64 = 10.0;
 
+/// How many standard deviations from 0 the estimate must be before readings are corrected by
+/// it: 2, a two-sided test at about 5% that the phone reads unlike the survey's phones.
+pub const DEVICE_OFFSET_Z: f64 = 2.0;
+
 /// The largest offset the estimate takes, dB: a bound on bad input, not a tuned value (the
 /// dynamic range between a phone's clip level and a reading at the access point).
 pub const MAX_DEVICE_OFFSET_DB: f64 = 30.0;
@@ -67,9 +71,21 @@ impl DeviceOffset {
         self.scans = self.scans.saturating_add(1);
     }
 
+    /// The offset readings are corrected by, dB: the estimate once it is
+    /// [`DEVICE_OFFSET_Z`] standard deviations from 0, else 0. Until the scans show that the
+    /// phone reads unlike the survey's, correcting by a noisy estimate only adds its noise to
+    /// every reading.
+    pub fn applied_db(&self) -> f64 {
+        if self.mean_db.abs() >= DEVICE_OFFSET_Z * self.std_db() {
+            self.mean_db
+        } else {
+            0.0
+        }
+    }
+
     /// `rssi_dbm` as the survey's phones would have read it.
     pub fn correct(&self, rssi_dbm: f64) -> f64 {
-        rssi_dbm - self.mean_db
+        rssi_dbm - self.applied_db()
     }
 }
 
@@ -82,10 +98,12 @@ mod tests {
     fn measurements_shrink_the_variance_and_pull_the_mean() {
         let mut offset = DeviceOffset::default();
         assert_eq!(offset.correct(-60.0), -60.0);
-        // One measurement as precise as the prior: halfway, half the variance.
+        // One measurement as precise as the prior: halfway, half the variance; not yet two
+        // standard deviations from 0, so nothing is corrected.
         offset.update(-6.0, 100.0);
         assert_relative_eq!(offset.mean_db(), -3.0);
         assert_relative_eq!(offset.std_db(), 50f64.sqrt());
+        assert_eq!(offset.correct(-60.0), -60.0);
         // Many precise ones: the mean of the measurements.
         for _ in 0..200 {
             offset.update(-5.5, 4.0);
