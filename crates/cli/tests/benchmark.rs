@@ -33,7 +33,16 @@ fn rows_without_data_are_skipped_and_a_run_of_only_those_fails() {
         .iter()
         .map(|r| format!("{}/{}", r["building"].as_str().unwrap(), r["split"].as_str().unwrap()))
         .collect();
-    assert_eq!(names, ["ilc20-site1/F=1", "ilc20-site1/F=0.5"]);
+    assert_eq!(
+        names,
+        [
+            "ilc20-site1/F=1",
+            "ilc20-site1/F=0.5",
+            "ipin2023-t3/A520F-surveys",
+            "ipin2023-t3/G930F-surveys",
+            "ipin2023-t3/both-phones"
+        ]
+    );
     assert!(rows.iter().all(|r| r["skipped"].is_string() && r.get("configurations").is_some()));
     assert_eq!((&printed["mean"], &printed["buildings"]), (&json!({}), &json!([])));
 
