@@ -1285,7 +1285,10 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     
     /**
      * Accelerometer samples, oldest first. Bad samples are dropped and counted; returns how
-     * many were taken.
+     * many were taken. Samples whose time is too far ahead of the engine's clock (more than
+     * 10 s after the latest input, unless the stream's next sample confirms the jump, or a
+     * negative `Long` passed as unsigned) are refused, counted in
+     * `InputStats.timestampsAhead` and reported to the listener as an `InputRejected` error.
      */
     func pushAccelerometer(batch: [MotionSample]) throws  -> UInt32
     
@@ -1682,7 +1685,10 @@ open func position()throws  -> PositionEstimate?  {
     
     /**
      * Accelerometer samples, oldest first. Bad samples are dropped and counted; returns how
-     * many were taken.
+     * many were taken. Samples whose time is too far ahead of the engine's clock (more than
+     * 10 s after the latest input, unless the stream's next sample confirms the jump, or a
+     * negative `Long` passed as unsigned) are refused, counted in
+     * `InputStats.timestampsAhead` and reported to the listener as an `InputRejected` error.
      */
 open func pushAccelerometer(batch: [MotionSample])throws  -> UInt32  {
     return try  FfiConverterUInt32.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
@@ -2424,17 +2430,28 @@ public func FfiConverterTypeSubscription_lower(_ value: Subscription) -> UInt64 
  * Records a survey walk: push the same sensor batches and scans as to a `PositioningEngine`,
  * and `markWaypoint` where the surveyor stands; `finish` closes the files, which
  * `waymark survey` turns into a site file (docs/surveying.md). Thread-safe.
+ *
+ * Every call that returns has handed its lines to the OS, so a killed app loses none of them;
+ * they are synced to storage at least once a second while calls come, and at each new file
+ * and at `finish`. Files only ever hold whole lines. After an `Io` error every call throws
+ * until `resume` succeeds (docs/surveying.md#durability).
  */
 public protocol SurveyRecorderProtocol: AnyObject, Sendable {
     
     /**
-     * Closes the files and returns what was recorded; later calls throw `Finished`.
+     * Writes the last file's end line, syncs and closes it, and returns what was recorded.
+     * Throws `NoWaypoints` before any waypoint and `Io` when the storage refuses; the recording
+     * goes on after either, and `finish` may be called again. Once it returned, later calls
+     * throw `Finished`.
      */
     func finish() throws  -> SurveySummary
     
     /**
      * The surveyor stands at (`x`, `y`) m on the plan of `floor` (the floor's name, as its
      * folder is named: "F1", "B1"). A waypoint on another floor begins that floor's file.
+     * Throws `InputRejected` for a floor name with a space at either end or a `.` at the end,
+     * or one that differs only in case from a folder in the directory ("f1" beside "F1":
+     * case-insensitive storage would merge them).
      */
     func markWaypoint(timestampNs: UInt64, x: Double, y: Double, floor: String) throws 
     
@@ -2460,7 +2477,15 @@ public protocol SurveyRecorderProtocol: AnyObject, Sendable {
     func pushScan(scan: RadioScan) throws 
     
     /**
-     * What was taken and dropped so far.
+     * Acknowledges an `Io` error and takes input again: cuts the file back to its last whole
+     * line if the failed write could not, and syncs it. Throws `Io` while the storage still
+     * refuses (call it again later). The calls that threw wrote nothing: push their input
+     * again.
+     */
+    func resume() throws 
+    
+    /**
+     * What was written and dropped so far; works after an `Io` error too.
      */
     func summary() throws  -> SurveySummary
     
@@ -2469,6 +2494,11 @@ public protocol SurveyRecorderProtocol: AnyObject, Sendable {
  * Records a survey walk: push the same sensor batches and scans as to a `PositioningEngine`,
  * and `markWaypoint` where the surveyor stands; `finish` closes the files, which
  * `waymark survey` turns into a site file (docs/surveying.md). Thread-safe.
+ *
+ * Every call that returns has handed its lines to the OS, so a killed app loses none of them;
+ * they are synced to storage at least once a second while calls come, and at each new file
+ * and at `finish`. Files only ever hold whole lines. After an `Io` error every call throws
+ * until `resume` succeeds (docs/surveying.md#durability).
  */
 open class SurveyRecorder: SurveyRecorderProtocol, @unchecked Sendable {
     fileprivate let handle: UInt64
@@ -2510,8 +2540,9 @@ open class SurveyRecorder: SurveyRecorderProtocol, @unchecked Sendable {
         return try! rustCall { uniffi_waymark_fn_clone_surveyrecorder(self.handle, $0) }
     }
     /**
-     * A recording into `directory` (created if missing); nothing is written before the first
-     * waypoint. Throws `InputRejected` for a walk name or site id that cannot be used.
+     * A recording into `directory` (created if missing); before the first waypoint the lines
+     * go to `directory/.WALK.pending`, then into the first walk file. Throws `InputRejected`
+     * for a walk name or site id that cannot be used.
      */
 public convenience init(directory: String, options: SurveyOptions)throws  {
     let handle =
@@ -2538,7 +2569,10 @@ public convenience init(directory: String, options: SurveyOptions)throws  {
 
     
     /**
-     * Closes the files and returns what was recorded; later calls throw `Finished`.
+     * Writes the last file's end line, syncs and closes it, and returns what was recorded.
+     * Throws `NoWaypoints` before any waypoint and `Io` when the storage refuses; the recording
+     * goes on after either, and `finish` may be called again. Once it returned, later calls
+     * throw `Finished`.
      */
 open func finish()throws  -> SurveySummary  {
     return try  FfiConverterTypeSurveySummary_lift(try rustCallWithError(FfiConverterTypeSurveyError_lift) {
@@ -2552,6 +2586,9 @@ open func finish()throws  -> SurveySummary  {
     /**
      * The surveyor stands at (`x`, `y`) m on the plan of `floor` (the floor's name, as its
      * folder is named: "F1", "B1"). A waypoint on another floor begins that floor's file.
+     * Throws `InputRejected` for a floor name with a space at either end or a `.` at the end,
+     * or one that differs only in case from a folder in the directory ("f1" beside "F1":
+     * case-insensitive storage would merge them).
      */
 open func markWaypoint(timestampNs: UInt64, x: Double, y: Double, floor: String)throws   {try rustCallWithError(FfiConverterTypeSurveyError_lift) {
         uniffiCallStatus in
@@ -2618,7 +2655,21 @@ open func pushScan(scan: RadioScan)throws   {try rustCallWithError(FfiConverterT
 }
     
     /**
-     * What was taken and dropped so far.
+     * Acknowledges an `Io` error and takes input again: cuts the file back to its last whole
+     * line if the failed write could not, and syncs it. Throws `Io` while the storage still
+     * refuses (call it again later). The calls that threw wrote nothing: push their input
+     * again.
+     */
+open func resume()throws   {try rustCallWithError(FfiConverterTypeSurveyError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_surveyrecorder_resume(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * What was written and dropped so far; works after an `Io` error too.
      */
 open func summary()throws  -> SurveySummary  {
     return try  FfiConverterTypeSurveySummary_lift(try rustCallWithError(FfiConverterTypeSurveyError_lift) {
@@ -3422,6 +3473,13 @@ public struct InputStats: Equatable, Hashable {
      * bridge, or when nothing could explain a scan.
      */
     public var filterRestarts: UInt64
+    /**
+     * Inputs refused for a time too far ahead of the engine's clock: sensor samples more than
+     * 10 s ahead of the latest input taken (unless the stream's next sample confirms the
+     * jump, as after the phone slept), and any time above 2^63 - 1 ns, a negative `Long`
+     * passed as unsigned. Each refusal also reaches the listener as an `InputRejected` error.
+     */
+    public var timestampsAhead: UInt64
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -3480,7 +3538,13 @@ public struct InputStats: Equatable, Hashable {
         /**
          * Times the engine started over from "anywhere on the site": after a gap too long to
          * bridge, or when nothing could explain a scan.
-         */filterRestarts: UInt64) {
+         */filterRestarts: UInt64, 
+        /**
+         * Inputs refused for a time too far ahead of the engine's clock: sensor samples more than
+         * 10 s ahead of the latest input taken (unless the stream's next sample confirms the
+         * jump, as after the phone slept), and any time above 2^63 - 1 ns, a negative `Long`
+         * passed as unsigned. Each refusal also reaches the listener as an `InputRejected` error.
+         */timestampsAhead: UInt64) {
         self.scansAccepted = scansAccepted
         self.scansOutOfOrder = scansOutOfOrder
         self.scansEmpty = scansEmpty
@@ -3498,6 +3562,7 @@ public struct InputStats: Equatable, Hashable {
         self.feedbackAccepted = feedbackAccepted
         self.feedbackRejected = feedbackRejected
         self.filterRestarts = filterRestarts
+        self.timestampsAhead = timestampsAhead
     }
 
     
@@ -3532,7 +3597,8 @@ public struct FfiConverterTypeInputStats: FfiConverterRustBuffer {
                 fixesRejected: FfiConverterUInt64.read(from: &buf), 
                 feedbackAccepted: FfiConverterUInt64.read(from: &buf), 
                 feedbackRejected: FfiConverterUInt64.read(from: &buf), 
-                filterRestarts: FfiConverterUInt64.read(from: &buf)
+                filterRestarts: FfiConverterUInt64.read(from: &buf), 
+                timestampsAhead: FfiConverterUInt64.read(from: &buf)
         )
     }
 
@@ -3554,6 +3620,7 @@ public struct FfiConverterTypeInputStats: FfiConverterRustBuffer {
         FfiConverterUInt64.write(value.feedbackAccepted, into: &buf)
         FfiConverterUInt64.write(value.feedbackRejected, into: &buf)
         FfiConverterUInt64.write(value.filterRestarts, into: &buf)
+        FfiConverterUInt64.write(value.timestampsAhead, into: &buf)
     }
 }
 
@@ -4631,7 +4698,8 @@ public func FfiConverterTypeSurveyOptions_lower(_ value: SurveyOptions) -> RustB
 
 
 /**
- * What a recording took and dropped, and the files it wrote.
+ * What a recording wrote and dropped, and the files it wrote. Only what is in the files is
+ * counted: a call that threw counts nothing.
  */
 public struct SurveySummary: Equatable, Hashable {
     /**
@@ -4639,8 +4707,10 @@ public struct SurveySummary: Equatable, Hashable {
      */
     public var samples: UInt64
     /**
-     * Samples dropped for a NaN, infinite or absurd value, or a time not after their
-     * stream's previous sample.
+     * Samples dropped for a NaN, infinite or absurd value, a time not after their stream's
+     * previous sample, or a time too far ahead of the recording's clock (more than 10 s after
+     * the latest input written, unless the stream's next sample confirms the jump, or a
+     * negative `Long` passed as unsigned).
      */
     public var samplesDropped: UInt64
     /**
@@ -4667,8 +4737,10 @@ public struct SurveySummary: Equatable, Hashable {
          * Sensor samples written.
          */samples: UInt64, 
         /**
-         * Samples dropped for a NaN, infinite or absurd value, or a time not after their
-         * stream's previous sample.
+         * Samples dropped for a NaN, infinite or absurd value, a time not after their stream's
+         * previous sample, or a time too far ahead of the recording's clock (more than 10 s after
+         * the latest input written, unless the stream's next sample confirms the jump, or a
+         * negative `Long` passed as unsigned).
          */samplesDropped: UInt64, 
         /**
          * Scans written.
@@ -6116,8 +6188,8 @@ public func FfiConverterTypeStatusUpdate_lower(_ value: StatusUpdate) -> RustBuf
 
 
 /**
- * Why a recorder call failed. The recording goes on after any of them but `Io` on a full or
- * missing disk.
+ * Why a recorder call failed. A call that throws writes nothing. After `Io` every call throws
+ * `Io` until `resume` succeeds.
  */
 public 
 enum SurveyError: Swift.Error, Equatable, Hashable, Foundation.LocalizedError {
@@ -6126,7 +6198,7 @@ enum SurveyError: Swift.Error, Equatable, Hashable, Foundation.LocalizedError {
     
     /**
      * A walk file could not be created or written, or exists already (a recording never
-     * overwrites one).
+     * overwrites one). It sticks until `resume` succeeds.
      */
     case Io(
         /**
@@ -6144,8 +6216,8 @@ enum SurveyError: Swift.Error, Equatable, Hashable, Foundation.LocalizedError {
          */reason: String
     )
     /**
-     * `finish` was called before any waypoint: nothing in the walk has a position, so no
-     * file was written.
+     * `finish` was called before any waypoint: nothing in the walk has a position yet, so no
+     * walk file exists. The recording goes on: mark a waypoint, then finish.
      */
     case NoWaypoints
     /**
@@ -7292,7 +7364,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_position() != 61181) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_push_accelerometer() != 46671) {
+    if (uniffi_waymark_checksum_method_positioningengine_push_accelerometer() != 4948) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_push_fix() != 60879) {
@@ -7337,10 +7409,10 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_subscription_cancel() != 31759) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_surveyrecorder_finish() != 40858) {
+    if (uniffi_waymark_checksum_method_surveyrecorder_finish() != 429) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_surveyrecorder_mark_waypoint() != 51739) {
+    if (uniffi_waymark_checksum_method_surveyrecorder_mark_waypoint() != 5632) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_surveyrecorder_push_accelerometer() != 35326) {
@@ -7355,7 +7427,10 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_surveyrecorder_push_scan() != 3498) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_surveyrecorder_summary() != 36859) {
+    if (uniffi_waymark_checksum_method_surveyrecorder_resume() != 34895) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_surveyrecorder_summary() != 16313) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_routetracker_reroute() != 56991) {
@@ -7388,7 +7463,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_constructor_site_from_path() != 18181) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_constructor_surveyrecorder_new() != 43661) {
+    if (uniffi_waymark_checksum_constructor_surveyrecorder_new() != 14957) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_constructor_routetracker_new() != 3039) {

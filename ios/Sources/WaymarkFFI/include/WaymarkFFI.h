@@ -591,6 +591,11 @@ uint32_t uniffi_waymark_fn_method_surveyrecorder_push_magnetometer(uint64_t ptr,
 void uniffi_waymark_fn_method_surveyrecorder_push_scan(uint64_t ptr, RustBuffer scan, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_RESUME
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_RESUME
+void uniffi_waymark_fn_method_surveyrecorder_resume(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_SUMMARY
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SURVEYRECORDER_SUMMARY
 RustBuffer uniffi_waymark_fn_method_surveyrecorder_summary(uint64_t ptr, RustCallStatus *_Nonnull out_status
@@ -1145,6 +1150,12 @@ uint16_t uniffi_waymark_checksum_method_surveyrecorder_push_magnetometer(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_SCAN
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_PUSH_SCAN
 uint16_t uniffi_waymark_checksum_method_surveyrecorder_push_scan(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_RESUME
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SURVEYRECORDER_RESUME
+uint16_t uniffi_waymark_checksum_method_surveyrecorder_resume(void
     
 );
 #endif
