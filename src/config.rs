@@ -185,6 +185,9 @@ pub struct EngineConfig {
     /// signal several dB apart, and a map surveyed with one scores another's scans as if
     /// every transmitter were nearer or farther than it is.
     pub device_offset: bool,
+    /// Whether barometer readings ([`Engine::push_pressure`](crate::Engine::push_pressure))
+    /// weigh the floors by the height climbed (docs/accuracy.md#barometer).
+    pub barometer: bool,
     /// The user's own step length model, used in place of the site's surveyed one and of
     /// `motion.step_length` (an app that knows its user's stride, e.g. from their height).
     /// `None`: the site's, else `motion.step_length`.
@@ -236,6 +239,7 @@ impl Default for EngineConfig {
             zone_hysteresis: ZoneHysteresis::default(),
             site_calibration: true,
             device_offset: true,
+            barometer: true,
             step_length_override: None,
             site_salt: None,
             history_epochs: 500,

@@ -194,6 +194,7 @@ fn a_recorded_walk_replays_as_the_calls_did() {
             waymark_survey::io::ilc::Event::Accelerometer(b) => _ = replayed.push_accelerometer(&b),
             waymark_survey::io::ilc::Event::Gyroscope(b) => _ = replayed.push_gyroscope(&b),
             waymark_survey::io::ilc::Event::Magnetometer(b) => _ = replayed.push_magnetometer(&b),
+            waymark_survey::io::ilc::Event::Pressure(b) => _ = replayed.push_pressure(&b),
             waymark_survey::io::ilc::Event::Scan(s) => {
                 if let Ok(e) = replayed.push_scan(&s) {
                     again.push(e.position);

@@ -117,6 +117,16 @@ static void walk(const char *site_path, const char *walk_path, const uint8_t *sa
     size_t accepted = 99;
     CHECK(waymark_engine_push_accelerometer(engine, bad, 2, &accepted) == WAYMARK_RESULT_OK && accepted == 1,
           "nan dropped, %zu accepted", accepted);
+    /* Barometer readings: a NaN and one outside 300-1100 hPa are dropped and counted. */
+    waymark_pressure_sample pressure[3] = {
+        {latest.timestamp_ns + 1, 1000.0}, {latest.timestamp_ns + 2, NAN}, {latest.timestamp_ns + 3, 20000.0}};
+    CHECK(waymark_engine_push_pressure(engine, pressure, 3, &accepted) == WAYMARK_RESULT_OK && accepted == 1,
+          "pressure: %zu accepted", accepted);
+    CHECK(waymark_engine_push_pressure(engine, NULL, 1, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL pressure");
+    waymark_input_stats pressure_stats;
+    CHECK(waymark_engine_input_stats(engine, &pressure_stats) == WAYMARK_RESULT_OK &&
+              pressure_stats.pressure_dropped == 2,
+          "pressure dropped %llu", (unsigned long long)pressure_stats.pressure_dropped);
     waymark_position moved;
     CHECK(waymark_engine_advance(engine, latest.timestamp_ns + 1500000000ull, &moved) == WAYMARK_RESULT_OK, "advance");
     /* A bad BSSID and a NaN RSSI are rejected. */

@@ -346,6 +346,21 @@ typedef struct {
 } waymark_sample;
 
 /**
+ * One barometer reading: air pressure in hPa (Android `Sensor.TYPE_PRESSURE`; iOS
+ * `CMAltitudeData.pressure` in kPa × 10), with a monotonic timestamp in ns.
+ */
+typedef struct {
+  /**
+   * ns on the clock shared by every input.
+   */
+  uint64_t timestamp_ns;
+  /**
+   * Air pressure, hPa.
+   */
+  double hpa;
+} waymark_pressure_sample;
+
+/**
  * A WiFi access point heard in a scan.
  */
 typedef struct {
@@ -572,6 +587,11 @@ typedef struct {
    * as unsigned. Each refusal also reaches the status callback as an `INPUT_REJECTED` error.
    */
   uint64_t timestamps_ahead;
+  /**
+   * Barometer readings dropped: not a pressure (NaN, outside 300-1100 hPa) or not after the
+   * previous one.
+   */
+  uint64_t pressure_dropped;
 } waymark_input_stats;
 
 /**
@@ -958,6 +978,18 @@ waymark_result waymark_engine_push_magnetometer(waymark_engine *engine,
                                                 const waymark_sample *samples,
                                                 size_t count,
                                                 size_t *accepted);
+
+/**
+ * Barometer readings (hPa), oldest first: floor changes from the height climbed
+ * (docs/accuracy.md#barometer). Readings that are not a pressure (NaN, outside 300-1100 hPa)
+ * or not after the previous are dropped and counted in
+ * `waymark_input_stats.pressure_dropped`; times too far ahead as for
+ * `waymark_engine_push_accelerometer`. `*accepted` (may be NULL) receives how many were taken.
+ */
+waymark_result waymark_engine_push_pressure(waymark_engine *engine,
+                                            const waymark_pressure_sample *samples,
+                                            size_t count,
+                                            size_t *accepted);
 
 /**
  * A scan: WiFi readings and BLE beacon readings (either array may be NULL with count 0). One

@@ -46,10 +46,15 @@ pub fn run(data: &[u8]) {
                     assert!(!b.is_empty(), "an empty sensor batch");
                     b.len()
                 }
+                Event::Pressure(b) => {
+                    assert!(!b.is_empty(), "an empty pressure batch");
+                    b.len()
+                }
                 Event::Scan(_) => 0,
             })
             .sum();
-        assert_eq!(samples, trace.accelerometer.len() + trace.gyroscope.len() + trace.magnetometer.len());
+        let sensors = trace.accelerometer.len() + trace.gyroscope.len() + trace.magnetometer.len();
+        assert_eq!(samples, sensors + trace.pressure.len());
         assert_eq!(events.iter().filter(|e| matches!(e, Event::Scan(_))).count(), scans.len());
     }
     if let Some((first, last)) = trace.time_span_ns() {

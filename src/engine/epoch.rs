@@ -132,13 +132,14 @@ impl Engine {
         // Back from beyond the map, the mass out there needs the whole table to come home.
         self.whole_reach = was_off_map || off_map;
         self.rule_out_unsurveyed();
+        self.weigh_floors_by_height(timestamp_ns);
         let evidence = self.forward(timestamp_ns, dt_s, motion);
         self.last_epoch_ns = Some(timestamp_ns);
         let mut position = Position::of_motion(timestamp_ns, motion, beyond_radio_m);
         position.radio_log_evidence = (input == EpochInput::Scan).then_some(evidence);
         position.radio_fit = radio_fit;
         let position = self.locate(position);
-        self.conclude(position, |history, p| {
+        let epoch = self.conclude(position, |history, p| {
             if let Some(record) = held_record {
                 history.push(record);
             }
@@ -151,7 +152,9 @@ impl Engine {
                 accuracy_m: p.accuracy_m,
                 allowed,
             })
-        })
+        });
+        self.settle_floor_anchor(timestamp_ns);
+        epoch
     }
 
     /// On the map (as far as the radio says): the unsurveyed states around it are out of

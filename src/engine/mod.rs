@@ -10,6 +10,7 @@ mod input;
 mod presence;
 mod transition;
 mod types;
+mod vertical;
 
 use crate::config::EngineConfig;
 use crate::error::Error;
@@ -17,7 +18,7 @@ use crate::habits::{FixError, HabitError, HabitModel, HabitPrior, HabitReport};
 use crate::history::{EpochRecord, History};
 use crate::hmm::{estimate, FixedLagSmoother, ForwardFilter, ViterbiWindow};
 use crate::radio::{DeviceOffset, ScanHasher};
-use crate::sensors::{MotionStats, MotionTracker, MotionUpdate};
+use crate::sensors::{Barometer, MotionStats, MotionTracker, MotionUpdate};
 use crate::site::{FloorReliability, ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
@@ -112,6 +113,12 @@ pub struct Engine {
     /// The phone's RSSI offset against the map, learned from this session's scans
     /// ([`EngineConfig::device_offset`]).
     device_offset: DeviceOffset,
+    /// The phone's relative height from its barometer.
+    barometer: Barometer,
+    /// Where the height last settled, and on which floors ([`vertical`]).
+    floor_anchor: Option<vertical::FloorAnchor>,
+    /// Each floor's level ([`Engine::floor_levels`]).
+    levels: Vec<i32>,
     /// Scan likelihoods shared with the other engines of an evaluation on this site
     /// ([`Engine::share_emissions`]); `None` in an app.
     shared_emissions: Option<Arc<SharedEmissions>>,
@@ -171,6 +178,7 @@ impl Engine {
             .filter(|(_, s)| s.kind == crate::site::StateKind::Unsurveyed)
             .map(|(i, _)| i as u32)
             .collect();
+        let levels = vertical::floor_levels(&site);
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,
             viterbi: config.track.then(|| ViterbiWindow::new(n, config.track_window_epochs)),
@@ -206,6 +214,9 @@ impl Engine {
             presence: presence::Presence::new(site_zones),
             scan_timing: ScanTiming::default(),
             device_offset: DeviceOffset::default(),
+            barometer: Barometer::default(),
+            floor_anchor: None,
+            levels,
             shared_emissions: None,
             config,
             undo: Undo::default(),

@@ -207,6 +207,9 @@ pub struct InputStats {
     /// (docs/errors.md#timestamps-ahead-of-the-clock). Each refused input is counted here
     /// only, not also in its kind's counter.
     pub timestamps_ahead: u64,
+    /// Barometer readings dropped: not finite, not a pressure, or not after the previous
+    /// ([`Engine::push_pressure`](super::Engine::push_pressure)).
+    pub pressure_dropped: u64,
 }
 
 /// Everything an engine holds that decides its later answers, for tests that check a call

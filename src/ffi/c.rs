@@ -28,7 +28,7 @@ use super::handle::{Event, Handle, Listeners, Options, Status};
 use crate::config::TransitionModel;
 use crate::engine::{Engine, Epoch};
 use crate::radio::{Reading, Scan, TransmitterId};
-use crate::sensors::SensorSample;
+use crate::sensors::{PressureSample, SensorSample};
 use crate::site::Site;
 use std::cell::RefCell;
 use std::ffi::{c_char, c_void, CStr, CString};
@@ -342,7 +342,7 @@ fn epoch(
     })
 }
 
-fn samples<'a>(batch: *const waymark_sample, count: usize) -> Option<&'a [waymark_sample]> {
+fn samples<'a, T>(batch: *const T, count: usize) -> Option<&'a [T]> {
     if count == 0 {
         return Some(&[]);
     }
@@ -412,6 +412,34 @@ pub extern "C" fn waymark_engine_push_magnetometer(
     accepted: *mut usize,
 ) -> waymark_result {
     push_samples(engine, samples, count, accepted, Engine::push_magnetometer)
+}
+
+/// Barometer readings (hPa), oldest first: floor changes from the height climbed
+/// (docs/accuracy.md#barometer). Readings that are not a pressure (NaN, outside 300-1100 hPa)
+/// or not after the previous are dropped and counted in
+/// `waymark_input_stats.pressure_dropped`; times too far ahead as for
+/// `waymark_engine_push_accelerometer`. `*accepted` (may be NULL) receives how many were taken.
+#[no_mangle]
+pub extern "C" fn waymark_engine_push_pressure(
+    engine: *mut waymark_engine,
+    samples: *const waymark_pressure_sample,
+    count: usize,
+    accepted: *mut usize,
+) -> waymark_result {
+    with_handle(engine, |handle| {
+        let Some(batch) = self::samples(samples, count) else {
+            return fail(waymark_result::NullParameter, "samples must not be NULL when count > 0");
+        };
+        let converted: Vec<PressureSample> =
+            batch.iter().map(|s| PressureSample { timestamp_ns: s.timestamp_ns, hpa: s.hpa }).collect();
+        match handle.push_samples(|e| e.push_pressure(&converted)) {
+            Ok(n) => {
+                write(accepted, n);
+                waymark_result::Ok
+            }
+            Err(e) => fail_with(&e),
+        }
+    })
 }
 
 fn string_arg(text: *const c_char, what: &str) -> Result<String, waymark_result> {

@@ -232,6 +232,15 @@ impl PositioningEngine {
         Ok(self.handle.push_samples(|e| e.push_magnetometer(&batch))? as u32)
     }
 
+    /// Barometer readings, oldest first: floor changes from the height climbed
+    /// (docs/accuracy.md#barometer). Readings that are not a pressure (NaN, outside 300-1100
+    /// hPa) or not after the previous are dropped and counted in `InputStats.pressureDropped`;
+    /// times too far ahead as for `push_accelerometer`. Returns how many were taken.
+    pub fn push_pressure(&self, batch: Vec<PressureReading>) -> Result<u32, PositioningError> {
+        let batch = pressure_samples(&batch);
+        Ok(self.handle.push_samples(|e| e.push_pressure(&batch))? as u32)
+    }
+
     /// A WiFi / BLE scan: one positioning epoch. Push the sensor batches up to the scan's time
     /// first. Returns the new position; a rejected scan throws `InputRejected` and changes
     /// nothing.

@@ -16,6 +16,7 @@
 //! ([`MotionTracker`]: buffering, time ordering, epochs). Their measured accuracy on simulated
 //! phones is in `docs/tuning.md#step-detector` and `#heading-filter`.
 
+mod barometer;
 mod clock;
 mod config;
 mod filter;
@@ -23,6 +24,8 @@ mod heading;
 mod step;
 mod tracker;
 
+pub(crate) use barometer::Barometer;
+pub use barometer::{pressure_height_m, PressureSample, PRESSURE_RANGE_HPA};
 pub(crate) use clock::refuse_ahead;
 pub use clock::MAX_TIMESTAMP_NS;
 pub use config::{EarthField, MotionConfig, StepDetectorKind, StepLengthModel};

@@ -5,7 +5,7 @@
 //! walk-bootstrap standard error of its mean; the mean over buildings; and the rule a change to
 //! the engine is judged by against a baseline run ([`compare`]).
 
-use crate::real::{evaluate_on, EvalError, EvalOptions};
+use crate::real::{evaluate_on, EvalError, EvalOptions, WalkResult};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -222,6 +222,36 @@ pub struct RowReport {
     /// Per configuration key.
     #[serde(default)]
     pub configurations: BTreeMap<String, Figures>,
+    /// Each test walk's figures, to find which walks a change moved.
+    #[serde(default)]
+    pub walks: Vec<WalkFigures>,
+}
+
+/// One test walk's figures in a row.
+#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
+pub struct WalkFigures {
+    /// The walk's name (its file's).
+    pub name: String,
+    /// Per configuration key: (mean error with the floor penalty, m; share on the right floor;
+    /// points scored).
+    pub configurations: BTreeMap<String, (f64, f64, usize)>,
+}
+
+impl WalkFigures {
+    fn new(walk: &WalkResult) -> WalkFigures {
+        let configurations = walk
+            .scored
+            .iter()
+            .filter(|(_, points)| !points.is_empty())
+            .map(|(key, points)| {
+                let n = points.len();
+                let mean = points.iter().map(Scored::penalised_m).sum::<f64>() / n as f64;
+                let floor = points.iter().filter(|p| p.floor_correct).count() as f64 / n as f64;
+                (key.clone(), (mean, floor, n))
+            })
+            .collect();
+        WalkFigures { name: walk.name.clone(), configurations }
+    }
 }
 
 impl RowReport {
@@ -235,6 +265,7 @@ impl RowReport {
             test_walks: 0,
             seconds: 0.0,
             configurations: BTreeMap::new(),
+            walks: Vec::new(),
         }
     }
 
@@ -276,6 +307,7 @@ pub fn evaluate_row(
         test_walks: walks.len(),
         seconds: started.elapsed().as_secs_f64(),
         configurations,
+        walks: walks.iter().map(WalkFigures::new).collect(),
     })
 }
 
@@ -559,6 +591,7 @@ mod tests {
                 .iter()
                 .map(|&(key, mean, se)| (key.to_string(), figures(mean, Some(se))))
                 .collect(),
+            walks: Vec::new(),
         }
     }
 

@@ -235,6 +235,10 @@ pub fn replay_observed(
                 tracker.as_mut().map(|k| k.push_magnetometer(&batch));
                 None
             }
+            Event::Pressure(batch) => {
+                engine.push_pressure(&batch);
+                None
+            }
             Event::Scan(scan) => {
                 if options.min_scan_interval_ns.is_some_and(|gap| last_scan.is_some_and(|l| t < l + gap)) {
                     None

@@ -1314,6 +1314,14 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     func pushMagnetometer(batch: [MotionSample]) throws  -> UInt32
     
     /**
+     * Barometer readings, oldest first: floor changes from the height climbed
+     * (docs/accuracy.md#barometer). Readings that are not a pressure (NaN, outside 300-1100
+     * hPa) or not after the previous are dropped and counted in `InputStats.pressureDropped`;
+     * times too far ahead as for `push_accelerometer`. Returns how many were taken.
+     */
+    func pushPressure(batch: [PressureReading]) throws  -> UInt32
+    
+    /**
      * A WiFi / BLE scan: one positioning epoch. Push the sensor batches up to the scan's time
      * first. Returns the new position; a rejected scan throws `InputRejected` and changes
      * nothing.
@@ -1741,6 +1749,22 @@ open func pushMagnetometer(batch: [MotionSample])throws  -> UInt32  {
     uniffi_waymark_fn_method_positioningengine_push_magnetometer(
             self.uniffiCloneHandle(),
         FfiConverterSequenceTypeMotionSample.lower(batch),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Barometer readings, oldest first: floor changes from the height climbed
+     * (docs/accuracy.md#barometer). Readings that are not a pressure (NaN, outside 300-1100
+     * hPa) or not after the previous are dropped and counted in `InputStats.pressureDropped`;
+     * times too far ahead as for `push_accelerometer`. Returns how many were taken.
+     */
+open func pushPressure(batch: [PressureReading])throws  -> UInt32  {
+    return try  FfiConverterUInt32.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_push_pressure(
+            self.uniffiCloneHandle(),
+        FfiConverterSequenceTypePressureReading.lower(batch),uniffiCallStatus
     )
 })
 }
@@ -3480,6 +3504,11 @@ public struct InputStats: Equatable, Hashable {
      * passed as unsigned. Each refusal also reaches the listener as an `InputRejected` error.
      */
     public var timestampsAhead: UInt64
+    /**
+     * Barometer readings dropped: not a pressure (NaN, outside 300-1100 hPa) or not after the
+     * previous one.
+     */
+    public var pressureDropped: UInt64
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -3544,7 +3573,11 @@ public struct InputStats: Equatable, Hashable {
          * 10 s ahead of the latest input taken (unless the stream's next sample confirms the
          * jump, as after the phone slept), and any time above 2^63 - 1 ns, a negative `Long`
          * passed as unsigned. Each refusal also reaches the listener as an `InputRejected` error.
-         */timestampsAhead: UInt64) {
+         */timestampsAhead: UInt64, 
+        /**
+         * Barometer readings dropped: not a pressure (NaN, outside 300-1100 hPa) or not after the
+         * previous one.
+         */pressureDropped: UInt64) {
         self.scansAccepted = scansAccepted
         self.scansOutOfOrder = scansOutOfOrder
         self.scansEmpty = scansEmpty
@@ -3563,6 +3596,7 @@ public struct InputStats: Equatable, Hashable {
         self.feedbackRejected = feedbackRejected
         self.filterRestarts = filterRestarts
         self.timestampsAhead = timestampsAhead
+        self.pressureDropped = pressureDropped
     }
 
     
@@ -3598,7 +3632,8 @@ public struct FfiConverterTypeInputStats: FfiConverterRustBuffer {
                 feedbackAccepted: FfiConverterUInt64.read(from: &buf), 
                 feedbackRejected: FfiConverterUInt64.read(from: &buf), 
                 filterRestarts: FfiConverterUInt64.read(from: &buf), 
-                timestampsAhead: FfiConverterUInt64.read(from: &buf)
+                timestampsAhead: FfiConverterUInt64.read(from: &buf), 
+                pressureDropped: FfiConverterUInt64.read(from: &buf)
         )
     }
 
@@ -3621,6 +3656,7 @@ public struct FfiConverterTypeInputStats: FfiConverterRustBuffer {
         FfiConverterUInt64.write(value.feedbackRejected, into: &buf)
         FfiConverterUInt64.write(value.filterRestarts, into: &buf)
         FfiConverterUInt64.write(value.timestampsAhead, into: &buf)
+        FfiConverterUInt64.write(value.pressureDropped, into: &buf)
     }
 }
 
@@ -4122,6 +4158,76 @@ public func FfiConverterTypePositionFix_lift(_ buf: RustBuffer) throws -> Positi
 #endif
 public func FfiConverterTypePositionFix_lower(_ value: PositionFix) -> RustBuffer {
     return FfiConverterTypePositionFix.lower(value)
+}
+
+
+/**
+ * One barometer reading with its monotonic timestamp in nanoseconds: Android's
+ * `Sensor.TYPE_PRESSURE` (`values[0]`, hPa), iOS's `CMAltitudeData.pressure` (kPa) × 10.
+ */
+public struct PressureReading: Equatable, Hashable {
+    /**
+     * Nanoseconds on the monotonic clock shared by every input.
+     */
+    public var timestampNs: UInt64
+    /**
+     * Air pressure, hPa.
+     */
+    public var hpa: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Nanoseconds on the monotonic clock shared by every input.
+         */timestampNs: UInt64, 
+        /**
+         * Air pressure, hPa.
+         */hpa: Double) {
+        self.timestampNs = timestampNs
+        self.hpa = hpa
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension PressureReading: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypePressureReading: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> PressureReading {
+        return
+            try PressureReading(
+                timestampNs: FfiConverterUInt64.read(from: &buf), 
+                hpa: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: PressureReading, into buf: inout [UInt8]) {
+        FfiConverterUInt64.write(value.timestampNs, into: &buf)
+        FfiConverterDouble.write(value.hpa, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePressureReading_lift(_ buf: RustBuffer) throws -> PressureReading {
+    return try FfiConverterTypePressureReading.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypePressureReading_lower(_ value: PressureReading) -> RustBuffer {
+    return FfiConverterTypePressureReading.lower(value)
 }
 
 
@@ -7063,6 +7169,31 @@ fileprivate struct FfiConverterSequenceTypeMotionSample: FfiConverterRustBuffer 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceTypePressureReading: FfiConverterRustBuffer {
+    typealias SwiftType = [PressureReading]
+
+    public static func write(_ value: [PressureReading], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypePressureReading.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [PressureReading] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [PressureReading]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypePressureReading.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceTypeRouteLeg: FfiConverterRustBuffer {
     typealias SwiftType = [RouteLeg]
 
@@ -7374,6 +7505,9 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_push_magnetometer() != 34522) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_push_pressure() != 33043) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_push_scan() != 27547) {

@@ -171,6 +171,17 @@ pub struct waymark_sample {
     pub z: f64,
 }
 
+/// One barometer reading: air pressure in hPa (Android `Sensor.TYPE_PRESSURE`; iOS
+/// `CMAltitudeData.pressure` in kPa × 10), with a monotonic timestamp in ns.
+#[repr(C)]
+#[derive(Clone, Copy, Debug)]
+pub struct waymark_pressure_sample {
+    /// ns on the clock shared by every input.
+    pub timestamp_ns: u64,
+    /// Air pressure, hPa.
+    pub hpa: f64,
+}
+
 /// A WiFi access point heard in a scan.
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
@@ -409,6 +420,9 @@ pub struct waymark_input_stats {
     /// jump, as after the phone slept), and any time above INT64_MAX ns, a negative time passed
     /// as unsigned. Each refusal also reaches the status callback as an `INPUT_REJECTED` error.
     pub timestamps_ahead: u64,
+    /// Barometer readings dropped: not a pressure (NaN, outside 300-1100 hPa) or not after the
+    /// previous one.
+    pub pressure_dropped: u64,
 }
 
 impl From<&engine::InputStats> for waymark_input_stats {
@@ -432,6 +446,7 @@ impl From<&engine::InputStats> for waymark_input_stats {
             feedback_rejected: s.feedback_rejected,
             filter_restarts: s.filter_restarts,
             timestamps_ahead: s.timestamps_ahead,
+            pressure_dropped: s.pressure_dropped,
         }
     }
 }

@@ -120,6 +120,16 @@ pub struct MotionSample {
     pub z: f64,
 }
 
+/// One barometer reading with its monotonic timestamp in nanoseconds: Android's
+/// `Sensor.TYPE_PRESSURE` (`values[0]`, hPa), iOS's `CMAltitudeData.pressure` (kPa) × 10.
+#[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
+pub struct PressureReading {
+    /// Nanoseconds on the monotonic clock shared by every input.
+    pub timestamp_ns: u64,
+    /// Air pressure, hPa.
+    pub hpa: f64,
+}
+
 /// A transmitter's id as an app gives it: a BSSID, a beacon's proximity UUID or its advertiser
 /// address. Kotlin and Swift see a `String`.
 ///
@@ -495,6 +505,9 @@ pub struct InputStats {
     /// jump, as after the phone slept), and any time above 2^63 - 1 ns, a negative `Long`
     /// passed as unsigned. Each refusal also reaches the listener as an `InputRejected` error.
     pub timestamps_ahead: u64,
+    /// Barometer readings dropped: not a pressure (NaN, outside 300-1100 hPa) or not after the
+    /// previous one.
+    pub pressure_dropped: u64,
 }
 
 impl From<&engine::InputStats> for InputStats {
@@ -518,6 +531,7 @@ impl From<&engine::InputStats> for InputStats {
             feedback_rejected: s.feedback_rejected,
             filter_restarts: s.filter_restarts,
             timestamps_ahead: s.timestamps_ahead,
+            pressure_dropped: s.pressure_dropped,
         }
     }
 }
@@ -712,6 +726,13 @@ pub(crate) fn status_update(status: &Status, site: &Site) -> StatusUpdate {
             }
         }
     }
+}
+
+pub(crate) fn pressure_samples(batch: &[PressureReading]) -> Vec<crate::sensors::PressureSample> {
+    batch
+        .iter()
+        .map(|s| crate::sensors::PressureSample { timestamp_ns: s.timestamp_ns, hpa: s.hpa })
+        .collect()
 }
 
 pub(crate) fn samples(batch: &[MotionSample]) -> Vec<SensorSample> {

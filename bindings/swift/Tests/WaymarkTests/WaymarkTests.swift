@@ -197,6 +197,10 @@ final class WaymarkTests: XCTestCase {
         // NaN and backwards samples are dropped, not fatal.
         let s = { (t: UInt64, x: Double) in MotionSample(timestampNs: first.timestampNs + t, x: x, y: 0, z: 9.81) }
         XCTAssertEqual(try engine.pushAccelerometer(batch: [s(15, 0), s(14, 0), s(16, .nan), s(17, 0.1)]), 2)
+        // Barometer readings: NaN, out of range and backwards are dropped and counted.
+        let hpa = { (t: UInt64, p: Double) in PressureReading(timestampNs: first.timestampNs + t, hpa: p) }
+        XCTAssertEqual(try engine.pushPressure(batch: [hpa(15, 1000), hpa(16, .nan), hpa(17, 20), hpa(14, 1000)]), 1)
+        XCTAssertEqual(try engine.inputStats().pressureDropped, 3)
         XCTAssertNotNil(try engine.position())
     }
 

@@ -23,6 +23,7 @@ use std::collections::BTreeMap;
 use std::path::Path;
 use waymark::radio::{Reading, Scan, TransmitterId};
 use waymark::recorder::RECORDER_HEADER;
+pub use waymark::sensors::PressureSample;
 use waymark::sensors::SensorSample;
 
 const NS_PER_MS: u64 = 1_000_000;
@@ -40,15 +41,6 @@ pub struct Waypoint {
     /// format says (GetSensorData's `POSI` lines, [`super::gsd`]); `None`: the floor the walk
     /// was filed under. An index past the site's floors is a level no survey walk reached.
     pub floor: Option<usize>,
-}
-
-/// One barometer reading.
-#[derive(Clone, Copy, Debug, PartialEq)]
-pub struct PressureSample {
-    /// Time, ns.
-    pub timestamp_ns: u64,
-    /// Air pressure, hPa (= mbar).
-    pub hpa: f64,
 }
 
 /// What reading a walk skipped, by reason.
@@ -121,6 +113,8 @@ pub enum Event {
     Gyroscope(Vec<SensorSample>),
     /// A batch of magnetometer samples.
     Magnetometer(Vec<SensorSample>),
+    /// A batch of barometer readings.
+    Pressure(Vec<PressureSample>),
     /// A WiFi and/or beacon scan.
     Scan(Scan),
 }
@@ -132,6 +126,7 @@ impl Event {
             Event::Accelerometer(b) | Event::Gyroscope(b) | Event::Magnetometer(b) => {
                 b.last().map_or(0, |s| s.timestamp_ns)
             }
+            Event::Pressure(b) => b.last().map_or(0, |s| s.timestamp_ns),
             Event::Scan(s) => s.timestamp_ns,
         }
     }
@@ -161,6 +156,29 @@ impl Default for EventOptions {
     fn default() -> Self {
         Self { batch_ns: 200 * NS_PER_MS, beacon_wait_ns: 4_000 * NS_PER_MS, beacons: true, wifi: true }
     }
+}
+
+/// `samples` in batches of `batch_ns` from each batch's first sample, none straddling a time
+/// of `scan_times` (the app pushed its samples up to a scan before the scan).
+fn batches<'a, T: Clone>(
+    samples: &'a [T],
+    time: impl Fn(&T) -> u64 + 'a,
+    scan_times: &'a [u64],
+    batch_ns: u64,
+) -> impl Iterator<Item = Vec<T>> + 'a {
+    let mut start = 0;
+    std::iter::from_fn(move || {
+        let first = time(samples.get(start)?);
+        let mut end_ns = first.saturating_add(batch_ns);
+        if let Some(&t) = scan_times.get(scan_times.partition_point(|&t| t < first)) {
+            end_ns = end_ns.min(t.saturating_add(1));
+        }
+        // At least one sample per batch: with `batch_ns` 0 none is before `end_ns`.
+        let end = start + samples[start..].partition_point(|s| time(s) < end_ns).max(1);
+        let batch = samples[start..end].to_vec();
+        start = end;
+        Some(batch)
+    })
 }
 
 impl Trace {
@@ -354,19 +372,11 @@ impl Trace {
         let scan_times: Vec<u64> =
             if self.grouped_scans { scans.iter().map(|s| s.timestamp_ns).collect() } else { Vec::new() };
         for (samples, make) in streams {
-            let mut start = 0;
-            while start < samples.len() {
-                let mut end_ns = samples[start].timestamp_ns.saturating_add(options.batch_ns);
-                let next_scan = scan_times.partition_point(|&t| t < samples[start].timestamp_ns);
-                if let Some(&t) = scan_times.get(next_scan) {
-                    end_ns = end_ns.min(t.saturating_add(1));
-                }
-                // At least one sample per batch: with `batch_ns` 0 none is before `end_ns`.
-                let end = start + samples[start..].partition_point(|s| s.timestamp_ns < end_ns).max(1);
-                events.push(make(samples[start..end].to_vec()));
-                start = end;
-            }
+            events.extend(batches(samples, |s| s.timestamp_ns, &scan_times, options.batch_ns).map(make));
         }
+        events.extend(
+            batches(&self.pressure, |s| s.timestamp_ns, &scan_times, options.batch_ns).map(Event::Pressure),
+        );
         events.extend(scans.into_iter().map(Event::Scan));
         // Stable: at equal times sensors (pushed first) precede the scan.
         events.sort_by_key(Event::timestamp_ns);

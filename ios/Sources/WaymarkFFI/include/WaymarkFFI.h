@@ -461,6 +461,11 @@ uint32_t uniffi_waymark_fn_method_positioningengine_push_gyroscope(uint64_t ptr,
 uint32_t uniffi_waymark_fn_method_positioningengine_push_magnetometer(uint64_t ptr, RustBuffer batch, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_PRESSURE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_PRESSURE
+uint32_t uniffi_waymark_fn_method_positioningengine_push_pressure(uint64_t ptr, RustBuffer batch, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_SCAN
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_PUSH_SCAN
 RustBuffer uniffi_waymark_fn_method_positioningengine_push_scan(uint64_t ptr, RustBuffer scan, RustCallStatus *_Nonnull out_status
@@ -1048,6 +1053,12 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_push_gyroscope(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_PUSH_MAGNETOMETER
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_PUSH_MAGNETOMETER
 uint16_t uniffi_waymark_checksum_method_positioningengine_push_magnetometer(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_PUSH_PRESSURE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_PUSH_PRESSURE
+uint16_t uniffi_waymark_checksum_method_positioningengine_push_pressure(void
     
 );
 #endif

@@ -144,6 +144,14 @@ class RobustnessTest {
             val huge = (1..300_000).map { MotionSample(20_000_000_000uL + it.toULong() * 1_000_000uL, 0.0, 0.0, 9.81) }
             assertNotNull(survives("a huge batch") { engine.pushGyroscope(huge) })
         }
+        // Barometer readings: every weird value and one outside 300-1100 hPa dropped and counted.
+        PositioningEngine(siteJson, EngineOptions()).use { engine ->
+            val readings = weird.mapIndexed { i, v -> PressureReading(10uL + i.toULong(), v) } +
+                PressureReading(100uL, 1000.0) + PressureReading(99uL, 1000.0) + PressureReading(101uL, 5.0)
+            assertEquals(1u, engine.pushPressure(readings))
+            assertEquals(readings.size.toULong() - 1uL, engine.inputStats().pressureDropped)
+            assertTrue(replay(engine, walk.take(10)) > 5)
+        }
         // Still usable: a fresh engine's walk after the same abuse positions finitely.
         PositioningEngine(siteJson, EngineOptions()).use { engine ->
             engine.pushAccelerometer(weird.map { MotionSample(1uL, it, it, it) })

@@ -1,0 +1,189 @@
+//! Floor changes from the barometer (docs/accuracy.md#barometer): a motion input for the
+//! vertical, as steps and heading are for the plan.
+//!
+//! The engine keeps an anchor: the phone's height and the posterior mass of each floor at the
+//! latest epoch the height had settled. At each epoch the height climbed since the anchor
+//! weighs each floor j by how well it fits a move from the anchor's floors f:
+//! Σ_f P_anchor(f) · p(Δh | level_j − level_f). The weight multiplies the epoch's emission,
+//! as the transition into floor j would (the plan's transition is left as it is: it spreads
+//! mass between floors only through its floor weight). When the height has settled again the
+//! anchor moves to it, with the posterior's floors.
+
+use super::Engine;
+use crate::sensors::{BatchReport, PressureSample};
+use crate::site::Site;
+
+/// A storey is at least this high, m: the headroom building codes ask over a stair (2.0 m,
+/// e.g. the UK's Approved Document K 1.10, the US IBC 1011.3 2032 mm).
+pub(crate) const STOREY_MIN_M: f64 = 2.0;
+
+/// A storey is at most this high, m: beyond it a building is a hall, one floor. 7 m covers the
+/// tallest public storeys (museums, stations, malls with their 5-6 m).
+pub(crate) const STOREY_MAX_M: f64 = 7.0;
+
+/// The spread of a height the phone climbed against a floor's, m: the phone held higher or
+/// lower (a hand to a pocket, about 0.5 m) and the barometer's drift over a minute (below
+/// 0.1 hPa, 0.8 m, in still weather).
+pub(crate) const CLIMB_SIGMA_M: f64 = 0.5;
+
+/// The share of heights the barometer gets wrong: a door or a ventilation draught moves the
+/// pressure by up to a storey's worth for seconds. Such a height is taken as uniform over the
+/// building's height ([`Engine::weigh_floors_by_height`]), so that a height no floor explains
+/// weighs them all alike and leaves the floor to the radio.
+pub(crate) const BAROMETER_OUTLIER_SHARE: f64 = 0.05;
+
+/// Where the phone's height settled, and which floor it was on then.
+#[derive(Clone, Debug, Default)]
+pub(super) struct FloorAnchor {
+    height_m: f64,
+    /// Posterior mass per floor.
+    floors: Vec<f64>,
+}
+
+/// The density of climbing `dh_m` in a move of `k` levels (negative: down): about 0 for the
+/// same floor; for another, |Δh| / |k| a storey height between [`STOREY_MIN_M`] and
+/// [`STOREY_MAX_M`], uniform, with the climb's spread at the edges, and Δh the sign of k.
+pub(crate) fn climb_likelihood(dh_m: f64, k: i32) -> f64 {
+    let gauss = |x: f64| {
+        (-0.5 * (x / CLIMB_SIGMA_M).powi(2)).exp() / (CLIMB_SIGMA_M * (2.0 * std::f64::consts::PI).sqrt())
+    };
+    if k == 0 {
+        return gauss(dh_m);
+    }
+    let (low, high) = (f64::from(k.abs()) * STOREY_MIN_M, f64::from(k.abs()) * STOREY_MAX_M);
+    let climbed = dh_m * f64::from(k.signum());
+    let outside = if climbed < low {
+        low - climbed
+    } else if climbed > high {
+        climbed - high
+    } else {
+        0.0
+    };
+    // A uniform over [low, high] convolved with the climb's spread, at its edges a Gaussian's.
+    gauss(outside) * CLIMB_SIGMA_M * (2.0 * std::f64::consts::PI).sqrt()
+        / (high - low + CLIMB_SIGMA_M * (2.0 * std::f64::consts::PI).sqrt())
+}
+
+/// The level of each floor of `site`: its own, else its rank by elevation (levels step by one).
+pub(super) fn floor_levels(site: &Site) -> Vec<i32> {
+    let floors = site.floors();
+    if floors.iter().all(|f| f.level.is_some()) {
+        return floors.iter().map(|f| f.level.unwrap_or(0)).collect();
+    }
+    let mut order: Vec<usize> = (0..floors.len()).collect();
+    order.sort_by(|&a, &b| floors[a].elevation_m.total_cmp(&floors[b].elevation_m));
+    let mut levels = vec![0; floors.len()];
+    for (rank, &f) in order.iter().enumerate() {
+        levels[f] = rank as i32;
+    }
+    levels
+}
+
+impl Engine {
+    /// Takes a batch of barometer readings (docs/accuracy.md#barometer). Readings that are not
+    /// finite or not a pressure, not after the previous, or too far ahead of the engine's
+    /// clock are dropped and counted in the report and in
+    /// [`InputStats::pressure_dropped`](super::InputStats::pressure_dropped).
+    pub fn push_pressure(&mut self, batch: &[PressureSample]) -> BatchReport {
+        let clock = self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns);
+        let bound_ns = (self.config.motion.max_backlog_s * 1e9) as u64;
+        let report = self.barometer.push(batch, clock, bound_ns);
+        self.stats.timestamps_ahead += report.ahead as u64;
+        self.stats.pressure_dropped += (report.non_finite + report.out_of_order) as u64;
+        report
+    }
+
+    /// Adds the log weight of the height climbed since the anchor to each state's emission.
+    pub(super) fn weigh_floors_by_height(&mut self, timestamp_ns: u64) {
+        if !self.config.barometer || self.levels.len() < 2 {
+            return;
+        }
+        let Some(height) = self.barometer.height_at(timestamp_ns) else {
+            // Without a current height the next one may be from anywhere: start again.
+            self.floor_anchor = None;
+            return;
+        };
+        let Some(anchor) = &self.floor_anchor else { return };
+        let dh = height - anchor.height_m;
+        // A wrong height: uniform over the heights a move between the site's floors can climb.
+        let span = self.levels.iter().max().zip(self.levels.iter().min()).map_or(1, |(a, b)| (a - b).max(1));
+        let outlier = BAROMETER_OUTLIER_SHARE / (2.0 * f64::from(span) * STOREY_MAX_M);
+        let weights: Vec<f64> = self
+            .levels
+            .iter()
+            .map(|&to| {
+                anchor
+                    .floors
+                    .iter()
+                    .zip(&self.levels)
+                    .map(|(p, &from)| p * climb_likelihood(dh, to - from))
+                    .sum::<f64>()
+                    * (1.0 - BAROMETER_OUTLIER_SHARE)
+                    + outlier
+            })
+            .collect();
+        let most = weights.iter().copied().fold(0.0, f64::max);
+        if !(most > 0.0 && most.is_finite()) {
+            return;
+        }
+        let ln_weight: Vec<f64> = weights.iter().map(|w| (w / most).ln()).collect();
+        for (e, state) in self.ln_emission.iter_mut().zip(self.site.states()) {
+            *e += ln_weight[state.floor];
+        }
+    }
+
+    /// After the filter's step: where the height has settled, the anchor moves to it with the
+    /// posterior's floors. After a climb of half a storey or more it moves only once the
+    /// posterior has changed floor the way the phone climbed: a height no floor of the site
+    /// explains (a storey nobody surveyed, a mezzanine) or one the radio refuses stays measured
+    /// from the last floor that explained one, so that the rest of the climb adds to it.
+    pub(super) fn settle_floor_anchor(&mut self, timestamp_ns: u64) {
+        if !self.config.barometer || self.levels.len() < 2 || !self.barometer.settled(timestamp_ns) {
+            return;
+        }
+        let Some(height_m) = self.barometer.height_at(timestamp_ns) else { return };
+        let mut floors = vec![0.0; self.levels.len()];
+        for (p, state) in self.filter.posterior().iter().zip(self.site.states()) {
+            floors[state.floor] += p;
+        }
+        let total: f64 = floors.iter().sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return;
+        }
+        floors.iter_mut().for_each(|p| *p /= total);
+        if let Some(anchor) = &self.floor_anchor {
+            let dh = height_m - anchor.height_m;
+            if dh.abs() >= STOREY_MIN_M / 2.0 {
+                let (from, to) = (most_likely(&anchor.floors), most_likely(&floors));
+                let along = (self.levels[to] - self.levels[from]).signum() == dh.signum() as i32;
+                if from == to || !along {
+                    return;
+                }
+            }
+        }
+        self.floor_anchor = Some(FloorAnchor { height_m, floors });
+    }
+}
+
+/// The index of the largest mass.
+fn most_likely(masses: &[f64]) -> usize {
+    masses.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)).map_or(0, |(i, _)| i)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_climb_of_a_storey_favours_the_floor_above_and_none_the_same() {
+        let same = climb_likelihood(0.1, 0);
+        assert!(same > 10.0 * climb_likelihood(0.1, 1));
+        let up = climb_likelihood(3.1, 1);
+        assert!(up > 100.0 * climb_likelihood(3.1, 0), "{up}");
+        assert!(up > 100.0 * climb_likelihood(3.1, -1), "the wrong way");
+        assert!(up > 5.0 * climb_likelihood(3.1, 2), "two storeys are at least 4 m");
+        // 5.6 m fits one tall storey or two low ones.
+        let (one, two) = (climb_likelihood(-5.6, -1), climb_likelihood(-5.6, -2));
+        assert!(one > 0.0 && two > 0.0 && (one / two - 2.0).abs() < 0.5, "{one} {two}");
+    }
+}

@@ -1,0 +1,119 @@
+//! The barometer as a motion input for floor changes (docs/accuracy.md#barometer).
+
+mod common;
+
+use common::scan;
+use nalgebra::Point2;
+use std::sync::Arc;
+use waymark::sensors::{pressure_height_m, PressureSample};
+use waymark::site::{BuildOptions, Site, SiteBuilder};
+use waymark::{Engine, EngineConfig};
+
+const SECOND: u64 = 1_000_000_000;
+
+/// Two floors 4 m apart, each a corridor of five states 3 m apart joined by a staircase at
+/// x = 0. Transmitters 0-2 sound the same on both floors; transmitter 9 is 30 dB stronger on
+/// the ground floor. A scan with 9 half way between cannot tell the floors apart.
+fn twin_floors() -> Site {
+    let mut b = SiteBuilder::new("twin floors");
+    let floors = [b.floor("G", 0.0), b.floor("1", 4.0)];
+    let mut first = Vec::new();
+    for (f, &floor) in floors.iter().enumerate() {
+        let mut previous = None;
+        for k in 0..5 {
+            let x = 3.0 * k as f64;
+            let scans = (0..20)
+                .map(|n| {
+                    let jitter = if n % 2 == 0 { 2.0 } else { -2.0 };
+                    let mut readings: Vec<(u8, f64)> = (0..3)
+                        .map(|t| (t as u8, -40.0 - 4.0 * (x - 6.0 * t as f64).abs() + jitter))
+                        .collect();
+                    readings.push((9, if f == 0 { -45.0 } else { -75.0 } + jitter));
+                    scan(n, &readings)
+                })
+                .collect();
+            let id = b.state(floor, Point2::new(x, 0.0), scans);
+            match previous {
+                Some(p) => b.edge(p, id, None),
+                None => first.push(id),
+            }
+            previous = Some(id);
+        }
+    }
+    b.edge(first[0], first[1], Some(6.0));
+    b.build(BuildOptions::default()).unwrap()
+}
+
+/// The pressure at `height_m` above a ground floor at 1000 hPa (the inverse of
+/// `pressure_height_m`).
+fn hpa_at(height_m: f64) -> f64 {
+    let h0 = pressure_height_m(1000.0);
+    1013.25 * (1.0 - (h0 + height_m) / 44_330.8).powf(1.0 / 0.190_263)
+}
+
+/// Readings at 10 Hz over `[from_s, to_s)` of the height `height(t)`.
+fn pressure(from_s: f64, to_s: f64, height: impl Fn(f64) -> f64) -> Vec<PressureSample> {
+    let n = ((to_s - from_s) * 10.0).round() as u64;
+    (0..n)
+        .map(|i| {
+            let t = from_s + i as f64 * 0.1;
+            PressureSample { timestamp_ns: (t * 1e9).round() as u64, hpa: hpa_at(height(t)) }
+        })
+        .collect()
+}
+
+/// A walk: 10 s on the ground floor at x = 0 (transmitter 9 as there), then a climb of `climb_m`
+/// between 10 and 16 s, then 10 s more at x = 0 with scans that cannot tell the floors apart.
+/// Returns the floor of the last position and its probability.
+fn walk(config: EngineConfig, climb_m: f64) -> (usize, f64) {
+    let mut engine = Engine::new(Arc::new(twin_floors()), config).unwrap();
+    let height = |t: f64| climb_m * ((t - 10.0) / 6.0).clamp(0.0, 1.0);
+    let mut floor = (usize::MAX, 0.0);
+    for second in 1..=26u64 {
+        let report = engine.push_pressure(&pressure((second - 1) as f64, second as f64, height));
+        assert_eq!(report.accepted, 10);
+        let nine = if second <= 10 { -45.0 } else { -60.0 };
+        let readings = [(0u8, -40.0), (1, -64.0), (2, -88.0), (9, nine)];
+        let p = engine.push_scan(&scan(second * SECOND, &readings)).unwrap().position;
+        floor = (p.floor, p.floor_probability);
+        if second == 10 {
+            assert_eq!(floor.0, 0, "on the ground floor before the climb");
+        }
+    }
+    floor
+}
+
+#[test]
+fn a_storey_climbed_moves_the_estimate_upstairs_where_the_radio_cannot_tell() {
+    let (floor, p) = walk(EngineConfig::default(), 4.0);
+    assert!(floor == 1 && p > 0.9, "{floor} {p}");
+    let without = EngineConfig { barometer: false, ..EngineConfig::default() };
+    let (_, p) = walk(without, 4.0);
+    assert!(p < 0.6, "without the barometer either floor: {p}");
+}
+
+#[test]
+fn less_than_a_storey_holds_the_floor_and_a_height_no_floor_explains_leaves_it_to_the_radio() {
+    let (floor, p) = walk(EngineConfig::default(), 1.0);
+    assert!(floor == 0 && p > 0.9, "a metre is no storey: {floor} {p}");
+    let (floor, p) = walk(EngineConfig::default(), -4.0);
+    // No floor is 4 m below the ground floor: a height no floor explains leaves the floor to
+    // the radio, which cannot tell here, rather than pushing it up or holding it.
+    assert!(p < 0.6, "{floor} {p}");
+}
+
+#[test]
+fn readings_that_are_no_pressure_are_dropped_and_counted() {
+    let mut engine = Engine::new(Arc::new(twin_floors()), EngineConfig::default()).unwrap();
+    let batch = [
+        PressureSample { timestamp_ns: SECOND, hpa: 1000.0 },
+        PressureSample { timestamp_ns: 2 * SECOND, hpa: f64::NAN },
+        PressureSample { timestamp_ns: 3 * SECOND, hpa: -5.0 },
+        PressureSample { timestamp_ns: SECOND, hpa: 1000.0 },
+        PressureSample { timestamp_ns: 4 * SECOND, hpa: 1000.0 },
+    ];
+    let report = engine.push_pressure(&batch);
+    assert_eq!((report.accepted, report.non_finite, report.out_of_order), (2, 2, 1));
+    assert_eq!(engine.stats().pressure_dropped, 3);
+    engine.push_scan(&scan(5 * SECOND, &[(0, -40.0), (9, -45.0)])).unwrap();
+}
