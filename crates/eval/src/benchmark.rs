@@ -763,7 +763,7 @@ mod tests {
         let row = &json["rows"][0];
         assert_eq!(
             keys(row),
-            ["building", "configurations", "seconds", "split", "survey_fraction", "test_walks"]
+            ["building", "configurations", "seconds", "split", "survey_fraction", "test_walks", "walks"]
         );
         assert_eq!(
             keys(&row["configurations"]["forward-auto"]),
