@@ -280,7 +280,7 @@ impl TransitionParts {
     /// Hands `model`'s transition, with the learned habits multiplied in, to `f`.
     fn with<R>(&self, model: &StepModel, f: impl FnOnce(&dyn Transition) -> R) -> R {
         let table = prediction_table(&self.reach, self.map_reach.as_deref(), model.whole_reach);
-        let (reach, hipe, hoang);
+        let (reach, hipe, hoang, prepared);
         let transition: &dyn Transition = match model.kind {
             StepKind::Reach => {
                 reach = UniformReach { table, rho_m: model.reach_m, ratio: model.ratio };
@@ -303,7 +303,8 @@ impl TransitionParts {
                     mahalanobis_cap: self.mahalanobis_cap,
                     exponent,
                 };
-                &hoang
+                prepared = hoang.prepared();
+                &prepared
             }
         };
         // Learned habits: a prior multiplied into the motion-based transition of each epoch.

@@ -235,34 +235,11 @@ impl HoangTransition<'_> {
 
 impl Transition for HoangTransition<'_> {
     fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
-        let states = self.site.states();
-        let reach = self.table.reachable_within(i, self.reach);
-        let (high, low) = hipe_probabilities(reach.len(), self.table.state_count(), self.ratio);
-        let from = &states[i];
-        let m = self.measured();
-        // Entries at the Mahalanobis cap (most of a row: the reach is wider than the spread)
-        // all weigh `high · exp(cap)`: one exponential for all of them.
-        let capped = self.ln_movement_range().0.exp();
-        let high_capped = high * capped;
-        for (j, walk_m) in reach.iter() {
-            let to = &states[j as usize];
-            let delta = if to.floor == from.floor {
-                to.position - from.position
-            } else {
-                // Between floors the plan distance is the walk along the stairs.
-                m.direction.unwrap_or_else(Vector2::zeros) * f64::from(walk_m)
-            };
-            let r2 = match (self.movement_m, self.walked_m) {
-                (None, Some(d)) => self.walked_r2(d, f64::from(walk_m)),
-                _ => self.movement_r2(&m, delta),
-            };
-            let a = match r2 {
-                Some(r2) => high * self.ln_density(&m, r2).exp(),
-                None => high_capped,
-            };
-            row.push((j, a));
-        }
-        low * capped
+        self.prepared().row(i, row)
+    }
+
+    fn row_on(&self, i: usize, weights: &[f64], row: &mut Vec<(u32, f64)>) -> f64 {
+        self.prepared().row_on(i, weights, row)
     }
 
     fn bounds(&self) -> Option<RowBounds<'_>> {
@@ -274,6 +251,75 @@ impl Transition for HoangTransition<'_> {
             floor_factor: cap.exp(),
             ln_most_factor: most,
         })
+    }
+}
+
+/// A [`HoangTransition`] with what all its rows share computed once: the measured movement,
+/// its direction, the normalisers and the density at the Mahalanobis cap. Its rows are the
+/// model's, value for value; an epoch writes thousands of them.
+pub struct PreparedHoang<'t, 'a> {
+    model: &'t HoangTransition<'a>,
+    measured: Measured,
+    /// exp of the movement term at the cap.
+    capped: f64,
+}
+
+impl<'a> HoangTransition<'a> {
+    /// The model ready to write many rows.
+    pub fn prepared(&self) -> PreparedHoang<'_, 'a> {
+        PreparedHoang { model: self, measured: self.measured(), capped: self.ln_movement_range().0.exp() }
+    }
+}
+
+impl Transition for PreparedHoang<'_, '_> {
+    fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+        self.row_where(i, row, |_| true)
+    }
+
+    fn row_on(&self, i: usize, weights: &[f64], row: &mut Vec<(u32, f64)>) -> f64 {
+        self.row_where(i, row, |j| weights.get(j as usize).is_some_and(|&w| w != 0.0))
+    }
+
+    fn bounds(&self) -> Option<RowBounds<'_>> {
+        self.model.bounds()
+    }
+}
+
+impl PreparedHoang<'_, '_> {
+    /// Row `i`'s entries whose j is `wanted`, in the row's order, and its floor weight: each
+    /// entry's weight depends on its own j alone, so the others need not be computed.
+    #[inline]
+    fn row_where(&self, i: usize, row: &mut Vec<(u32, f64)>, wanted: impl Fn(u32) -> bool) -> f64 {
+        let (t, m) = (self.model, &self.measured);
+        let states = t.site.states();
+        let reach = t.table.reachable_within(i, t.reach);
+        let (high, low) = hipe_probabilities(reach.len(), t.table.state_count(), t.ratio);
+        let from = &states[i];
+        // Entries at the Mahalanobis cap (most of a row: the reach is wider than the spread)
+        // all weigh `high · exp(cap)`: one exponential for all of them.
+        let high_capped = high * self.capped;
+        for (j, walk_m) in reach.iter() {
+            if !wanted(j) {
+                continue;
+            }
+            let to = &states[j as usize];
+            let delta = if to.floor == from.floor {
+                to.position - from.position
+            } else {
+                // Between floors the plan distance is the walk along the stairs.
+                m.direction.unwrap_or_else(Vector2::zeros) * f64::from(walk_m)
+            };
+            let r2 = match (t.movement_m, t.walked_m) {
+                (None, Some(d)) => t.walked_r2(d, f64::from(walk_m)),
+                _ => t.movement_r2(m, delta),
+            };
+            let a = match r2 {
+                Some(r2) => high * t.ln_density(m, r2).exp(),
+                None => high_capped,
+            };
+            row.push((j, a));
+        }
+        low * self.capped
     }
 }
 

@@ -205,12 +205,14 @@ fn back<M>(
                     return (i, alpha * (0.0 + bounds.floor_of(reach.len()) * total.max(0.0)));
                 }
             }
+            // Σ_j a_ij r(j) over the entries with later mass (`row_on`): an entry without adds
+            // exactly nothing to either sum.
             row.clear();
-            let floor = transition.row(i as usize, row);
-            // Σ_j a_ij r(j): the listed entries, and the floor weight on every other j.
+            let floor = transition.row_on(i as usize, ratio, row);
+            // The listed entries, and the floor weight on every other j.
             let (mut explicit, mut listed) = (0.0, 0.0);
             for &(j, a) in row.iter() {
-                let r = ratio.get(j as usize).copied().unwrap_or(0.0);
+                let r = ratio[j as usize];
                 explicit += a * r;
                 listed += r;
             }

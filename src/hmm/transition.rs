@@ -11,6 +11,17 @@ pub trait Transition {
     /// caller) and returns the weight of every state not listed. Each j appears at most once.
     fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64;
 
+    /// [`row`](Self::row) with only the entries whose j has a non-zero `weights[j]` (within
+    /// `weights`) written, in the same order, and the same floor weight: what a sum of
+    /// `a_ij · weights[j]` over the row needs, as the fixed-lag smoother's step back takes.
+    /// A model that can tell an entry's j before its weight overrides it to weigh only those.
+    fn row_on(&self, i: usize, weights: &[f64], row: &mut Vec<(u32, f64)>) -> f64 {
+        let has_weight = |j: u32| weights.get(j as usize).is_some_and(|&w| w != 0.0);
+        let floor = self.row(i, row);
+        row.retain(|&(j, _)| has_weight(j));
+        floor
+    }
+
     /// What the Viterbi step may know of this epoch's rows without writing them
     /// ([`RowBounds`]); `None` when the model cannot tell it more cheaply than by the rows.
     fn bounds(&self) -> Option<RowBounds<'_>> {
