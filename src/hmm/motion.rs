@@ -472,6 +472,29 @@ mod tests {
     }
 
     #[test]
+    fn row_on_is_the_row_on_the_weighted_states_bit_for_bit() {
+        let site = grid();
+        let table = ReachTable::build(&site, 9.0);
+        // Anisotropic (direction and both spreads), isotropic, and distance alone.
+        let vector = one_metre_east(&site, &table, [0.3, 0.1], 3.0);
+        let round = one_metre_east(&site, &table, [0.3, 0.3], 3.0);
+        let walked = HoangTransition { movement_m: None, walked_m: Some(1.5), ..vector };
+        // Every third state weighted, by weights so small that only their sign tells them.
+        let weights: Vec<f64> =
+            (0..25).map(|j| if j % 3 == 0 { 1e-200 * (j + 1) as f64 } else { 0.0 }).collect();
+        let bits = |row: &[(u32, f64)]| row.iter().map(|&(j, a)| (j, a.to_bits())).collect::<Vec<_>>();
+        for t in [vector, round, walked] {
+            for i in 0..25 {
+                let (mut full, mut on) = (Vec::new(), Vec::new());
+                let floor = t.row(i, &mut full);
+                assert_eq!(t.row_on(i, &weights, &mut on).to_bits(), floor.to_bits());
+                full.retain(|&(j, _)| weights[j as usize] != 0.0);
+                assert_eq!(bits(&on), bits(&full));
+            }
+        }
+    }
+
+    #[test]
     fn distance_alone_is_a_gaussian_ring_in_walking_distance() {
         let site = grid();
         let table = ReachTable::build(&site, 9.0);
