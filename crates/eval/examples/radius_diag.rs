@@ -8,6 +8,7 @@
 //! ```text
 //! FRACTION=0.25 cargo run --release -p waymark-eval --example radius_diag -- \
 //!   target/ilc/site1/{B1,F1,F2,F3,F4} > rows.csv
+//! ROW=ipin2023-t3/both-phones cargo run --release -p waymark-eval --example radius_diag > rows.csv
 //! ```
 //!
 //! Columns: `set` (held: a held-out survey walk scored at each of its positions, as the
@@ -198,7 +199,19 @@ fn rows(
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     let dirs: Vec<PathBuf> = std::env::args().skip(1).map(PathBuf::from).collect();
     let fraction: f64 = std::env::var("FRACTION").ok().and_then(|v| v.parse().ok()).unwrap_or(1.0);
-    let mut floors = dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?;
+    // `ROW=building/split` reads a benchmark row's floors instead of floor folders.
+    let mut floors = match std::env::var("ROW") {
+        Ok(name) => {
+            let row = waymark_eval::benchmark::ROWS
+                .iter()
+                .find(|r| format!("{}/{}", r.building, r.split) == name)
+                .ok_or_else(|| format!("no benchmark row {name}"))?;
+            let source =
+                waymark_eval::benchmark::DataSource { workspace: std::env::current_dir()?, max_walks: None };
+            (row.load)(&source)?
+        }
+        Err(_) => dirs.iter().map(|d| FloorData::load(d, None)).collect::<Result<Vec<_>, _>>()?,
+    };
     for f in &mut floors {
         f.keep_survey_fraction(fraction);
     }
