@@ -212,7 +212,7 @@ fn back<M>(
             // The listed entries, and the floor weight on every other j.
             let (mut explicit, mut listed) = (0.0, 0.0);
             for &(j, a) in row.iter() {
-                let r = ratio[j as usize];
+                let r = ratio.get(j as usize).copied().unwrap_or(0.0);
                 explicit += a * r;
                 listed += r;
             }
