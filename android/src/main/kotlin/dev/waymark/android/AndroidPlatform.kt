@@ -55,6 +55,7 @@ internal object AndroidPlatform {
             wifi = AndroidWifi(context, handler),
             ble = AndroidBle(context),
             availability = AndroidAvailability(context, handler),
+            barometer = AndroidBarometer(context, handler),
         )
     }
 
@@ -92,6 +93,29 @@ private class AndroidSensors(context: Context, private val handler: Handler) : M
 
     override fun stop(sensor: MotionSensor) {
         listeners.remove(sensor)?.let { manager.unregisterListener(it) }
+    }
+}
+
+private class AndroidBarometer(context: Context, private val handler: Handler) : Barometer {
+    private val manager = context.getSystemService(Context.SENSOR_SERVICE) as SensorManager
+    private var listener: SensorEventListener? = null
+
+    override fun has() = manager.getDefaultSensor(Sensor.TYPE_PRESSURE) != null
+
+    override fun start(periodUs: Int, maxReportLatencyUs: Int, sink: PressureSink): Boolean {
+        val hardware = manager.getDefaultSensor(Sensor.TYPE_PRESSURE) ?: return false
+        val l = object : SensorEventListener {
+            override fun onSensorChanged(event: SensorEvent) = sink.onPressure(event.timestamp, event.values[0])
+            override fun onAccuracyChanged(s: Sensor, accuracy: Int) = Unit
+        }
+        if (!manager.registerListener(l, hardware, periodUs, maxReportLatencyUs, handler)) return false
+        listener = l
+        return true
+    }
+
+    override fun stop() {
+        listener?.let { manager.unregisterListener(it) }
+        listener = null
     }
 }
 

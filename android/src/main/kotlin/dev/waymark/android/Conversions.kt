@@ -2,6 +2,7 @@ package dev.waymark.android
 
 import dev.waymark.MotionSample
 import dev.waymark.PositionEstimate
+import dev.waymark.PressureReading
 import dev.waymark.WifiReading
 
 /**
@@ -19,6 +20,10 @@ object Conversions {
             z = values[2].toDouble(),
         )
     }
+
+    /** A `TYPE_PRESSURE` `SensorEvent` (timestamp in ns since boot, `values[0]` in hPa). */
+    fun pressure(timestampNs: Long, hpa: Float): PressureReading =
+        PressureReading(timestampNs = timestampNs.toULong(), hpa = hpa.toDouble())
 
     /**
      * A `ScanResult`: its `timestamp` is µs since boot, the scan's own time is `scanTimeNs`

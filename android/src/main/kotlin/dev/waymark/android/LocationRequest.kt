@@ -27,6 +27,9 @@ data class LocationRequest(
     /** Shortest interval between the client's own WiFi scans, ms; 0 scans as often as Android's
      *  budget allows. Other apps' results are taken whenever they come. */
     val wifiScanIntervalMs: Long = 0,
+    /** Read the barometer, where the phone has one, for floor changes
+     *  (docs/android.md#the-barometer). */
+    val barometer: Boolean = true,
 ) {
     init {
         require(wifi || ble) { "a request scans WiFi, BLE or both: the engine positions from radio" }
@@ -38,6 +41,9 @@ data class LocationRequest(
 
     /** Sensor period, µs, as `SensorManager.registerListener` takes it. */
     val sensorPeriodUs: Int get() = 1_000_000 / sensorRateHz
+
+    /** [sensorMaxLatencyMs] in µs, as `registerListener` takes it. */
+    internal val maxLatencyUs: Int get() = (sensorMaxLatencyMs * 1_000L).coerceAtMost(Int.MAX_VALUE.toLong()).toInt()
 
     /** Samples per FFI call: half a second of one sensor. */
     internal val batchSize: Int get() = maxOf(1, sensorRateHz / 2)
@@ -52,6 +58,7 @@ data class LocationRequest(
             advanceIntervalMs = requests.minOf { it.advanceIntervalMs },
             background = requests.all { it.background },
             wifiScanIntervalMs = requests.minOf { it.wifiScanIntervalMs },
+            barometer = requests.any { it.barometer },
         )
     }
 }

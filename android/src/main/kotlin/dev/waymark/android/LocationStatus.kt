@@ -118,6 +118,8 @@ data class LocationClientStats(
     val advancesRejected: Long = 0,
     /** Motion sample batches pushed (one FFI call each). */
     val motionBatches: Long = 0,
+    /** Barometer reading batches pushed (one FFI call each). */
+    val pressureBatches: Long = 0,
     /** Callback deliveries the executor refused or threw from. */
     val callbackFailures: Long = 0,
     /** The engine's message for the last rejected scan or advance. */

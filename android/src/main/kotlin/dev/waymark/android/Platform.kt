@@ -6,7 +6,7 @@ package dev.waymark.android
  * adapts them to SensorManager, WifiManager, BluetoothLeScanner, Handler and Context.
  */
 
-/** Everything the client runs on. */
+/** Everything the client runs on. [barometer] defaults to a phone without one. */
 class Platform(
     val clock: Clock,
     val scheduler: Scheduler,
@@ -14,6 +14,7 @@ class Platform(
     val wifi: WifiRadio,
     val ble: BleScanner,
     val availability: Availability,
+    val barometer: Barometer = Barometer.NONE,
 )
 
 /** The monotonic clock of every input: `SystemClock.elapsedRealtimeNanos()` on Android, the
@@ -47,6 +48,33 @@ interface MotionSensors {
 /** One `SensorEvent`: ns on the shared clock, values in SI units. */
 fun interface MotionSink {
     fun onSample(sensor: MotionSensor, timestampNs: Long, values: FloatArray)
+}
+
+/** The barometer, `Sensor.TYPE_PRESSURE`: many phones have one, some do not, and a phone
+ *  without one loses only the floor changes it gives (docs/android.md#the-barometer). */
+interface Barometer {
+    /** Whether the phone has one. */
+    fun has(): Boolean
+
+    /** `registerListener(listener, sensor, periodUs, maxReportLatencyUs)`; false if refused. */
+    fun start(periodUs: Int, maxReportLatencyUs: Int, sink: PressureSink): Boolean
+
+    /** Unregisters it. */
+    fun stop()
+
+    companion object {
+        /** A phone without a barometer. */
+        val NONE: Barometer = object : Barometer {
+            override fun has() = false
+            override fun start(periodUs: Int, maxReportLatencyUs: Int, sink: PressureSink) = false
+            override fun stop() = Unit
+        }
+    }
+}
+
+/** One `TYPE_PRESSURE` `SensorEvent`: ns on the shared clock, `values[0]` in hPa. */
+fun interface PressureSink {
+    fun onPressure(timestampNs: Long, hpa: Float)
 }
 
 /** One `ScanResult` of `WifiManager.getScanResults()`. */

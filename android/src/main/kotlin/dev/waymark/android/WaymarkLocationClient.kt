@@ -8,6 +8,7 @@ import dev.waymark.PositionEstimate
 import dev.waymark.PositionListener
 import dev.waymark.PositioningEngineInterface
 import dev.waymark.PositioningException
+import dev.waymark.PressureReading
 import dev.waymark.RadioScan
 import dev.waymark.StatusUpdate
 import dev.waymark.Subscription
@@ -22,8 +23,9 @@ import java.util.concurrent.atomic.AtomicLong
  * Positions from the phone's sensors and radios, as Android's fused location provider gives
  * them: [requestLocationUpdates] with a [LocationRequest] and a [LocationCallback] called on
  * the caller's executor, or the `locations(request)` Flow. The client runs the motion sensors,
- * WiFi scans within Android's budget ([WifiScanBudget]), BLE scans and a timer that keeps
- * epochs coming between scans, and reports every problem as a coded [LocationStatus].
+ * the barometer where the phone has one, WiFi scans within Android's budget ([WifiScanBudget]),
+ * BLE scans and a timer that keeps epochs coming between scans, and reports every problem as a
+ * coded [LocationStatus].
  *
  * On Android: `WaymarkLocationClient(context, engine)` (AndroidPlatform.kt). Here the platform
  * comes as [Platform] ports, so this class runs on the JVM against fakes. One client per app:
@@ -60,6 +62,11 @@ class WaymarkLocationClient(
     private var newestAccelerometerNs = Long.MIN_VALUE
     private var motionStartedNs = Long.MIN_VALUE
 
+    // The report latency the barometer was asked to run with; null: not asked.
+    private var barometerLatencyUs: Int? = null
+    private var barometerOn = false
+    private val pressures = ArrayList<PressureReading>()
+
     private var wifiOn = false
     private val scanHistory = ArrayList<Long>()
     private var scanInFlightSinceNs: Long? = null
@@ -75,6 +82,7 @@ class WaymarkLocationClient(
     private var stats = LocationClientStats()
 
     private val motionSink = MotionSink { sensor, timestampNs, values -> onSample(sensor, timestampNs, values) }
+    private val pressureSink = PressureSink { timestampNs, hpa -> onPressure(timestampNs, hpa) }
     private val wifiSink = WifiSink { updated -> onWifiResults(updated) }
     private val bleSink = object : BleSink {
         override fun onAdvertisement(address: String, rssiDbm: Int, timestampNs: Long, scanRecord: ByteArray?) =
@@ -105,6 +113,10 @@ class WaymarkLocationClient(
 
     /** The conditions that hold now (permissions missing, radios off, sensors missing). */
     val conditions: Set<LocationStatus> get() = synchronized(lock) { LinkedHashSet(holding) }
+
+    /** Whether the barometer is read: the phone has one, a request asks for it, and Android
+     *  registered it. A phone without one positions as well, less its floor changes. */
+    val usesBarometer: Boolean get() = synchronized(lock) { barometerOn }
 
     /** What the client did and dropped so far. */
     fun stats(): LocationClientStats = synchronized(lock) { stats.copy(callbackFailures = callbackFailures.get()) }
@@ -229,6 +241,7 @@ class WaymarkLocationClient(
         holding += now
 
         setMotion(positioning, request)
+        setBarometer(if (positioning && request.barometer) request.maxLatencyUs else null)
         setWifi(wifiMayRun)
         setBle(bleMayRun, request.background)
         current = when {
@@ -242,6 +255,7 @@ class WaymarkLocationClient(
     /** Stops every sensor, radio and timer. */
     private fun halt() {
         setMotion(false, null)
+        setBarometer(null)
         setWifi(false)
         setBle(false, false)
         bleRetry?.cancel()
@@ -261,7 +275,7 @@ class WaymarkLocationClient(
     }
 
     private fun setMotion(on: Boolean, request: LocationRequest?) {
-        val settings = request?.let { it.sensorPeriodUs to (it.sensorMaxLatencyMs * 1_000L).coerceAtMost(Int.MAX_VALUE.toLong()).toInt() }
+        val settings = request?.let { it.sensorPeriodUs to it.maxLatencyUs }
         if (on && settings == sensorSettings && sensorsOn.isNotEmpty()) return
         flushMotion()
         for (sensor in sensorsOn) platform.sensors.stop(sensor)
@@ -278,6 +292,19 @@ class WaymarkLocationClient(
             } else if (sensorsRefused.add(sensor)) {
                 reconcileAgain = true // reported as missing by the next pass
             }
+        }
+    }
+
+    /** Runs the barometer with report latency [maxLatencyUs], or stops it (null). One that
+     *  Android refuses stays off until the request changes: it is an extra, not a condition. */
+    private fun setBarometer(maxLatencyUs: Int?) {
+        if (maxLatencyUs == barometerLatencyUs) return
+        flushPressure()
+        if (barometerOn) platform.barometer.stop()
+        barometerOn = false
+        barometerLatencyUs = maxLatencyUs
+        if (maxLatencyUs != null && platform.barometer.has()) {
+            barometerOn = platform.barometer.start(BAROMETER_PERIOD_US, maxLatencyUs, pressureSink)
         }
     }
 
@@ -396,9 +423,33 @@ class WaymarkLocationClient(
         }
     }
 
-    /** Pushes every sensor's batch: the engine needs the motion up to an epoch before it. */
+    private fun onPressure(timestampNs: Long, hpa: Float) {
+        synchronized(lock) {
+            if (!barometerOn) return
+            pressures += Conversions.pressure(timestampNs, hpa)
+            if (pressures.size >= (request?.batchSize ?: 50)) flushPressure()
+        }
+    }
+
+    /** Pushes every sensor's batch: the engine needs the motion (and the height) up to an
+     *  epoch before it. */
     private fun flushMotion() {
         for (sensor in MotionSensor.values()) flush(sensor)
+        flushPressure()
+    }
+
+    /** Pushes the barometer's batch. Readings that are not a pressure, or not after the
+     *  previous, are dropped and counted by the engine (`inputStats().pressureDropped`). */
+    private fun flushPressure() {
+        if (pressures.isEmpty()) return
+        val copy = pressures.toList()
+        pressures.clear()
+        try {
+            engine.pushPressure(copy)
+            stats = stats.copy(pressureBatches = stats.pressureBatches + 1)
+        } catch (e: PositioningException) {
+            // As for motion: a throw is an internal error, reported by the listener.
+        }
     }
 
     private fun flush(sensor: MotionSensor) {
@@ -520,6 +571,9 @@ class WaymarkLocationClient(
     }
 
     private companion object {
+        /** The barometer's period, µs: 10 Hz, so the engine's one-second low-pass averages about
+         *  ten readings (docs/accuracy.md#barometer); a stair climb takes several seconds. */
+        const val BAROMETER_PERIOD_US = 100_000
         const val SCAN_TIMEOUT_NS = 10_000_000_000L
         const val MIN_TICK_MS = 50L
         const val AVAILABILITY_CHECK_NS = 5_000_000_000L

@@ -1,6 +1,7 @@
 package dev.waymark
 
 import dev.waymark.android.Availability
+import dev.waymark.android.Barometer
 import dev.waymark.android.BleScanner
 import dev.waymark.android.BleSink
 import dev.waymark.android.Cancellable
@@ -12,6 +13,7 @@ import dev.waymark.android.MotionSensors
 import dev.waymark.android.MotionSink
 import dev.waymark.android.Permission
 import dev.waymark.android.Platform
+import dev.waymark.android.PressureSink
 import dev.waymark.android.Scheduler
 import dev.waymark.android.WifiRadio
 import dev.waymark.android.WifiResult
@@ -87,6 +89,31 @@ class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values()
 
     fun emit(sensor: MotionSensor, s: MotionSample) {
         running[sensor]?.onSample(sensor, s.timestampNs.toLong(), floatArrayOf(s.x.toFloat(), s.y.toFloat(), s.z.toFloat()))
+    }
+}
+
+class FakeBarometer(private val present: Boolean) : Barometer {
+    @Volatile var sink: PressureSink? = null
+    /** (periodUs, maxReportLatencyUs) of each registration. */
+    val registrations = ArrayList<Pair<Int, Int>>()
+    /** Present, but registerListener returns false. */
+    var refuse = false
+
+    override fun has() = present
+
+    override fun start(periodUs: Int, maxReportLatencyUs: Int, sink: PressureSink): Boolean {
+        if (!present || refuse) return false
+        registrations += periodUs to maxReportLatencyUs
+        this.sink = sink
+        return true
+    }
+
+    override fun stop() {
+        sink = null
+    }
+
+    fun emit(timestampNs: Long, hpa: Float) {
+        sink?.onPressure(timestampNs, hpa)
     }
 }
 
@@ -173,30 +200,45 @@ class FakeAvailability(var sdk: Int = 34) : Availability {
 }
 
 /** Everything a client runs on, faked. */
-class FakePhone(sensorsPresent: Set<MotionSensor> = MotionSensor.values().toSet()) {
+class FakePhone(sensorsPresent: Set<MotionSensor> = MotionSensor.values().toSet(), hasBarometer: Boolean = false) {
     val clock = FakeClock()
     val scheduler = FakeScheduler(clock)
     val sensors = FakeSensors(sensorsPresent)
     val wifi = FakeWifi(clock)
     val ble = FakeBle()
     val availability = FakeAvailability()
-    val platform = Platform(clock, scheduler, sensors, wifi, ble, availability)
+    val barometer = FakeBarometer(hasBarometer)
+    val platform = Platform(clock, scheduler, sensors, wifi, ble, availability, barometer)
 
-    /** Nothing of the phone runs: no sensor, no receiver, no BLE scan. */
-    val idle: Boolean get() = sensors.running.isEmpty() && wifi.sink == null && ble.sink == null
+    /** Nothing of the phone runs: no sensor, no barometer, no receiver, no BLE scan. */
+    val idle: Boolean get() =
+        sensors.running.isEmpty() && barometer.sink == null && wifi.sink == null && ble.sink == null
 
     /**
      * Replays the simulated walk: its motion samples in time order, the timers between them,
      * and at each epoch the scan's results, broadcast 300 ms after the scan's time when the
      * client asked for a scan since the previous epoch or when [passive] says another app did.
+     * With [pressureHpa], the barometer reads it every 100 ms between the epochs' motion.
      */
-    fun replay(walk: List<Epoch>, passive: (Int) -> Boolean = { false }, afterEpoch: (Int) -> Unit = {}) {
+    fun replay(
+        walk: List<Epoch>,
+        passive: (Int) -> Boolean = { false },
+        pressureHpa: ((Long) -> Float)? = null,
+        afterEpoch: (Int) -> Unit = {},
+    ) {
+        var nextPressureNs = walk.first().timestampNs.toLong()
         for ((k, epoch) in walk.withIndex()) {
             val samples = epoch.accelerometer.map { MotionSensor.ACCELEROMETER to it } +
                 epoch.gyroscope.map { MotionSensor.GYROSCOPE to it } +
                 epoch.magnetometer.map { MotionSensor.MAGNETOMETER to it }
             for ((sensor, s) in samples.sortedBy { it.second.timestampNs }) {
-                scheduler.runUntil(s.timestampNs.toLong())
+                val t = s.timestampNs.toLong()
+                while (pressureHpa != null && nextPressureNs <= t) {
+                    scheduler.runUntil(nextPressureNs)
+                    barometer.emit(nextPressureNs, pressureHpa(nextPressureNs))
+                    nextPressureNs += 100_000_000L
+                }
+                scheduler.runUntil(t)
                 sensors.emit(sensor, s)
             }
             val t = epoch.timestampNs.toLong()
@@ -240,6 +282,16 @@ class RecordingEngine(private val inner: PositioningEngine) : PositioningEngineI
     var newestAccelerometerNs = Long.MIN_VALUE
     /** For each pushed scan: the newest accelerometer sample pushed before it. */
     val motionBeforeScan = ArrayList<Long>()
+    var pressureReadings = 0
+    var newestPressureNs = Long.MIN_VALUE
+    /** For each pushed scan: the newest barometer reading pushed before it. */
+    val pressureBeforeScan = ArrayList<Long>()
+
+    override fun pushPressure(batch: List<PressureReading>): UInt {
+        pressureReadings += batch.size
+        batch.lastOrNull()?.let { newestPressureNs = maxOf(newestPressureNs, it.timestampNs.toLong()) }
+        return inner.pushPressure(batch)
+    }
 
     override fun pushAccelerometer(batch: List<MotionSample>): UInt {
         accelerometerCalls++
@@ -251,6 +303,7 @@ class RecordingEngine(private val inner: PositioningEngine) : PositioningEngineI
     override fun pushScan(scan: RadioScan): PositionEstimate {
         scans += scan
         motionBeforeScan += newestAccelerometerNs
+        pressureBeforeScan += newestPressureNs
         return inner.pushScan(scan)
     }
 

@@ -107,6 +107,105 @@ class LocationClientTest {
     }
 
     @Test
+    fun theBarometerReachesTheEngineBeforeEachScan() {
+        val phone = FakePhone(hasBarometer = true)
+        val engine = engine()
+        val client = WaymarkLocationClient(engine, phone.platform)
+        val callback = RecordingCallback()
+        client.requestLocationUpdates(LocationRequest(ble = false, sensorMaxLatencyMs = 200), direct, callback)
+        assertTrue(client.usesBarometer)
+        // 10 Hz, reports held up to the request's 200 ms, as the motion sensors are.
+        assertEquals(listOf(100_000 to 200_000), phone.barometer.registrations)
+        // A level walk at 1000 hPa, with a few hundredths of noise and one reading that is no pressure.
+        val start = walk.first().timestampNs.toLong()
+        var emitted = 0
+        phone.replay(walk, passive = { true }, pressureHpa = { t ->
+            emitted++
+            if (emitted == 25) Float.NaN else 1000f + 0.03f * ((t - start) / 100_000_000L % 3).toFloat()
+        })
+        val stats = client.stats()
+        client.close()
+        assertTrue("readings: $emitted", emitted > 400)
+        // Every reading went in, in batches, and the engine dropped the one that was no pressure.
+        assertEquals(emitted, engine.pressureReadings)
+        assertEquals(1UL, engine.inputStats().pressureDropped)
+        assertTrue("${stats.pressureBatches} batches", stats.pressureBatches in 1L..(emitted / 10).toLong())
+        // Every scan went in after the barometer up to its time (one 10 Hz reading of slack).
+        for ((scan, pressure) in engine.scans.zip(engine.pressureBeforeScan)) {
+            assertTrue("pressure up to ${scan.timestampNs} pushed first (had $pressure)", pressure >= scan.timestampNs.toLong() - 100_000_000L)
+        }
+        assertTrue("positions: ${callback.positions.size}", callback.positions.size >= walk.size - 1)
+        assertTrue("stopped when closed", phone.idle && !client.usesBarometer)
+        engine.close()
+    }
+
+    @Test
+    fun aPhoneWithoutABarometerOrARequestForItRunsWithoutOne() {
+        for ((hasBarometer, request) in listOf(false to LocationRequest(ble = false), true to LocationRequest(ble = false, barometer = false))) {
+            val phone = FakePhone(hasBarometer = hasBarometer)
+            val engine = engine()
+            val client = WaymarkLocationClient(engine, phone.platform)
+            val callback = RecordingCallback()
+            client.requestLocationUpdates(request, direct, callback)
+            phone.replay(walk.take(10), passive = { true }, pressureHpa = { 1000f })
+            // Not a condition: the client runs, and says so with no status.
+            assertEquals(ClientState.RUNNING, client.state)
+            assertTrue(callback.statuses.toString(), callback.statuses.isEmpty())
+            assertFalse(client.usesBarometer)
+            assertTrue(phone.barometer.registrations.isEmpty())
+            assertEquals(0, engine.pressureReadings)
+            assertTrue(callback.positions.size >= 9)
+            client.close()
+            engine.close()
+        }
+        // Refused by Android: off, and not asked again on every tick.
+        val phone = FakePhone(hasBarometer = true)
+        phone.barometer.refuse = true
+        val engine = engine()
+        val client = WaymarkLocationClient(engine, phone.platform)
+        client.requestLocationUpdates(LocationRequest(ble = false), direct, RecordingCallback())
+        phone.scheduler.runUntil(60 * S)
+        assertFalse(client.usesBarometer)
+        assertEquals(ClientState.RUNNING, client.state)
+        client.close()
+        engine.close()
+    }
+
+    @Test
+    fun theBarometerStopsWhilePausedAndResumes() {
+        val phone = FakePhone(hasBarometer = true)
+        val engine = engine()
+        val client = WaymarkLocationClient(engine, phone.platform)
+        val mine = RecordingCallback()
+        client.requestLocationUpdates(LocationRequest(ble = false), direct, mine)
+        assertTrue(client.usesBarometer)
+        phone.barometer.emit(1_000_000L, 1000f)
+        // Location permission revoked: nothing runs, the held reading went to the engine first.
+        phone.availability.granted -= Permission.ACCESS_FINE_LOCATION
+        client.refreshAvailability()
+        assertEquals(ClientState.PAUSED, client.state)
+        assertFalse(client.usesBarometer)
+        assertNull(phone.barometer.sink)
+        assertEquals(1, engine.pressureReadings)
+        // Granted again: registered again.
+        phone.availability.granted += Permission.ACCESS_FINE_LOCATION
+        client.refreshAvailability()
+        assertTrue(client.usesBarometer)
+        assertEquals(2, phone.barometer.registrations.size)
+        // Another caller that asks for no barometer keeps it on; removing the one that did stops it.
+        val other = RecordingCallback()
+        client.requestLocationUpdates(LocationRequest(ble = false, barometer = false), direct, other)
+        assertTrue(client.usesBarometer)
+        client.removeLocationUpdates(mine)
+        assertFalse(client.usesBarometer)
+        assertNull(phone.barometer.sink)
+        assertNotNull("the motion sensors run on", phone.sensors.running[MotionSensor.ACCELEROMETER])
+        client.close()
+        assertTrue(phone.idle)
+        engine.close()
+    }
+
+    @Test
     fun theScanBudgetHoldsOverHoursInTheForegroundAndInTheBackground() {
         val phone = FakePhone()
         val engine = engine()
