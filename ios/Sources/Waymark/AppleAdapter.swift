@@ -67,6 +67,37 @@ public final class CoreMotionSource: WaymarkMotionSource {
     }
 }
 
+/// The barometer through a `CMAltimeter`: its relative-altitude updates carry the pressure.
+/// Reading it needs the app's motion authorization (`NSMotionUsageDescription`); iOS asks the
+/// user on the first start.
+public final class CoreMotionAltimeter: WaymarkAltimeter {
+    private let altimeter = CMAltimeter()
+    private let operations = OperationQueue()
+
+    /// An altimeter of its own.
+    public init() {
+        operations.maxConcurrentOperationCount = 1
+    }
+
+    public var isAvailable: Bool {
+        let status = CMAltimeter.authorizationStatus()
+        return CMAltimeter.isRelativeAltitudeAvailable() && status != .denied && status != .restricted
+    }
+
+    public func start(queue: DispatchQueue, handler: @escaping (WaymarkPressureReading) -> Void) {
+        operations.underlyingQueue = queue
+        altimeter.startRelativeAltitudeUpdates(to: operations) { data, _ in
+            guard let d = data else { return }
+            handler(WaymarkPressureReading(timestamp: d.timestamp, kilopascals: d.pressure.doubleValue))
+        }
+    }
+
+    public func stop() {
+        altimeter.stopRelativeAltitudeUpdates()
+        operations.cancelAllOperations()
+    }
+}
+
 /// Beacon ranging and location authorization through a `CLLocationManager`. Make it on the
 /// main thread: Core Location calls its delegate on the run loop of the thread that made it,
 /// and every call here goes to the main queue.
@@ -150,14 +181,16 @@ public final class CoreLocationBeaconRanger: NSObject, WaymarkBeaconRanger, CLLo
 }
 
 public extension WaymarkLocationManager {
-    /// A manager reading CoreMotion and ranging with CoreLocation, on the uptime clock, with
-    /// a `DispatchSourceTimer` for `advance`. Make it on the main thread.
+    /// A manager reading CoreMotion (the barometer too, where the device has one) and ranging
+    /// with CoreLocation, on the uptime clock, with a `DispatchSourceTimer` for `advance`.
+    /// Make it on the main thread.
     convenience init(
         engine: PositioningEngine, request: WaymarkLocationRequest = WaymarkLocationRequest(),
         delegateQueue: DispatchQueue = .main
     ) throws {
         try self.init(engine: engine, request: request, motion: CoreMotionSource(),
-                      ranger: CoreLocationBeaconRanger(), delegateQueue: delegateQueue)
+                      ranger: CoreLocationBeaconRanger(), altimeter: CoreMotionAltimeter(),
+                      delegateQueue: delegateQueue)
     }
 }
 

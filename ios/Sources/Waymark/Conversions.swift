@@ -53,6 +53,14 @@ public enum AppleSensorConversion {
         return MotionSample(timestampNs: ns, x: x, y: y, z: z)
     }
 
+    /// `CMAltitudeData` (`timestamp` s on the uptime clock, `pressure` in kPa) to a Waymark
+    /// barometer reading in hPa. `nil` for a bad timestamp; a pressure that is no pressure
+    /// goes to the engine, which drops and counts it (`InputStats.pressureDropped`).
+    public static func pressure(timestamp: Double, kilopascals: Double) -> PressureReading? {
+        guard let ns = nanoseconds(fromSeconds: timestamp) else { return nil }
+        return PressureReading(timestampNs: ns, hpa: kilopascals * 10)
+    }
+
     /// Milliseconds between a reading's wall-clock time (`CLBeacon.timestamp`) and the scan
     /// (`now`); 0 if the reading is fresh or from the future, `nil`-safe.
     public static func ageMs(measuredAt: Date?, now: Date) -> UInt64 {

@@ -24,12 +24,16 @@ public struct WaymarkLocationRequest: Sendable, Equatable {
     /// Whether `start` shows the "while using the app" prompt when the user was never asked:
     /// true. Set it to false to ask at a moment of the app's choosing.
     public var requestsAuthorization: Bool
+    /// Whether the barometer is read, where the device has one, for floor changes: true
+    /// (docs/ios.md#the-barometer).
+    public var usesBarometer: Bool
 
     /// A request with the documented defaults.
     public init(
         beaconUUIDs: [UUID] = [], motionInterval: TimeInterval = 0.01, motionBatchSize: Int = 50,
-        advanceInterval: TimeInterval = 2, requestsAuthorization: Bool = true
+        advanceInterval: TimeInterval = 2, requestsAuthorization: Bool = true, usesBarometer: Bool = true
     ) {
+        self.usesBarometer = usesBarometer
         self.beaconUUIDs = beaconUUIDs
         self.motionInterval = motionInterval
         self.motionBatchSize = motionBatchSize
@@ -161,7 +165,8 @@ public extension WaymarkLocationManagerDelegate {
 /// `locations()`. On iOS make it on the main thread with `init(engine:request:delegateQueue:)`
 /// (AppleAdapter.swift); the designated initialiser takes the platform ports.
 ///
-/// Each inertial sensor is read at `request.motionInterval` and sent in batches. Each ranging
+/// Each inertial sensor is read at `request.motionInterval` and sent in batches, as is the
+/// barometer where there is one (a device without one is not degraded). Each ranging
 /// result with at least one measured beacon becomes one scan, timed on the motion's clock,
 /// after the motion up to its time. When no epoch was made for `request.advanceInterval`
 /// (beacons out of range, or ranging off), the manager calls `advance` so the position keeps
@@ -177,6 +182,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
 
     private let motion: WaymarkMotionSource
     private let ranger: WaymarkBeaconRanger
+    private let altimeter: WaymarkAltimeter?
     private let clock: WaymarkClock
     private let scheduler: WaymarkScheduler
 
@@ -187,6 +193,8 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     private var startedExplicitly = false
     private var subscription: Subscription?
     private var pending: [WaymarkMotionSensor: [MotionSample]] = [:]
+    private var pendingPressure: [PressureReading] = []
+    private var barometerOn = false
     private var unavailableSensors: [WaymarkMotionSensor] = []
     private var authorization: WaymarkAuthorization = .notDetermined
     private var askedAuthorization = false
@@ -207,13 +215,15 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     private weak var _delegate: WaymarkLocationManagerDelegate?
     private var _state: WaymarkLocationState = .idle
     private var _rejectedScans: UInt64 = 0
+    private var _usesBarometer = false
     private var statusStreams: [UUID: AsyncStream<WaymarkLocationStatus>.Continuation] = [:]
 
-    /// A manager over the given ports. Throws `PositioningError.InvalidConfig` for a request
-    /// with an interval not > 0 or a batch size below 1.
+    /// A manager over the given ports (`altimeter` nil: a device without a barometer). Throws
+    /// `PositioningError.InvalidConfig` for a request with an interval not > 0 or a batch
+    /// size below 1.
     public init(
         engine: PositioningEngine, request: WaymarkLocationRequest = WaymarkLocationRequest(),
-        motion: WaymarkMotionSource, ranger: WaymarkBeaconRanger,
+        motion: WaymarkMotionSource, ranger: WaymarkBeaconRanger, altimeter: WaymarkAltimeter? = nil,
         clock: WaymarkClock = UptimeClock(), scheduler: WaymarkScheduler = DispatchTimerScheduler(),
         delegateQueue: DispatchQueue = .main
     ) throws {
@@ -222,6 +232,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         self.request = request
         self.motion = motion
         self.ranger = ranger
+        self.altimeter = altimeter
         self.clock = clock
         self.scheduler = scheduler
         self.delegateQueue = delegateQueue
@@ -234,6 +245,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         advanceTimer?.cancel()
         if active {
             motion.stop()
+            if barometerOn { altimeter?.stop() }
             if ranging { ranger.stopRanging() }
         }
         locationStreams.values.forEach { $0.finish() }
@@ -248,6 +260,10 @@ public final class WaymarkLocationManager: @unchecked Sendable {
 
     /// Where the manager is now.
     public var state: WaymarkLocationState { lock.lock(); defer { lock.unlock() }; return _state }
+
+    /// Whether the barometer is read: the device has one, the app may read it, and the request
+    /// asks for it. A device without one positions as well, less its floor changes.
+    public var usesBarometer: Bool { lock.lock(); defer { lock.unlock() }; return _usesBarometer }
 
     /// Beacon scans the engine refused since the manager was made.
     public var rejectedScanCount: UInt64 { lock.lock(); defer { lock.unlock() }; return _rejectedScans }
@@ -325,6 +341,13 @@ public final class WaymarkLocationManager: @unchecked Sendable {
             }
         }
 
+        if request.usesBarometer, let altimeter, altimeter.isAvailable {
+            pendingPressure = []
+            barometerOn = true
+            altimeter.start(queue: queue) { [weak self] reading in self?.receive(reading) }
+        }
+        setUsesBarometer(barometerOn)
+
         advanceFromNs = clock.nowNs()
         armAdvance(after: request.advanceInterval)
 
@@ -341,6 +364,12 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         guard active else { return }
         active = false
         motion.stop()
+        if barometerOn {
+            altimeter?.stop()
+            barometerOn = false
+            setUsesBarometer(false)
+        }
+        pendingPressure = []
         if ranging {
             ranger.stopRanging()
             ranging = false
@@ -410,8 +439,40 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         }
     }
 
-    /// Sends every pending sample up to `t`, so the epoch at `t` has the motion before it.
+    private func receive(_ reading: WaymarkPressureReading) {
+        dispatchPrecondition(condition: .onQueue(queue))
+        guard active, barometerOn else { return }
+        guard let pressure = AppleSensorConversion.pressure(timestamp: reading.timestamp, kilopascals: reading.kilopascals)
+        else { return }
+        pendingPressure.append(pressure)
+        if pendingPressure.count >= request.motionBatchSize {
+            pushPressure(pendingPressure)
+            pendingPressure = []
+        }
+    }
+
+    private func pushPressure(_ batch: [PressureReading]) {
+        do {
+            _ = try engineCall { try engine.pushPressure(batch: batch) }
+        } catch {
+            reportEngineError(error)
+        }
+    }
+
+    private func setUsesBarometer(_ on: Bool) {
+        lock.lock(); defer { lock.unlock() }
+        _usesBarometer = on
+    }
+
+    /// Sends every pending sample and barometer reading up to `t`, so the epoch at `t` has
+    /// the motion and the height before it.
     private func flush(upTo t: UInt64) {
+        let split = pendingPressure.firstIndex { $0.timestampNs > t } ?? pendingPressure.count
+        if split > 0 {
+            let batch = Array(pendingPressure[..<split])
+            pendingPressure.removeFirst(split)
+            pushPressure(batch)
+        }
         for sensor in WaymarkMotionSensor.allCases {
             guard let batch = pending[sensor], !batch.isEmpty else { continue }
             let split = batch.firstIndex { $0.timestampNs > t } ?? batch.count

@@ -53,6 +53,35 @@ public protocol WaymarkMotionSource: AnyObject {
     func stop()
 }
 
+/// One barometer reading, in CoreMotion's units: `CMAltitudeData.timestamp` (seconds on the
+/// uptime clock) and `CMAltitudeData.pressure` (kPa). The manager converts it with
+/// `AppleSensorConversion.pressure`.
+public struct WaymarkPressureReading: Sendable, Equatable {
+    /// Seconds since boot, as `CMLogItem.timestamp`.
+    public var timestamp: TimeInterval
+    /// Air pressure, kPa.
+    public var kilopascals: Double
+
+    /// A reading at `timestamp`.
+    public init(timestamp: TimeInterval, kilopascals: Double) {
+        self.timestamp = timestamp
+        self.kilopascals = kilopascals
+    }
+}
+
+/// The barometer (`CoreMotionAltimeter` on iOS, over `CMAltimeter`). Many devices have one;
+/// one without loses only the floor changes it gives (docs/ios.md#the-barometer).
+public protocol WaymarkAltimeter: AnyObject {
+    /// Whether the device has one and the app may read it
+    /// (`CMAltimeter.isRelativeAltitudeAvailable()`, authorization not denied or restricted).
+    var isAvailable: Bool { get }
+    /// Starts updates (about one a second on iOS) and calls `handler` with each reading on
+    /// `queue` (a serial queue), in time order.
+    func start(queue: DispatchQueue, handler: @escaping (WaymarkPressureReading) -> Void)
+    /// Stops updates; no reading is delivered after it returns.
+    func stop()
+}
+
 /// The app's location authorization, as `CLAuthorizationStatus` (same raw values).
 public enum WaymarkAuthorization: Int32, Sendable {
     /// The user has not been asked yet.

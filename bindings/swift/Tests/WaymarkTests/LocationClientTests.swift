@@ -18,6 +18,7 @@ let beaconUUID = UUID(uuidString: "FDA50693-A4E2-4FB1-AFCF-C6EB07647825")!
 final class RecordingEngine: PositioningEngine, @unchecked Sendable {
     enum Call: Equatable {
         case motion(WaymarkMotionSensor, [MotionSample])
+        case pressure([PressureReading])
         case scan(RadioScan)
         case advance(UInt64)
     }
@@ -44,6 +45,11 @@ final class RecordingEngine: PositioningEngine, @unchecked Sendable {
         return try super.pushMagnetometer(batch: batch)
     }
 
+    override func pushPressure(batch: [PressureReading]) throws -> UInt32 {
+        record(.pressure(batch))
+        return try super.pushPressure(batch: batch)
+    }
+
     override func pushScan(scan: RadioScan) throws -> PositionEstimate {
         record(.scan(scan))
         return try super.pushScan(scan: scan)
@@ -60,7 +66,7 @@ final class RecordingEngine: PositioningEngine, @unchecked Sendable {
             switch $0 {
             case .scan(let s): return s.timestampNs
             case .advance(let t): return t
-            case .motion: return nil
+            case .motion, .pressure: return nil
             }
         }
     }
@@ -146,6 +152,33 @@ final class FakeMotion: WaymarkMotionSource {
 
     /// Delivers readings as CoreMotion would, on the queue given to `start`; nothing when stopped.
     func emit(_ readings: [WaymarkMotionReading]) {
+        guard let queue, let handler else { return }
+        queue.sync { readings.forEach(handler) }
+    }
+}
+
+final class FakeAltimeter: WaymarkAltimeter {
+    var isAvailable = true
+    private(set) var starts = 0
+    private(set) var stops = 0
+    private var queue: DispatchQueue?
+    private var handler: ((WaymarkPressureReading) -> Void)?
+
+    var running: Bool { handler != nil }
+
+    func start(queue: DispatchQueue, handler: @escaping (WaymarkPressureReading) -> Void) {
+        self.queue = queue
+        self.handler = handler
+        starts += 1
+    }
+
+    func stop() {
+        handler = nil
+        stops += 1
+    }
+
+    /// Delivers readings as CoreMotion would, on the queue given to `start`; nothing when stopped.
+    func emit(_ readings: [WaymarkPressureReading]) {
         guard let queue, let handler else { return }
         queue.sync { readings.forEach(handler) }
     }
@@ -239,6 +272,7 @@ final class DelegateRecorder: WaymarkLocationManagerDelegate {
 final class Harness {
     let engine: RecordingEngine
     let motion = FakeMotion()
+    let altimeter = FakeAltimeter()
     let ranger: FakeRanger
     let clock = FakeClock()
     let scheduler = FakeScheduler()
@@ -248,13 +282,14 @@ final class Harness {
 
     init(siteJson: String, request: WaymarkLocationRequest = WaymarkLocationRequest(beaconUUIDs: [beaconUUID]),
          authorization: WaymarkAuthorization = .authorizedWhenInUse, rangingAvailable: Bool = true,
-         clockStart: UInt64 = 0) throws {
+         clockStart: UInt64 = 0, barometer: Bool = true) throws {
         engine = try RecordingEngine(siteJson: siteJson, options: EngineOptions())
         ranger = FakeRanger(authorization: authorization, isRangingAvailable: rangingAvailable)
         clock.set(clockStart)
         delegateQueue.setSpecific(key: DelegateRecorder.key, value: "delegate")
         manager = try WaymarkLocationManager(
-            engine: engine, request: request, motion: motion, ranger: ranger, clock: clock,
+            engine: engine, request: request, motion: motion, ranger: ranger,
+            altimeter: barometer ? altimeter : nil, clock: clock,
             scheduler: scheduler, delegateQueue: delegateQueue)
         manager.delegate = delegate
     }
@@ -325,6 +360,7 @@ final class LocationClientTests: XCTestCase {
                 sent += batch.map(\.timestampNs)
                 motionCalls += 1
                 continue
+            case .pressure: continue
             case .scan(let scan): t = scan.timestampNs
             case .advance(let at): t = at
             }
@@ -597,6 +633,73 @@ final class LocationClientTests: XCTestCase {
     }
 
     // Missing sensors: one coded status each, the others started, degraded.
+    // The barometer's readings (kPa, about 1 Hz) reach the engine in hPa, each before the
+    // first epoch after it and none after, and stop with the manager.
+    func testTheBarometerReachesTheEngineBeforeEachEpoch() throws {
+        let walk = try walk()
+        let h = try Harness(siteJson: try beaconSiteJson())
+        h.manager.start()
+        h.settle()
+        XCTAssertTrue(h.manager.usesBarometer)
+        XCTAssertEqual(h.altimeter.starts, 1)
+        XCTAssertEqual(h.manager.state, .running)
+        var emitted: [UInt64] = []
+        var next = walk.epochs[0].timestampNs
+        for epoch in walk.epochs {
+            var readings: [WaymarkPressureReading] = []
+            while next <= epoch.timestampNs {
+                readings.append(WaymarkPressureReading(timestamp: Double(next) / 1e9, kilopascals: 100.0))
+                emitted.append(next)
+                next += 1_000_000_000
+            }
+            h.altimeter.emit(readings)
+            h.motion.emit(Harness.readings(epoch))
+            h.clock.set(epoch.timestampNs)
+            h.ranger.send(.ranged(Harness.beacons(epoch), uuid: beaconUUID))
+            h.scheduler.fire()
+        }
+        h.settle()
+        let calls = h.engine.calls
+        var sent: [PressureReading] = []
+        for call in calls {
+            switch call {
+            case .pressure(let batch): sent += batch
+            case .scan(let scan):
+                let t = scan.timestampNs
+                XCTAssertEqual(sent.filter { $0.timestampNs <= t }.count, emitted.filter { $0 <= t }.count,
+                               "pressure up to \(t) sent before its epoch")
+                XCTAssertFalse(sent.contains { $0.timestampNs > t }, "pressure after \(t) sent before its epoch")
+            default: continue
+            }
+        }
+        XCTAssertGreaterThan(emitted.count, 20)
+        XCTAssertEqual(Set(sent.map(\.hpa)), [1000.0], "kPa × 10")
+        XCTAssertEqual(try h.engine.inputStats().pressureDropped, 0)
+        h.manager.stop()
+        h.settle()
+        XCTAssertFalse(h.altimeter.running)
+        XCTAssertFalse(h.manager.usesBarometer)
+        // A reading after stop is not delivered (the fake drops it, as CoreMotion does) nor sent.
+        h.altimeter.emit([WaymarkPressureReading(timestamp: Double(next) / 1e9, kilopascals: 100.0)])
+        XCTAssertEqual(h.engine.calls.count, calls.count)
+    }
+
+    // No barometer, one the app may not read, or a request without it: nothing is degraded.
+    func testWithoutABarometerNothingIsDegraded() throws {
+        for (present, available, wanted) in [(false, true, true), (true, false, true), (true, true, false)] {
+            let h = try Harness(siteJson: try siteJson(), request: WaymarkLocationRequest(usesBarometer: wanted),
+                                barometer: present)
+            h.altimeter.isAvailable = available
+            h.manager.start()
+            h.settle()
+            XCTAssertFalse(h.manager.usesBarometer)
+            XCTAssertEqual(h.altimeter.starts, 0)
+            XCTAssertEqual(h.manager.state, .running)
+            XCTAssertEqual(h.delegate.statuses, [])
+            h.manager.stop()
+        }
+    }
+
     func testMissingMotionSensors() throws {
         let h = try Harness(siteJson: try siteJson(), request: WaymarkLocationRequest())
         h.motion.available = [.accelerometer]
