@@ -242,12 +242,12 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let run = |site: &Site,
                trace: &Trace,
                replay_options: &ReplayOptions|
-     -> Option<(Vec<Position>, Vec<TrackPoint>)> {
+     -> Option<(Vec<Position>, Vec<TrackPoint>, (f64, f64))> {
         let replay_options = &ReplayOptions { fixed_lag: true, ..*replay_options };
         let site = site.clone().with_calibration(unscaled).ok()?.with_floor_rssi_weights(&weights).ok()?;
         let mut engine = Engine::new(Arc::new(site), engine_config.clone()).ok()?;
         let r = replay(&mut engine, trace, replay_options);
-        Some((r.positions, r.fixed_lag))
+        Some((r.positions, r.fixed_lag, engine.device_offset().unwrap_or((f64::NAN, f64::NAN))))
     };
     // The rows of one walk on one site, steady and throttled.
     let survey = Survey::new(&floors, options.calibration.survey.fingerprint_radius_m);
@@ -255,15 +255,16 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         |set: &str, site: &Site, f: usize, trace: &Trace, map: &Map, left_out: Option<(usize, usize)>| {
             let mut out = Vec::new();
             for (t, opts) in [(false, &steady), (true, &throttled)] {
-                if let Some((p, fl)) = run(site, trace, opts) {
+                if let Some((p, fl, (offset, offset_sd))) = run(site, trace, opts) {
                     let lag = (&fl[..], engine_config.fixed_lag_epochs);
-                    out.extend(rows(set, t, f, trace, &p, lag, (map, &survey, left_out)));
+                    let walk = rows(set, t, f, trace, &p, lag, (map, &survey, left_out));
+                    out.extend(walk.into_iter().map(|r| format!("{r},{offset:.2},{offset_sd:.2}")));
                 }
             }
             out
         };
     println!(
-        "set,throttled,floor,walk,error_m,r68,r95,beyond_radio_m,scenario,fit,band,off_map_m,floor_ok,states_8m,lag_d,jump,k,floor_p,walks_r,scans_r,walks_4m"
+        "set,throttled,floor,walk,error_m,r68,r95,beyond_radio_m,scenario,fit,band,off_map_m,floor_ok,states_8m,lag_d,jump,k,floor_p,walks_r,scans_r,walks_4m,offset_db,offset_sd_db"
     );
     // Held out.
     let inputs = survey_inputs(&floors);
