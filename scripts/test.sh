@@ -41,8 +41,8 @@ fi
 step "Formatting (cargo fmt --check)"
 cargo fmt --all -- --check
 
-# Docs say what is true now (no dates, commit hashes or patch links in docs/), every
-# `docs/X.md#section` cited anywhere resolves, and nothing shipped links into research/.
+# Docs say what is true now (no dates, commit hashes or patch links in docs/), every docs
+# section cited anywhere resolves, and nothing shipped links into the research notes.
 step "Docs: a reference, and every cited section resolves (scripts/check-docs.py)"
 python3 scripts/check-docs.py
 
