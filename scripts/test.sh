@@ -41,6 +41,11 @@ fi
 step "Formatting (cargo fmt --check)"
 cargo fmt --all -- --check
 
+# Docs say what is true now (no dates, commit hashes or patch links in docs/), every docs
+# section cited anywhere resolves, and nothing shipped links into the research notes.
+step "Docs: a reference, and every cited section resolves (scripts/check-docs.py)"
+python3 scripts/check-docs.py
+
 # Lints, docs and tests leave out crates/uniffi-bindgen, one line that calls uniffi's own
 # main: checking it means checking uniffi_bindgen, the longest unit of each of those builds
 # (about 2 minutes each, docs/testing.md#how-long-it-takes). The Kotlin and Swift steps build
@@ -75,6 +80,11 @@ tools_ready() {
     wait "$1" || { cat "$2" >&2; echo "test.sh: making the tools failed (above)" >&2; exit 1; }
 }
 cargo run --release -p waymark-cli --locked --quiet -- demo --json --walks 20
+
+# docs/results.md is generated from the committed JSON in docs/results/; a page that differs
+# from what the JSON makes fails here, with the command that regenerates it.
+step "docs/results.md is what docs/results/*.json makes (waymark results --check)"
+cargo run --release -p waymark-cli --locked --quiet -- results --check docs/results.md docs/results/*.json
 
 step "C ABI: header freshness, shared and static library under valgrind"
 run bash bindings/c/test.sh

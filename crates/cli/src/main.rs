@@ -5,6 +5,7 @@ mod bench;
 mod benchmark;
 mod hmm;
 mod real;
+mod results;
 mod route;
 mod view;
 
@@ -46,6 +47,9 @@ enum Command {
     /// evaluated as `eval` does, a table per row and the mean over buildings; with
     /// `--baseline`, whether a change is kept (docs/benchmark.md).
     Benchmark(benchmark::BenchmarkArgs),
+    /// `docs/results.md` from the committed JSON in `docs/results/` (`--check FILE`: fail when
+    /// FILE is not what the JSON makes).
+    Results(results::ResultsArgs),
     /// Speed and memory at building scale (1 000 to 50 000 states), as one JSON object.
     Bench(bench::BenchArgs),
     /// Site files: pack into the binary encoding apps ship (`site pack`) and back to JSON
@@ -193,6 +197,7 @@ fn main() -> ExitCode {
         Command::Eval(args) => real::eval(&args),
         Command::Bench(args) => bench::bench(&args),
         Command::Benchmark(args) => benchmark::benchmark(&args),
+        Command::Results(args) => results::run(&args),
         Command::Site(args) => real::site(&args),
         Command::Hmm(args) => hmm::hmm(&args),
         Command::View(args) => view::view(&args),

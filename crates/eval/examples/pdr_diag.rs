@@ -5,7 +5,6 @@
 //!
 //! ```text
 //! cargo run --release -p waymark-eval --example pdr_diag -- target/ilc/site1/{B1,F1,F2,F3,F4}/path_data_files > /tmp/diag.tsv
-//! python3 examples/pdr_diag.py /tmp/diag.tsv
 //! ```
 //!
 //! `walk` rows: waypoint path `L` (m), waypoints `nwp`, span `T` (s), steps inside `N` and in

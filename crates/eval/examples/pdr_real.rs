@@ -6,7 +6,7 @@
 //! cargo run --release -p waymark-eval --example pdr_real -- site1/B1/path_data_files site1/F1/path_data_files ...
 //! ```
 //!
-//! The figures on the competition's site 1: `docs/results.md#pdr-on-real-walks`.
+//! The figures on the competition's site 1: `docs/tuning.md#step-detector`.
 //!
 //! `WAYMARK_MOTION_CONFIG` may hold a `MotionConfig` as JSON (missing fields at their
 //! defaults) to try other tracker settings.

@@ -42,7 +42,7 @@
 //! - **Score**: the forward algorithm's room accuracy (the most probable state of the filtered
 //!   posterior, §III-B) on held-out walks, the same for every row and curve.
 //!
-//! What it shows: `docs/results.md#baum-welch-experiment`.
+//! What it shows: `docs/tuning.md#baum-welch-experiment`; the curves: `waymark simulate --experiment baum-welch`.
 
 use nalgebra::{Matrix2, Matrix3, Point2, Vector2, Vector3};
 use rand::rngs::ChaCha8Rng;

@@ -40,7 +40,7 @@
 //! that a reference better than the normal error at some epoch does not hold back a run that
 //! is within it. The rule's own noise: a reference is one undisturbed history among many; the
 //! outage's reference is the same run with radio, so there the comparison is exact. Figures:
-//! `docs/tuning.md#recovery-rule`, `docs/results.md#recovery`.
+//! `docs/tuning.md#recovery-rule`; the runs: `waymark simulate --experiment recovery`.
 //!
 //! The first rule's figures on the disturbed runs, the references, the twins and the fresh
 //! engines are reported alongside (`tolerance_recovery` and the like).

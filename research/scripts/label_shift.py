@@ -4,10 +4,10 @@ RMS residual of its WiFi readings (last seen at most 2 s before their scan, plac
 last-seen time) against the mean of the survey walks' readings of the same access point within
 3 m of the labelled position, the walk itself left out. The same with the walk's labels shifted
 in time by -20 to +20 s, every 2 s: a third whose residual falls far at a shift of many seconds
-was heard where its labels put it that many seconds later or earlier (docs/tuning.md
+was heard where its labels put it that many seconds later or earlier (research/tuning-history.md
 #where-the-error-is).
 
-    python3 crates/eval/examples/label_shift.py target/ilc/site1/{B1,F1,F2,F3,F4} > shifts.txt
+    python3 research/scripts/label_shift.py target/ilc/site1/{B1,F1,F2,F3,F4} > shifts.txt
 
 One line per walk: floor, `test` or `survey`, the walk's name, then per third the residual
 unshifted, the least residual, and the shift that gives it in seconds (`nan nan 0` for a third

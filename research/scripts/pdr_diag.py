@@ -3,7 +3,7 @@
 product). Every section prints the figure quoted in the diagnosis of the PDR distance error.
 
     cargo run --release -p waymark-eval --example pdr_diag -- .../site1/{B1,F1,F2,F3,F4}/path_data_files > /tmp/diag.tsv
-    python3 examples/pdr_diag.py /tmp/diag.tsv
+    python3 research/scripts/pdr_diag.py /tmp/diag.tsv
 
 Model choices are made on SURVEY walks only; TEST walks are only scored.
 """

@@ -1,8 +1,8 @@
 #!/usr/bin/env python3
 """How alike two transmitters' readings are, by kind of pair: the measurement behind the
-survey's shared-radio rule (docs/tuning.md#shared-radios).
+survey's shared-radio rule (research/tuning-history.md#shared-radios).
 
-    python3 crates/eval/examples/shared_radios.py target/ilc/site1/{B1,F1,F2,F3,F4}
+    python3 research/scripts/shared_radios.py target/ilc/site1/{B1,F1,F2,F3,F4}
 
 Survey walks only (the data README's split: the file at index i of a floor's sorted walks is a
 test walk when i % 5 == 4), readings at most 2 s older than their scan. Per pair of BSSIDs heard

@@ -5,9 +5,9 @@ between waypoints), pooled by the walk's index modulo 5 in the sorted file list 
 walks). A survey walk held out by the calibration is scored against the other survey walks,
 a test walk against all of them; walks recorded one after another often cover the same
 stretch, so the split's rule decides what a held-out walk has left to be compared with
-(docs/tuning.md#radius-factors).
+(research/tuning-history.md#radius-factors).
 
-    python3 crates/eval/examples/walk_coverage.py target/ilc/site1/{B1,F1,F2,F3,F4}
+    python3 research/scripts/walk_coverage.py target/ilc/site1/{B1,F1,F2,F3,F4}
 
 Standard library only.
 """

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Whether a fingerprint should depend on the way the walker faces (docs/tuning.md#where-the-error-is):
+"""Whether a fingerprint should depend on the way the walker faces (research/tuning-history.md#where-the-error-is):
 each test walk's WiFi readings against the mean of 3 survey readings of the same access point
 within 3 m taken walking the same way (within 45 degrees), 3 taken walking the opposite way, and
 all 6 together, where a reading has both (positions and directions from the waypoints, segments

@@ -1,8 +1,8 @@
 """Candidate rules for the radius factors, fitted on the held-out rows of `radius_diag` and
-checked on its test rows (docs/tuning.md#radius-factors).
+checked on its test rows (research/tuning-history.md#radius-factors).
 
     cargo run --release -p waymark-eval --example radius_diag -- target/ilc/site1/F3 > F3.csv
-    python3 crates/eval/examples/radius_diag.py F3.csv
+    python3 research/scripts/radius_diag.py F3.csv
 
 Each rule fits (68%, 95%) factors as the calibration does, the 68th and 95th percentiles of
 (error - beyond_radio_m) / radius over the held-out epochs it selects (the kept rule: the 68th
