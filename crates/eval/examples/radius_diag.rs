@@ -239,10 +239,9 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let engine_config = options.calibration.engine.clone();
     let steady = options.calibration.calibration_replay();
     let throttled = options.calibration.throttled_replay();
-    let run = |site: &Site,
-               trace: &Trace,
-               replay_options: &ReplayOptions|
-     -> Option<(Vec<Position>, Vec<TrackPoint>, (f64, f64))> {
+    // A walk's live positions, fixed-lag track and the device offset (mean, SD in dB) it ends with.
+    type WalkRun = (Vec<Position>, Vec<TrackPoint>, (f64, f64));
+    let run = |site: &Site, trace: &Trace, replay_options: &ReplayOptions| -> Option<WalkRun> {
         let replay_options = &ReplayOptions { fixed_lag: true, ..*replay_options };
         let site = site.clone().with_calibration(unscaled).ok()?.with_floor_rssi_weights(&weights).ok()?;
         let mut engine = Engine::new(Arc::new(site), engine_config.clone()).ok()?;
