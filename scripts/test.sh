@@ -60,6 +60,19 @@ step "API docs of the whole workspace, warnings denied"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --exclude uniffi-bindgen --no-deps --locked --quiet
 
 step "Rust tests (unit, integration, property, doc)"
+# Real-data tests skip without the data, and fail without it where it is expected: CI sets
+# WAYMARK_REQUIRE_DATA=1 (.ci/run), and so does this script when it finds a data folder
+# (WAYMARK_DATA, or data/ in a folder beside the checkout, docs/testing.md#real-data).
+if [[ -z ${WAYMARK_REQUIRE_DATA:-} ]]; then
+    if [[ -n ${WAYMARK_DATA:-} ]] || compgen -G "../*/data/ilc20-site1" > /dev/null; then
+        export WAYMARK_REQUIRE_DATA=1
+    fi
+fi
+if [[ -n ${WAYMARK_REQUIRE_DATA:-} ]]; then
+    echo "real-data tests: the data is required (WAYMARK_REQUIRE_DATA=$WAYMARK_REQUIRE_DATA)"
+else
+    echo "real-data tests: no data folder found, they skip"
+fi
 run cargo test --workspace --exclude uniffi-bindgen --all-features --locked
 
 step "The library on the declared MSRV and the mobile targets (checked: no NDK or Xcode here)"

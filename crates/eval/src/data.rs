@@ -27,6 +27,19 @@ pub fn ipin2023_t3(workspace: &Path) -> Option<PathBuf> {
     unpack(workspace, Path::new("ipin2023-t3/ipin2023-t3.tar.xz"), "target/ipin").then_some(unpacked)
 }
 
+/// What a real-data test does with the data it looked for: `found`, or `None` to skip, except
+/// where the test command expects the data (`WAYMARK_REQUIRE_DATA=1`, which CI sets,
+/// docs/testing.md#real-data): there a missing data set fails the test instead of passing it
+/// unseen.
+pub fn or_skip<T>(found: Option<T>) -> Option<T> {
+    let required = std::env::var("WAYMARK_REQUIRE_DATA").is_ok_and(|v| !v.is_empty() && v != "0");
+    assert!(
+        found.is_some() || !required,
+        "WAYMARK_REQUIRE_DATA is set but the real data is missing (the reason is above; docs/testing.md#real-data)"
+    );
+    found
+}
+
 /// Unpacks the data archive `relative` into `<workspace>/<into>`; false, saying why on stderr,
 /// when it is not found or cannot be unpacked.
 fn unpack(workspace: &Path, relative: &Path, into: &str) -> bool {

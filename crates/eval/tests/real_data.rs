@@ -12,7 +12,10 @@ use waymark_survey::replay::{replay_observed, Call, ReplayOptions};
 /// F1 unpacked under `target/`, or `None` (with a message) without the data.
 fn floor_dir() -> Option<PathBuf> {
     // The workspace root, two levels above this crate.
-    waymark_eval::data::site1_floor(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."), "F1")
+    waymark_eval::data::or_skip(waymark_eval::data::site1_floor(
+        &Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."),
+        "F1",
+    ))
 }
 
 #[test]
@@ -240,11 +243,12 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
 #[test]
 fn a_two_floor_slice_calibrates_its_floor_probability() {
     let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let Some(dirs) = ["B1", "F1"]
-        .iter()
-        .map(|f| waymark_eval::data::site1_floor(&workspace, f))
-        .collect::<Option<Vec<_>>>()
-    else {
+    let Some(dirs) = waymark_eval::data::or_skip(
+        ["B1", "F1"]
+            .iter()
+            .map(|f| waymark_eval::data::site1_floor(&workspace, f))
+            .collect::<Option<Vec<_>>>(),
+    ) else {
         return;
     };
     let floors: Vec<FloorData> =
@@ -313,7 +317,7 @@ fn a_real_floor_plan_draws_under_a_walk() {
 #[test]
 fn the_museum_reads_as_two_phones_three_floors_and_one_frame() {
     let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
-    let Some(dir) = waymark_eval::data::ipin2023_t3(&workspace) else { return };
+    let Some(dir) = waymark_eval::data::or_skip(waymark_eval::data::ipin2023_t3(&workspace)) else { return };
     let walks = |floors: &[FloorData]| floors.iter().map(|f| f.survey.len() + f.test.len()).sum::<usize>();
     // Every walk surveys: 50 logfiles, two of them changing floors. Trial 51 goes
     // 0, -1, -2, -1, 0, -1, -2, -1, 0 and trial 52 0, -2, 0, -2, 0; their stays of two points
