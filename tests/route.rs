@@ -8,8 +8,10 @@ use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::sync::{Arc, OnceLock};
-use waymark::route::{Destination, FloorPoint, Route, RouteError, RouteTracker, SIGMA_PER_ACCURACY_68};
-use waymark::site::{ReachTable, Site, SiteBuilder};
+use waymark_engine::route::{
+    Destination, FloorPoint, Route, RouteError, RouteTracker, SIGMA_PER_ACCURACY_68,
+};
+use waymark_engine::site::{ReachTable, Site, SiteBuilder};
 use waymark_sim::{Office, OfficeConfig};
 
 fn office() -> &'static Office {
@@ -325,7 +327,7 @@ fn a_noisy_walk_along_the_route_stays_on_it_and_a_detour_leaves_it() {
 /// The uniffi surface: `Site.route`, `RouteTracker`, typed errors, from Rust.
 #[test]
 fn the_uniffi_surface_routes_and_tracks() {
-    use waymark::ffi::uniffi as api;
+    use waymark as api;
     let site = Arc::new(api::Site::from_bytes(two_floors().to_json().into_bytes()).unwrap());
     let from = api::FloorPoint { floor: 0, x: 4.9, y: 2.0 };
     let to = api::Destination::Zone { name: "upstairs room 10".into() };

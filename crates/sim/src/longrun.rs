@@ -4,7 +4,7 @@
 //! A [`SessionGenerator`] makes the day one activity at a time (walks with stops, the phone on
 //! a table); a [`Feeder`] pushes accelerometer, gyroscope and magnetometer samples in batches
 //! of 50 up to each epoch; a WiFi scan comes every 2 s. The same input goes, in lockstep, to
-//! the FFI's [`PositioningEngine`](waymark::ffi::uniffi::PositioningEngine) (what Kotlin and
+//! the FFI's [`PositioningEngine`](waymark::PositioningEngine) (what Kotlin and
 //! Swift apps hold, with a subscribed listener) and to a core [`Engine`], which exposes the counters and memory accounting the FFI does not; their
 //! positions must agree exactly. Every report interval (an hour by default) the process's
 //! resident memory (`VmRSS`, `VmHWM` from `/proc/self/status`), the engine's accounted track
@@ -18,15 +18,15 @@ use serde::Serialize;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-use waymark::ffi::uniffi as ffi;
-use waymark::hmm::ViterbiWindow;
-use waymark::hmm::STEP_BYTES_PER_STATE;
-use waymark::radio::{Scan, TransmitterId};
-use waymark::sensors::{MotionStats, SensorSample};
-use waymark::site::{Site, PSEUDO_SPACING_M};
-use waymark::Engine;
-use waymark::EngineConfig;
-use waymark::Error;
+use waymark as ffi;
+use waymark_engine::hmm::ViterbiWindow;
+use waymark_engine::hmm::STEP_BYTES_PER_STATE;
+use waymark_engine::radio::{Scan, TransmitterId};
+use waymark_engine::sensors::{MotionStats, SensorSample};
+use waymark_engine::site::{Site, PSEUDO_SPACING_M};
+use waymark_engine::Engine;
+use waymark_engine::EngineConfig;
+use waymark_engine::Error;
 
 /// One scan every 2 s: an unthrottled Android phone, the same as the replay's timer
 /// ([`ReplayOptions::timer_ns`](waymark_survey::replay::ReplayOptions::timer_ns),
@@ -67,7 +67,8 @@ impl Default for LongRunConfig {
     }
 }
 
-/// Counters of the engine's input, as [`waymark::InputStats`] plus the motion tracker's drops.
+/// Counters of the engine's input, as [`waymark_engine::InputStats`] plus the motion
+/// tracker's drops.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct InputCounts {
     /// Scans that made an epoch.
