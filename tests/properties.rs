@@ -210,6 +210,20 @@ fn delta() -> impl Strategy<Value = u64> {
     ]
 }
 
+/// The times a test build panics at on purpose (feature `fault-injection`): a scan at
+/// `waymark::FAULT_INJECTION_TIMESTAMP_NS`, an epoch at
+/// `waymark_engine::FAULT_INJECTION_MID_EPOCH_NS`. Those constants exist only with the
+/// feature; without it these are times like any other near the top of the range.
+const INJECTED_SCAN_NS: u64 = u64::MAX - 7;
+const INJECTED_MID_EPOCH_NS: u64 = waymark_engine::sensors::MAX_TIMESTAMP_NS - 8;
+
+#[cfg(feature = "fault-injection")]
+#[test]
+fn the_injected_times_are_the_features() {
+    assert_eq!(INJECTED_SCAN_NS, waymark::FAULT_INJECTION_TIMESTAMP_NS);
+    assert_eq!(INJECTED_MID_EPOCH_NS, waymark_engine::FAULT_INJECTION_MID_EPOCH_NS);
+}
+
 fn when() -> impl Strategy<Value = When> {
     prop_oneof![
         12 => delta().prop_map(When::After),
@@ -219,8 +233,8 @@ fn when() -> impl Strategy<Value = When> {
             Just(0u64),
             Just(u64::MAX),
             Just(u64::MAX - 1),
-            Just(waymark::FAULT_INJECTION_TIMESTAMP_NS),
-            Just(waymark_engine::FAULT_INJECTION_MID_EPOCH_NS),
+            Just(INJECTED_SCAN_NS),
+            Just(INJECTED_MID_EPOCH_NS),
             any::<u64>(),
         ]
         .prop_map(When::At),
@@ -747,7 +761,7 @@ fn run_core(
             Some((t, _, Err(Panicked))) => {
                 // The injected panic half-way through an epoch: undone, counters included.
                 prop_assert!(
-                    cfg!(feature = "fault-injection") && t == waymark_engine::FAULT_INJECTION_MID_EPOCH_NS,
+                    cfg!(feature = "fault-injection") && t == INJECTED_MID_EPOCH_NS,
                     "call {} ({:?} at {}) panicked",
                     n,
                     call,
@@ -1023,8 +1037,7 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                 // The injected panics: before a scan reaches the engine, or half-way through an
                 // epoch (which the engine undoes).
                 let injected = cfg!(feature = "fault-injection")
-                    && ((kind == Kind::Scan && t == waymark::FAULT_INJECTION_TIMESTAMP_NS)
-                        || t == waymark_engine::FAULT_INJECTION_MID_EPOCH_NS);
+                    && ((kind == Kind::Scan && t == INJECTED_SCAN_NS) || t == INJECTED_MID_EPOCH_NS);
                 match &e {
                     PositioningError::InputRejected { .. } => {}
                     PositioningError::Internal { .. } if injected => {}

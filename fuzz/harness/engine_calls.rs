@@ -176,13 +176,19 @@ impl Clock {
     }
 }
 
-/// With the `fault-injection` feature (`cargo test --all-features`) a scan at
-/// `FAULT_INJECTION_TIMESTAMP_NS` panics inside the FFI engine on purpose, and an epoch at
-/// `FAULT_INJECTION_MID_EPOCH_NS` inside either engine: the harness never makes one.
+/// The times a test build (feature `fault-injection`, `cargo test --all-features`) panics at
+/// on purpose: a scan at `u64::MAX - 7` inside the FFI engine
+/// (`waymark::FAULT_INJECTION_TIMESTAMP_NS`) and an epoch at `MAX_TIMESTAMP_NS - 8` inside
+/// either engine (`waymark_engine::FAULT_INJECTION_MID_EPOCH_NS`). Those constants exist only
+/// with the feature (`tests/fuzz_corpus.rs` checks these against them); the harness never
+/// makes either time, with the feature or without.
+pub const INJECTED_SCAN_NS: u64 = u64::MAX - 7;
+/// See [`INJECTED_SCAN_NS`].
+pub const INJECTED_MID_EPOCH_NS: u64 = waymark_engine::sensors::MAX_TIMESTAMP_NS - 8;
+
 fn not_fault_injection(t: u64) -> u64 {
-    let mid = waymark_engine::FAULT_INJECTION_MID_EPOCH_NS;
-    if t == ffi::FAULT_INJECTION_TIMESTAMP_NS || t == mid {
-        mid - 1
+    if t == INJECTED_SCAN_NS || t == INJECTED_MID_EPOCH_NS {
+        INJECTED_MID_EPOCH_NS - 1
     } else {
         t
     }

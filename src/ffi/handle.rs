@@ -108,21 +108,16 @@ impl Options {
     }
 }
 
-/// With the `fault-injection` feature (test builds only), a scan at this timestamp panics
-/// inside the engine call, to show that a panic comes out as an error, not an abort.
+/// A scan at this timestamp panics inside the engine call, to show that a panic comes out as
+/// an error, not an abort. Only with the `fault-injection` feature (test builds).
+#[cfg(feature = "fault-injection")]
 pub const FAULT_INJECTION_TIMESTAMP_NS: u64 = u64::MAX - 7;
 
-/// With the `fault-injection` feature (test builds only), importing this text as a habit
-/// model panics inside the engine call, half-way through a change the engine cannot undo: the
-/// engine is left unusable, so every later call fails with `Internal`.
+/// Importing this text as a habit model panics inside the engine call, half-way through a
+/// change the engine cannot undo: the engine is left unusable, so every later call fails with
+/// `Internal`. Only with the `fault-injection` feature (test builds).
+#[cfg(feature = "fault-injection")]
 pub const FAULT_INJECTION_HABITS_JSON: &str = "waymark fault injection";
-
-/// Panics on the magic timestamp in test builds; nothing otherwise.
-fn fault_injection(timestamp_ns: u64) {
-    if cfg!(feature = "fault-injection") && timestamp_ns == FAULT_INJECTION_TIMESTAMP_NS {
-        panic!("fault injected at timestamp {timestamp_ns}");
-    }
-}
 
 /// A thread-safe engine with its app's listeners `L`.
 pub(crate) struct Handle<L> {
@@ -267,7 +262,8 @@ impl<L: Listeners> Handle<L> {
     /// Replaces the engine's habits by the model `json`.
     pub(crate) fn import_habits(&self, json: &str) -> Result<(), PositioningError> {
         self.call(|engine| {
-            if cfg!(feature = "fault-injection") && json == FAULT_INJECTION_HABITS_JSON {
+            #[cfg(feature = "fault-injection")]
+            if json == FAULT_INJECTION_HABITS_JSON {
                 engine.clear_habits();
                 panic!("fault injected half-way through importing habits");
             }
@@ -280,7 +276,10 @@ impl<L: Listeners> Handle<L> {
     pub(crate) fn push_scan(&self, scan: &Scan) -> Result<Position, PositioningError> {
         let events = Arc::clone(&self.events);
         self.epoch(|engine| {
-            fault_injection(scan.timestamp_ns);
+            #[cfg(feature = "fault-injection")]
+            if scan.timestamp_ns == FAULT_INJECTION_TIMESTAMP_NS {
+                panic!("fault injected at timestamp {}", scan.timestamp_ns);
+            }
             let result = engine.push_scan(scan);
             if let Err(waymark_engine::InputError::NoKnownTransmitter { .. }) = result {
                 events.stage(Event::Status(Status::NoSiteCoverage { timestamp_ns: scan.timestamp_ns }));

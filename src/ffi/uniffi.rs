@@ -9,6 +9,7 @@ mod records;
 mod route;
 
 pub use super::error::{ErrorCode, ErrorReport, PositioningError};
+#[cfg(feature = "fault-injection")]
 pub use super::handle::{FAULT_INJECTION_HABITS_JSON, FAULT_INJECTION_TIMESTAMP_NS};
 pub use geofence::{Geofence, GeofenceShape, SitePoint};
 pub use recorder::*;

@@ -34,9 +34,11 @@ pub mod site;
 pub use config::{
     EngineConfig, HipeConfig, HoangConfig, TransitionModel, ZoneHysteresis, DEFAULT_ESTIMATE_STATES,
 };
+#[cfg(feature = "fault-injection")]
+pub use engine::FAULT_INJECTION_MID_EPOCH_NS;
 pub use engine::{
     Engine, EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent,
-    TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,
+    TrackPoint, MAX_RSSI_DBM,
 };
 pub use error::{Error, InputError};
 pub use fix::PositionFix;
