@@ -1,6 +1,7 @@
 //! `waymark`: the command-line tool for the engineer who surveys a building and measures
 //! accuracy. `waymark demo` runs the engine on a built-in simulated office.
 
+mod app_engine;
 mod bench;
 mod benchmark;
 mod hmm;
@@ -537,7 +538,7 @@ fn long_run(args: &SimulateArgs) -> ExitCode {
         println!("  (mean error while walking / standing / on a table in brackets)");
     }
     let json = args.json;
-    let result = longrun::run(&config, |i| {
+    let result = longrun::run(&config, app_engine::ffi_engine, |i| {
         if !json {
             println!(
                 "  {:>6.2} {:>7.1} {:>8} {:>8} {:>9} {:>6} {:>6} {:>9} {:>7.2} {:>7.2} {:>5.0}% {:>5.0}% {:>8} {:>7} {:>8}",
