@@ -20,9 +20,9 @@ import sys
 
 ROOT = pathlib.Path(__file__).resolve().parent.parent
 # Where code and docs live; research/ is read for its links only.
-SHIPPED = ["src", "crates", "tests", "bindings", "android", "ios", "benches", "examples",
-           "fuzz", "scripts", "docs", "README.md", "ARCHITECTURE.md", "CHANGELOG.md",
-           "Cargo.toml", "cbindgen.toml", "uniffi.toml"]
+SHIPPED = ["src", "crates", "tests", "bindings", "android", "ios", "fuzz", "scripts", "docs",
+           "README.md", "ARCHITECTURE.md", "CHANGELOG.md", "Cargo.toml", "cbindgen.toml",
+           "uniffi.toml"]
 TEXT = {".rs", ".md", ".kt", ".kts", ".swift", ".h", ".c", ".sh", ".py", ".toml", ".gradle",
         ".json", ".html", ".js", ".yml", ".yaml", ".txt"}
 SKIP = {"target", "build", ".gradle", "node_modules", ".git"}

@@ -1,6 +1,7 @@
 #!/usr/bin/env bash
 # Checks that the Waymark library makes no network calls, three ways:
-#   1. its source names no networking API (std::net, sockets);
+#   1. its source (the SDK library's src/ and the engine's crates/engine/src/) names no
+#      networking API (std::net, sockets);
 #   2. the library's dependency tree, as shipped (no features, every target, Android too),
 #      holds no networking crate;
 #   3. the shared library imports no socket or name-resolution function from libc
@@ -16,8 +17,8 @@ cd "$repo"
 target=${CARGO_TARGET_DIR:-$repo/target}
 status=0
 
-echo "-- 1. no networking API in src/"
-if grep -rnE 'std::net\b|\bTcpStream\b|\bTcpListener\b|\bUdpSocket\b|\bToSocketAddrs\b|\bUnix(Stream|Listener|Datagram)\b' src/; then
+echo "-- 1. no networking API in src/ and crates/engine/src/"
+if grep -rnE 'std::net\b|\bTcpStream\b|\bTcpListener\b|\bUdpSocket\b|\bToSocketAddrs\b|\bUnix(Stream|Listener|Datagram)\b' src/ crates/engine/src/; then
     echo "check-no-network: the source above names a networking API" >&2
     status=1
 fi
@@ -40,7 +41,7 @@ fi
 echo "-- 3. no socket or resolver function imported by the shared library"
 libs=("$@")
 if [ ${#libs[@]} -eq 0 ]; then
-    cargo build --locked --release --lib --quiet
+    cargo build --locked --release -p waymark --lib --quiet
     libs=("$target/release/libwaymark.so")
 fi
 network_symbols='^(socket|socketpair|connect|bind|listen|accept|accept4|send|sendto|sendmsg|sendmmsg|recv|recvfrom|recvmsg|recvmmsg|shutdown|setsockopt|getsockopt|getpeername|getsockname|getaddrinfo|getnameinfo|freeaddrinfo|gethostbyname|gethostbyname2|gethostbyname_r|gethostbyaddr|res_init|res_query|res_search|__res_init|inet_pton|inet_aton|curl_.*|SSL_.*)$'

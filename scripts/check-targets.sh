@@ -1,5 +1,6 @@
 #!/usr/bin/env bash
-# The shipped library on what it promises beyond this machine's toolchain:
+# The shipped library (package `waymark`, and with it the engine crate it is built on) on what
+# it promises beyond this machine's toolchain:
 # - a build on the declared MSRV (Cargo.toml `rust-version`), so an app team on an older
 #   stable toolchain can build it;
 # - `cargo check` for Android (aarch64-linux-android) and iOS (aarch64-apple-ios). Linking for

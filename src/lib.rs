@@ -1,46 +1,17 @@
-#![doc = include_str!("../README.md")]
+//! Waymark's SDK library, the one mobile apps link: the engine of the `waymark-engine` crate
+//! behind uniffi for Kotlin and Swift (`libwaymark.so`, `.a`, namespace `waymark`) and behind
+//! a C ABI (the header `bindings/c/waymark.h`). The README says how to embed it per platform.
+//!
+//! From Rust, this crate is the API Kotlin and Swift see: the [`PositioningEngine`] object
+//! with its listeners, the shared [`Site`], the records, routes, the survey recorder, errors
+//! and logging. A Rust app uses the engine directly: depend on `waymark-engine`. The C
+//! functions are the library's exported symbols, not a Rust API.
 #![deny(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
-// The engine and what an app hands it and gets back: private modules, their types re-exported
-// below.
-mod config;
-mod engine;
-mod error;
-mod fix;
-mod history;
+mod ffi;
 
-// The building blocks under the engine, public for Rust apps and for the tools that build site
-// files: the site model and its file formats, radio fingerprints, the motion pipeline, the HMM,
-// habit models, routes on the walkable graph, the survey recorder, and the binding surface
-// Kotlin, Swift and C see.
-pub mod ffi;
-pub mod geofence;
-pub mod habits;
-pub mod hmm;
-pub mod radio;
-pub mod recorder;
-pub mod route;
-pub mod sensors;
-pub mod site;
-
-pub use config::{
-    EngineConfig, HipeConfig, HoangConfig, TransitionModel, ZoneHysteresis, DEFAULT_ESTIMATE_STATES,
-};
-pub use engine::{
-    Engine, EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent,
-    TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM,
-};
-pub use error::{Error, InputError};
-pub use fix::PositionFix;
-pub use geofence::{Geofence, GeofenceError, GeofenceShape};
-pub use history::{EpochInput, EpochRecord};
-pub use radio::{Reading, Salt, Scan, TransmitterId};
-pub use recorder::{RecorderError, RecorderOptions, RecordingStats, SurveyRecorder};
-pub use route::{Destination, FloorPoint, Progress, Route, RouteError, RouteTracker};
-pub use site::{Site, SiteError, Zone, ZoneKind};
-
-/// Nanoseconds in a millisecond: the FFIs and site files give ages in ms, the engine keeps ns.
-pub(crate) const NS_PER_MS: u64 = 1_000_000;
+pub use ffi::logging::{init_logging, LogLevel, LogSink, MAX_HELD_RECORDS};
+pub use ffi::uniffi::*;
 
 uniffi::setup_scaffolding!();

@@ -8,12 +8,12 @@ use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
 use std::sync::mpsc;
 use std::sync::{Arc, Barrier, LazyLock, Mutex, Weak};
 use std::time::{Duration, Instant};
-use waymark::ffi::uniffi::{
+use waymark::{
     EngineOptions, ErrorReport, MotionSample, PositionEstimate, PositionListener, PositioningEngine,
     PositioningError, RadioScan, StatusUpdate, Subscription, TrackPoint, WifiReading,
 };
-use waymark::sensors::SensorSample;
-use waymark::TransmitterId;
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::TransmitterId;
 use waymark_sim::{imu, Office, OfficeConfig, EPOCH_NS};
 
 /// How long the hammer runs.

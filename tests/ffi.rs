@@ -4,11 +4,11 @@
 
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
-use waymark::ffi::uniffi::{
+use waymark::{
     BeaconReading, EngineOptions, ErrorReport, FixError, MotionSample, PositionEstimate, PositionFix,
     PositionListener, PositioningEngine, PositioningError, RadioScan, StatusUpdate, WifiReading,
 };
-use waymark::radio::TransmitterId;
+use waymark_engine::radio::TransmitterId;
 use waymark_sim::{imu, Office, OfficeConfig};
 
 #[derive(Default)]
@@ -49,13 +49,13 @@ impl PositionListener for Failing {
     }
 }
 
-fn to_ffi(batch: &[waymark::sensors::SensorSample]) -> Vec<MotionSample> {
+fn to_ffi(batch: &[waymark_engine::sensors::SensorSample]) -> Vec<MotionSample> {
     batch.iter().map(|s| MotionSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z }).collect()
 }
 
 /// Pushes the IMU samples after `from` up to `to`, ns, as an app's batches.
 fn push_imu(engine: &PositioningEngine, trace: &imu::ImuTrace, from: u64, to: u64) {
-    let batch = |v: &[waymark::sensors::SensorSample]| {
+    let batch = |v: &[waymark_engine::sensors::SensorSample]| {
         to_ffi(&v[v.partition_point(|s| s.timestamp_ns <= from)..v.partition_point(|s| s.timestamp_ns <= to)])
     };
     engine.push_accelerometer(batch(&trace.accelerometer)).unwrap();
@@ -63,7 +63,7 @@ fn push_imu(engine: &PositioningEngine, trace: &imu::ImuTrace, from: u64, to: u6
     engine.push_magnetometer(batch(&trace.magnetometer)).unwrap();
 }
 
-fn scan(s: &waymark::Scan) -> RadioScan {
+fn scan(s: &waymark_engine::Scan) -> RadioScan {
     let wifi = s
         .readings
         .iter()
@@ -174,7 +174,7 @@ fn errors_are_typed() {
 fn the_sites_reading_age_limit_applies_through_the_ffi() {
     let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
     let reading = |age_ms| WifiReading { bssid: "02:00:00:00:00:00".into(), rssi_dbm: -60.0, age_ms };
-    let stale_counted = |site: &waymark::Site| {
+    let stale_counted = |site: &waymark_engine::Site| {
         let engine = PositioningEngine::new(site.to_json(), EngineOptions::default()).unwrap();
         let scan = RadioScan { timestamp_ns: 10, wifi: vec![reading(0), reading(5_000)], beacons: vec![] };
         // The same transmitter twice: the fresh reading is kept, the old one is stale or a
@@ -193,7 +193,7 @@ fn the_sites_reading_age_limit_applies_through_the_ffi() {
 fn a_hashed_site_needs_its_salt() {
     let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
     let salt: Vec<u8> = (0u8..32).collect();
-    let hashed = office.site.hashed(&waymark::Salt::new(salt.clone()).unwrap()).unwrap().to_json();
+    let hashed = office.site.hashed(&waymark_engine::Salt::new(salt.clone()).unwrap()).unwrap().to_json();
     let with = |site_salt: Option<Vec<u8>>| EngineOptions { site_salt, ..EngineOptions::default() };
     let engine = PositioningEngine::new(hashed.clone(), with(Some(salt.clone()))).unwrap();
     let walk = office.walk(5, 20.0);
@@ -257,7 +257,7 @@ fn eight_threads_at_once() {
 #[cfg(feature = "fault-injection")]
 #[test]
 fn an_injected_panic_is_an_error_and_the_engine_goes_on() {
-    use waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS;
+    use waymark::FAULT_INJECTION_TIMESTAMP_NS;
     let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
     let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
     let wifi = vec![WifiReading { bssid: "02:00:00:00:00:00".into(), rssi_dbm: -60.0, age_ms: 0 }];
@@ -313,7 +313,7 @@ fn beacons_known_by_address_only() {
 
 #[test]
 fn log_records_reach_the_sink() {
-    use waymark::ffi::logging::{init_logging, LogLevel, LogSink};
+    use waymark::{init_logging, LogLevel, LogSink};
     #[derive(Default)]
     struct Sink(Mutex<Vec<String>>);
     impl LogSink for Sink {
@@ -488,7 +488,7 @@ fn learning_while_other_threads_push_and_read() {
 fn one_shared_site_serves_several_engines() {
     let office = Office::generate(&OfficeConfig::default());
     let json = office.site.to_json();
-    let site = waymark::ffi::uniffi::Site::from_bytes(office.site.to_binary()).unwrap();
+    let site = waymark::Site::from_bytes(office.site.to_binary()).unwrap();
     assert_eq!(site.floor_names(), vec!["office".to_string()]);
     assert_eq!(site.zone_names().len(), office.site.zones().len());
     let walk = office.walk(5, 40.0);
@@ -501,7 +501,7 @@ fn one_shared_site_serves_several_engines() {
     assert!(own.iter().filter(|p| p.is_some()).count() > walk.epochs.len() / 2);
     assert_eq!(own, first);
     assert_eq!(own, second);
-    let bad = waymark::ffi::uniffi::Site::from_bytes(b"{".to_vec());
+    let bad = waymark::Site::from_bytes(b"{".to_vec());
     assert!(matches!(bad, Err(PositioningError::InvalidSite { .. })));
 }
 

@@ -33,6 +33,14 @@ fn replay(target: &str, run: fn(&[u8])) {
     assert!(failed.is_empty(), "{} of {} {target} inputs fail: {failed:#?}", failed.len(), files.len());
 }
 
+/// The harness steers clear of the test build's fault-injection times: the right ones.
+#[cfg(feature = "fault-injection")]
+#[test]
+fn the_harness_avoids_the_injected_times() {
+    assert_eq!(harness::engine_calls::INJECTED_SCAN_NS, waymark::FAULT_INJECTION_TIMESTAMP_NS);
+    assert_eq!(harness::engine_calls::INJECTED_MID_EPOCH_NS, waymark_engine::FAULT_INJECTION_MID_EPOCH_NS);
+}
+
 #[test]
 fn site_file_corpus() {
     replay("site_file", harness::site_file::run);

@@ -10,13 +10,13 @@
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
-use waymark::ffi::uniffi::{
+use waymark::{
     EngineOptions, ErrorReport, MotionSample, PositionEstimate, PositionListener, PositioningEngine,
     PositioningError, RadioScan, StatusUpdate, WifiReading,
 };
-use waymark::sensors::SensorSample;
-use waymark::FAULT_INJECTION_MID_EPOCH_NS as MID;
-use waymark::{Engine, EngineConfig, Scan, Site, TransmitterId};
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::FAULT_INJECTION_MID_EPOCH_NS as MID;
+use waymark_engine::{Engine, EngineConfig, Scan, Site, TransmitterId};
 use waymark_sim::{imu, Office, OfficeConfig};
 
 /// One epoch of a walk: the inertial samples since the previous one, then the scan.
@@ -103,7 +103,7 @@ fn a_panic_in_the_middle_of_an_epoch_leaves_the_core_engine_as_it_was() {
         // The engine runs on as one that never saw the call.
         let scan = Scan { timestamp_ns: MID + 2, ..last.scan.clone() };
         assert_eq!(engine.push_scan(&scan), twin.push_scan(&scan));
-        let end = waymark::sensors::MAX_TIMESTAMP_NS;
+        let end = waymark_engine::sensors::MAX_TIMESTAMP_NS;
         assert_eq!(engine.advance(end), twin.advance(end));
         assert_eq!(engine.snapshot(), twin.snapshot());
     }
@@ -183,7 +183,7 @@ fn a_panic_in_the_middle_of_an_epoch_is_internal_and_changes_nothing_across_the_
         // The engine runs on as one that never saw the call.
         let p = engine.push_scan(ffi_scan(&last.scan, MID + 2)).unwrap();
         assert_eq!(p, twin.push_scan(ffi_scan(&last.scan, MID + 2)).unwrap());
-        let end = waymark::sensors::MAX_TIMESTAMP_NS;
+        let end = waymark_engine::sensors::MAX_TIMESTAMP_NS;
         assert_eq!(engine.advance(end).unwrap(), twin.advance(end).unwrap());
         assert_eq!(engine.snapshot(), twin.snapshot());
         let positions = listener.positions.lock().unwrap();

@@ -14,25 +14,26 @@
 //! - a rejected call (one that returns `Err`) leaves the engine's state as it was;
 //! - reads change nothing, and listeners hear exactly one position per accepted epoch.
 //!
-//! "State" is everything in [`waymark::EngineSnapshot`] except `InputStats`: the
+//! "State" is everything in [`waymark_engine::EngineSnapshot`] except `InputStats`: the
 //! rejection counters are bookkeeping of rejections, so a rejected scan, advance, fix or
 //! feedback must change exactly its own counter by one and nothing else (checked separately),
 //! while every later answer of the engine is decided by the rest (the epoch history included),
 //! which must be identical.
 
+#[path = "../crates/engine/tests/common/mod.rs"]
 mod common;
 
 use proptest::prelude::*;
 use std::sync::{Arc, LazyLock, Mutex};
-use waymark::ffi::uniffi::{
+use waymark::{
     BeaconReading, EngineOptions, MotionSample, PositionEstimate, PositionFix as FfiFix,
     PositionListener as FfiListener, PositioningEngine, PositioningError, RadioScan, StatusUpdate,
     TransitionKind, WifiReading,
 };
-use waymark::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
-use waymark::EngineSnapshot;
-use waymark::TransitionModel;
-use waymark::{
+use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
+use waymark_engine::EngineSnapshot;
+use waymark_engine::TransitionModel;
+use waymark_engine::{
     Engine, EngineConfig, Epoch, InputError, InputStats, Position, PositionFix, Reading, Scan, Site,
     TrackPoint, TransmitterId, Zone, ZoneKind,
 };
@@ -209,6 +210,20 @@ fn delta() -> impl Strategy<Value = u64> {
     ]
 }
 
+/// The times a test build panics at on purpose (feature `fault-injection`): a scan at
+/// `waymark::FAULT_INJECTION_TIMESTAMP_NS`, an epoch at
+/// `waymark_engine::FAULT_INJECTION_MID_EPOCH_NS`. Those constants exist only with the
+/// feature; without it these are times like any other near the top of the range.
+const INJECTED_SCAN_NS: u64 = u64::MAX - 7;
+const INJECTED_MID_EPOCH_NS: u64 = waymark_engine::sensors::MAX_TIMESTAMP_NS - 8;
+
+#[cfg(feature = "fault-injection")]
+#[test]
+fn the_injected_times_are_the_features() {
+    assert_eq!(INJECTED_SCAN_NS, waymark::FAULT_INJECTION_TIMESTAMP_NS);
+    assert_eq!(INJECTED_MID_EPOCH_NS, waymark_engine::FAULT_INJECTION_MID_EPOCH_NS);
+}
+
 fn when() -> impl Strategy<Value = When> {
     prop_oneof![
         12 => delta().prop_map(When::After),
@@ -218,8 +233,8 @@ fn when() -> impl Strategy<Value = When> {
             Just(0u64),
             Just(u64::MAX),
             Just(u64::MAX - 1),
-            Just(waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS),
-            Just(waymark::FAULT_INJECTION_MID_EPOCH_NS),
+            Just(INJECTED_SCAN_NS),
+            Just(INJECTED_MID_EPOCH_NS),
             any::<u64>(),
         ]
         .prop_map(When::At),
@@ -746,7 +761,7 @@ fn run_core(
             Some((t, _, Err(Panicked))) => {
                 // The injected panic half-way through an epoch: undone, counters included.
                 prop_assert!(
-                    cfg!(feature = "fault-injection") && t == waymark::FAULT_INJECTION_MID_EPOCH_NS,
+                    cfg!(feature = "fault-injection") && t == INJECTED_MID_EPOCH_NS,
                     "call {} ({:?} at {}) panicked",
                     n,
                     call,
@@ -813,12 +828,12 @@ impl FfiListener for FfiRecorder {
         }
     }
 
-    fn on_error(&self, _error: waymark::ffi::uniffi::ErrorReport) {
+    fn on_error(&self, _error: waymark::ErrorReport) {
         self.heard.lock().unwrap().1 += 1;
     }
 }
 
-fn check_ffi_track(f: &Fixture, track: &[waymark::ffi::uniffi::TrackPoint]) -> Result<(), TestCaseError> {
+fn check_ffi_track(f: &Fixture, track: &[waymark::TrackPoint]) -> Result<(), TestCaseError> {
     for p in track {
         check_on_site(f, p.floor as usize, p.x, p.y, "FFI track point")?;
     }
@@ -1022,8 +1037,7 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                 // The injected panics: before a scan reaches the engine, or half-way through an
                 // epoch (which the engine undoes).
                 let injected = cfg!(feature = "fault-injection")
-                    && ((kind == Kind::Scan && t == waymark::ffi::uniffi::FAULT_INJECTION_TIMESTAMP_NS)
-                        || t == waymark::FAULT_INJECTION_MID_EPOCH_NS);
+                    && ((kind == Kind::Scan && t == INJECTED_SCAN_NS) || t == INJECTED_MID_EPOCH_NS);
                 match &e {
                     PositioningError::InputRejected { .. } => {}
                     PositioningError::Internal { .. } if injected => {}

@@ -1,15 +1,17 @@
 //! Routes on the simulated office (docs/routes.md): never shorter than the straight line,
 //! as short as the walking-distance table says, never through a wall of the office's plan,
 //! floor changes only on the staircase; the tracker's progress and off-route rule; typed
-//! errors; and the same through the uniffi and C surfaces.
+//! errors; and the same through the uniffi surface (the C surface's: bindings/c/test.c).
 
 use nalgebra::Point2;
 use proptest::prelude::*;
 use rand::SeedableRng;
 use rand_distr::{Distribution, Normal};
 use std::sync::{Arc, OnceLock};
-use waymark::route::{Destination, FloorPoint, Route, RouteError, RouteTracker, SIGMA_PER_ACCURACY_68};
-use waymark::site::{ReachTable, Site, SiteBuilder};
+use waymark_engine::route::{
+    Destination, FloorPoint, Route, RouteError, RouteTracker, SIGMA_PER_ACCURACY_68,
+};
+use waymark_engine::site::{ReachTable, Site, SiteBuilder};
 use waymark_sim::{Office, OfficeConfig};
 
 fn office() -> &'static Office {
@@ -325,7 +327,7 @@ fn a_noisy_walk_along_the_route_stays_on_it_and_a_detour_leaves_it() {
 /// The uniffi surface: `Site.route`, `RouteTracker`, typed errors, from Rust.
 #[test]
 fn the_uniffi_surface_routes_and_tracks() {
-    use waymark::ffi::uniffi as api;
+    use waymark as api;
     let site = Arc::new(api::Site::from_bytes(two_floors().to_json().into_bytes()).unwrap());
     let from = api::FloorPoint { floor: 0, x: 4.9, y: 2.0 };
     let to = api::Destination::Zone { name: "upstairs room 10".into() };
@@ -355,82 +357,4 @@ fn the_uniffi_surface_routes_and_tracks() {
     ));
     let rerouted = tracker.reroute().unwrap();
     assert_eq!(rerouted.end, route.end);
-}
-
-/// The C surface, called from Rust as C would.
-#[test]
-fn the_c_surface_routes_and_tracks() {
-    use std::ptr::{null, null_mut};
-    use waymark::ffi::c::*;
-    extern "C" {
-        // Not re-exported to Rust (it is C's constructor): linked by its symbol.
-        fn waymark_engine_new_with_options(
-            site_file: *const u8,
-            len: usize,
-            options: *const waymark_engine_options,
-            out: *mut *mut std::ffi::c_void,
-        ) -> waymark_result;
-    }
-    let json = office().site.to_json();
-    let mut engine: *mut std::ffi::c_void = null_mut();
-    // SAFETY: `json` is `json.len()` readable bytes; `engine` is writable.
-    let created = unsafe { waymark_engine_new_with_options(json.as_ptr(), json.len(), null(), &mut engine) };
-    let engine = engine as *mut waymark_engine;
-    assert_eq!(created, waymark_result::Ok);
-    let from = waymark_floor_point { floor: 0, x: 4.9, y: 2.0 };
-    let zone = c"room 10";
-    let mut route = null_mut();
-    assert_eq!(waymark_engine_route_to_zone(engine, &from, zone.as_ptr(), &mut route), waymark_result::Ok);
-    let mut info = std::mem::MaybeUninit::<waymark_route_info>::uninit();
-    assert_eq!(waymark_route_get_info(route, info.as_mut_ptr()), waymark_result::Ok);
-    // SAFETY: written by the call that returned Ok.
-    let info = unsafe { info.assume_init() };
-    let core =
-        Route::plan(&office().site, &FloorPoint::new(0, 4.9, 2.0), &Destination::Zone("room 10".into()))
-            .unwrap();
-    assert_eq!(info.leg_count, core.legs().len());
-    assert!((info.length_m - core.length_m()).abs() < 1e-9);
-    let mut leg = std::mem::MaybeUninit::<waymark_route_leg>::uninit();
-    assert_eq!(waymark_route_get_leg(route, 1, leg.as_mut_ptr()), waymark_result::Ok);
-    // SAFETY: as above.
-    let leg = unsafe { leg.assume_init() };
-    assert_ne!(leg.turn, waymark_turn::None);
-    assert_eq!(waymark_route_get_leg(route, 99, leg_out()), waymark_result::InputRejected);
-    let mut progress = std::mem::MaybeUninit::<waymark_route_progress>::uninit();
-    assert_eq!(waymark_route_update(route, &from, 1.0, progress.as_mut_ptr()), waymark_result::Ok);
-    let bad = waymark_floor_point { floor: 0, x: f64::NAN, y: 0.0 };
-    assert_eq!(waymark_route_update(route, &bad, 1.0, null_mut()), waymark_result::OffGraph);
-    assert_eq!(waymark_route_reroute(route, null()), waymark_result::Ok);
-    // No position yet: a route from it is refused; unknown zone and NULLs are typed.
-    assert_eq!(
-        waymark_engine_route_to_zone(engine, null(), zone.as_ptr(), &mut route_out()),
-        waymark_result::NoPosition
-    );
-    assert_eq!(
-        waymark_engine_route_to_zone(engine, &from, c"nope".as_ptr(), &mut route_out()),
-        waymark_result::UnknownZone
-    );
-    let far = waymark_floor_point { floor: 0, x: 500.0, y: 0.0 };
-    assert_eq!(
-        waymark_engine_route_to_point(engine, &from, &far, &mut route_out()),
-        waymark_result::OffGraph
-    );
-    assert_eq!(
-        waymark_engine_route_to_point(engine, &from, null(), &mut route_out()),
-        waymark_result::NullParameter
-    );
-    assert_eq!(waymark_route_get_info(null(), info_out()), waymark_result::NullParameter);
-    waymark_route_free(route);
-    waymark_route_free(null_mut());
-    waymark_engine_free(engine);
-
-    fn leg_out() -> *mut waymark_route_leg {
-        Box::leak(Box::new(std::mem::MaybeUninit::<waymark_route_leg>::uninit())).as_mut_ptr()
-    }
-    fn info_out() -> *mut waymark_route_info {
-        Box::leak(Box::new(std::mem::MaybeUninit::<waymark_route_info>::uninit())).as_mut_ptr()
-    }
-    fn route_out() -> *mut waymark_route {
-        null_mut()
-    }
 }

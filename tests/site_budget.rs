@@ -2,13 +2,14 @@
 //! refused with `SiteError::OverLimit` naming the limit, in little memory, through the core,
 //! the FFI and `Site::load`.
 
+#[path = "../crates/engine/tests/common/mod.rs"]
 mod common;
 
 use std::process::Command;
 use std::sync::Arc;
-use waymark::ffi::uniffi as ffi;
-use waymark::site::budget::MAX_SITE_FILE_BYTES;
-use waymark::{Engine, EngineConfig, Error, Site, SiteError};
+use waymark as ffi;
+use waymark_engine::site::budget::MAX_SITE_FILE_BYTES;
+use waymark_engine::{Engine, EngineConfig, Error, Site, SiteError};
 
 /// Set in the child process that [`refused_within_256_mb_of_address_space`] runs under the
 /// limit.
@@ -99,10 +100,10 @@ fn a_dense_site_within_the_budget_loads() {
     let site = Arc::new(Site::from_json(common::dense_line_site_json(2_000).as_bytes()).unwrap());
     let mut engine =
         Engine::new(site, EngineConfig::default()).expect("2 000 states within reach is allowed");
-    let scan = waymark::Scan {
+    let scan = waymark_engine::Scan {
         timestamp_ns: 1_000_000_000,
-        readings: vec![waymark::Reading {
-            transmitter: waymark::radio::TransmitterId::wifi("02:00:00:00:00:01").unwrap(),
+        readings: vec![waymark_engine::Reading {
+            transmitter: waymark_engine::radio::TransmitterId::wifi("02:00:00:00:00:01").unwrap(),
             rssi_dbm: -60.0,
             age_ns: 0,
         }],

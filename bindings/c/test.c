@@ -690,8 +690,8 @@ static void geofences_and_zone_events(const char *site_path) {
 }
 
 /* Routes (docs/routes.md) on the simulated office: room 1's far corner to room 10 as legs,
- * a tracker that notices a detour and reroutes, typed errors, and the route outliving its
- * engine. */
+ * a tracker that notices a detour and reroutes, typed errors (no position, unknown zone, off
+ * the graph, NULLs), and the route outliving its engine. */
 static void routes(const char *site_path) {
     waymark_engine *engine = NULL;
     CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "site");
@@ -710,7 +710,10 @@ static void routes(const char *site_path) {
     CHECK(fabs(sum - info.length_m) < 1e-9, "legs sum to %g, route %g", sum, info.length_m);
     CHECK(info.length_m >= hypot(info.end.x - info.start.x, info.end.y - info.start.y), "never under the line");
     waymark_route_leg leg;
+    CHECK(waymark_route_get_leg(route, 1, &leg) == WAYMARK_RESULT_OK && leg.turn != WAYMARK_TURN_NONE,
+          "the second leg starts with a turn");
     CHECK(waymark_route_get_leg(route, info.leg_count, &leg) == WAYMARK_RESULT_INPUT_REJECTED, "leg out of range");
+    CHECK(waymark_route_get_info(NULL, &info) == WAYMARK_RESULT_NULL_PARAMETER, "NULL route");
     waymark_route_progress progress;
     CHECK(waymark_route_update(route, &info.start, 2.0, &progress) == WAYMARK_RESULT_OK && !progress.off_route &&
               fabs(progress.remaining_m - info.length_m) < 1e-9,
@@ -719,16 +722,25 @@ static void routes(const char *site_path) {
     waymark_floor_point detour = {0, 10.0, 3.0};
     CHECK(waymark_route_update(route, &detour, 2.0, &progress) == WAYMARK_RESULT_OK && progress.off_route,
           "a detour is off the route");
+    waymark_floor_point nowhere = {0, NAN, 0.0};
+    CHECK(waymark_route_update(route, &nowhere, 2.0, NULL) == WAYMARK_RESULT_OFF_GRAPH, "a NaN position");
     CHECK(waymark_route_reroute(route, &detour) == WAYMARK_RESULT_OK, "reroute");
     CHECK(waymark_route_update(route, &detour, 2.0, &progress) == WAYMARK_RESULT_OK && !progress.off_route,
           "on the new route");
     waymark_route *none = NULL;
+    /* No position yet: a route from it is refused. */
+    CHECK(waymark_engine_route_to_zone(engine, NULL, "room 10", &none) == WAYMARK_RESULT_NO_POSITION && !none,
+          "no position");
     CHECK(waymark_engine_route_to_zone(engine, &from, "kitchen", &none) == WAYMARK_RESULT_UNKNOWN_ZONE && !none,
           "unknown zone");
     waymark_floor_point upstairs = {7, 1.0, 1.0};
     CHECK(waymark_engine_route_to_point(engine, &upstairs, &from, &none) == WAYMARK_RESULT_OFF_GRAPH && !none,
           "no floor 7");
+    waymark_floor_point far = {0, 500.0, 0.0};
+    CHECK(waymark_engine_route_to_point(engine, &from, &far, &none) == WAYMARK_RESULT_OFF_GRAPH && !none,
+          "500 m off the office");
     CHECK(waymark_engine_route_to_zone(engine, &from, NULL, &none) == WAYMARK_RESULT_NULL_PARAMETER, "NULL zone");
+    CHECK(waymark_engine_route_to_point(engine, &from, NULL, &none) == WAYMARK_RESULT_NULL_PARAMETER, "NULL point");
     waymark_engine_free(engine);
     /* The route keeps its own reference to the site. */
     CHECK(waymark_route_get_info(route, &info) == WAYMARK_RESULT_OK, "after the engine is freed");

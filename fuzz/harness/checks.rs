@@ -1,8 +1,8 @@
 //! What must hold of everything that leaves the engine, whatever went in. A broken invariant
 //! panics, which the fuzzer reports as a crash and the corpus-replay test as a failure.
 
-use waymark::ffi::uniffi as ffi;
-use waymark::{Position, TrackPoint};
+use waymark as ffi;
+use waymark_engine::{Position, TrackPoint};
 
 /// The posterior is a probability distribution: finite, non-negative, summing to 1.
 pub fn posterior(p: &[f64], states: usize) {

@@ -12,11 +12,11 @@
 use super::checks;
 use super::cursor::{Cursor, Writer};
 use std::sync::{Arc, OnceLock, Weak};
-use waymark::ffi::uniffi as ffi;
-use waymark::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
-use waymark::TransitionModel;
-use waymark::TransmitterId;
-use waymark::{Engine, EngineConfig, Epoch, InputError, Position, Reading, Scan, Site};
+use waymark as ffi;
+use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
+use waymark_engine::TransitionModel;
+use waymark_engine::TransmitterId;
+use waymark_engine::{Engine, EngineConfig, Epoch, InputError, Position, Reading, Scan, Site};
 use waymark_sim::{imu, Office, OfficeConfig};
 
 /// Calls decoded from one input, at most.
@@ -176,13 +176,19 @@ impl Clock {
     }
 }
 
-/// With the `fault-injection` feature (`cargo test --all-features`) a scan at
-/// `FAULT_INJECTION_TIMESTAMP_NS` panics inside the FFI engine on purpose, and an epoch at
-/// `FAULT_INJECTION_MID_EPOCH_NS` inside either engine: the harness never makes one.
+/// The times a test build (feature `fault-injection`, `cargo test --all-features`) panics at
+/// on purpose: a scan at `u64::MAX - 7` inside the FFI engine
+/// (`waymark::FAULT_INJECTION_TIMESTAMP_NS`) and an epoch at `MAX_TIMESTAMP_NS - 8` inside
+/// either engine (`waymark_engine::FAULT_INJECTION_MID_EPOCH_NS`). Those constants exist only
+/// with the feature (`tests/fuzz_corpus.rs` checks these against them); the harness never
+/// makes either time, with the feature or without.
+pub const INJECTED_SCAN_NS: u64 = u64::MAX - 7;
+/// See [`INJECTED_SCAN_NS`].
+pub const INJECTED_MID_EPOCH_NS: u64 = waymark_engine::sensors::MAX_TIMESTAMP_NS - 8;
+
 fn not_fault_injection(t: u64) -> u64 {
-    let mid = waymark::FAULT_INJECTION_MID_EPOCH_NS;
-    if t == ffi::FAULT_INJECTION_TIMESTAMP_NS || t == mid {
-        mid - 1
+    if t == INJECTED_SCAN_NS || t == INJECTED_MID_EPOCH_NS {
+        INJECTED_MID_EPOCH_NS - 1
     } else {
         t
     }
@@ -445,7 +451,7 @@ fn rejection(
     fixture: &Fixture,
     motion_valid: bool,
 ) -> Option<&'static str> {
-    if scan.timestamp_ns > waymark::sensors::MAX_TIMESTAMP_NS {
+    if scan.timestamp_ns > waymark_engine::sensors::MAX_TIMESTAMP_NS {
         Some("time ahead")
     } else if last_epoch.is_some_and(|last| scan.timestamp_ns <= last) {
         Some("out of order")
@@ -456,7 +462,7 @@ fn rejection(
     } else if scan.readings.iter().any(|r| !(r.rssi_dbm.is_finite() && r.rssi_dbm >= -1000.0)) {
         // NaN, ±inf, or below -1000 dBm, which no receiver reports.
         Some("non-finite")
-    } else if scan.readings.iter().any(|r| r.rssi_dbm > waymark::MAX_RSSI_DBM) {
+    } else if scan.readings.iter().any(|r| r.rssi_dbm > waymark_engine::MAX_RSSI_DBM) {
         Some("rssi too high")
     } else if !scan.readings.iter().any(|r| fixture.knows(&r.transmitter)) {
         Some("no known transmitter")
@@ -685,7 +691,7 @@ impl Session<'_> {
     }
 
     fn advance(&mut self, timestamp_ns: u64) {
-        let ahead = timestamp_ns > waymark::sensors::MAX_TIMESTAMP_NS;
+        let ahead = timestamp_ns > waymark_engine::sensors::MAX_TIMESTAMP_NS;
         let rejected = |last: Option<u64>| ahead || last.is_some_and(|last| timestamp_ns <= last);
         let why = rejected(self.core_last).then_some(if ahead { "time ahead" } else { "out of order" });
         let core = self.core_epoch(timestamp_ns, why, |e| e.advance(timestamp_ns));
@@ -807,7 +813,7 @@ pub fn run(data: &[u8]) {
                     s.core_epoch(input.core.timestamp_ns, why, |e| e.push_scan_with_motion(&input.core, &m));
                 } else {
                     let t = clock.time(&mut c);
-                    let ahead = (t > waymark::sensors::MAX_TIMESTAMP_NS).then_some("time ahead");
+                    let ahead = (t > waymark_engine::sensors::MAX_TIMESTAMP_NS).then_some("time ahead");
                     let why = ahead.or(s.core_last.is_some_and(|last| t <= last).then_some("out of order"));
                     let why = why.or((!valid).then_some("invalid motion"));
                     s.core_epoch(t, why, |e| e.advance_with_motion(t, &m));

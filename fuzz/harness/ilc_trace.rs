@@ -1,7 +1,7 @@
 //! `ilc_trace`: any text through the competition-walk reader, then everything a replay asks of
 //! a walk: scans and events under several batching options, ground truth, path length.
 
-use waymark::radio::Scan;
+use waymark_engine::radio::Scan;
 use waymark_survey::io::ilc::{Event, EventOptions, Trace};
 
 /// Batching options, from the replay's default to the extremes of each field.

@@ -1,5 +1,5 @@
 //! `site_cost`: any bytes through `Site::from_bytes` and `Engine::new`, for what a site file
-//! costs, not only whether it crashes: the site budget (`waymark::site::budget`,
+//! costs, not only whether it crashes: the site budget (`waymark_engine::site::budget`,
 //! docs/errors.md#site-limits) must hold for every input. Run it under libFuzzer's memory and
 //! time limits, which fail any input that passes them, with the `site_file` corpus as more
 //! seeds:
@@ -17,10 +17,10 @@
 //! `fuzz/corpus/site_cost/seed-dense-line-600.json` is `tests/common`'s
 //! `dense_line_site_json(600)`: 600 states 13 mm apart, each within reach of every other.
 
-use waymark::site::budget::{
+use waymark_engine::site::budget::{
     MAX_EDGES_PER_STATE, MAX_FINGERPRINT_ENTRIES, MAX_REACHABLE_STATES, MAX_REACH_ENTRIES, MAX_STATES,
 };
-use waymark::{Engine, EngineConfig, Error, Site, SiteError};
+use waymark_engine::{Engine, EngineConfig, Error, Site, SiteError};
 
 /// One fuzz input.
 pub fn run(data: &[u8]) {

@@ -5,8 +5,8 @@
 
 use super::checks;
 use std::sync::Arc;
-use waymark::ffi::uniffi as ffi;
-use waymark::{Engine, EngineConfig, Error, InputError, Reading, Scan, Site, SiteError};
+use waymark as ffi;
+use waymark_engine::{Engine, EngineConfig, Error, InputError, Reading, Scan, Site, SiteError};
 
 /// One fuzz input.
 pub fn run(data: &[u8]) {
@@ -67,7 +67,7 @@ fn exercise(mut engine: Engine) {
             .map(|t| Reading { transmitter: t.clone(), rssi_dbm, age_ns: 0 })
             .collect(),
     };
-    for (k, rssi) in [(1u64, -60.0), (4, -85.0), (5, waymark::MAX_RSSI_DBM)] {
+    for (k, rssi) in [(1u64, -60.0), (4, -85.0), (5, waymark_engine::MAX_RSSI_DBM)] {
         match engine.push_scan(&scan(k * 1_000_000_000, rssi)) {
             Ok(e) => checks::position(&e.position, floors),
             Err(InputError::EmptyScan) => assert!(transmitters.is_empty()),

@@ -18,18 +18,16 @@ mod recorder;
 mod route;
 mod types;
 
-pub use recorder::*;
-pub use route::*;
 pub use types::*;
 
+// The engine crate is `::waymark_engine` in the C modules: `waymark_engine` is C's handle.
 use super::delivery::lock;
 use super::error::PositioningError;
 use super::handle::{Event, Handle, Listeners, Options, Status};
-use crate::config::TransitionModel;
-use crate::engine::{Engine, Epoch};
-use crate::radio::{Reading, Scan, TransmitterId};
-use crate::sensors::{PressureSample, SensorSample};
-use crate::site::Site;
+use ::waymark_engine::radio::{Reading, Scan, TransmitterId};
+use ::waymark_engine::sensors::{PressureSample, SensorSample};
+use ::waymark_engine::site::Site;
+use ::waymark_engine::{Engine, Epoch, TransitionModel};
 use std::cell::RefCell;
 use std::ffi::{c_char, c_void, CStr, CString};
 use std::sync::atomic::{AtomicUsize, Ordering};
@@ -45,9 +43,9 @@ pub struct waymark_engine {
     calls: AtomicUsize,
 }
 
-/// `waymark_engine::calls`: `waymark_engine_free` was called.
+/// `::waymark_engine::calls`: `waymark_engine_free` was called.
 const FREED: usize = 1;
-/// `waymark_engine::calls`: one call running.
+/// `::waymark_engine::calls`: one call running.
 const CALL: usize = 2;
 
 /// A call running on an engine: frees the engine when it is the last one to return and
@@ -331,7 +329,7 @@ fn read<T>(
 fn epoch(
     engine: *mut waymark_engine,
     out: *mut waymark_position,
-    f: impl FnOnce(&mut Engine) -> Result<Epoch, crate::InputError>,
+    f: impl FnOnce(&mut Engine) -> Result<Epoch, ::waymark_engine::InputError>,
 ) -> waymark_result {
     with_handle(engine, |handle| match handle.epoch(f) {
         Ok(p) => {
@@ -360,7 +358,7 @@ fn push_samples(
     batch: *const waymark_sample,
     count: usize,
     accepted: *mut usize,
-    push: fn(&mut Engine, &[SensorSample]) -> crate::sensors::BatchReport,
+    push: fn(&mut Engine, &[SensorSample]) -> ::waymark_engine::sensors::BatchReport,
 ) -> waymark_result {
     with_handle(engine, |handle| {
         let Some(batch) = samples(batch, count) else {
@@ -533,7 +531,7 @@ fn readings(
             readings.push(Reading {
                 transmitter,
                 rssi_dbm: w.rssi_dbm,
-                age_ns: w.age_ms.saturating_mul(crate::NS_PER_MS),
+                age_ns: w.age_ms.saturating_mul(crate::ffi::NS_PER_MS),
             });
         }
     }
@@ -547,7 +545,7 @@ fn readings(
             readings.push(Reading {
                 transmitter,
                 rssi_dbm: b.rssi_dbm,
-                age_ns: b.age_ms.saturating_mul(crate::NS_PER_MS),
+                age_ns: b.age_ms.saturating_mul(crate::ffi::NS_PER_MS),
             });
         }
     }
@@ -585,8 +583,13 @@ pub extern "C" fn waymark_engine_push_fix(
     out: *mut waymark_position,
 ) -> waymark_result {
     epoch(engine, out, |engine| {
-        let fix =
-            crate::fix::PositionFix { timestamp_ns, x, y, floor: usize::try_from(floor).ok(), accuracy_m };
+        let fix = ::waymark_engine::PositionFix {
+            timestamp_ns,
+            x,
+            y,
+            floor: usize::try_from(floor).ok(),
+            accuracy_m,
+        };
         engine.push_fix(&fix)
     })
 }
@@ -608,12 +611,12 @@ pub extern "C" fn waymark_engine_push_fix_lat_lon(
 ) -> waymark_result {
     with_handle(engine, |handle| {
         let floor = usize::try_from(floor).ok();
-        let at = crate::site::LatLon { lat_deg: latitude_deg, lon_deg: longitude_deg };
+        let at = ::waymark_engine::site::LatLon { lat_deg: latitude_deg, lon_deg: longitude_deg };
         let p = match handle.site().site_point(floor, at) {
             Ok(p) => p,
             Err(e) => return fail_with(&handle.reject(PositioningError::input(e))),
         };
-        let fix = crate::fix::PositionFix { timestamp_ns, x: p.x, y: p.y, floor, accuracy_m };
+        let fix = ::waymark_engine::PositionFix { timestamp_ns, x: p.x, y: p.y, floor, accuracy_m };
         match handle.epoch(|e| e.push_fix(&fix)) {
             Ok(p) => {
                 write(out, position(&p, handle.site()));

@@ -121,20 +121,20 @@ impl From<uniffi::UnexpectedUniFFICallbackError> for PositioningError {
     }
 }
 
-impl From<crate::Error> for PositioningError {
-    fn from(e: crate::Error) -> Self {
+impl From<waymark_engine::Error> for PositioningError {
+    fn from(e: waymark_engine::Error) -> Self {
         match e {
-            crate::Error::InvalidConfig(reason) => PositioningError::InvalidConfig { reason },
-            crate::Error::Site(s) => s.into(),
-            crate::Error::Input(i) => PositioningError::input(i),
+            waymark_engine::Error::InvalidConfig(reason) => PositioningError::InvalidConfig { reason },
+            waymark_engine::Error::Site(s) => s.into(),
+            waymark_engine::Error::Input(i) => PositioningError::input(i),
         }
     }
 }
 
-impl From<crate::SiteError> for PositioningError {
-    fn from(e: crate::SiteError) -> Self {
+impl From<waymark_engine::SiteError> for PositioningError {
+    fn from(e: waymark_engine::SiteError) -> Self {
         match e {
-            s @ (crate::SiteError::SaltRequired | crate::SiteError::WrongSalt) => {
+            s @ (waymark_engine::SiteError::SaltRequired | waymark_engine::SiteError::WrongSalt) => {
                 PositioningError::SaltMismatch { reason: s.to_string() }
             }
             s => PositioningError::InvalidSite { reason: s.to_string() },
@@ -142,23 +142,25 @@ impl From<crate::SiteError> for PositioningError {
     }
 }
 
-impl From<crate::InputError> for PositioningError {
-    fn from(e: crate::InputError) -> Self {
+impl From<waymark_engine::InputError> for PositioningError {
+    fn from(e: waymark_engine::InputError) -> Self {
         PositioningError::input(e)
     }
 }
 
-impl From<crate::geofence::GeofenceError> for PositioningError {
-    fn from(e: crate::geofence::GeofenceError) -> Self {
+impl From<waymark_engine::geofence::GeofenceError> for PositioningError {
+    fn from(e: waymark_engine::geofence::GeofenceError) -> Self {
         PositioningError::InputRejected { reason: e.to_string() }
     }
 }
 
-impl From<crate::habits::HabitError> for PositioningError {
-    fn from(e: crate::habits::HabitError) -> Self {
+impl From<waymark_engine::habits::HabitError> for PositioningError {
+    fn from(e: waymark_engine::habits::HabitError) -> Self {
         match e {
             // Learning's input is the engine's own history and validated options: a bug.
-            crate::habits::HabitError::Learn(e) => PositioningError::internal(format!("habits: {e}")),
+            waymark_engine::habits::HabitError::Learn(e) => {
+                PositioningError::internal(format!("habits: {e}"))
+            }
             e => PositioningError::HabitsRejected { reason: e.to_string() },
         }
     }

@@ -10,14 +10,13 @@
 
 use super::delivery::{lock, Delivery};
 use super::error::PositioningError;
-use crate::config::{EngineConfig, TransitionModel};
-use crate::engine::{self, Engine, Epoch, Position};
-use crate::radio::Scan;
-use crate::sensors::{MdiScenario, MotionState};
-use crate::site::Site;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
+use waymark_engine::radio::Scan;
+use waymark_engine::sensors::{MdiScenario, MotionState};
+use waymark_engine::site::Site;
+use waymark_engine::{self as engine, Engine, EngineConfig, Epoch, Position, TransitionModel};
 
 /// What an epoch produced, or a call's failure, waiting for delivery to the app.
 #[derive(Clone, Debug)]
@@ -86,11 +85,12 @@ impl Options {
             ..defaults
         };
         if let Some(length_m) = self.step_length_m {
-            config.step_length_override = Some(crate::sensors::StepLengthModel::Constant { length_m });
+            config.step_length_override =
+                Some(waymark_engine::sensors::StepLengthModel::Constant { length_m });
         }
         if self.declination_deg.is_some() || self.site_rotation_deg.is_some() {
             let from_site = site.north();
-            config.north = Some(crate::site::North {
+            config.north = Some(waymark_engine::site::North {
                 declination_rad: self.declination_deg.map_or(from_site.declination_rad, f64::to_radians),
                 site_rotation_rad: self
                     .site_rotation_deg
@@ -100,7 +100,7 @@ impl Options {
         config.site_salt = match &self.site_salt {
             None => None,
             Some(bytes) => Some(
-                crate::Salt::new(bytes.clone())
+                waymark_engine::Salt::new(bytes.clone())
                     .map_err(|m| PositioningError::InvalidConfig { reason: format!("site_salt: {m}") })?,
             ),
         };
@@ -108,21 +108,16 @@ impl Options {
     }
 }
 
-/// With the `fault-injection` feature (test builds only), a scan at this timestamp panics
-/// inside the engine call, to show that a panic comes out as an error, not an abort.
+/// A scan at this timestamp panics inside the engine call, to show that a panic comes out as
+/// an error, not an abort. Only with the `fault-injection` feature (test builds).
+#[cfg(feature = "fault-injection")]
 pub const FAULT_INJECTION_TIMESTAMP_NS: u64 = u64::MAX - 7;
 
-/// With the `fault-injection` feature (test builds only), importing this text as a habit
-/// model panics inside the engine call, half-way through a change the engine cannot undo: the
-/// engine is left unusable, so every later call fails with `Internal`.
+/// Importing this text as a habit model panics inside the engine call, half-way through a
+/// change the engine cannot undo: the engine is left unusable, so every later call fails with
+/// `Internal`. Only with the `fault-injection` feature (test builds).
+#[cfg(feature = "fault-injection")]
 pub const FAULT_INJECTION_HABITS_JSON: &str = "waymark fault injection";
-
-/// Panics on the magic timestamp in test builds; nothing otherwise.
-fn fault_injection(timestamp_ns: u64) {
-    if cfg!(feature = "fault-injection") && timestamp_ns == FAULT_INJECTION_TIMESTAMP_NS {
-        panic!("fault injected at timestamp {timestamp_ns}");
-    }
-}
 
 /// A thread-safe engine with its app's listeners `L`.
 pub(crate) struct Handle<L> {
@@ -224,7 +219,7 @@ impl<L: Listeners> Handle<L> {
     /// changes, track revisions, then the position.
     pub(crate) fn epoch(
         &self,
-        f: impl FnOnce(&mut Engine) -> Result<Epoch, crate::InputError>,
+        f: impl FnOnce(&mut Engine) -> Result<Epoch, waymark_engine::InputError>,
     ) -> Result<Position, PositioningError> {
         let events = Arc::clone(&self.events);
         self.call_undoable(|engine| {
@@ -267,7 +262,8 @@ impl<L: Listeners> Handle<L> {
     /// Replaces the engine's habits by the model `json`.
     pub(crate) fn import_habits(&self, json: &str) -> Result<(), PositioningError> {
         self.call(|engine| {
-            if cfg!(feature = "fault-injection") && json == FAULT_INJECTION_HABITS_JSON {
+            #[cfg(feature = "fault-injection")]
+            if json == FAULT_INJECTION_HABITS_JSON {
                 engine.clear_habits();
                 panic!("fault injected half-way through importing habits");
             }
@@ -280,9 +276,12 @@ impl<L: Listeners> Handle<L> {
     pub(crate) fn push_scan(&self, scan: &Scan) -> Result<Position, PositioningError> {
         let events = Arc::clone(&self.events);
         self.epoch(|engine| {
-            fault_injection(scan.timestamp_ns);
+            #[cfg(feature = "fault-injection")]
+            if scan.timestamp_ns == FAULT_INJECTION_TIMESTAMP_NS {
+                panic!("fault injected at timestamp {}", scan.timestamp_ns);
+            }
             let result = engine.push_scan(scan);
-            if let Err(crate::InputError::NoKnownTransmitter { .. }) = result {
+            if let Err(waymark_engine::InputError::NoKnownTransmitter { .. }) = result {
                 events.stage(Event::Status(Status::NoSiteCoverage { timestamp_ns: scan.timestamp_ns }));
             }
             result
@@ -294,7 +293,7 @@ impl<L: Listeners> Handle<L> {
     /// hear of those as an `InputRejected` error (docs/errors.md#timestamps-ahead-of-the-clock).
     pub(crate) fn push_samples(
         &self,
-        push: impl FnOnce(&mut Engine) -> crate::sensors::BatchReport,
+        push: impl FnOnce(&mut Engine) -> waymark_engine::sensors::BatchReport,
     ) -> Result<usize, PositioningError> {
         let events = Arc::clone(&self.events);
         self.call(|engine| {
@@ -345,8 +344,8 @@ impl<L: Listeners> Handle<L> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sensors::StepLengthModel;
-    use crate::site::{BuildOptions, Calibration, SiteBuilder};
+    use waymark_engine::sensors::StepLengthModel;
+    use waymark_engine::site::{BuildOptions, Calibration, SiteBuilder};
 
     /// `stepLengthM` / `step_length_m` is honoured on a surveyed site: it replaces the site's
     /// step length model and keeps the rest of its calibration.

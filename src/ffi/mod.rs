@@ -1,17 +1,21 @@
-//! The only place that knows about uniffi and the C ABI: thin wrappers over the pure core.
-//! Kotlin and Swift see [`uniffi`]'s types; C (and dart:ffi, React Native, Unity) sees [`c`]'s,
+//! The only place that knows about uniffi and the C ABI: thin wrappers over the pure engine
+//! (the `waymark-engine` crate). Kotlin and Swift see [`uniffi`]'s types, re-exported at the
+//! crate's root; C (and dart:ffi, React Native, Unity) sees [`c`]'s exported functions,
 //! through the header `bindings/c/waymark.h`. Both wrap one engine handle (`handle.rs`: the
 //! lock, the panic boundary, listener delivery and error mapping) and report failures with
 //! one error ([`error`]).
 
-pub mod c;
+mod c;
 mod delivery;
 pub mod error;
 mod handle;
 pub mod logging;
 pub mod uniffi;
 
-use crate::radio::TransmitterId;
+use waymark_engine::radio::TransmitterId;
+
+/// Nanoseconds in a millisecond: apps give reading ages in ms, the engine keeps ns.
+pub(crate) const NS_PER_MS: u64 = 1_000_000;
 
 /// Which transmitter a BLE beacon reading from an app is, by one rule for Kotlin, Swift and C:
 ///

@@ -9,6 +9,7 @@ mod records;
 mod route;
 
 pub use super::error::{ErrorCode, ErrorReport, PositioningError};
+#[cfg(feature = "fault-injection")]
 pub use super::handle::{FAULT_INJECTION_HABITS_JSON, FAULT_INJECTION_TIMESTAMP_NS};
 pub use geofence::{Geofence, GeofenceShape, SitePoint};
 pub use recorder::*;
@@ -17,10 +18,10 @@ pub use route::*;
 
 use super::delivery::lock;
 use super::handle::{Event, Handle, Listeners};
-use crate::engine;
-use crate::site::Site as CoreSite;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex, Weak};
+use waymark_engine as engine;
+use waymark_engine::site::Site as CoreSite;
 
 /// Waymark's version, as `"0.1.0"`: the version of the Rust library the app bundles.
 #[uniffi::export]
@@ -163,7 +164,7 @@ impl PositioningEngine {
 
     fn epoch(
         &self,
-        f: impl FnOnce(&mut engine::Engine) -> Result<engine::Epoch, crate::InputError>,
+        f: impl FnOnce(&mut engine::Engine) -> Result<engine::Epoch, waymark_engine::InputError>,
     ) -> Result<PositionEstimate, PositioningError> {
         let position = self.handle.epoch(f)?;
         Ok(estimate(&position, self.handle.site()))

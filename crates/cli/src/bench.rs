@@ -1,8 +1,8 @@
 //! `waymark bench`: speed and memory at building scale, printed as one JSON object.
 //!
 //! Every figure is measured here, in this process or a child it starts, on sites made by
-//! [`waymark_sim::scale`]; the criterion benches in `benches/` time the same operations with
-//! statistics.
+//! [`waymark_sim::scale`]; the criterion benches in `crates/engine/benches/` time the same
+//! operations with statistics.
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -10,10 +10,10 @@ use std::process::ExitCode;
 use std::sync::Arc;
 
 use serde_json::{json, Value};
-use waymark::hmm::UniformReach;
-use waymark::sensors::{MotionConfig, MotionTracker, SensorSample};
-use waymark::site::ReachTable;
-use waymark::{Engine, EngineConfig, Site};
+use waymark_engine::hmm::UniformReach;
+use waymark_engine::sensors::{MotionConfig, MotionTracker, SensorSample};
+use waymark_engine::site::ReachTable;
+use waymark_engine::{Engine, EngineConfig, Site};
 use waymark_sim::imu::{self, ImuConfig};
 use waymark_sim::scale::{DenseForward, ScaleConfig, ScaleSite, SCALE_EPOCH_NS};
 use waymark_sim::Trajectory;
@@ -367,11 +367,11 @@ fn push_fingerprint_scans(site: &Site, engine: &mut Engine) {
         let mut heard = std::mem::take(&mut by_state[s]);
         heard.sort_by(|a, b| b.1.total_cmp(&a.1));
         heard.truncate(ScaleConfig::default().heard);
-        let scan = waymark::Scan {
+        let scan = waymark_engine::Scan {
             timestamp_ns: (k as u64 + 1) * SCALE_EPOCH_NS,
             readings: heard
                 .iter()
-                .map(|&(tx, rssi)| waymark::Reading {
+                .map(|&(tx, rssi)| waymark_engine::Reading {
                     transmitter: site.radio().transmitters()[tx as usize].clone(),
                     rssi_dbm: rssi.round(),
                     age_ns: 0,

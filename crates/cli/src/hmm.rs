@@ -1,11 +1,11 @@
 //! `waymark hmm decode|fit`: the HMM learning core on a JSON model, for checking against other
-//! implementations (`waymark::hmm::learn::json` documents the documents).
+//! implementations (`waymark_engine::hmm::learn::json` documents the documents).
 
 use serde::de::DeserializeOwned;
 use std::io::{Read, Write};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use waymark::hmm::learn::json::{decode_json, fit_json};
+use waymark_engine::hmm::learn::json::{decode_json, fit_json};
 
 /// Exit status for input that cannot be read, parsed or used (clap uses 2 for bad arguments).
 const BAD_INPUT: u8 = 2;
@@ -47,7 +47,7 @@ pub fn hmm(args: &HmmArgs) -> ExitCode {
 fn run<I: DeserializeOwned, O: serde::Serialize>(
     verb: &str,
     source: &Source,
-    compute: impl Fn(&I) -> Result<O, waymark::hmm::learn::LearnError>,
+    compute: impl Fn(&I) -> Result<O, waymark_engine::hmm::learn::LearnError>,
 ) -> ExitCode {
     let fail = |message: String| {
         eprintln!("waymark hmm {verb}: {message}");

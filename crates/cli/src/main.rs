@@ -1,6 +1,7 @@
 //! `waymark`: the command-line tool for the engineer who surveys a building and measures
 //! accuracy. `waymark demo` runs the engine on a built-in simulated office.
 
+mod app_engine;
 mod bench;
 mod benchmark;
 mod hmm;
@@ -11,9 +12,9 @@ mod view;
 
 use clap::{Parser, Subcommand, ValueEnum};
 use std::process::ExitCode;
-use waymark::radio::RssiModel;
-use waymark::EngineConfig;
-use waymark::TransitionModel;
+use waymark_engine::radio::RssiModel;
+use waymark_engine::EngineConfig;
+use waymark_engine::TransitionModel;
 use waymark_sim as sim;
 use waymark_sim::{Experiment, PaperExperiment};
 
@@ -249,7 +250,7 @@ fn demo(args: &DemoArgs) -> ExitCode {
             "surveyed_states": report.surveyed_states,
             "states": report.states,
             "access_points": report.access_points,
-            "top_m": experiment.engine.estimate_states.unwrap_or(waymark::DEFAULT_ESTIMATE_STATES),
+            "top_m": experiment.engine.estimate_states.unwrap_or(waymark_engine::DEFAULT_ESTIMATE_STATES),
             "epochs": s.epochs,
             "mean_error_m": s.mean_error_m,
             "median_error_m": s.median_error_m,
@@ -537,7 +538,7 @@ fn long_run(args: &SimulateArgs) -> ExitCode {
         println!("  (mean error while walking / standing / on a table in brackets)");
     }
     let json = args.json;
-    let result = longrun::run(&config, |i| {
+    let result = longrun::run(&config, app_engine::ffi_engine, |i| {
         if !json {
             println!(
                 "  {:>6.2} {:>7.1} {:>8} {:>8} {:>9} {:>6} {:>6} {:>9} {:>7.2} {:>7.2} {:>5.0}% {:>5.0}% {:>8} {:>7} {:>8}",
@@ -756,7 +757,7 @@ fn sim_export(args: &SimExportArgs) -> ExitCode {
 /// since the previous epoch and the WiFi readings; with `waypoints`, the surveyor's taps at
 /// every state passed.
 fn walk_json(walk: &sim::Walk, seed: u64, waypoints: bool) -> serde_json::Value {
-    use waymark::sensors::SensorSample;
+    use waymark_engine::sensors::SensorSample;
     let imu = sim::imu::synthesize(&walk.trajectory, &sim::imu::ImuConfig::default(), seed);
     let rows =
         |v: &[SensorSample]| v.iter().map(|s| [s.timestamp_ns as f64, s.x, s.y, s.z]).collect::<Vec<_>>();
@@ -780,7 +781,7 @@ fn walk_json(walk: &sim::Walk, seed: u64, waypoints: bool) -> serde_json::Value 
                 "magnetometer": batch(&imu.magnetometer),
                 "wifi": e.scan.readings.iter().map(|r| serde_json::json!({
                     "bssid": match &r.transmitter {
-                        waymark::TransmitterId::Wifi { bssid } => bssid.clone(),
+                        waymark_engine::TransmitterId::Wifi { bssid } => bssid.clone(),
                         other => other.to_string(),
                     },
                     "rssi_dbm": r.rssi_dbm,

@@ -5,8 +5,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Instant;
-use waymark::sensors::MdiScenario;
-use waymark::{Engine, EngineConfig, Salt, Site};
+use waymark_engine::sensors::MdiScenario;
+use waymark_engine::{Engine, EngineConfig, Salt, Site};
 use waymark_eval::real::{self as evaluation, EvalOptions, CONFIGURATIONS};
 use waymark_survey::calibrate::{self, CalibrationOptions, FloorData, WalkSplit};
 use waymark_survey::io::Trace;
@@ -440,7 +440,7 @@ fn print_calibration(c: &calibrate::CalibrationReport) {
         .iter()
         .map(|p| format!("{}: {:.2} ± {:.2}", p.gamma, p.mean_error_m, p.jackknife_se_m))
         .collect();
-    let edges = waymark::site::SINCE_SPARSE_SCAN_BANDS_S;
+    let edges = waymark_engine::site::SINCE_SPARSE_SCAN_BANDS_S;
     let factors: Vec<String> = (0..=edges.len())
         .map(|band| {
             let from = band.checked_sub(1).map_or(0.0, |b| edges[b]);
@@ -457,7 +457,7 @@ fn print_calibration(c: &calibrate::CalibrationReport) {
     );
     println!("  radius factors 68%/95% by time since the sparse scan | {}", factors.join(", "));
     let floor_table = |r: &calibrate::FloorReliabilityReport| -> String {
-        let edges = waymark::site::FLOOR_MISS_BANDS.map(|miss| 1.0 - miss);
+        let edges = waymark_engine::site::FLOOR_MISS_BANDS.map(|miss| 1.0 - miss);
         let bands: Vec<String> = (r.epochs_right_by_band.iter().enumerate())
             .map(|(band, [right, all])| {
                 let from = band.checked_sub(1).map_or("0".into(), |b| edges[b].to_string());
@@ -606,8 +606,8 @@ pub fn site(args: &SiteArgs) -> ExitCode {
             println!(
                 "{} transmitter ids hashed ({} version {}); written to {}",
                 hashed.radio().transmitters().len(),
-                waymark::radio::ID_HASH_SCHEME,
-                waymark::radio::ID_HASH_VERSION,
+                waymark_engine::radio::ID_HASH_SCHEME,
+                waymark_engine::radio::ID_HASH_VERSION,
                 output.display()
             );
             ExitCode::SUCCESS

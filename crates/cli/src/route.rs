@@ -2,8 +2,8 @@
 //! from a point to a point or a zone, as legs with turns (docs/routes.md).
 
 use std::process::ExitCode;
-use waymark::route::{Destination, FloorPoint, Route};
-use waymark::site::Site;
+use waymark_engine::route::{Destination, FloorPoint, Route};
+use waymark_engine::site::Site;
 use waymark_sim as sim;
 
 #[derive(clap::Args)]

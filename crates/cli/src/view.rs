@@ -9,8 +9,8 @@ use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
-use waymark::site::{LatLon, StateKind, PSEUDO_SPACING_M};
-use waymark::{Engine, EngineConfig, Site};
+use waymark_engine::site::{LatLon, StateKind, PSEUDO_SPACING_M};
+use waymark_engine::{Engine, EngineConfig, Site};
 use waymark_sim as sim;
 use waymark_survey::io::{FloorPlan, FloorPlanError, TraceError};
 use waymark_survey::replay::{self as replaying, ReplayOptions};
@@ -63,7 +63,7 @@ pub struct ViewArgs {
 pub enum ViewError {
     /// The site file could not be loaded.
     #[error("{path}: {source}")]
-    Site { path: String, source: waymark::SiteError },
+    Site { path: String, source: waymark_engine::SiteError },
     /// A floor plan could not be read.
     #[error(transparent)]
     Plan(#[from] FloorPlanError),
@@ -90,7 +90,7 @@ pub enum ViewError {
     Salt(String),
     /// The engine refused the site or its configuration.
     #[error(transparent)]
-    Engine(#[from] waymark::Error),
+    Engine(#[from] waymark_engine::Error),
     /// A command-line value is out of range.
     #[error("{0}")]
     Argument(String),
@@ -226,7 +226,11 @@ fn demo(seed: u64, walk_length_m: f64) -> Result<(Arc<Site>, Track), ViewError> 
 /// the age limit the site's survey applied, the site's calibrated γ). Its waypoints, linear
 /// between them, are the truth on the floor they give (GetSensorData) or else on the site
 /// floor its header names.
-fn replay_walk(site: &Arc<Site>, path: &Path, site_salt: Option<waymark::Salt>) -> Result<Track, ViewError> {
+fn replay_walk(
+    site: &Arc<Site>,
+    path: &Path,
+    site_salt: Option<waymark_engine::Salt>,
+) -> Result<Track, ViewError> {
     let trace = waymark_survey::io::read_walk(path, site)?;
     let config = EngineConfig { rssi_weight: None, site_salt, ..EngineConfig::default() };
     let mut engine = Engine::new(Arc::clone(site), config)?;
@@ -443,7 +447,7 @@ struct PlanView {
 #[derive(Serialize)]
 struct ZoneView {
     name: String,
-    kind: waymark::ZoneKind,
+    kind: waymark_engine::ZoneKind,
 }
 
 #[derive(Serialize)]
@@ -557,8 +561,8 @@ fn render(data: &PageData) -> Result<String, serde_json::Error> {
 mod tests {
     use super::*;
     use nalgebra::Point2;
-    use waymark::site::{Anchor, BuildOptions, SiteBuilder, TrainingScan};
-    use waymark::ZoneKind;
+    use waymark_engine::site::{Anchor, BuildOptions, SiteBuilder, TrainingScan};
+    use waymark_engine::ZoneKind;
 
     /// Two floors of two states, a stair edge between them, one zone per floor.
     fn site() -> Site {

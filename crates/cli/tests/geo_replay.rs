@@ -7,7 +7,7 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use waymark::site::LatLon;
+use waymark_engine::site::LatLon;
 use waymark_survey::calibrate::{survey_inputs, FloorData};
 use waymark_survey::io::FloorPlan;
 use waymark_survey::{survey, SurveyOptions};

@@ -1,6 +1,6 @@
 //! Issue 6's independent check: `waymark hmm decode` and `waymark hmm fit` against a small,
 //! dense textbook implementation written here from Rabiner's tutorial and El Gemayel et al.
-//! eqs. 7-13, sharing no code with `waymark::hmm::learn`: log-space forward and backward
+//! eqs. 7-13, sharing no code with `waymark_engine::hmm::learn`: log-space forward and backward
 //! recursions with log-sum-exp over full N × N matrices (no scaling, no sparsity, no
 //! thresholds), ξ and γ formed from them, and the M-step with the covariance taken in a second
 //! pass around the new mean (the library accumulates around the old one in a single pass) and
@@ -29,8 +29,10 @@ use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, StandardNormal};
 use std::io::Write;
 use std::process::{Command, Stdio};
-use waymark::hmm::learn::json::{decode_json, fit_json, DecodeInput, DecodeOutput, FitInput, FitOutput};
-use waymark::hmm::learn::LearnError;
+use waymark_engine::hmm::learn::json::{
+    decode_json, fit_json, DecodeInput, DecodeOutput, FitInput, FitOutput,
+};
+use waymark_engine::hmm::learn::LearnError;
 
 const TOLERANCE: f64 = 1e-6;
 

@@ -9,9 +9,9 @@ use serde_json::Value;
 use std::path::Path;
 use std::process::Command;
 use std::sync::Arc;
-use waymark::recorder::{RecorderOptions, SurveyRecorder};
-use waymark::sensors::SensorSample;
-use waymark::{Engine, EngineConfig, Reading, Scan, Site, TransmitterId};
+use waymark_engine::recorder::{RecorderOptions, SurveyRecorder};
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::{Engine, EngineConfig, Reading, Scan, Site, TransmitterId};
 
 /// Runs the CLI; returns its standard output.
 fn waymark(args: &[&str]) -> String {

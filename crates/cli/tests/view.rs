@@ -8,8 +8,8 @@ use nalgebra::Point2;
 use serde_json::Value;
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
-use waymark::site::{BuildOptions, SiteBuilder};
-use waymark::{Reading, Scan, TransmitterId, ZoneKind};
+use waymark_engine::site::{BuildOptions, SiteBuilder};
+use waymark_engine::{Reading, Scan, TransmitterId, ZoneKind};
 
 fn waymark(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_waymark")).args(args).output().expect("the waymark binary runs")

@@ -15,7 +15,7 @@ use stats_alloc::{Region, StatsAlloc, INSTRUMENTED_SYSTEM};
 use std::alloc::System;
 use std::path::Path;
 use std::sync::Arc;
-use waymark::{Engine, EngineConfig, Site};
+use waymark_engine::{Engine, EngineConfig, Site};
 use waymark_survey::io::Trace;
 use waymark_survey::replay::{replay, ReplayOptions};
 

@@ -23,7 +23,7 @@
 //! `WAYMARK_MOTION_CONFIG` may hold a `MotionConfig` as JSON, as for `pdr_real`.
 
 use std::path::{Path, PathBuf};
-use waymark::sensors::{wrap_angle, MotionConfig, StepLengthModel};
+use waymark_engine::sensors::{wrap_angle, MotionConfig, StepLengthModel};
 use waymark_survey::calibrate_motion;
 use waymark_survey::io::ilc::Trace;
 use waymark_survey::motion::replay_steps;

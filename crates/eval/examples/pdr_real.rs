@@ -12,7 +12,7 @@
 //! defaults) to try other tracker settings.
 
 use std::path::{Path, PathBuf};
-use waymark::sensors::MotionConfig;
+use waymark_engine::sensors::MotionConfig;
 use waymark_eval::pdr::{evaluate_pdr, PdrReport};
 use waymark_survey::calibrate_motion;
 use waymark_survey::io::ilc::Trace;

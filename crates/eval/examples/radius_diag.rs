@@ -30,8 +30,8 @@
 use std::collections::HashMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use waymark::site::{Calibration, StateKind};
-use waymark::{Engine, Position, ScanTiming, Site, TrackPoint};
+use waymark_engine::site::{Calibration, StateKind};
+use waymark_engine::{Engine, Position, ScanTiming, Site, TrackPoint};
 use waymark_eval::real::EvalOptions;
 use waymark_survey::calibrate::{parallel_map, survey_calibrated, survey_inputs, FloorData};
 use waymark_survey::io::ilc::Trace;
@@ -228,7 +228,7 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let unscaled = Calibration {
         accuracy_scale: None,
         accuracy_scale_by_scenario: Default::default(),
-        sparse_scans: waymark::site::SparseScans {
+        sparse_scans: waymark_engine::site::SparseScans {
             accuracy_scale_by_since: Default::default(),
             floor_reliability: Default::default(),
             ..site.calibration().sparse_scans

@@ -25,7 +25,7 @@ use cpu_time::ThreadTime;
 use std::path::Path;
 use std::sync::Arc;
 use std::time::Instant;
-use waymark::{Engine, EngineConfig, Site};
+use waymark_engine::{Engine, EngineConfig, Site};
 use waymark_survey::io::Trace;
 use waymark_survey::replay::{replay_observed, Call, ReplayOptions};
 

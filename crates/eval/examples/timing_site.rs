@@ -9,7 +9,7 @@
 //! ```
 
 use std::path::PathBuf;
-use waymark::site::Calibration;
+use waymark_engine::site::Calibration;
 use waymark_survey::calibrate::{survey_inputs, FloorData};
 use waymark_survey::SurveyOptions;
 
@@ -31,7 +31,7 @@ fn main() {
         .collect();
     let options = SurveyOptions { fingerprint_radius_m: number(radius), ..SurveyOptions::default() };
     let all: Vec<&waymark_survey::io::Trace> = floors.iter().flat_map(|f| &f.survey).collect();
-    let motion = waymark_survey::calibrate_motion(&all, &waymark::EngineConfig::default().motion);
+    let motion = waymark_survey::calibrate_motion(&all, &waymark_engine::EngineConfig::default().motion);
     let north = motion.as_ref().map_or_else(Default::default, |m| m.north());
     let (site, _) = waymark_survey::survey("timing", &survey_inputs(&floors), north, &options)
         .unwrap_or_else(|e| panic!("survey: {e}"));

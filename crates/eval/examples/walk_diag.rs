@@ -33,7 +33,7 @@
 use std::collections::BTreeMap;
 use std::path::PathBuf;
 use std::sync::Arc;
-use waymark::site::Calibration;
+use waymark_engine::site::Calibration;
 use waymark_eval::real::{evaluate_on, survey_site, EvalOptions};
 use waymark_survey::calibrate::FloorData;
 use waymark_survey::io::ilc::Trace;

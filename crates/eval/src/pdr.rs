@@ -3,7 +3,7 @@
 //! while walking against the bearing of the waypoint segment being walked.
 
 use serde::Serialize;
-use waymark::sensors::{wrap_angle, MotionConfig};
+use waymark_engine::sensors::{wrap_angle, MotionConfig};
 use waymark_survey::io::ilc::Trace;
 use waymark_survey::motion::{replay_steps, segment_at, steps_within, waypoint_span};
 
@@ -105,7 +105,7 @@ pub fn evaluate_pdr(test: &[&Trace], config: &MotionConfig) -> PdrReport {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use waymark::sensors::StepLengthModel;
+    use waymark_engine::sensors::StepLengthModel;
     use waymark_sim::recorded::{imu, walk};
 
     const L_ROUTE: [(f64, f64); 3] = [(0.0, 0.0), (0.0, 40.0), (30.0, 40.0)];

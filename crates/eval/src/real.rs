@@ -8,13 +8,13 @@ use nalgebra::Point2;
 use serde::Serialize;
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
-use waymark::habits::{clustered_ratio, HabitModel, HabitReport};
-use waymark::radio::Scan;
-use waymark::site::{Site, StateKind};
-use waymark::Engine;
-use waymark::EngineConfig;
-use waymark::EpochRecord;
-use waymark::SharedEmissions;
+use waymark_engine::habits::{clustered_ratio, HabitModel, HabitReport};
+use waymark_engine::radio::Scan;
+use waymark_engine::site::{Site, StateKind};
+use waymark_engine::Engine;
+use waymark_engine::EngineConfig;
+use waymark_engine::EpochRecord;
+use waymark_engine::SharedEmissions;
 use waymark_survey::calibrate::{
     parallel_map, parallel_map_by_cost, replay_cost, survey_inputs, CalibrationError, CalibrationOptions,
     CalibrationReport, FloorData,
@@ -45,16 +45,16 @@ pub enum EvalError {
     Calibration(#[from] CalibrationError),
     /// The survey could not build a site.
     #[error(transparent)]
-    Site(#[from] waymark::site::SiteError),
+    Site(#[from] waymark_engine::site::SiteError),
     /// The engine rejected its configuration.
     #[error(transparent)]
-    Engine(#[from] waymark::Error),
+    Engine(#[from] waymark_engine::Error),
     /// Nothing to evaluate.
     #[error("{0}")]
     Empty(String),
     /// Habits could not be learned.
     #[error(transparent)]
-    Habits(#[from] waymark::habits::HabitError),
+    Habits(#[from] waymark_engine::habits::HabitError),
 }
 
 /// One configuration's figures.
@@ -79,7 +79,7 @@ pub struct Knn {
     /// Reference (floor, position, Σ (rssi − clip)²).
     references: Vec<(usize, Point2<f64>, f64)>,
     /// Per transmitter: (reference, rssi − clip).
-    by_transmitter: HashMap<waymark::TransmitterId, Vec<(u32, f64)>>,
+    by_transmitter: HashMap<waymark_engine::TransmitterId, Vec<(u32, f64)>>,
 }
 
 impl Knn {
@@ -99,8 +99,8 @@ impl Knn {
     }
 
     /// (transmitter, rssi − clip) once per transmitter, the strongest reading kept.
-    fn levels(&self, scan: &Scan) -> Vec<(waymark::TransmitterId, f64)> {
-        let mut best: HashMap<&waymark::TransmitterId, f64> = HashMap::new();
+    fn levels(&self, scan: &Scan) -> Vec<(waymark_engine::TransmitterId, f64)> {
+        let mut best: HashMap<&waymark_engine::TransmitterId, f64> = HashMap::new();
         for r in scan.readings.iter().filter(|r| r.rssi_dbm.is_finite()) {
             let v = (r.rssi_dbm - self.clip_dbm).max(0.0);
             let e = best.entry(&r.transmitter).or_insert(v);
@@ -417,7 +417,7 @@ pub fn evaluate_on(
 pub const WAYPOINT_FEEDBACK_SPACINGS: f64 = std::f64::consts::FRAC_1_SQRT_2;
 
 /// The strengths the evaluation with habits tries on held-out survey walks: every other value of
-/// the pass's grid ([`STRENGTHS`](waymark::habits::STRENGTHS)) up to 100, where the habits no
+/// the pass's grid ([`STRENGTHS`](waymark_engine::habits::STRENGTHS)) up to 100, where the habits no
 /// longer change any configuration (`docs/tuning.md#habit-strength`). Four replays per survey
 /// walk.
 pub const HELD_OUT_STRENGTHS: [f64; 3] = [1.0, 10.0, 100.0];
@@ -611,8 +611,8 @@ mod tests {
     /// guess from silence, not a match.
     #[test]
     fn single_scan_mle_matches_only_states_with_a_fingerprint() {
-        use waymark::radio::{Reading, TransmitterId};
-        use waymark::site::{BuildOptions, SiteBuilder};
+        use waymark_engine::radio::{Reading, TransmitterId};
+        use waymark_engine::site::{BuildOptions, SiteBuilder};
         let ap = |k: u8| TransmitterId::wifi(&format!("02:00:00:00:00:{k:02x}")).unwrap();
         let scan = |timestamp_ns: u64, heard: &[(u8, f64)]| Scan {
             timestamp_ns,

@@ -4,7 +4,7 @@
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
-use waymark::Site;
+use waymark_engine::Site;
 use waymark_eval::real::{self, EvalOptions};
 use waymark_survey::calibrate::{self, FloorData};
 use waymark_survey::replay::{replay_observed, Call, ReplayOptions};
@@ -39,7 +39,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert!(scale.iter().all(|s| s.is_finite() && *s > 0.0));
     // Per motion scenario where enough held-out epochs were on the map.
     assert!(calibration.epochs > 0);
-    for scenario in waymark::sensors::MdiScenario::ALL {
+    for scenario in waymark_engine::sensors::MdiScenario::ALL {
         let own = calibration.accuracy_scale_by_scenario.get(scenario);
         let enough = calibration.scenario_epochs[scenario.index()] >= calibrate::MIN_SCENARIO_EPOCHS;
         assert_eq!(own.is_some(), enough, "{scenario:?}: {calibration:?}");
@@ -47,7 +47,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     }
     assert!(calibration
         .accuracy_scale_by_scenario
-        .get(waymark::sensors::MdiScenario::DistanceHeading)
+        .get(waymark_engine::sensors::MdiScenario::DistanceHeading)
         .is_some());
     assert!(calibration.motion.is_some(), "step length and north fitted");
     // The fingerprint radius: neighbouring radii of the grid from its middle scored on
@@ -166,8 +166,11 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
 
     // Unsurveyed states around the surveyed ones, on the floor's plan, none with a fingerprint.
     let kind = |i: u32| site.states()[i as usize].kind;
-    assert!(site.states().iter().any(|s| s.kind == waymark::site::StateKind::Unsurveyed));
-    assert!(site.radio().fingerprints().all(|(i, _, _)| kind(i) != waymark::site::StateKind::Unsurveyed));
+    assert!(site.states().iter().any(|s| s.kind == waymark_engine::site::StateKind::Unsurveyed));
+    assert!(site
+        .radio()
+        .fingerprints()
+        .all(|(i, _, _)| kind(i) != waymark_engine::site::StateKind::Unsurveyed));
 
     // The calibrated site survives its file format.
     let site = Arc::new(Site::from_json(site.to_json().as_bytes()).expect("reloads"));
@@ -184,8 +187,8 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert_eq!(site.max_reading_age_ns(), Some(options.calibration.survey.max_reading_age_ns));
     let site_arc = Arc::new(site.clone());
     let walk = &floors[0].test[0];
-    let replayed = |config: waymark::EngineConfig| {
-        let mut engine = waymark::Engine::new(Arc::clone(&site_arc), config).unwrap();
+    let replayed = |config: waymark_engine::EngineConfig| {
+        let mut engine = waymark_engine::Engine::new(Arc::clone(&site_arc), config).unwrap();
         let mut epochs = 0;
         let r = replay_observed(&mut engine, walk, &ReplayOptions::default(), &mut |call| {
             epochs +=
@@ -193,10 +196,10 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
         });
         (r.positions, epochs, engine.stats().readings_stale)
     };
-    let (app, app_epochs, stale) = replayed(waymark::EngineConfig::default());
+    let (app, app_epochs, stale) = replayed(waymark_engine::EngineConfig::default());
     let survey_limit = Some(options.calibration.survey.max_reading_age_ns);
     let (limited, _, _) =
-        replayed(waymark::EngineConfig { max_reading_age_ns: survey_limit, ..Default::default() });
+        replayed(waymark_engine::EngineConfig { max_reading_age_ns: survey_limit, ..Default::default() });
     assert_eq!(app, limited);
     assert_eq!(app_epochs, app.len());
     assert!(stale > 0, "the walk's cached readings are left out");
@@ -278,7 +281,8 @@ fn a_two_floor_slice_calibrates_its_floor_probability() {
             .iter()
             .flat_map(|t| t.0.iter().flatten().copied())
             .collect();
-    let mut engine = waymark::Engine::new(Arc::clone(&site), waymark::EngineConfig::default()).unwrap();
+    let mut engine =
+        waymark_engine::Engine::new(Arc::clone(&site), waymark_engine::EngineConfig::default()).unwrap();
     let positions =
         replay_observed(&mut engine, &floors[1].test[0], &ReplayOptions::default(), &mut |_| {}).positions;
     assert!(!positions.is_empty());

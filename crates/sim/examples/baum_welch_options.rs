@@ -9,7 +9,7 @@
 //! ```
 
 use std::time::Instant;
-use waymark::hmm::learn::FitOptions;
+use waymark_engine::hmm::learn::FitOptions;
 use waymark_sim::baum_welch::{self, BaumWelchExperiment};
 
 fn main() {

@@ -10,8 +10,8 @@
 
 use std::collections::HashSet;
 use std::sync::Arc;
-use waymark::site::PSEUDO_SPACING_M;
-use waymark::{EngineConfig, StatusEvent, ZoneHysteresis};
+use waymark_engine::site::PSEUDO_SPACING_M;
+use waymark_engine::{EngineConfig, StatusEvent, ZoneHysteresis};
 use waymark_sim::imu::{synthesize, ImuConfig};
 use waymark_sim::{track_walk, walk_seed, Sensors};
 use waymark_sim::{Office, OfficeConfig};

@@ -49,7 +49,7 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Exp, Normal};
 use serde::Serialize;
-use waymark::hmm::learn::{
+use waymark_engine::hmm::learn::{
     fit, forward_backward, Chain, FitOptions, Gaussian, GaussianHmm, GaussianMixtures, Known, LearnError,
     Sequence, SparseTransition,
 };
@@ -618,7 +618,7 @@ pub fn run(config: &BaumWelchExperiment) -> Result<BaumWelchReport, LearnError> 
     let mut curves = Vec::new();
     for schedule in &config.schedules {
         // Seeded by the curve's name, so that a curve draws the same feedback epochs in any
-        // company (tests/baum_welch.rs runs two of the CLI's five).
+        // company (crates/engine/tests/baum_welch.rs runs two of the CLI's five).
         let tag = schedule
             .name
             .bytes()

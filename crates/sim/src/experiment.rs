@@ -5,11 +5,11 @@ use super::imu::{synthesize, ImuConfig, ImuTrace};
 use super::{Office, OfficeConfig, Walk};
 use nalgebra::Point2;
 use std::sync::Arc;
-use waymark::sensors::SensorSample;
-use waymark::site::{Site, PSEUDO_SPACING_M};
-use waymark::Error;
-use waymark::{Engine, Position};
-use waymark::{EngineConfig, TransitionModel};
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::site::{Site, PSEUDO_SPACING_M};
+use waymark_engine::Error;
+use waymark_engine::{Engine, Position};
+use waymark_engine::{EngineConfig, TransitionModel};
 use waymark_survey::metrics::{EpochError, ErrorSummary};
 
 /// Which inertial streams a run feeds to the engine.
@@ -47,7 +47,7 @@ pub struct TrackPoint {
     /// What the engine said.
     pub position: Position,
     /// What changed about the session at that epoch (zones entered and left, ...).
-    pub status: Vec<waymark::StatusEvent>,
+    pub status: Vec<waymark_engine::StatusEvent>,
 }
 
 /// A tracked walk: every epoch's position, and the error of the Viterbi track `lag` epochs
@@ -92,7 +92,9 @@ pub fn track_walk(
         }
         previous = Some(t);
         // A scan where no access point was heard is rejected (and counted): nothing to score.
-        let Ok(waymark::Epoch { position, status, .. }) = engine.push_scan(&epoch.scan) else { continue };
+        let Ok(waymark_engine::Epoch { position, status, .. }) = engine.push_scan(&epoch.scan) else {
+            continue;
+        };
         points.push(TrackPoint { truth: epoch.truth, truth_zone: epoch.zone, position, status });
         for (lag, out) in lag_errors.iter_mut().enumerate() {
             let back = engine.smoothed_position(lag).zip(k.checked_sub(lag));

@@ -15,7 +15,7 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
 use std::f64::consts::{PI, TAU};
-use waymark::sensors::{wrap_angle, SensorSample};
+use waymark_engine::sensors::{wrap_angle, SensorSample};
 
 /// Standard gravity, m/s² (the simulator's Earth).
 const GRAVITY: f64 = 9.80665;
@@ -702,7 +702,7 @@ pub fn shaken_in_place(duration_s: f64, config: &ImuConfig, seed: u64) -> ImuTra
 mod tests {
     use super::*;
     use approx::assert_relative_eq;
-    use waymark::sensors::{compass_azimuth, gyro_yaw_rate};
+    use waymark_engine::sensors::{compass_azimuth, gyro_yaw_rate};
 
     fn quiet() -> ImuConfig {
         ImuConfig {

@@ -27,8 +27,8 @@ use nalgebra::Point2;
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use rand_distr::{Distribution, Normal};
-use waymark::radio::{FitOptions, Reading, RssiModel, Scan, TransmitterId};
-use waymark::site::{BuildOptions, Site, SiteBuilder, ZoneKind};
+use waymark_engine::radio::{FitOptions, Reading, RssiModel, Scan, TransmitterId};
+use waymark_engine::site::{BuildOptions, Site, SiteBuilder, ZoneKind};
 
 /// Log-distance path loss: RSSI(d) = `ref_dbm` - 10 · `exponent` · log10(d / 1 m).
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -274,7 +274,7 @@ impl Office {
         let floor = builder.floor("office", 0.0);
         // The survey records the site's orientation: +y is true north here, and the Earth
         // field the simulated phones sense has the default declination.
-        builder.north(waymark::site::North {
+        builder.north(waymark_engine::site::North {
             site_rotation_rad: 0.0,
             declination_rad: imu::DEFAULT_DECLINATION_RAD,
         });

@@ -4,29 +4,29 @@
 //! A [`SessionGenerator`] makes the day one activity at a time (walks with stops, the phone on
 //! a table); a [`Feeder`] pushes accelerometer, gyroscope and magnetometer samples in batches
 //! of 50 up to each epoch; a WiFi scan comes every 2 s. The same input goes, in lockstep, to
-//! the FFI's [`PositioningEngine`](waymark::ffi::uniffi::PositioningEngine) (what Kotlin and
-//! Swift apps hold, with a subscribed listener) and to a core [`Engine`], which exposes the counters and memory accounting the FFI does not; their
-//! positions must agree exactly. Every report interval (an hour by default) the process's
-//! resident memory (`VmRSS`, `VmHWM` from `/proc/self/status`), the engine's accounted track
-//! memory and the error against the truth are recorded.
+//! the engine an app holds (an [`AppEngine`] the caller brings: `waymark simulate
+//! --experiment long-run` brings the SDK library's `PositioningEngine`, what Kotlin and Swift
+//! apps hold, with a subscribed listener) and to a core [`Engine`], which exposes the counters
+//! and memory accounting the FFI does not; their positions must agree exactly. Every report
+//! interval (an hour by default) the process's resident memory (`VmRSS`, `VmHWM` from
+//! `/proc/self/status`), the engine's accounted track memory and the error against the truth
+//! are recorded.
 
 use super::session::{Activity, Feeder, ImuSink, SessionConfig, SessionGenerator};
 use super::{Office, OfficeConfig};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::Serialize;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::Instant;
-use waymark::ffi::uniffi as ffi;
-use waymark::hmm::ViterbiWindow;
-use waymark::hmm::STEP_BYTES_PER_STATE;
-use waymark::radio::{Scan, TransmitterId};
-use waymark::sensors::{MotionStats, SensorSample};
-use waymark::site::{Site, PSEUDO_SPACING_M};
-use waymark::Engine;
-use waymark::EngineConfig;
-use waymark::Error;
+use waymark_engine::hmm::ViterbiWindow;
+use waymark_engine::hmm::STEP_BYTES_PER_STATE;
+use waymark_engine::radio::Scan;
+use waymark_engine::sensors::{MotionStats, SensorSample};
+use waymark_engine::site::{Site, PSEUDO_SPACING_M};
+use waymark_engine::Engine;
+use waymark_engine::EngineConfig;
+use waymark_engine::Error;
 
 /// One scan every 2 s: an unthrottled Android phone, the same as the replay's timer
 /// ([`ReplayOptions::timer_ns`](waymark_survey::replay::ReplayOptions::timer_ns),
@@ -67,7 +67,8 @@ impl Default for LongRunConfig {
     }
 }
 
-/// Counters of the engine's input, as [`waymark::InputStats`] plus the motion tracker's drops.
+/// Counters of the engine's input, as [`waymark_engine::InputStats`] plus the motion
+/// tracker's drops.
 #[derive(Clone, Debug, Default, PartialEq, Eq, Serialize)]
 pub struct InputCounts {
     /// Scans that made an epoch.
@@ -126,7 +127,8 @@ pub struct IntervalReport {
     pub track_window_epochs: usize,
     /// Epochs in this interval.
     pub epochs: u64,
-    /// Positions the app's listener received in this interval with finite x, y and accuracy.
+    /// Positions the app engine's listener received in this interval with finite x, y and
+    /// accuracy.
     pub finite_positions: u64,
     /// ... and with any of them NaN or infinite.
     pub non_finite_positions: u64,
@@ -143,7 +145,7 @@ pub struct IntervalReport {
     /// Mean error while walking / standing with the phone in hand / with the phone on a
     /// table, m (NaN when there was no such epoch).
     pub mean_error_by_activity_m: [f64; 3],
-    /// Epochs where the FFI engine and the core engine disagreed (must be 0).
+    /// Epochs where the app engine (the FFI's) and the core engine disagreed (must be 0).
     pub ffi_core_mismatches: u64,
     /// Cumulative input counters at the end of the interval.
     pub input: InputCounts,
@@ -200,74 +202,39 @@ pub fn process_memory_kb() -> (Option<u64>, Option<u64>) {
     (field("VmRSS:"), field("VmHWM:"))
 }
 
-/// Counts what an app's listener receives.
-#[derive(Default)]
-struct AppListener {
-    finite: AtomicU64,
-    non_finite: AtomicU64,
-    statuses: AtomicU64,
-    errors: AtomicU64,
-}
-
-impl ffi::PositionListener for AppListener {
-    fn on_position(&self, p: ffi::PositionEstimate) {
-        let finite = p.x.is_finite() && p.y.is_finite() && p.accuracy_m.is_finite();
-        let counter = if finite { &self.finite } else { &self.non_finite };
-        counter.fetch_add(1, Ordering::Relaxed);
-    }
-
-    fn on_status(&self, _status: ffi::StatusUpdate) {
-        self.statuses.fetch_add(1, Ordering::Relaxed);
-    }
-
-    fn on_error(&self, _error: ffi::ErrorReport) {
-        self.errors.fetch_add(1, Ordering::Relaxed);
-    }
+/// The engine an app holds, fed the same input as the core engine in lockstep. The simulator
+/// depends on the engine crate alone, so the caller brings it: the CLI's long run wraps the
+/// SDK library's `PositioningEngine` (crates/cli/src/app_engine.rs).
+pub trait AppEngine: ImuSink {
+    /// One scan: the position it returned, as (x, y), or `None` when it was rejected.
+    fn push_scan(&mut self, scan: &Scan) -> Option<(f64, f64)>;
+    /// The positions its listener has heard so far: (all fields finite, some field NaN or
+    /// infinite).
+    fn positions_heard(&self) -> (u64, u64);
 }
 
 /// The two engines fed in lockstep.
 struct Engines {
-    ffi: Arc<ffi::PositioningEngine>,
+    app: Box<dyn AppEngine>,
     core: Engine,
 }
 
-fn motion_samples(batch: &[SensorSample]) -> Vec<ffi::MotionSample> {
-    batch.iter().map(|s| ffi::MotionSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z }).collect()
-}
-
 impl ImuSink for Engines {
+    // A rejected batch is counted by each engine; the core's counters say the same.
     fn accelerometer(&mut self, batch: &[SensorSample]) {
         self.core.push_accelerometer(batch);
-        // A rejected batch is counted by the engine; the core's counters say the same.
-        let _ = self.ffi.push_accelerometer(motion_samples(batch));
+        self.app.accelerometer(batch);
     }
 
     fn gyroscope(&mut self, batch: &[SensorSample]) {
         self.core.push_gyroscope(batch);
-        let _ = self.ffi.push_gyroscope(motion_samples(batch));
+        self.app.gyroscope(batch);
     }
 
     fn magnetometer(&mut self, batch: &[SensorSample]) {
         self.core.push_magnetometer(batch);
-        let _ = self.ffi.push_magnetometer(motion_samples(batch));
+        self.app.magnetometer(batch);
     }
-}
-
-/// The scan as an app hands it over the FFI.
-fn radio_scan(scan: &Scan) -> ffi::RadioScan {
-    let wifi = scan
-        .readings
-        .iter()
-        .filter_map(|r| match &r.transmitter {
-            TransmitterId::Wifi { bssid } => Some(ffi::WifiReading {
-                bssid: bssid.clone().into(),
-                rssi_dbm: r.rssi_dbm,
-                age_ms: r.age_ns / 1_000_000,
-            }),
-            _ => None,
-        })
-        .collect();
-    ffi::RadioScan { timestamp_ns: scan.timestamp_ns, wifi, beacons: Vec::new() }
 }
 
 /// Nearest-rank quantile of unsorted values (sorts them).
@@ -276,9 +243,11 @@ fn quantile(values: &mut [f64], q: f64) -> f64 {
     waymark_survey::scoring::quantile(values, q)
 }
 
-/// Runs the long session; `progress` sees each interval as it completes.
+/// Runs the long session; `app` makes the app's engine from the site file (JSON), and
+/// `progress` sees each interval as it completes.
 pub fn run(
     config: &LongRunConfig,
+    app: impl FnOnce(&str) -> Result<Box<dyn AppEngine>, String>,
     mut progress: impl FnMut(&IntervalReport),
 ) -> Result<LongRunReport, Error> {
     let started = Instant::now();
@@ -293,12 +262,10 @@ pub fn run(
     let site = Arc::new(Site::from_json(site_json.as_bytes())?);
     let engine_config = EngineConfig::default();
     let core = Engine::new(Arc::clone(&site), engine_config.clone())?;
-    let ffi_engine = ffi::PositioningEngine::new(site_json, ffi::EngineOptions::default())
-        .map_err(|e| Error::InvalidConfig(format!("the FFI engine refused the site: {e}")))?;
-    drop(site);
-    let listener = Arc::new(AppListener::default());
-    let _subscription = Arc::clone(&ffi_engine).subscribe(listener.clone());
-    let mut engines = Engines { ffi: ffi_engine, core };
+    let app =
+        app(&site_json).map_err(|e| Error::InvalidConfig(format!("the app engine refused the site: {e}")))?;
+    drop((site, site_json));
+    let mut engines = Engines { app, core };
 
     let mut rng = ChaCha8Rng::seed_from_u64(config.seed ^ 0x10_4e_2a_11);
     let start_state = rng.random_range(0..office.points().len()) as u32;
@@ -323,10 +290,10 @@ pub fn run(
         table += u64::from(segment.activity == Activity::Table);
         let scan = office.field.scan_at(truth, t, &mut rng);
         let core_result = engines.core.push_scan(&scan).map(|epoch| epoch.position);
-        let ffi_result = engines.ffi.push_scan(radio_scan(&scan));
-        match (&core_result, &ffi_result) {
-            (Ok(c), Ok(f)) => {
-                if c.x.to_bits() != f.x.to_bits() || c.y.to_bits() != f.y.to_bits() {
+        let app_result = engines.app.push_scan(&scan);
+        match (&core_result, app_result) {
+            (Ok(c), Some((x, y))) => {
+                if c.x.to_bits() != x.to_bits() || c.y.to_bits() != y.to_bits() {
                     mismatches += 1;
                 }
                 let error = nalgebra::distance(&truth, &nalgebra::Point2::new(c.x, c.y));
@@ -345,14 +312,13 @@ pub fn run(
                     scored += 1;
                 }
             }
-            (Err(_), Err(_)) => {}
+            (Err(_), None) => {}
             _ => mismatches += 1,
         }
         interval_epochs += 1;
         if k % epochs_per_report == 0 || k == total_epochs {
             let (rss_kb, hwm_kb) = process_memory_kb();
-            let finite = listener.finite.load(Ordering::Relaxed);
-            let non_finite = listener.non_finite.load(Ordering::Relaxed);
+            let (finite, non_finite) = engines.app.positions_heard();
             let n = interval_epochs as f64;
             let mean_error_m = errors.iter().sum::<f64>() / errors.len().max(1) as f64;
             let p90_error_m = quantile(&mut errors, 0.9);

@@ -11,7 +11,7 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::Serialize;
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
-use waymark::sensors::{wrap_angle, MotionConfig, MotionTracker, StepDetectorKind};
+use waymark_engine::sensors::{wrap_angle, MotionConfig, MotionTracker, StepDetectorKind};
 
 /// What to measure.
 #[derive(Clone, Debug, PartialEq)]

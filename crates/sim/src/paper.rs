@@ -8,10 +8,10 @@ use super::imu::{synthesize, ImuConfig};
 use super::{Office, OfficeConfig, Walk};
 use serde::Serialize;
 use std::sync::Arc;
-use waymark::radio::RssiModel;
-use waymark::site::{Site, PSEUDO_SPACING_M};
-use waymark::Error;
-use waymark::{EngineConfig, TransitionModel};
+use waymark_engine::radio::RssiModel;
+use waymark_engine::site::{Site, PSEUDO_SPACING_M};
+use waymark_engine::Error;
+use waymark_engine::{EngineConfig, TransitionModel};
 use waymark_survey::metrics::{EpochError, ErrorSummary};
 
 /// The papers' artificial-data experiments on one simulated building: Hoang et al. Table 1

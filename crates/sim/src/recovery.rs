@@ -52,11 +52,11 @@ use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::Serialize;
 use std::sync::Arc;
-use waymark::sensors::SensorSample;
-use waymark::site::{Site, PSEUDO_SPACING_M};
-use waymark::Engine;
-use waymark::EngineConfig;
-use waymark::Error;
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::site::{Site, PSEUDO_SPACING_M};
+use waymark_engine::Engine;
+use waymark_engine::EngineConfig;
+use waymark_engine::Error;
 use waymark_survey::scoring::quantile;
 
 use super::longrun::{BATCH_SAMPLES, SCAN_INTERVAL_NS};

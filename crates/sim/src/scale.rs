@@ -11,10 +11,10 @@ use nalgebra::Point2;
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde_json::json;
-use waymark::hmm::Transition;
-use waymark::radio::{Reading, Scan, TransmitterId};
-use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
-use waymark::Site;
+use waymark_engine::hmm::Transition;
+use waymark_engine::radio::{Reading, Scan, TransmitterId};
+use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+use waymark_engine::Site;
 
 /// What a scaled site looks like.
 #[derive(Clone, Debug, PartialEq)]
@@ -146,7 +146,7 @@ impl ScaleSite {
         }
         let transmitters: Vec<&TransmitterId> = field.access_points.iter().map(|(id, _)| id).collect();
         let file = json!({
-            "format_version": waymark::site::FORMAT_VERSION,
+            "format_version": waymark_engine::site::FORMAT_VERSION,
             "name": format!("waymark scale test, {n} states"),
             "floors": [{"name": "G"}],
             "radio": {
@@ -270,17 +270,17 @@ impl DenseForward {
         let model = map.model();
         // The same emission as the radio map's: ln p(absent) of fingerprint entries from the
         // table the map scores with, of the unheard model exactly.
-        let cell = |g: &waymark::radio::Gaussian, ln_absent: f64| {
+        let cell = |g: &waymark_engine::radio::Gaussian, ln_absent: f64| {
             [g.mean_dbm, 1.0 / g.std_db, g.ln_pdf(g.mean_dbm), ln_absent]
         };
         let unheard = map.unheard();
         let mut emission = vec![cell(&unheard, model.ln_absent(&unheard, clip_dbm)); n * transmitters];
         for (state, tx, g) in map.fingerprints() {
             let ln_absent = match model {
-                waymark::radio::RssiModel::CensoredGaussian => {
-                    waymark::radio::LnCdfTable::get().ln_cdf((clip_dbm - g.mean_dbm) / g.std_db)
+                waymark_engine::radio::RssiModel::CensoredGaussian => {
+                    waymark_engine::radio::LnCdfTable::get().ln_cdf((clip_dbm - g.mean_dbm) / g.std_db)
                 }
-                waymark::radio::RssiModel::NaiveGaussian => model.ln_absent(&g, clip_dbm),
+                waymark_engine::radio::RssiModel::NaiveGaussian => model.ln_absent(&g, clip_dbm),
             };
             emission[state as usize * transmitters + tx as usize] = cell(&g, ln_absent);
         }
@@ -347,7 +347,7 @@ impl DenseForward {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use waymark::Site;
+    use waymark_engine::Site;
 
     #[test]
     fn a_scaled_site_loads_and_its_scans_hear_the_configured_count() {
@@ -365,8 +365,8 @@ mod tests {
 
     #[test]
     fn the_dense_reference_equals_the_engine_filter() {
-        use waymark::hmm::{ForwardFilter, UniformReach};
-        use waymark::site::ReachTable;
+        use waymark_engine::hmm::{ForwardFilter, UniformReach};
+        use waymark_engine::site::ReachTable;
         let scaled = ScaleSite::generate(&ScaleConfig { states: 200, ..ScaleConfig::default() });
         let site = Site::from_json(scaled.json.as_bytes()).unwrap();
         let table = ReachTable::build(&site, 9.0);

@@ -12,7 +12,7 @@ use super::{Office, Trajectory};
 use nalgebra::Point2;
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
-use waymark::sensors::SensorSample;
+use waymark_engine::sensors::SensorSample;
 
 /// What a session is made of. These describe the scenario, not the engine: they were chosen so
 /// that a day exercises walking, standing and lying still in comparable shares, not tuned to

@@ -29,7 +29,7 @@ pub struct Trajectory {
 
 /// Azimuth of `to - from`, clockwise from +y.
 fn azimuth(from: Point2<f64>, to: Point2<f64>) -> f64 {
-    waymark::hmm::azimuth(to - from)
+    waymark_engine::hmm::azimuth(to - from)
 }
 
 impl Trajectory {

@@ -1,7 +1,7 @@
 //! The survey's motion calibration on simulated phones: the fitted step length and north
 //! recover the walker's.
 
-use waymark::sensors::{wrap_angle, MotionConfig, StepLengthModel};
+use waymark_engine::sensors::{wrap_angle, MotionConfig, StepLengthModel};
 use waymark_sim::recorded::{imu, walk};
 use waymark_survey::calibrate_motion;
 use waymark_survey::io::Trace;

@@ -10,8 +10,10 @@
 
 use crate::io::ilc::Trace;
 use serde::Serialize;
-use waymark::sensors::{wrap_angle, MotionConfig, MotionTracker, SensorSample, StepEvent, StepLengthModel};
-use waymark::site::North;
+use waymark_engine::sensors::{
+    wrap_angle, MotionConfig, MotionTracker, SensorSample, StepEvent, StepLengthModel,
+};
+use waymark_engine::site::North;
 
 /// Samples are fed to the tracker in batches of this length, ns, each followed by an update:
 /// Android delivers sensor batches every few hundred ms, and the engine updates every 1.5 s

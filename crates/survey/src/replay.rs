@@ -5,8 +5,8 @@
 use crate::io::ilc::{Event, EventOptions};
 use crate::io::Trace;
 use serde::{Deserialize, Serialize};
-use waymark::sensors::{MdiScenario, MotionState, MotionTracker, MotionUpdate};
-use waymark::{Engine, Position, TrackPoint};
+use waymark_engine::sensors::{MdiScenario, MotionState, MotionTracker, MotionUpdate};
+use waymark_engine::{Engine, Position, TrackPoint};
 
 /// Which motion information the engine may use (HIPE Table 1), forced by withholding it.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
@@ -207,7 +207,7 @@ pub fn replay_observed(
             // Waypoints up to this event's time, confirmed in order (once an epoch exists).
             while let Some(w) = waypoints.next_if(|w| w.timestamp_ns < t) {
                 if last_epoch.is_some_and(|l| w.timestamp_ns >= l) {
-                    if let Ok(waymark::Epoch { position: p, .. }) =
+                    if let Ok(waymark_engine::Epoch { position: p, .. }) =
                         engine.confirm_position(w.timestamp_ns, w.x, w.y, feedback.floor, feedback.radius_m)
                     {
                         if last_epoch != Some(p.timestamp_ns) {
@@ -275,7 +275,7 @@ pub fn replay_observed(
             (false, true) => Call::Timer { published: matches!(result, Some(Ok(_))) },
             (false, false) => Call::Sensors,
         };
-        if let Some(Ok(waymark::Epoch { position, .. })) = result {
+        if let Some(Ok(waymark_engine::Epoch { position, .. })) = result {
             last_epoch = Some(position.timestamp_ns);
             out.publish(engine, position, options.estimate_states_grid);
             if options.fixed_lag {

@@ -6,7 +6,7 @@ use crate::io::Trace;
 use nalgebra::Point2;
 use serde::Serialize;
 use std::collections::HashMap;
-use waymark::Site;
+use waymark_engine::Site;
 
 /// A wrong floor adds this to the epoch's error, m: the public competition's metric (Indoor
 /// Location Competition 2.0 adds 15 × the floor difference).
@@ -274,7 +274,7 @@ pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
     let live = live_estimates(&r.positions);
     let radius: HashMap<u64, (f64, f64)> =
         live.iter().map(|e| (e.timestamp_ns, (e.accuracy_m, e.accuracy_95_m))).collect();
-    let smoothed = |points: &mut dyn Iterator<Item = &waymark::TrackPoint>| -> Vec<Estimate> {
+    let smoothed = |points: &mut dyn Iterator<Item = &waymark_engine::TrackPoint>| -> Vec<Estimate> {
         points
             .map(|p| {
                 let (a68, a95) = radius.get(&p.timestamp_ns).copied().unwrap_or((f64::NAN, f64::NAN));
@@ -300,7 +300,7 @@ pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
 }
 
 /// The engine's live positions as estimates.
-pub fn live_estimates(positions: &[waymark::Position]) -> Vec<Estimate> {
+pub fn live_estimates(positions: &[waymark_engine::Position]) -> Vec<Estimate> {
     positions
         .iter()
         .map(|p| Estimate {

@@ -13,7 +13,7 @@ pub extern "C" fn waymark_engine_options_default(out: *mut waymark_engine_option
         if out.is_null() {
             return fail(waymark_result::NullParameter, "out must not be NULL");
         }
-        let defaults = crate::EngineConfig::default();
+        let defaults = ::waymark_engine::EngineConfig::default();
         write(
             out,
             waymark_engine_options {
@@ -38,11 +38,12 @@ fn options_arg(options: *const waymark_engine_options) -> Result<Options, waymar
     let Some(o) = (unsafe { options.as_ref() }) else {
         return Ok(Options::default());
     };
+    // The header's `waymark_transition` values, which C passes as a plain integer.
     let transition = match o.transition {
-        0 => None,
-        1 => Some(TransitionModel::Reach),
-        2 => Some(TransitionModel::Hipe),
-        3 => Some(TransitionModel::Hoang),
+        t if t == waymark_transition::Default as u32 => None,
+        t if t == waymark_transition::Reach as u32 => Some(TransitionModel::Reach),
+        t if t == waymark_transition::Hipe as u32 => Some(TransitionModel::Hipe),
+        t if t == waymark_transition::Hoang as u32 => Some(TransitionModel::Hoang),
         t => return Err(fail(waymark_result::InvalidConfig, format!("transition {t} does not exist"))),
     };
     let salt = match (o.site_salt.is_null(), o.site_salt_len) {
@@ -75,7 +76,7 @@ fn options_arg(options: *const waymark_engine_options) -> Result<Options, waymar
 }
 
 fn create(
-    site: Result<Site, crate::SiteError>,
+    site: Result<Site, ::waymark_engine::SiteError>,
     options: &Options,
     out: *mut *mut waymark_engine,
 ) -> waymark_result {

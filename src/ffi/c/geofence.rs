@@ -2,7 +2,7 @@
 //! status callback (`WAYMARK_STATUS_KIND_GEOFENCE_ENTERED` / `_EXITED`; docs/zones.md).
 
 use super::{fail, fail_with, string_arg, waymark_engine, waymark_result, with_handle, write};
-use crate::geofence::{Geofence, GeofenceShape};
+use ::waymark_engine::geofence::{Geofence, GeofenceShape};
 use std::ffi::c_char;
 
 /// Adds `geofence` to the engine behind `engine`.

@@ -4,8 +4,8 @@ use super::{
     call, copy_string, fail, fail_with, read, string_arg, waymark_engine, waymark_fix_error,
     waymark_habit_report, waymark_result, with_handle, write,
 };
-use crate::engine::Engine;
 use crate::ffi::error::PositioningError;
+use ::waymark_engine::Engine;
 use std::ffi::c_char;
 
 /// Learns the user's habits from the epochs of the engine's history not learned from yet

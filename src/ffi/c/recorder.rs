@@ -6,9 +6,9 @@ use super::{
     waymark_result, waymark_sample, waymark_wifi_reading, write, Rejected,
 };
 use crate::ffi::delivery::lock;
-use crate::radio::Scan;
-use crate::recorder::{RecorderError, RecorderOptions, RecordingStats, SurveyRecorder};
-use crate::sensors::{BatchReport, SensorSample};
+use ::waymark_engine::radio::Scan;
+use ::waymark_engine::recorder::{RecorderError, RecorderOptions, RecordingStats, SurveyRecorder};
+use ::waymark_engine::sensors::{BatchReport, SensorSample};
 use std::ffi::c_char;
 use std::sync::Mutex;
 

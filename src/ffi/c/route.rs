@@ -5,8 +5,8 @@
 
 use super::{boundary, fail, string_arg, waymark_engine, waymark_result, with_handle, write};
 use crate::ffi::delivery::lock;
-use crate::route::{Destination, FloorPoint, Route, RouteError, RouteTracker, Turn};
-use crate::site::Site;
+use ::waymark_engine::route::{Destination, FloorPoint, Route, RouteError, RouteTracker, Turn};
+use ::waymark_engine::site::Site;
 use std::ffi::c_char;
 use std::sync::{Arc, Mutex};
 

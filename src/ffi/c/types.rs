@@ -1,10 +1,10 @@
 //! The C API's types: the result codes, the `repr(C)` structs passed in and out, and their
 //! conversions from the core's types. cbindgen writes them into `bindings/c/waymark.h`.
 
-use crate::engine::{self, Position};
 use crate::ffi::error::{ErrorCode, PositioningError};
-use crate::sensors::{MdiScenario, MotionState};
-use crate::site::Site;
+use ::waymark_engine::sensors::{MdiScenario, MotionState};
+use ::waymark_engine::site::Site;
+use ::waymark_engine::{self as engine, Position};
 use std::ffi::{c_char, c_void};
 
 /// What a call did.
@@ -354,8 +354,8 @@ pub struct waymark_fix_error {
     pub spread: f64,
 }
 
-impl From<crate::habits::FixError> for waymark_fix_error {
-    fn from(e: crate::habits::FixError) -> Self {
+impl From<::waymark_engine::habits::FixError> for waymark_fix_error {
+    fn from(e: ::waymark_engine::habits::FixError) -> Self {
         Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
     }
 }

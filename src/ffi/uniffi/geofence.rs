@@ -1,6 +1,6 @@
 //! Geofences as Kotlin and Swift see them.
 
-use crate::geofence::{Geofence as CoreGeofence, GeofenceShape as CoreShape};
+use waymark_engine::geofence::{Geofence as CoreGeofence, GeofenceShape as CoreShape};
 
 /// A point of the site's metric frame, m.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]

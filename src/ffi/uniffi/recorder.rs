@@ -2,9 +2,9 @@
 
 use super::records::{samples, MotionSample, RadioScan};
 use crate::ffi::delivery::lock;
-use crate::recorder::{self as core, RecorderError};
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Mutex;
+use waymark_engine::recorder::{self as core, RecorderError};
 
 /// Who and what is being recorded; written into every walk file's header.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]

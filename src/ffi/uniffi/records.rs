@@ -1,11 +1,11 @@
 //! The records and enums of the Kotlin and Swift API, and their conversions from the core's
 //! types. A change here is a possible breaking change for apps (CHANGELOG, "Breaking changes").
 
-use crate::config::TransitionModel;
-use crate::engine;
 use crate::ffi::handle::{Options, Status};
-use crate::sensors::{self, SensorSample};
-use crate::site::Site;
+use waymark_engine as engine;
+use waymark_engine::sensors::{self, SensorSample};
+use waymark_engine::site::Site;
+use waymark_engine::TransitionModel;
 
 /// Which transition model the engine uses.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
@@ -73,7 +73,7 @@ impl std::fmt::Debug for EngineOptions {
 
 impl Default for EngineOptions {
     fn default() -> Self {
-        let core = crate::config::EngineConfig::default();
+        let core = waymark_engine::EngineConfig::default();
         Self {
             transition: None,
             step_length_m: None,
@@ -219,24 +219,24 @@ pub struct RadioScan {
 
 impl RadioScan {
     /// The scan as the core takes it, or why a transmitter id does not parse.
-    pub(crate) fn to_core(&self) -> Result<crate::radio::Scan, String> {
-        use crate::radio::{Reading, TransmitterId};
+    pub(crate) fn to_core(&self) -> Result<waymark_engine::radio::Scan, String> {
+        use waymark_engine::radio::{Reading, TransmitterId};
         let mut readings = Vec::with_capacity(self.wifi.len() + self.beacons.len());
         for w in &self.wifi {
             readings.push(Reading {
                 transmitter: TransmitterId::wifi(&w.bssid)?,
                 rssi_dbm: w.rssi_dbm,
-                age_ns: w.age_ms.saturating_mul(crate::NS_PER_MS),
+                age_ns: w.age_ms.saturating_mul(crate::ffi::NS_PER_MS),
             });
         }
         for b in &self.beacons {
             readings.push(Reading {
                 transmitter: crate::ffi::beacon_id(&b.uuid, b.major, b.minor, b.address.as_deref())?,
                 rssi_dbm: b.rssi_dbm,
-                age_ns: b.age_ms.saturating_mul(crate::NS_PER_MS),
+                age_ns: b.age_ms.saturating_mul(crate::ffi::NS_PER_MS),
             });
         }
-        Ok(crate::radio::Scan { timestamp_ns: self.timestamp_ns, readings })
+        Ok(waymark_engine::radio::Scan { timestamp_ns: self.timestamp_ns, readings })
     }
 }
 
@@ -384,15 +384,15 @@ pub struct ZoneProbability {
     pub probability: f64,
 }
 
-pub(crate) fn zone_kind(k: crate::site::ZoneKind) -> ZoneKind {
+pub(crate) fn zone_kind(k: waymark_engine::site::ZoneKind) -> ZoneKind {
     match k {
-        crate::site::ZoneKind::Room => ZoneKind::Room,
-        crate::site::ZoneKind::Corridor => ZoneKind::Corridor,
-        crate::site::ZoneKind::Hall => ZoneKind::Hall,
-        crate::site::ZoneKind::Stairs => ZoneKind::Stairs,
-        crate::site::ZoneKind::Lift => ZoneKind::Lift,
-        crate::site::ZoneKind::Entrance => ZoneKind::Entrance,
-        crate::site::ZoneKind::Other => ZoneKind::Other,
+        waymark_engine::site::ZoneKind::Room => ZoneKind::Room,
+        waymark_engine::site::ZoneKind::Corridor => ZoneKind::Corridor,
+        waymark_engine::site::ZoneKind::Hall => ZoneKind::Hall,
+        waymark_engine::site::ZoneKind::Stairs => ZoneKind::Stairs,
+        waymark_engine::site::ZoneKind::Lift => ZoneKind::Lift,
+        waymark_engine::site::ZoneKind::Entrance => ZoneKind::Entrance,
+        waymark_engine::site::ZoneKind::Other => ZoneKind::Other,
     }
 }
 
@@ -422,8 +422,8 @@ pub struct FixError {
     pub spread: f64,
 }
 
-impl From<crate::habits::FixError> for FixError {
-    fn from(e: crate::habits::FixError) -> Self {
+impl From<waymark_engine::habits::FixError> for FixError {
+    fn from(e: waymark_engine::habits::FixError) -> Self {
         Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
     }
 }
@@ -448,7 +448,10 @@ fn count(n: usize) -> u32 {
     u32::try_from(n).unwrap_or(u32::MAX)
 }
 
-pub(crate) fn habit_report(r: &crate::habits::HabitReport, model: &crate::habits::HabitModel) -> HabitReport {
+pub(crate) fn habit_report(
+    r: &waymark_engine::habits::HabitReport,
+    model: &waymark_engine::habits::HabitModel,
+) -> HabitReport {
     HabitReport {
         epochs: count(r.epochs),
         total_epochs: model.epochs(),
@@ -673,19 +676,19 @@ pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
 impl PositionFix {
     /// The core fix: `x` and `y` as given, or the latitude/longitude in the site's frame
     /// (on the fix's floor, when the floors' frames differ). `Err` says why it is neither.
-    pub(crate) fn to_core(self, site: &Site) -> Result<crate::fix::PositionFix, String> {
+    pub(crate) fn to_core(self, site: &Site) -> Result<waymark_engine::PositionFix, String> {
         let floor = self.floor.map(|f| f as usize);
         let (x, y) = match (self.x, self.y, self.latitude_deg, self.longitude_deg) {
             (Some(x), Some(y), None, None) => (x, y),
             (None, None, Some(lat_deg), Some(lon_deg)) => {
                 let p = site
-                    .site_point(floor, crate::site::LatLon { lat_deg, lon_deg })
+                    .site_point(floor, waymark_engine::site::LatLon { lat_deg, lon_deg })
                     .map_err(|e| e.to_string())?;
                 (p.x, p.y)
             }
             _ => return Err("a position fix needs x and y, or latitude and longitude (not both)".into()),
         };
-        Ok(crate::fix::PositionFix {
+        Ok(waymark_engine::PositionFix {
             timestamp_ns: self.timestamp_ns,
             x,
             y,
@@ -728,10 +731,10 @@ pub(crate) fn status_update(status: &Status, site: &Site) -> StatusUpdate {
     }
 }
 
-pub(crate) fn pressure_samples(batch: &[PressureReading]) -> Vec<crate::sensors::PressureSample> {
+pub(crate) fn pressure_samples(batch: &[PressureReading]) -> Vec<waymark_engine::sensors::PressureSample> {
     batch
         .iter()
-        .map(|s| crate::sensors::PressureSample { timestamp_ns: s.timestamp_ns, hpa: s.hpa })
+        .map(|s| waymark_engine::sensors::PressureSample { timestamp_ns: s.timestamp_ns, hpa: s.hpa })
         .collect()
 }
 

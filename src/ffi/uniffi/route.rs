@@ -4,10 +4,10 @@
 
 use super::{PositionEstimate, PositioningEngine, Site};
 use crate::ffi::delivery::lock;
-use crate::route::{self as core, RouteTracker as CoreTracker};
-use crate::site::Site as CoreSite;
 use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
+use waymark_engine::route::{self as core, RouteTracker as CoreTracker};
+use waymark_engine::site::Site as CoreSite;
 
 /// A point of the site: a floor index and a position in the site's metric frame, m.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]

@@ -84,7 +84,7 @@ impl PreparedSurvey<'_> {
             let mut heard: Vec<u32> = readings.iter().map(|r| r.0).collect();
             heard.sort_unstable();
             heard.dedup();
-            let models = waymark::site::fit_columns(readings, training.len(), build.model, &fit);
+            let models = waymark_engine::site::fit_columns(readings, training.len(), build.model, &fit);
             CellFit { scans: training.len() as u32, heard, models }
         };
         let threads = threads.max(1).min(todo.len().max(1));

@@ -12,8 +12,10 @@ use crate::io::{FloorPlan, Trace};
 use nalgebra::Point2;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
-use waymark::radio::{FitOptions, Gaussian, Reading, Scan, TransmitterId};
-use waymark::site::{Anchor, BuildOptions, LatLon, North, Site, SiteBuilder, SiteError, Zone, ZoneKind};
+use waymark_engine::radio::{FitOptions, Gaussian, Reading, Scan, TransmitterId};
+use waymark_engine::site::{
+    Anchor, BuildOptions, LatLon, North, Site, SiteBuilder, SiteError, Zone, ZoneKind,
+};
 
 mod assemble;
 mod fit;
@@ -35,7 +37,7 @@ pub struct SurveyOptions {
     /// spacing: the grid then covers a corridor two to three states wide around each walk.
     pub coverage_m: f64,
     /// Grid points within this distance of a surveyed state (and on the floor, when there is a
-    /// plan) that no survey walk covered become [`StateKind::Unsurveyed`](waymark::site::StateKind::Unsurveyed) states with no
+    /// plan) that no survey walk covered become [`StateKind::Unsurveyed`](waymark_engine::site::StateKind::Unsurveyed) states with no
     /// fingerprint, joined to the grid: where a walker leaves the surveyed area, the motion
     /// can carry the estimate there instead of pinning it to the map's edge. 0: none.
     pub unsurveyed_margin_m: f64,

@@ -1,7 +1,7 @@
 //! Transmitters that one radio sends. An access point that serves several networks reports
 //! each under its own BSSID, from the same antenna at the same level, so a scan hears one
 //! reading several times over; the radio map counts such a group once
-//! ([`waymark::radio::RadioMap::with_shared_radios`]). The survey finds the groups in its own
+//! ([`waymark_engine::radio::RadioMap::with_shared_radios`]). The survey finds the groups in its own
 //! scans, whatever the ids look like (hashed ones too): two transmitters are one radio when
 //! they are nearly always heard together and their readings move together.
 

@@ -1,7 +1,7 @@
 use super::*;
 use crate::io::Waypoint;
-use waymark::radio::TransmitterId;
-use waymark::site::StateKind;
+use waymark_engine::radio::TransmitterId;
+use waymark_engine::site::StateKind;
 
 fn walk(name: &str, from: (f64, f64), to: (f64, f64), seconds: u64) -> Trace {
     let ns = 1_000_000_000u64;
@@ -223,7 +223,7 @@ fn a_site_without_a_walk_reusing_fits_is_the_survey_without_it() {
     let fits = prepared.fit(&|f, w| !(f == 0 && w == 2), Some(&all), 1);
     let (without_c, _) = prepared.assemble(&fits).unwrap();
     let high = |site: &Site| {
-        let surveyed = |s: &&waymark::site::State| s.kind == StateKind::Surveyed;
+        let surveyed = |s: &&waymark_engine::site::State| s.kind == StateKind::Surveyed;
         site.states()
             .iter()
             .filter(surveyed)

@@ -193,12 +193,12 @@ pub fn load_gsd_building(
         )));
     }
     let n = fixes.len() as f64;
-    let centre = waymark::site::LatLon::new(
+    let centre = waymark_engine::site::LatLon::new(
         fixes.iter().map(|f| f.position.lat_deg).sum::<f64>() / n,
         fixes.iter().map(|f| f.position.lon_deg).sum::<f64>() / n,
     )
     .map_err(|e| CalibrationError::Empty(format!("{}: the survey's centre: {e}", dir.display())))?;
-    let anchor = waymark::site::Anchor::at(centre);
+    let anchor = waymark_engine::site::Anchor::at(centre);
     let mut levels: Vec<i32> = fixes.iter().map(|f| f.level).collect();
     levels.sort_unstable();
     levels.dedup();

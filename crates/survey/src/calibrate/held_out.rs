@@ -3,9 +3,11 @@
 
 use crate::io::Trace;
 use crate::scoring::{live_estimates, quantile, score, Scored};
-use waymark::sensors::MdiScenario;
-use waymark::site::{scaled_radii, Calibration, FloorReliability, StateKind, FLOOR_BANDS, FLOOR_MISS_BANDS};
-use waymark::{ScanTiming, Site};
+use waymark_engine::sensors::MdiScenario;
+use waymark_engine::site::{
+    scaled_radii, Calibration, FloorReliability, StateKind, FLOOR_BANDS, FLOOR_MISS_BANDS,
+};
+use waymark_engine::{ScanTiming, Site};
 
 /// Per walk, per γ, per run of the calibration (`survey_calibrated`'s `masks`; the as-shipped
 /// replays of `shipped` use the first two for steady and throttled scans): the held-out epochs.
@@ -47,13 +49,18 @@ pub(super) struct Tag {
     /// ([`ScanTiming::sparse_band`]).
     pub band: Option<usize>,
     /// What the engine added to both radii for the walking since the radio last explained a
-    /// scan ([`Position::beyond_radio_m`](waymark::Position::beyond_radio_m)), m: not the
+    /// scan ([`Position::beyond_radio_m`](waymark_engine::Position::beyond_radio_m)), m: not the
     /// posterior's, so no factor applies to it.
     pub beyond_radio_m: f64,
 }
 
 /// The live positions of a replay of `trace` (on floor `floor`), scored and tagged.
-pub(super) fn tag(trace: &Trace, floor: usize, mapped: &OnMap, positions: &[waymark::Position]) -> Vec<Tag> {
+pub(super) fn tag(
+    trace: &Trace,
+    floor: usize,
+    mapped: &OnMap,
+    positions: &[waymark_engine::Position],
+) -> Vec<Tag> {
     let scored = score(trace, floor, &live_estimates(positions)).0;
     // The sparse band of each position, as the engine saw it (its scans are the epochs with
     // radio evidence).

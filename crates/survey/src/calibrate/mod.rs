@@ -31,9 +31,9 @@ use held_out::{floor_reliability, radius_factors, tag, HeldOut, Tag, Tagged, Wal
 use radius::calibrate_fingerprint_radius;
 use shipped::{covered_replays, CoveredGamma, HeldOutSite};
 use std::sync::Arc;
-use waymark::sensors::MdiScenario;
-use waymark::site::{Calibration, FloorReliability, North, Site, SparseScans, SPARSE_BANDS};
-use waymark::{Engine, EngineConfig};
+use waymark_engine::sensors::MdiScenario;
+use waymark_engine::site::{Calibration, FloorReliability, North, Site, SparseScans, SPARSE_BANDS};
+use waymark_engine::{Engine, EngineConfig};
 
 /// Why a site could not be read or calibrated.
 #[derive(Debug, thiserror::Error)]
@@ -54,7 +54,7 @@ pub enum CalibrationError {
     Plan(#[from] crate::io::FloorPlanError),
     /// The survey could not build a site.
     #[error(transparent)]
-    Site(#[from] waymark::site::SiteError),
+    Site(#[from] waymark_engine::site::SiteError),
     /// The walks give nothing to survey.
     #[error("{0}")]
     Empty(String),

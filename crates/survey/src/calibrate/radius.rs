@@ -9,8 +9,8 @@ use crate::scoring::{live_estimates, score_scans, Scored};
 use crate::{PreparedSurvey, SurveyOptions};
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use waymark::site::{Calibration, North};
-use waymark::{Engine, EngineConfig, SharedEmissions};
+use waymark_engine::site::{Calibration, North};
+use waymark_engine::{Engine, EngineConfig, SharedEmissions};
 
 /// One radius of the fingerprint radius's search: (radius m, held-out mean error m, scans).
 pub type RadiusPoint = (f64, f64, usize);

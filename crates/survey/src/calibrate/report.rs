@@ -3,7 +3,7 @@
 use super::held_out::Tag;
 use super::radius::RadiusPoint;
 use serde::Serialize;
-use waymark::site::{Calibration, FLOOR_BANDS, SPARSE_BANDS};
+use waymark_engine::site::{Calibration, FLOOR_BANDS, SPARSE_BANDS};
 
 /// One γ of [`GAMMA_GRID`](super::GAMMA_GRID) on one floor's held-out walks.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -160,10 +160,10 @@ pub struct CalibrationReport {
     pub rssi_weight_without_movement: Option<f64>,
     /// All floors pooled, with only the distance and with only the heading: the curve each
     /// scenario's own γ is chosen on (`rssi_weight_by_scenario`).
-    pub gamma_by_scenario: waymark::site::PerScenario<Vec<GammaPoint>>,
+    pub gamma_by_scenario: waymark_engine::site::PerScenario<Vec<GammaPoint>>,
     /// The γ of those scenarios, when their own beat `rssi_weight_without_movement` on their
     /// curve by more than its standard error.
-    pub rssi_weight_by_scenario: waymark::site::PerScenario<f64>,
+    pub rssi_weight_by_scenario: waymark_engine::site::PerScenario<f64>,
     /// Per floor, in site order: the γ each floor gets.
     pub floors: Vec<FloorCalibrationReport>,
     /// The radius factors chosen (68%, 95%), over the held-out walks replayed with the engine
@@ -176,8 +176,8 @@ pub struct CalibrationReport {
     /// at least [`MIN_SCENARIO_EPOCHS`](super::MIN_SCENARIO_EPOCHS) in it, else from the
     /// calibration's replays with the motion as the sensors give it, withheld, distance only
     /// and heading only, at each floor's γ; a scenario with fewer than that in both has none.
-    pub accuracy_scale_by_scenario: waymark::site::ScenarioScales,
-    /// Those epochs per scenario ([`MdiScenario::ALL`](waymark::sensors::MdiScenario::ALL) order).
+    pub accuracy_scale_by_scenario: waymark_engine::site::ScenarioScales,
+    /// Those epochs per scenario ([`MdiScenario::ALL`](waymark_engine::sensors::MdiScenario::ALL) order).
     pub scenario_epochs: [usize; 4],
     /// Held-out epochs on the map replayed with the engine as shipped: what
     /// `accuracy_scale`'s 68% factor was fitted on.
@@ -225,7 +225,7 @@ pub struct CalibrationReport {
     pub floor_reliability: FloorReliabilityReport,
 }
 
-/// The calibration for sparse scans ([`SparseScans`](waymark::site::SparseScans)): every
+/// The calibration for sparse scans ([`SparseScans`](waymark_engine::site::SparseScans)): every
 /// held-out walk replayed again at each γ with one scan every 30 s reaching the engine.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct SparseScansReport {
@@ -240,10 +240,10 @@ pub struct SparseScansReport {
     /// The floor probability's calibration in the sparse regime.
     pub floor_reliability: FloorReliabilityReport,
     /// What was chosen.
-    pub calibration: waymark::site::SparseScans,
+    pub calibration: waymark_engine::site::SparseScans,
 }
 
-/// The floor probability's calibration ([`FloorReliability`](waymark::site::FloorReliability))
+/// The floor probability's calibration ([`FloorReliability`](waymark_engine::site::FloorReliability))
 /// and the held-out epochs on the map it rests on; empty on a site of one floor.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
 pub struct FloorReliabilityReport {
@@ -252,7 +252,7 @@ pub struct FloorReliabilityReport {
     /// all: no calibration.
     pub epochs_right_by_band: [[usize; 2]; FLOOR_BANDS],
     /// What was chosen.
-    pub calibration: waymark::site::FloorReliability,
+    pub calibration: waymark_engine::site::FloorReliability,
 }
 
 /// The held-out epochs whose truth was off the held-out site's map, with the motion as the
@@ -330,7 +330,7 @@ impl OffMapBand {
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct MotionSummary {
     /// The chosen step length model.
-    pub step_length: waymark::sensors::StepLengthModel,
+    pub step_length: waymark_engine::sensors::StepLengthModel,
     /// Site heading = magnetic azimuth + this, degrees.
     pub heading_offset_deg: f64,
     /// Walks used.
@@ -343,7 +343,7 @@ pub struct MotionSummary {
 /// `site` needs more walks (`docs/surveying.md#is-the-survey-enough`). `None` when `site` is
 /// not geo-referenced, since GeoJSON has no other frame.
 pub fn coverage_geojson(
-    site: &waymark::Site,
+    site: &waymark_engine::Site,
     report: &CalibrationReport,
 ) -> Option<geojson::FeatureCollection> {
     site.anchor()?;

@@ -8,8 +8,8 @@ use super::{held_out_reach, parallel_map_by_cost, replay_cost, CalibrationOption
 use crate::replay::{replay, ReplayOptions};
 use crate::{PreparedSurvey, SurveyFits};
 use std::sync::Arc;
-use waymark::site::{Calibration, Site};
-use waymark::{Engine, SharedEmissions};
+use waymark_engine::site::{Calibration, Site};
+use waymark_engine::{Engine, SharedEmissions};
 
 /// Walk `w` of floor `f` held out: the site surveyed from every other walk, with its
 /// walking-distance tables taken from `whole` where they are the same, the map that says
@@ -172,7 +172,7 @@ const _: () = assert!(RUNS > SPARSE);
 mod tests {
     use super::*;
     use crate::calibrate::gamma::tests::scored;
-    use waymark::sensors::MdiScenario;
+    use waymark_engine::sensors::MdiScenario;
 
     fn tag(beyond_map_m: f64) -> Tag {
         Tag {

@@ -12,7 +12,7 @@
 use nalgebra::Point2;
 use serde_json::Value;
 use std::path::Path;
-use waymark::site::{Anchor, LatLon};
+use waymark_engine::site::{Anchor, LatLon};
 
 /// Smallest floor width or height a plan may give, m. The competition's floors are 176 to
 /// 320 m across; a plan smaller than a room is a unit mistake (the width in km, or a

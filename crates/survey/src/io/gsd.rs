@@ -25,9 +25,9 @@
 use super::ilc::{sort_by_time, PressureSample, ReadStats, Trace, TraceError, Waypoint};
 use std::collections::BTreeMap;
 use std::path::Path;
-use waymark::radio::{Reading, Scan, TransmitterId};
-use waymark::sensors::SensorSample;
-use waymark::site::{Anchor, LatLon};
+use waymark_engine::radio::{Reading, Scan, TransmitterId};
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::site::{Anchor, LatLon};
 
 const NS_PER_S: f64 = 1e9;
 

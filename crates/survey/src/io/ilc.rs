@@ -14,17 +14,17 @@
 //! - Unknown line types, malformed numbers and non-finite values are skipped and counted in
 //!   [`ReadStats`], never fatal: a walk with one waypoint, or none, still reads.
 //!
-//! A walk the SDK's survey recorder wrote (`waymark::recorder`) says so in its header
+//! A walk the SDK's survey recorder wrote (`waymark_engine::recorder`) says so in its header
 //! ([`RECORDER_HEADER`]): its times are ns rather than ms, and the WiFi and beacon lines at one
 //! time are one scan as the app pushed it, each reading with its own last-seen time, so nothing
 //! is folded or rounded.
 
 use std::collections::BTreeMap;
 use std::path::Path;
-use waymark::radio::{Reading, Scan, TransmitterId};
-use waymark::recorder::RECORDER_HEADER;
-pub use waymark::sensors::PressureSample;
-use waymark::sensors::SensorSample;
+use waymark_engine::radio::{Reading, Scan, TransmitterId};
+use waymark_engine::recorder::RECORDER_HEADER;
+pub use waymark_engine::sensors::PressureSample;
+use waymark_engine::sensors::SensorSample;
 
 const NS_PER_MS: u64 = 1_000_000;
 

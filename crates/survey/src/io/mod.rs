@@ -14,7 +14,7 @@ pub use ilc::{Event, PressureSample, ReadStats, Trace, TraceError, Waypoint};
 /// Reads a walk in either format: a GetSensorData logfile ([`gsd`]), its ground truth placed
 /// by `site` (the site's anchor and its floors' levels; without an anchor the walk has no
 /// waypoints), or a competition walk ([`ilc`]).
-pub fn read_walk(path: &std::path::Path, site: &waymark::Site) -> Result<Trace, TraceError> {
+pub fn read_walk(path: &std::path::Path, site: &waymark_engine::Site) -> Result<Trace, TraceError> {
     let bytes =
         std::fs::read(path).map_err(|source| TraceError::Io { path: path.display().to_string(), source })?;
     let text = String::from_utf8_lossy(&bytes);

@@ -3,12 +3,12 @@
 //! 3 s and a tap every 5 s, into a temporary folder, and prints the bytes written and how long
 //! the calls took: each call hands its lines to the OS, and one a second also syncs them.
 //!
-//! `cargo run --release --example recorder_sync_cost [seconds, default 10] [folder]`
+//! `cargo run --release -p waymark-engine --example recorder_sync_cost [seconds, default 10] [folder]`
 
 use std::time::{Duration, Instant};
-use waymark::recorder::{RecorderOptions, SurveyRecorder};
-use waymark::sensors::SensorSample;
-use waymark::{Reading, Scan, TransmitterId};
+use waymark_engine::recorder::{RecorderOptions, SurveyRecorder};
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::{Reading, Scan, TransmitterId};
 
 fn main() {
     let mut args = std::env::args().skip(1);

@@ -3,14 +3,14 @@
 //! heading better than compass-only and gyro-only past steel, the HIPE Table 1 scenario
 //! chosen from what delivered, and bad input never panicking.
 
-use waymark::sensors::{
+use waymark_engine::sensors::{
     MdiScenario, MotionConfig, MotionState, MotionTracker, SensorSample, StepDetectorKind,
 };
-use waymark::Error;
+use waymark_engine::Error;
 use waymark_sim::imu::{shaken_in_place, synthesize, ImuConfig, ImuTrace};
 use waymark_sim::motion_eval::{evaluate, evaluate_with, EvalOptions, MotionReport};
 
-/// Prints the full report: `cargo test --release --test sensors -- --ignored --nocapture`.
+/// Prints the full report: `cargo test --release -p waymark-engine --test sensors -- --ignored --nocapture`.
 /// Seed and runs from WAYMARK_EVAL_SEED and WAYMARK_EVAL_RUNS (default 1 and 10); a tracker
 /// configuration to try from WAYMARK_EVAL_CONFIG as JSON, missing fields at their defaults
 /// (e.g. `{"confirm_steps": 3}`).
@@ -76,7 +76,7 @@ fn run_trace(
     trace: &ImuTrace,
     config: MotionConfig,
     streams: [bool; 3],
-) -> (MotionTracker, Vec<waymark::sensors::MotionUpdate>) {
+) -> (MotionTracker, Vec<waymark_engine::sensors::MotionUpdate>) {
     let mut tracker = MotionTracker::new(config).unwrap();
     let all = [&trace.accelerometer, &trace.gyroscope, &trace.magnetometer];
     let start = all.iter().filter_map(|s| s.first()).map(|s| s.timestamp_ns).min().unwrap();

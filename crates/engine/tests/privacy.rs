@@ -2,8 +2,8 @@
 //! one does, holds no raw id, and refuses to start without its salt.
 
 use std::sync::Arc;
-use waymark::radio::Reading;
-use waymark::{Engine, EngineConfig, Error, Salt, Scan, Site, SiteError, TransmitterId};
+use waymark_engine::radio::Reading;
+use waymark_engine::{Engine, EngineConfig, Error, Salt, Scan, Site, SiteError, TransmitterId};
 use waymark_sim as sim;
 
 const SALT_HEX: &str = "8c1d6b2a9e4f0a7753b1c0de5a11e7f00d2b6c8e9f1a3b5c7d9e0f1a2b3c4d5e";
@@ -72,7 +72,7 @@ fn a_hashed_site_positions_exactly_as_the_raw_one() {
     assert_eq!(hashed_engine.push_scan(&unknown), raw_engine.push_scan(&unknown));
     assert!(matches!(
         hashed_engine.push_scan(&unknown),
-        Err(waymark::InputError::NoKnownTransmitter { unknown: 2, .. })
+        Err(waymark_engine::InputError::NoKnownTransmitter { unknown: 2, .. })
     ));
 }
 

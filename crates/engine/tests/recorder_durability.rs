@@ -9,9 +9,9 @@
 use std::io::{BufRead, BufReader};
 use std::path::Path;
 use std::process::{Command, Stdio};
-use waymark::recorder::{RecorderOptions, SurveyRecorder};
-use waymark::sensors::SensorSample;
-use waymark::RecorderError;
+use waymark_engine::recorder::{RecorderOptions, SurveyRecorder};
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::RecorderError;
 
 const CHILD: &str = "WAYMARK_RECORDER_CHILD";
 const DIR: &str = "WAYMARK_RECORDER_DIR";
@@ -110,7 +110,8 @@ fn in_mount_namespace(script: &str, args: &[&str]) -> Option<std::process::ExitS
 
 /// A real full disk: a 256 KiB tmpfs, mounted in a mount namespace of the child's own. Where
 /// that is not allowed (not root, no `unshare`, a container without `mount`) it says so and
-/// checks nothing; the same faults are injected in `src/recorder.rs`'s tests everywhere.
+/// checks nothing; the same faults are injected in `src/recorder.rs`'s tests (this crate's)
+/// everywhere.
 #[cfg(target_os = "linux")]
 #[test]
 fn a_full_filesystem_loses_no_call_that_returned() {

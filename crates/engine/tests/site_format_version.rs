@@ -3,8 +3,8 @@
 //! does not know; version-1 and version-2 files (older schemas, subsets of the current) still
 //! load.
 
-use waymark::site::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
-use waymark::{Site, SiteError};
+use waymark_engine::site::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
+use waymark_engine::{Site, SiteError};
 
 /// A version-1 file with a field added within version 1 (`zones`).
 const VERSION_1: &str = r#"{
@@ -65,7 +65,7 @@ fn a_version_6_file_still_loads_and_version_7_adds_the_shared_radios() {
     assert!(site.to_json().contains(r#""shared_radios":[[0,1]]"#), "{}", site.to_json());
     let binary = Site::from_bytes(&site.to_binary()).unwrap();
     assert_eq!(binary.radio().shared_radios(), [vec![0, 1]]);
-    let hashed = site.hashed(&waymark::radio::Salt::new(b"a salt of sixteen bytes").unwrap()).unwrap();
+    let hashed = site.hashed(&waymark_engine::radio::Salt::new(b"a salt of sixteen bytes").unwrap()).unwrap();
     assert_eq!(hashed.radio().shared_radios(), [vec![0, 1]]);
     for (bad, says) in [("[[0, 1]]", "[[0, 2]]"), ("[[0, 1]]", "[[0]]")] {
         let err = Site::from_json(two.replace(bad, says).as_bytes()).unwrap_err().to_string();

@@ -8,8 +8,8 @@ mod common;
 use common::{corridor_readings as readings_at, scan, two_floor_site, zoned_site};
 use nalgebra::Point2;
 use std::sync::Arc;
-use waymark::EpochInput;
-use waymark::{Engine, EngineConfig, InputError, PositionFix, Site};
+use waymark_engine::EpochInput;
+use waymark_engine::{Engine, EngineConfig, InputError, PositionFix, Site};
 use waymark_sim::{Office, OfficeConfig};
 
 const SECOND: u64 = 1_000_000_000;
@@ -134,7 +134,7 @@ fn bad_feedback_is_rejected_counted_and_changes_nothing() {
     }
     let after = engine.snapshot();
     assert_eq!(after.stats.feedback_rejected, 8);
-    let reset = |mut s: waymark::EngineSnapshot| {
+    let reset = |mut s: waymark_engine::EngineSnapshot| {
         s.stats = Default::default();
         s
     };
@@ -249,7 +249,7 @@ fn bad_fixes_are_rejected_counted_and_change_nothing() {
     let after = engine.snapshot();
     assert_eq!(after.stats.fixes_rejected, bad.len() as u64 + 1);
     assert_eq!(after.stats.fixes_accepted, 0);
-    let reset = |mut s: waymark::EngineSnapshot| {
+    let reset = |mut s: waymark_engine::EngineSnapshot| {
         s.stats = Default::default();
         s
     };
@@ -286,7 +286,7 @@ fn the_simulated_office_has_its_rooms_as_zones() {
     for (i, s) in site.states().iter().enumerate() {
         assert_eq!(site.zone_of(i), office.zone_at(s.position), "state {i} at {}", s.position);
     }
-    let pseudo = site.with_pseudo_states(waymark::site::PSEUDO_SPACING_M);
+    let pseudo = site.with_pseudo_states(waymark_engine::site::PSEUDO_SPACING_M);
     assert!((0..pseudo.states().len()).all(|i| pseudo.zone_of(i).is_some()));
     // Every epoch of a walk is in some zone.
     assert!(office.walk(1, 100.0).epochs.iter().all(|e| e.zone.is_some()));

@@ -65,12 +65,12 @@ pub enum SiteError {
     /// Within the format, but over one of the limits on what a site may cost (its size, its
     /// states, the walking-distance tables an engine builds from it): a file crafted to
     /// exhaust memory or time, or far larger than any real site
-    /// (`waymark::site::budget`, docs/errors.md#site-limits).
+    /// (`waymark_engine::site::budget`, docs/errors.md#site-limits).
     #[error(
         "site is over a limit: {what} (the most allowed is {limit}: {name}, docs/errors.md#site-limits)"
     )]
     OverLimit {
-        /// The limit's name, a constant of `waymark::site::budget` (`MAX_REACHABLE_STATES`).
+        /// The limit's name, a constant of `waymark_engine::site::budget` (`MAX_REACHABLE_STATES`).
         name: &'static str,
         /// Its value.
         limit: u64,

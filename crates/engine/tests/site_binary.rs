@@ -1,7 +1,7 @@
 //! Binary site files: exact round trips through JSON and binary, and a damaged file (cut short,
 //! a flipped byte, a newer version, an invalid entry) is a named error, never a different site.
 
-use waymark::Site;
+use waymark_engine::Site;
 
 /// Length of the binary file's leading signature.
 const SIGNATURE_LEN: usize = 8;

@@ -4,9 +4,9 @@
 
 use proptest::prelude::*;
 use std::sync::Arc;
-use waymark::recorder::{RecorderOptions, SurveyRecorder};
-use waymark::sensors::SensorSample;
-use waymark::{Engine, EngineConfig, Reading, Scan, TransmitterId};
+use waymark_engine::recorder::{RecorderOptions, SurveyRecorder};
+use waymark_engine::sensors::SensorSample;
+use waymark_engine::{Engine, EngineConfig, Reading, Scan, TransmitterId};
 use waymark_sim::{imu, Office, OfficeConfig};
 use waymark_survey::io::ilc::{EventOptions, Trace, Waypoint};
 
@@ -106,7 +106,7 @@ proptest! {
         }
         let stats = match recorder.finish() {
             Ok(stats) => stats,
-            Err(waymark::RecorderError::NoWaypoints) => {
+            Err(waymark_engine::RecorderError::NoWaypoints) => {
                 prop_assert!(waypoints.is_empty());
                 // No walk file: what was pushed waits in the spool for a waypoint.
                 let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();

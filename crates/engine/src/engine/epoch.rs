@@ -1,7 +1,7 @@
 //! One epoch: the scan's emissions, the filter step, the estimate and what it returns.
 
 use super::input::check_motion;
-use super::{Engine, Epoch, Position, StatusEvent, TrackPoint, FAULT_INJECTION_MID_EPOCH_NS, MAX_RSSI_DBM};
+use super::{Engine, Epoch, Position, StatusEvent, TrackPoint, MAX_RSSI_DBM};
 use crate::error::InputError;
 use crate::history::{EpochInput, EpochRecord, History};
 use crate::hmm::estimate;
@@ -270,7 +270,8 @@ impl Engine {
         );
         status.extend(presence);
         let revised_track = self.revise_track();
-        if cfg!(feature = "fault-injection") && position.timestamp_ns == FAULT_INJECTION_MID_EPOCH_NS {
+        #[cfg(feature = "fault-injection")]
+        if position.timestamp_ns == super::FAULT_INJECTION_MID_EPOCH_NS {
             panic!("fault injected in the middle of the epoch at {}", position.timestamp_ns);
         }
         self.presence.apply(changes);

@@ -5,9 +5,9 @@ mod common;
 use common::scan;
 use nalgebra::Point2;
 use std::sync::Arc;
-use waymark::sensors::{pressure_height_m, PressureSample};
-use waymark::site::{BuildOptions, Site, SiteBuilder};
-use waymark::{Engine, EngineConfig};
+use waymark_engine::sensors::{pressure_height_m, PressureSample};
+use waymark_engine::site::{BuildOptions, Site, SiteBuilder};
+use waymark_engine::{Engine, EngineConfig};
 
 const SECOND: u64 = 1_000_000_000;
 

@@ -3,8 +3,8 @@
 //! positioned better for it; the survey's own phone is found to read as it did.
 
 use std::sync::Arc;
-use waymark::radio::{Scan, DEVICE_OFFSET_PRIOR_STD_DB};
-use waymark::{Engine, EngineConfig};
+use waymark_engine::radio::{Scan, DEVICE_OFFSET_PRIOR_STD_DB};
+use waymark_engine::{Engine, EngineConfig};
 use waymark_sim::{Office, OfficeConfig};
 
 /// Replays walks `seeds` with every reading moved by `offset_db` (and dropped where that puts
@@ -18,7 +18,7 @@ fn replay(office: &Office, seeds: &[u64], offset_db: f64, learn: bool) -> (f64, 
         let mut engine = Engine::new(Arc::clone(&site), config).unwrap();
         for epoch in &office.walk(seed, 200.0).epochs {
             let readings = (epoch.scan.readings.iter())
-                .map(|r| waymark::radio::Reading { rssi_dbm: r.rssi_dbm + offset_db, ..r.clone() })
+                .map(|r| waymark_engine::radio::Reading { rssi_dbm: r.rssi_dbm + offset_db, ..r.clone() })
                 .filter(|r| r.rssi_dbm > office.field.clip_dbm)
                 .collect();
             let scan = Scan { timestamp_ns: epoch.scan.timestamp_ns, readings };

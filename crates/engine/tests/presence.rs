@@ -5,7 +5,7 @@ mod common;
 
 use common::{corridor_readings as readings_at, scan, two_floor_site, zoned_site};
 use std::sync::Arc;
-use waymark::{Engine, EngineConfig, Geofence, GeofenceError, GeofenceShape, StatusEvent};
+use waymark_engine::{Engine, EngineConfig, Geofence, GeofenceError, GeofenceShape, StatusEvent};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -50,7 +50,7 @@ fn walking_from_east_to_west_leaves_one_zone_before_entering_the_next() {
 #[test]
 fn an_exit_threshold_above_the_entry_is_refused() {
     let band = |enter_mass, exit_mass| EngineConfig {
-        zone_hysteresis: waymark::ZoneHysteresis { enter_mass, exit_mass },
+        zone_hysteresis: waymark_engine::ZoneHysteresis { enter_mass, exit_mass },
         ..EngineConfig::default()
     };
     assert!(band(0.3, 0.6).validate().is_err());

@@ -1,7 +1,7 @@
 //! Criterion benchmarks of what `waymark bench` reports as single figures: one epoch of the
 //! sparse engine and of the dense reference, raw IMU ingestion, and site loading.
 //!
-//!     cargo bench --bench engine
+//!     cargo bench -p waymark-engine --bench engine
 //!
 //! Sites come from `waymark_sim::scale` (an 8-connected 2 m grid, 100 access points heard
 //! per scan), the same as `waymark bench` uses.
@@ -9,10 +9,10 @@
 use criterion::{criterion_group, criterion_main, BatchSize, Criterion, Throughput};
 use std::hint::black_box;
 use std::sync::Arc;
-use waymark::hmm::UniformReach;
-use waymark::sensors::{MotionConfig, MotionTracker};
-use waymark::site::ReachTable;
-use waymark::{Engine, EngineConfig, Site};
+use waymark_engine::hmm::UniformReach;
+use waymark_engine::sensors::{MotionConfig, MotionTracker};
+use waymark_engine::site::ReachTable;
+use waymark_engine::{Engine, EngineConfig, Site};
 use waymark_sim::imu::{self, ImuConfig};
 use waymark_sim::scale::{DenseForward, ScaleConfig, ScaleSite, SCALE_EPOCH_NS};
 use waymark_sim::Trajectory;

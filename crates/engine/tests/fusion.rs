@@ -5,9 +5,9 @@ mod common;
 
 use common::{scan, two_floor_site};
 use std::sync::Arc;
-use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
-use waymark::TransitionModel;
-use waymark::{Engine, EngineConfig, Epoch, InputError, Position, StatusEvent, TrackPoint};
+use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+use waymark_engine::TransitionModel;
+use waymark_engine::{Engine, EngineConfig, Epoch, InputError, Position, StatusEvent, TrackPoint};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -145,8 +145,8 @@ fn scenario_and_motion_changes_are_announced() {
 
 /// A corridor of five states 3 m apart whose one transmitter is symmetric: -50 dBm at both
 /// ends, -70 dBm in the middle. Only the direction of walking tells the ends apart.
-fn symmetric_corridor() -> waymark::Site {
-    use waymark::site::{BuildOptions, SiteBuilder};
+fn symmetric_corridor() -> waymark_engine::Site {
+    use waymark_engine::site::{BuildOptions, SiteBuilder};
     let mut b = SiteBuilder::new("symmetric");
     let f = b.floor("G", 0.0);
     let mut previous = None;
@@ -369,7 +369,7 @@ fn held_motion_given_adds_up_and_a_held_epoch_orders_input() {
     assert_eq!(held.history().len(), steps + 1);
     assert_eq!(
         held.history().back().map(|r| (r.timestamp_ns, r.input.clone())),
-        Some((3 * SECOND, waymark::EpochInput::Feedback))
+        Some((3 * SECOND, waymark_engine::EpochInput::Feedback))
     );
 }
 

@@ -1,7 +1,7 @@
 //! Hoang §6.1 on the simulated office: the whole pipeline (training scans, EM fit, site, engine)
 //! must position to within the paper's ballpark.
 
-use waymark::radio::RssiModel;
+use waymark_engine::radio::RssiModel;
 use waymark_sim as sim;
 use waymark_sim::{Experiment, OfficeConfig};
 
@@ -51,7 +51,7 @@ fn the_demo_is_deterministic() {
 fn the_simulated_site_survives_its_own_file_format() {
     let office = sim::Office::generate(&OfficeConfig::default());
     let text = office.site.to_json();
-    let again = waymark::Site::from_json(text.as_bytes()).unwrap();
+    let again = waymark_engine::Site::from_json(text.as_bytes()).unwrap();
     assert_eq!(again.to_json(), text);
     assert_eq!(again.states().len(), 81);
     assert_eq!(again.radio().transmitters().len(), 15);

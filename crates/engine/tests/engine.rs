@@ -5,7 +5,7 @@ mod common;
 
 use common::{scan, two_floor_site};
 use std::sync::Arc;
-use waymark::{Engine, EngineConfig, InputError, Site};
+use waymark_engine::{Engine, EngineConfig, InputError, Site};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -119,7 +119,7 @@ fn the_sites_reading_age_limit_applies_unless_the_config_sets_one() {
 #[test]
 fn the_sites_calibrated_m_applies_unless_the_config_sets_one() {
     let calibrated = |m: Option<u32>| {
-        let calibration = waymark::site::Calibration { estimate_states: m, ..Default::default() };
+        let calibration = waymark_engine::site::Calibration { estimate_states: m, ..Default::default() };
         Arc::new(two_floor_site().with_calibration(calibration).unwrap())
     };
     // Between two states' fingerprints, so that the M most likely states average to
@@ -143,13 +143,13 @@ fn the_sites_calibrated_m_applies_unless_the_config_sets_one() {
     let (p, by_m) =
         position_after(&calibrated(Some(1)), EngineConfig { site_calibration: false, ..default() });
     assert_eq!(p, by_m[1], "without the site's calibration, the default M");
-    assert_eq!(waymark::DEFAULT_ESTIMATE_STATES, 3);
+    assert_eq!(waymark_engine::DEFAULT_ESTIMATE_STATES, 3);
     let (p, by_m) = position_after(&calibrated(None), default());
     assert_eq!(p, by_m[1], "a site without one: the default M");
     // M survives the site file, and 0 is refused.
     let reloaded = Site::from_bytes(&calibrated(Some(30)).to_binary()).unwrap();
     assert_eq!(reloaded.calibration().estimate_states, Some(30));
-    let zero = waymark::site::Calibration { estimate_states: Some(0), ..Default::default() };
+    let zero = waymark_engine::site::Calibration { estimate_states: Some(0), ..Default::default() };
     assert!(two_floor_site().with_calibration(zero).is_err());
 }
 
@@ -208,7 +208,8 @@ fn without_the_track_the_positions_are_the_same() {
     };
     let (with, track, bytes) = run(true);
     let (without, no_track, no_bytes) = run(false);
-    let positions = |epochs: &[waymark::Epoch]| epochs.iter().map(|e| e.position.clone()).collect::<Vec<_>>();
+    let positions =
+        |epochs: &[waymark_engine::Epoch]| epochs.iter().map(|e| e.position.clone()).collect::<Vec<_>>();
     assert_eq!(positions(&with), positions(&without));
     assert_eq!(track.len(), 8);
     assert!(bytes > 0);
@@ -235,7 +236,7 @@ fn an_rssi_no_receiver_reports_rejects_the_scan() {
     }
     assert_eq!(engine.stats().scans_rssi_too_high, 3);
     assert_eq!(engine.position(), Some(&first));
-    let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark::MAX_RSSI_DBM)])).unwrap().position;
+    let loud = engine.push_scan(&scan(11 * SECOND, &[(0, waymark_engine::MAX_RSSI_DBM)])).unwrap().position;
     assert!(loud.radio_log_evidence.is_some_and(f64::is_finite));
 }
 
@@ -244,7 +245,7 @@ fn an_rssi_no_receiver_reports_rejects_the_scan() {
 /// an explicit γ in the configuration overrides every floor.
 #[test]
 fn each_epoch_weighs_the_radio_by_the_gamma_of_the_floor_it_is_on() {
-    use waymark::site::Calibration;
+    use waymark_engine::site::Calibration;
     let (site_wide, floor_1) = (0.3, 0.05);
     let with = |floors: [Option<f64>; 2]| {
         let calibration = Calibration { rssi_weight: Some(site_wide), ..Calibration::default() };
@@ -287,8 +288,8 @@ fn each_epoch_weighs_the_radio_by_the_gamma_of_the_floor_it_is_on() {
 /// none of its own. A bad factor is refused with its path.
 #[test]
 fn radius_factors_follow_the_epochs_scenario() {
-    use waymark::sensors::MdiScenario;
-    use waymark::site::{Calibration, ScenarioScales};
+    use waymark_engine::sensors::MdiScenario;
+    use waymark_engine::site::{Calibration, ScenarioScales};
     let radius = |calibration: Calibration| {
         let site = Arc::new(two_floor_site().with_calibration(calibration).unwrap());
         let mut engine = Engine::new(site, EngineConfig::default()).unwrap();
@@ -325,8 +326,8 @@ fn radius_factors_follow_the_epochs_scenario() {
 /// configuration overrides both, and a γ out of (0, 1] is refused with its path.
 #[test]
 fn an_epoch_without_movement_takes_its_scenarios_gamma() {
-    use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
-    use waymark::site::{Calibration, PerScenario};
+    use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+    use waymark_engine::site::{Calibration, PerScenario};
     let (without, distance_only) = (0.3, 0.05);
     let site = |by_scenario: Option<f64>, without: f64| {
         let mut rssi_weight_by_scenario = PerScenario::default();
@@ -386,8 +387,8 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
 }
 
 /// Second k of a walk: `distance_m` walked in two steps, no heading.
-fn walking(k: u64, distance_m: f64) -> waymark::sensors::MotionUpdate {
-    use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
+fn walking(k: u64, distance_m: f64) -> waymark_engine::sensors::MotionUpdate {
+    use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
     MotionUpdate {
         start_ns: (k - 1) * SECOND,
         end_ns: k * SECOND,
@@ -407,7 +408,7 @@ fn walking(k: u64, distance_m: f64) -> waymark::sensors::MotionUpdate {
 /// an engine told not to take the site's calibration has no floor.
 #[test]
 fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
-    use waymark::site::Calibration;
+    use waymark_engine::site::Calibration;
     let walked = |k: u64| walking(k, 1.5);
     let explained = readings_at(0, 3.0);
     // Floor 0's transmitters all faint, as nowhere on the map: a state that never heard them
@@ -471,9 +472,9 @@ fn beyond_the_map_the_radii_grow_with_the_distance_walked() {
 fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
     use common::wifi;
     use nalgebra::Point2;
-    use waymark::radio::{Reading, Scan};
-    use waymark::sensors::{MdiScenario, MotionUpdate};
-    use waymark::site::{BuildOptions, Calibration, SiteBuilder, StateKind};
+    use waymark_engine::radio::{Reading, Scan};
+    use waymark_engine::sensors::{MdiScenario, MotionUpdate};
+    use waymark_engine::site::{BuildOptions, Calibration, SiteBuilder, StateKind};
     let level = |t: u8, x: f64| -40.0 - 4.0 * (x - 6.0 * f64::from(t)).abs();
     let site = |unsurveyed: bool| {
         let mut b = SiteBuilder::new("corridor");
@@ -587,8 +588,8 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
 /// the first scan, whose posterior holds one scan as after a sparse one.
 #[test]
 fn sparse_scans_take_their_own_radius_factors_and_gamma() {
-    use waymark::sensors::{MdiScenario, MotionState, MotionUpdate};
-    use waymark::site::{Calibration, FloorReliability, SparseScans, SPARSE_BANDS};
+    use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+    use waymark_engine::site::{Calibration, FloorReliability, SparseScans, SPARSE_BANDS};
     let mut accuracy_scale_by_since = [None; SPARSE_BANDS];
     accuracy_scale_by_since[0] = Some([3.0, 4.0]);
     accuracy_scale_by_since[1] = Some([5.0, 6.0]);
@@ -677,7 +678,7 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
         )
     };
     let (both, steady_only) = (with_tables(sparse_table), with_tables(FloorReliability::default()));
-    let p = |epochs: &[(waymark::Epoch, Vec<f64>)]| -> Vec<f64> {
+    let p = |epochs: &[(waymark_engine::Epoch, Vec<f64>)]| -> Vec<f64> {
         epochs.iter().map(|e| e.0.position.floor_probability).collect()
     };
     let raw = p(&run(&plain, default(), &throttled));
@@ -705,7 +706,7 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
 /// another calibration; a memo of another site, even an equal one, is refused.
 #[test]
 fn shared_scan_likelihoods_change_no_position() {
-    use waymark::SharedEmissions;
+    use waymark_engine::SharedEmissions;
     let site = Arc::new(two_floor_site());
     let walk: Vec<_> = (0..12u64)
         .map(|k| scan((k + 1) * 2 * SECOND, &readings_at((k / 6) as usize, 2.0 * (k % 6) as f64)))
@@ -718,7 +719,7 @@ fn shared_scan_likelihoods_change_no_position() {
         sharing.share_emissions(Arc::clone(&shared)).unwrap();
         for s in walk.iter().chain(&walk[..3]) {
             // The last three scans again, later: the memo answers for them.
-            let s = waymark::Scan {
+            let s = waymark_engine::Scan {
                 timestamp_ns: s.timestamp_ns.max(own.position().map_or(0, |p| p.timestamp_ns) + SECOND),
                 ..s.clone()
             };
@@ -727,7 +728,7 @@ fn shared_scan_likelihoods_change_no_position() {
         }
     }
     // A copy of the site with another calibration shares its radio map, and so the memo.
-    let calibration = waymark::site::Calibration { radio_fit_floor: Some(1.0), ..*site.calibration() };
+    let calibration = waymark_engine::site::Calibration { radio_fit_floor: Some(1.0), ..*site.calibration() };
     let copy = Arc::new(site.as_ref().clone().with_calibration(calibration).unwrap());
     let mut own = Engine::new(Arc::clone(&copy), EngineConfig::default()).unwrap();
     let mut sharing = Engine::new(copy, EngineConfig::default()).unwrap();
@@ -745,7 +746,7 @@ fn shared_scan_likelihoods_change_no_position() {
 /// (docs/errors.md#timestamps-ahead-of-the-clock).
 #[test]
 fn a_time_far_ahead_is_refused_and_counted_and_the_stream_goes_on() {
-    use waymark::sensors::SensorSample;
+    use waymark_engine::sensors::SensorSample;
     let at = |t: u64| SensorSample { timestamp_ns: t, x: 0.1, y: 0.2, z: 9.81 };
     let ms = SECOND / 1000;
     let mut engine = engine();

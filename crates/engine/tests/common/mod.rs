@@ -2,8 +2,8 @@
 #![allow(dead_code)]
 
 use nalgebra::Point2;
-use waymark::radio::{Reading, Scan, TransmitterId};
-use waymark::site::{BuildOptions, Site, SiteBuilder};
+use waymark_engine::radio::{Reading, Scan, TransmitterId};
+use waymark_engine::site::{BuildOptions, Site, SiteBuilder};
 
 pub fn wifi(k: u8) -> TransmitterId {
     TransmitterId::wifi(&format!("02:00:00:00:00:{k:02x}")).unwrap()
@@ -58,7 +58,7 @@ pub fn two_floor_site() -> Site {
 /// [`two_floor_site`] with zones: "west" is states 0-1, "east" 3-4 (state 2 in no zone),
 /// "upstairs" all of floor 1.
 pub fn zoned_site() -> Site {
-    use waymark::{Zone, ZoneKind};
+    use waymark_engine::{Zone, ZoneKind};
     let zone = |name: &str, kind, states: Vec<u32>| Zone { name: name.into(), kind, states };
     two_floor_site()
         .with_zones(vec![

@@ -34,12 +34,13 @@ pub use types::{
 /// "not heard".
 pub const MAX_RSSI_DBM: f64 = 100.0;
 
-/// With the `fault-injection` feature (test builds only), an epoch (a scan or an advance) at
-/// this time panics after it has stepped the filter and the track, moved the clock, raised the
-/// counters and worked out its status events, just before it stores the position: as half-done as an
-/// epoch gets. The engine must come out of it exactly as it was before the call. It is within
-/// the times an engine takes ([`MAX_TIMESTAMP_NS`](crate::sensors::MAX_TIMESTAMP_NS)):
-/// `i64::MAX - 8`.
+/// An epoch (a scan or an advance) at this time panics after it has stepped the filter and
+/// the track, moved the clock, raised the counters and worked out its status events, just
+/// before it stores the position: as half-done as an epoch gets. The engine must come out of
+/// it exactly as it was before the call. It is within the times an engine takes
+/// ([`MAX_TIMESTAMP_NS`](crate::sensors::MAX_TIMESTAMP_NS)): `i64::MAX - 8`. It exists only
+/// with the `fault-injection` feature, which test builds turn on.
+#[cfg(feature = "fault-injection")]
 pub const FAULT_INJECTION_MID_EPOCH_NS: u64 = crate::sensors::MAX_TIMESTAMP_NS - 8;
 
 /// A positioning session on one site.

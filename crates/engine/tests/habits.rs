@@ -7,8 +7,8 @@ mod common;
 
 use common::{scan, two_floor_site};
 use std::sync::Arc;
-use waymark::habits::{HabitError, HabitModel, VERSION};
-use waymark::{Engine, EngineConfig, PositionFix, Site};
+use waymark_engine::habits::{HabitError, HabitModel, VERSION};
+use waymark_engine::{Engine, EngineConfig, PositionFix, Site};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -144,10 +144,10 @@ fn the_model_round_trips_and_bad_models_are_refused() {
         assert_eq!(other.export_habits(), before, "a refused model changes nothing");
     }
     // A model of another site.
-    let mut builder = waymark::site::SiteBuilder::new("elsewhere");
+    let mut builder = waymark_engine::site::SiteBuilder::new("elsewhere");
     let f = builder.floor("G", 0.0);
     builder.state(f, nalgebra::Point2::new(0.0, 0.0), vec![scan(0, &[(0, -50.0)])]);
-    let elsewhere = builder.build(waymark::site::BuildOptions::default()).unwrap();
+    let elsewhere = builder.build(waymark_engine::site::BuildOptions::default()).unwrap();
     assert!(matches!(HabitModel::from_json(&json, &elsewhere), Err(HabitError::WrongSite(_))));
     other.clear_habits();
     assert!(other.habits().is_empty());
@@ -222,7 +222,7 @@ fn habits_that_do_not_predict_are_not_applied() {
     let mut east = engine_on(&site);
     walk_east(&mut east, 0..6);
     let report = east.learn_habits().unwrap();
-    assert_eq!(report.strength_gain.len(), waymark::habits::STRENGTHS.len(), "{report:?}");
+    assert_eq!(report.strength_gain.len(), waymark_engine::habits::STRENGTHS.len(), "{report:?}");
     assert!(report.strength.is_some() && report.strength == east.habits().strength(), "{report:?}");
     assert!(report.strength_gain.iter().any(|g| g.gain > 2.0 * g.standard_error), "{report:?}");
 

@@ -4,14 +4,14 @@
 //! (100 HMAC-SHA256), and whole engine epochs on the raw and the hashed site.
 //!
 //! ```sh
-//! cargo run --release --example scan_hashing
+//! cargo run --release -p waymark-engine --example scan_hashing
 //! ```
 
 use std::hint::black_box;
 use std::sync::Arc;
 use std::time::Instant;
-use waymark::radio::ScanHasher;
-use waymark::{Engine, EngineConfig, Reading, Salt, Scan, Site, TransmitterId};
+use waymark_engine::radio::ScanHasher;
+use waymark_engine::{Engine, EngineConfig, Reading, Salt, Scan, Site, TransmitterId};
 use waymark_sim as sim;
 
 /// Mean time of `f` in µs over enough calls to take about a second.
