@@ -5,7 +5,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use waymark::{
-    BeaconReading, EngineOptions, ErrorReport, FixError, MotionSample, PositionEstimate, PositionFix,
+    BeaconReading, EngineOptions, ErrorReport, FixBias, MotionSample, PositionEstimate, PositionFix,
     PositionListener, PositioningEngine, PositioningError, RadioScan, StatusUpdate, WifiReading,
 };
 use waymark_engine::radio::TransmitterId;
@@ -376,8 +376,8 @@ fn walk_with_fixes_and_feedback(engine: &PositioningEngine, office: &Office, see
 fn habits_are_learned_exported_and_imported_through_the_ffi() {
     let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
     let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
-    let unlearned = FixError { bias_x_m: 0.0, bias_y_m: 0.0, spread: 1.0 };
-    assert_eq!(engine.fix_error().unwrap(), unlearned);
+    let unlearned = FixBias { bias_x_m: 0.0, bias_y_m: 0.0, spread: 1.0 };
+    assert_eq!(engine.fix_bias().unwrap(), unlearned);
     let (fixes, confirmations) = walk_with_fixes_and_feedback(&engine, &office, 11);
     assert!(fixes > 10 && confirmations > 3, "{fixes} fixes, {confirmations} confirmations");
 
@@ -389,7 +389,7 @@ fn habits_are_learned_exported_and_imported_through_the_ffi() {
     let model: serde_json::Value = serde_json::from_str(&engine.export_habits().unwrap()).unwrap();
     assert_eq!(report.applied, model["strength"].as_f64().is_some(), "{report:?}");
     // The fixes' bias is learned (toward +x, +y).
-    let learned = engine.fix_error().unwrap();
+    let learned = engine.fix_bias().unwrap();
     assert!(
         learned.bias_x_m > 0.3 && learned.bias_y_m > 0.0 && learned.bias_x_m > learned.bias_y_m,
         "{learned:?}"
@@ -408,7 +408,7 @@ fn habits_are_learned_exported_and_imported_through_the_ffi() {
     assert_ne!(empty, json);
     other.import_habits(json.clone().into()).unwrap();
     assert_eq!(other.export_habits().unwrap(), json);
-    assert_eq!(other.fix_error().unwrap(), learned);
+    assert_eq!(other.fix_bias().unwrap(), learned);
 
     // Refused models throw HabitsRejected, reach onError, and change nothing.
     let counter = Arc::new(Counter::default());
@@ -440,11 +440,11 @@ fn habits_are_learned_exported_and_imported_through_the_ffi() {
         assert_eq!(other.export_habits().unwrap(), json, "a refused model changed the habits");
         assert_eq!(counter.errors.load(Ordering::SeqCst), k + 1);
     }
-    assert_eq!(other.fix_error().unwrap(), learned);
+    assert_eq!(other.fix_bias().unwrap(), learned);
 
     other.clear_habits().unwrap();
     assert_eq!(other.export_habits().unwrap(), empty);
-    assert_eq!(other.fix_error().unwrap(), unlearned);
+    assert_eq!(other.fix_bias().unwrap(), unlearned);
 }
 
 #[test]
@@ -458,7 +458,7 @@ fn learning_while_other_threads_push_and_read() {
         let pusher = scope.spawn(|| {
             for epoch in &walk.epochs {
                 let _ = engine.push_scan(scan(&epoch.scan));
-                let _ = engine.fix_error().unwrap();
+                let _ = engine.fix_bias().unwrap();
             }
         });
         let learner = scope.spawn(|| {

@@ -30,7 +30,7 @@ use waymark::{
     PositionListener as FfiListener, PositioningEngine, PositioningError, RadioScan, StatusUpdate,
     TransitionKind, WifiReading,
 };
-use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
+use waymark_engine::sensors::{MotionScenario, MotionState, MotionUpdate, SensorSample};
 use waymark_engine::EngineSnapshot;
 use waymark_engine::TransitionModel;
 use waymark_engine::{
@@ -333,10 +333,10 @@ fn call() -> impl Strategy<Value = Call> {
 /// Motion from a platform step detector: any values, consistent or not.
 fn motion_update() -> impl Strategy<Value = MotionUpdate> {
     let scenario = prop_oneof![
-        Just(MdiScenario::DistanceHeading),
-        Just(MdiScenario::Distance),
-        Just(MdiScenario::HeadingSpeed),
-        Just(MdiScenario::Speed),
+        Just(MotionScenario::DistanceHeading),
+        Just(MotionScenario::Distance),
+        Just(MotionScenario::HeadingSpeed),
+        Just(MotionScenario::Speed),
     ];
     let state =
         prop_oneof![Just(MotionState::Unknown), Just(MotionState::Stationary), Just(MotionState::Walking)];
@@ -370,7 +370,11 @@ fn motion_update() -> impl Strategy<Value = MotionUpdate> {
 }
 
 fn transition() -> impl Strategy<Value = TransitionModel> {
-    prop_oneof![Just(TransitionModel::Hoang), Just(TransitionModel::Hipe), Just(TransitionModel::Reach)]
+    prop_oneof![
+        Just(TransitionModel::MovementVector),
+        Just(TransitionModel::Regions),
+        Just(TransitionModel::Reach)
+    ]
 }
 
 /// The test's clock and the walk's IMU cursor: turns `When` into timestamps.
@@ -892,8 +896,8 @@ fn check_ffi_engine(f: &Fixture, engine: &PositioningEngine) -> Result<(), TestC
 fn options() -> impl Strategy<Value = EngineOptions> {
     let transition = proptest::option::of(prop_oneof![
         Just(TransitionKind::Reach),
-        Just(TransitionKind::Hipe),
-        Just(TransitionKind::Hoang)
+        Just(TransitionKind::Regions),
+        Just(TransitionKind::MovementVector)
     ]);
     let length =
         proptest::option::of(prop_oneof![8 => 0.4..1.0f64, 1 => value(), 1 => Just(0.0), 1 => Just(-0.7)]);
@@ -1154,7 +1158,7 @@ fn invalid_motion_from_outside_is_rejected() {
         heading_sigma_rad: 0.1,
         displacement_m: Some([0.67, 1.23]),
         motion_state: MotionState::Walking,
-        scenario: MdiScenario::DistanceHeading,
+        scenario: MotionScenario::DistanceHeading,
         compass_disturbed: false,
     };
     let scan =

@@ -180,7 +180,7 @@ static void null_engine(void) {
     CHECK(waymark_engine_zone_name(NULL, 0, name, sizeof name, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "zone name");
     CHECK(waymark_engine_zone_posterior(NULL, posterior, 2) == WAYMARK_RESULT_NULL_PARAMETER, "zone posterior");
     waymark_habit_report report;
-    waymark_fix_error fix_error;
+    waymark_fix_bias fix_bias;
     size_t json_len;
     CHECK(waymark_engine_learn_habits(NULL, &report) == WAYMARK_RESULT_NULL_PARAMETER, "learn habits");
     CHECK(waymark_engine_learn_habits(NULL, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "learn habits, NULL out");
@@ -188,7 +188,7 @@ static void null_engine(void) {
           "export habits");
     CHECK(waymark_engine_import_habits(NULL, "{}") == WAYMARK_RESULT_NULL_PARAMETER, "import habits");
     CHECK(waymark_engine_clear_habits(NULL) == WAYMARK_RESULT_NULL_PARAMETER, "clear habits");
-    CHECK(waymark_engine_fix_error(NULL, &fix_error) == WAYMARK_RESULT_NULL_PARAMETER, "fix error");
+    CHECK(waymark_engine_fix_bias(NULL, &fix_bias) == WAYMARK_RESULT_NULL_PARAMETER, "fix error");
 }
 
 /* A callback that calls back into the engine: no lock is held while it runs. */
@@ -378,8 +378,8 @@ static void abi_edges(const char *json, size_t len) {
 static void habit_garbage(waymark_engine *engine) {
     waymark_habit_report r;
     CHECK(waymark_engine_learn_habits(engine, &r) == WAYMARK_RESULT_OK, "learn from the garbage's history");
-    waymark_fix_error e;
-    CHECK(waymark_engine_fix_error(engine, &e) == WAYMARK_RESULT_OK && isfinite(e.bias_x_m) &&
+    waymark_fix_bias e;
+    CHECK(waymark_engine_fix_bias(engine, &e) == WAYMARK_RESULT_OK && isfinite(e.bias_x_m) &&
               isfinite(e.bias_y_m) && e.spread > 0,
           "finite fix error");
     (void)r;

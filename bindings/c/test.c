@@ -514,8 +514,8 @@ static void habits(const char *site_path, const char *walk_path) {
     waymark_engine *engine = NULL, *other = NULL;
     CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "site");
     CHECK(waymark_engine_new_from_path(site_path, &other) == WAYMARK_RESULT_OK, "second engine");
-    waymark_fix_error e = {NAN, NAN, NAN};
-    CHECK(waymark_engine_fix_error(engine, &e) == WAYMARK_RESULT_OK && e.bias_x_m == 0 && e.bias_y_m == 0 &&
+    waymark_fix_bias e = {NAN, NAN, NAN};
+    CHECK(waymark_engine_fix_bias(engine, &e) == WAYMARK_RESULT_OK && e.bias_x_m == 0 && e.bias_y_m == 0 &&
               e.spread == 1,
           "nothing learned yet: bias (%g, %g) spread %g", e.bias_x_m, e.bias_y_m, e.spread);
     fixed pushed = {0};
@@ -530,10 +530,10 @@ static void habits(const char *site_path, const char *walk_path) {
     CHECK(r.epochs > 10, "report: %zu epochs", r.epochs);
     CHECK(r.learned_transitions > 0 && r.total_epochs == r.epochs, "%zu transitions", r.learned_transitions);
     /* 1.5 m east, 0.5 m north, shrunk toward 0 by the prior's 5 pseudo-fixes. */
-    CHECK(waymark_engine_fix_error(engine, &e) == WAYMARK_RESULT_OK && e.bias_x_m > 0.3 && e.bias_y_m > 0 &&
+    CHECK(waymark_engine_fix_bias(engine, &e) == WAYMARK_RESULT_OK && e.bias_x_m > 0.3 && e.bias_y_m > 0 &&
               e.bias_x_m > e.bias_y_m && e.spread > 0,
           "learned bias (%g, %g)", e.bias_x_m, e.bias_y_m);
-    waymark_fix_error learned = e;
+    waymark_fix_bias learned = e;
     /* Each epoch once: nothing new to learn. */
     waymark_habit_report again;
     CHECK(waymark_engine_learn_habits(engine, &again) == WAYMARK_RESULT_OK && again.epochs == 0 &&
@@ -569,7 +569,7 @@ static void habits(const char *site_path, const char *walk_path) {
     CHECK(waymark_engine_export_habits(other, back, json_len + 1, &got) == WAYMARK_RESULT_OK &&
               strcmp(back, json) == 0,
           "imported model exports the same JSON");
-    CHECK(waymark_engine_fix_error(other, &e) == WAYMARK_RESULT_OK && e.bias_x_m == learned.bias_x_m,
+    CHECK(waymark_engine_fix_bias(other, &e) == WAYMARK_RESULT_OK && e.bias_x_m == learned.bias_x_m,
           "imported fix error");
 
     /* Refused models: HABITS_REJECTED (or a typed argument error), and nothing changes. */
@@ -611,12 +611,12 @@ static void habits(const char *site_path, const char *walk_path) {
     CHECK(waymark_engine_export_habits(other, back, json_len + 1, &got) == WAYMARK_RESULT_OK &&
               strcmp(back, empty) == 0,
           "cleared");
-    CHECK(waymark_engine_fix_error(other, &e) == WAYMARK_RESULT_OK && e.bias_x_m == 0 && e.spread == 1,
+    CHECK(waymark_engine_fix_bias(other, &e) == WAYMARK_RESULT_OK && e.bias_x_m == 0 && e.spread == 1,
           "cleared fix error");
     CHECK(waymark_engine_clear_habits(NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL engine");
     CHECK(waymark_engine_learn_habits(NULL, &r) == WAYMARK_RESULT_NULL_PARAMETER, "NULL engine");
-    CHECK(waymark_engine_fix_error(NULL, &e) == WAYMARK_RESULT_NULL_PARAMETER, "NULL engine");
-    CHECK(waymark_engine_fix_error(other, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL out");
+    CHECK(waymark_engine_fix_bias(NULL, &e) == WAYMARK_RESULT_NULL_PARAMETER, "NULL engine");
+    CHECK(waymark_engine_fix_bias(other, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "NULL out");
     free(json);
     free(empty);
     free(back);
@@ -829,13 +829,13 @@ static void options_status_and_stats(const char *site_path) {
           "injected panic while importing");
     size_t json_len = 12345, zones = 0;
     double posterior[1] = {-1.0};
-    waymark_fix_error fix = {-1.0, -1.0, -1.0};
+    waymark_fix_bias fix = {-1.0, -1.0, -1.0};
     CHECK(waymark_engine_export_habits(engine, NULL, 0, &json_len) == WAYMARK_RESULT_PANIC && json_len == 12345,
           "export after the panic");
     CHECK(waymark_engine_zone_count(engine, &zones) == WAYMARK_RESULT_OK, "zone count (from the site)");
     CHECK(waymark_engine_zone_posterior(engine, posterior, 1) == WAYMARK_RESULT_PANIC && posterior[0] == -1.0,
           "zone posterior after the panic");
-    CHECK(waymark_engine_fix_error(engine, &fix) == WAYMARK_RESULT_PANIC && fix.spread == -1.0,
+    CHECK(waymark_engine_fix_bias(engine, &fix) == WAYMARK_RESULT_PANIC && fix.spread == -1.0,
           "fix error after the panic");
     CHECK(waymark_engine_push_scan(engine, 3000000000ull, &known, 1, NULL, 0, NULL) == WAYMARK_RESULT_PANIC,
           "scan after the panic");

@@ -778,7 +778,7 @@ typedef struct {
    * Factor on the fixes' own accuracy (1: they are as good as they say).
    */
   double spread;
-} waymark_fix_error;
+} waymark_fix_bias;
 
 /**
  * Called with each log record at the level given to `waymark_set_log_callback` or above:
@@ -1279,7 +1279,7 @@ waymark_result waymark_engine_clear_habits(waymark_engine *engine);
  * The fix error learned so far into `*out`: zero bias and spread 1 before any fix was
  * learned from.
  */
-waymark_result waymark_engine_fix_error(const waymark_engine *engine, waymark_fix_error *out);
+waymark_result waymark_engine_fix_bias(const waymark_engine *engine, waymark_fix_bias *out);
 
 /**
  * Sends Waymark's log records at `level` (a `waymark_log_level`) and above to `callback`, with

@@ -13,7 +13,7 @@ use super::checks;
 use super::cursor::{Cursor, Writer};
 use std::sync::{Arc, OnceLock, Weak};
 use waymark as ffi;
-use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate, SensorSample};
+use waymark_engine::sensors::{MotionScenario, MotionState, MotionUpdate, SensorSample};
 use waymark_engine::TransitionModel;
 use waymark_engine::TransmitterId;
 use waymark_engine::{Engine, EngineConfig, Epoch, InputError, Position, Reading, Scan, Site};
@@ -151,7 +151,7 @@ pub fn fixtures() -> &'static [Fixture; 2] {
 }
 
 const TRANSITIONS: [TransitionModel; 3] =
-    [TransitionModel::Reach, TransitionModel::Hipe, TransitionModel::Hoang];
+    [TransitionModel::Reach, TransitionModel::Regions, TransitionModel::MovementVector];
 
 /// The input's running clock: timestamps are mostly read relative to the last one.
 struct Clock {
@@ -204,8 +204,8 @@ fn options(c: &mut Cursor) -> ffi::EngineOptions {
         transition: match c.u8() % 4 {
             0 => None,
             1 => Some(ffi::TransitionKind::Reach),
-            2 => Some(ffi::TransitionKind::Hipe),
-            _ => Some(ffi::TransitionKind::Hoang),
+            2 => Some(ffi::TransitionKind::Regions),
+            _ => Some(ffi::TransitionKind::MovementVector),
         },
         step_length_m: optional(c),
         fixed_lag_epochs: if c.u8().is_multiple_of(2) { u32::from(c.u8()) } else { c.u32() },
@@ -221,9 +221,9 @@ fn options(c: &mut Cursor) -> ffi::EngineOptions {
 /// Whether the FFI options make the same engine configuration as the core's `transition`.
 fn same_config(options: &ffi::EngineOptions, transition: TransitionModel) -> bool {
     let ffi_transition = match options.transition {
-        None | Some(ffi::TransitionKind::Hoang) => TransitionModel::Hoang,
+        None | Some(ffi::TransitionKind::MovementVector) => TransitionModel::MovementVector,
         Some(ffi::TransitionKind::Reach) => TransitionModel::Reach,
-        Some(ffi::TransitionKind::Hipe) => TransitionModel::Hipe,
+        Some(ffi::TransitionKind::Regions) => TransitionModel::Regions,
     };
     let default = ffi::EngineOptions::default();
     ffi_transition == transition
@@ -424,10 +424,10 @@ fn motion(c: &mut Cursor, clock: &mut Clock) -> MotionUpdate {
         displacement_m: if c.u8().is_multiple_of(3) { None } else { Some([c.f64(), c.f64()]) },
         motion_state: [MotionState::Unknown, MotionState::Stationary, MotionState::Walking][c.below(3)],
         scenario: [
-            MdiScenario::DistanceHeading,
-            MdiScenario::Distance,
-            MdiScenario::HeadingSpeed,
-            MdiScenario::Speed,
+            MotionScenario::DistanceHeading,
+            MotionScenario::Distance,
+            MotionScenario::HeadingSpeed,
+            MotionScenario::Speed,
         ][c.below(4)],
         compass_disturbed: c.u8() % 2 == 1,
     }

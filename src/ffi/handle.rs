@@ -14,7 +14,7 @@ use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use waymark_engine::radio::Scan;
-use waymark_engine::sensors::{MdiScenario, MotionState};
+use waymark_engine::sensors::{MotionScenario, MotionState};
 use waymark_engine::site::Site;
 use waymark_engine::{self as engine, Engine, EngineConfig, Epoch, Position, TransitionModel};
 
@@ -33,7 +33,7 @@ pub(crate) enum Event {
 #[derive(Clone, Debug)]
 pub(crate) enum Status {
     /// The motion information available changed.
-    ScenarioChanged { timestamp_ns: u64, scenario: MdiScenario },
+    ScenarioChanged { timestamp_ns: u64, scenario: MotionScenario },
     /// The person started or stopped walking.
     MotionStateChanged { timestamp_ns: u64, state: MotionState },
     /// A scan heard no transmitter of the site.

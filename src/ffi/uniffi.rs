@@ -383,8 +383,8 @@ impl PositioningEngine {
 
     /// The fix error learned so far: zero bias and spread 1 before any fix was learned from.
     /// Throws `Internal` (never a made-up value) if it could not be read.
-    pub fn fix_error(&self) -> Result<FixError, PositioningError> {
-        self.handle.read(|e| e.fix_error().into())
+    pub fn fix_bias(&self) -> Result<FixBias, PositioningError> {
+        self.handle.read(|e| e.fix_bias().into())
     }
 
     /// What the engine took and refused since it was created, and why.

@@ -92,10 +92,12 @@ struct SimExportArgs {
 
 #[derive(Clone, Copy, ValueEnum)]
 enum Model {
-    /// HIPE's high/low regions (HIPE eqs. 5-11).
-    Hipe,
-    /// Hoang's Gaussian on the movement vector (Hoang eqs. 11, 14).
-    Hoang,
+    /// High/low probability regions from distance and heading (HIPE eqs. 5-11).
+    #[value(alias = "hipe")]
+    Regions,
+    /// A Gaussian on the movement vector (Hoang eqs. 11, 14).
+    #[value(alias = "hoang")]
+    MovementVector,
 }
 
 #[derive(clap::Args)]
@@ -211,8 +213,8 @@ fn demo(args: &DemoArgs) -> ExitCode {
     let mut experiment = Experiment { walks: args.walks, walk_length_m: args.walk_length_m, ..base };
     if let Some(model) = args.model {
         experiment.engine.transition = match model {
-            Model::Hipe => TransitionModel::Hipe,
-            Model::Hoang => TransitionModel::Hoang,
+            Model::Regions => TransitionModel::Regions,
+            Model::MovementVector => TransitionModel::MovementVector,
         };
     }
     experiment.office.seed = args.seed;
@@ -276,8 +278,8 @@ fn demo(args: &DemoArgs) -> ExitCode {
             "Full fusion: raw accelerometer, gyroscope and magnetometer at {:.0} Hz -> steps and heading -> {} transitions, with WiFi",
             experiment.imu.rate_hz,
             match experiment.engine.transition {
-                TransitionModel::Hipe => "HIPE",
-                TransitionModel::Hoang => "Hoang",
+                TransitionModel::Regions => "HIPE",
+                TransitionModel::MovementVector => "Hoang",
                 TransitionModel::Reach => "reachability",
             }
         );

@@ -5,7 +5,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::time::Instant;
-use waymark_engine::sensors::MdiScenario;
+use waymark_engine::sensors::MotionScenario;
 use waymark_engine::{Engine, EngineConfig, Salt, Site};
 use waymark_eval::real::{self as evaluation, EvalOptions, CONFIGURATIONS};
 use waymark_survey::calibrate::{self, CalibrationOptions, FloorData, WalkSplit};
@@ -353,7 +353,7 @@ fn print_calibration(c: &calibrate::CalibrationReport) {
         }
     );
     for (name, scenario) in
-        [("distance only", MdiScenario::Distance), ("heading only", MdiScenario::HeadingSpeed)]
+        [("distance only", MotionScenario::Distance), ("heading only", MotionScenario::HeadingSpeed)]
     {
         let Some(curve) = c.gamma_by_scenario.get(scenario) else { continue };
         let curve: Vec<String> = curve
@@ -700,7 +700,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         options.calibration.survey.build.fit.min_std_db = v;
     }
     if args.fixed_movement_variance {
-        options.calibration.engine.hoang.measured_spread = false;
+        options.calibration.engine.movement_vector.measured_spread = false;
     }
     if let Some(m) = args.top_m {
         options.calibration.engine.estimate_states = Some(m);

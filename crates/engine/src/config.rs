@@ -24,19 +24,23 @@ pub enum TransitionModel {
     /// Uniform over the states reachable at `max_speed_mps`, motion ignored (Hoang §6.1,
     /// the "RSSI only" row of Table 1).
     Reach,
-    /// HIPE's high/low regions from the measured distance and heading (HIPE eqs. 5-11).
-    Hipe,
+    /// High/low probability regions from the measured distance and heading: HIPE's model
+    /// (HIPE eqs. 5-11). Written `hipe` in files.
+    #[serde(rename = "hipe", alias = "regions")]
+    Regions,
     /// Hoang's Gaussian on the movement vector over the reachable states (Hoang eqs. 11, 14)
     /// when distance and heading are both measured; with the distance alone, its along-track
     /// term on the walking distance; with the heading alone, HIPE's sector (which uses it);
     /// with neither, the reachable states.
+    /// Written `hoang` in files.
     #[default]
-    Hoang,
+    #[serde(rename = "hoang", alias = "movement_vector")]
+    MovementVector,
 }
 
-/// HIPE's parameters (HIPE Table 4 unless said otherwise).
+/// The regions model's parameters: HIPE's (HIPE Table 4 unless said otherwise).
 #[derive(Clone, Debug, PartialEq)]
-pub struct HipeConfig {
+pub struct RegionsConfig {
     /// Relative distance tolerance: ±10% of the distance estimate (Table 4).
     pub distance_tolerance_fraction: f64,
     /// Least distance tolerance: 1.5 m, "half the separation distance of most RPs" (§5.2).
@@ -51,7 +55,7 @@ pub struct HipeConfig {
     pub transition_ratio_min: f64,
 }
 
-impl Default for HipeConfig {
+impl Default for RegionsConfig {
     fn default() -> Self {
         Self {
             distance_tolerance_fraction: 0.10,
@@ -63,9 +67,9 @@ impl Default for HipeConfig {
     }
 }
 
-/// Hoang's movement-vector model.
+/// The movement-vector model's parameters: Hoang's (Hoang §6.1 unless said otherwise).
 #[derive(Clone, Debug, PartialEq)]
-pub struct HoangConfig {
+pub struct MovementVectorConfig {
     /// Σ_v = variance · I: 0.25 m² (Hoang §6.1, "determined in offline experiments").
     pub movement_variance_m2: f64,
     /// Mahalanobis distance beyond which the movement likelihood stops falling, so that a
@@ -87,7 +91,7 @@ pub struct HoangConfig {
     pub measured_spread: bool,
 }
 
-impl Default for HoangConfig {
+impl Default for MovementVectorConfig {
     fn default() -> Self {
         Self {
             movement_variance_m2: 0.25,
@@ -114,10 +118,11 @@ pub struct EngineConfig {
     /// The site frame's orientation, when the app knows better than the site file (a fresh
     /// declination from a geomagnetic model, say). `None`: the site file's.
     pub north: Option<crate::site::North>,
-    /// HIPE's parameters, for [`TransitionModel::Hipe`].
-    pub hipe: HipeConfig,
-    /// Hoang's parameters, for [`TransitionModel::Hoang`].
-    pub hoang: HoangConfig,
+    /// The regions model's parameters (HIPE's), for [`TransitionModel::Regions`].
+    pub regions: RegionsConfig,
+    /// The movement-vector model's parameters (Hoang's), for
+    /// [`TransitionModel::MovementVector`].
+    pub movement_vector: MovementVectorConfig,
     /// γ of Hoang eq. 14: the radio likelihood is raised to γ and the movement likelihood to
     /// 1 - γ. `None` is eq. 3 (both to the power 1), as in Hoang's simulations (§6.1); the
     /// field-data value is chosen per site by jackknife (Hoang §6.2 found 0.003).
@@ -222,8 +227,8 @@ impl Default for EngineConfig {
             transition: TransitionModel::default(),
             motion: MotionConfig::default(),
             north: None,
-            hipe: HipeConfig::default(),
-            hoang: HoangConfig::default(),
+            regions: RegionsConfig::default(),
+            movement_vector: MovementVectorConfig::default(),
             rssi_weight: None,
             rssi_weight_without_movement: None,
             track_window_epochs: 64,
@@ -413,9 +418,9 @@ impl EngineConfig {
     }
 
     /// Factors on the 68% and 95% radii for `site`, per motion scenario (indexed by
-    /// [`MdiScenario::index`](crate::sensors::MdiScenario::index)): the site's calibrated ones, else 1.
+    /// [`MotionScenario::index`](crate::sensors::MotionScenario::index)): the site's calibrated ones, else 1.
     pub fn accuracy_scales_for(&self, site: &crate::Site) -> [[f64; 2]; 4] {
-        crate::sensors::MdiScenario::ALL.map(|s| {
+        crate::sensors::MotionScenario::ALL.map(|s| {
             if self.site_calibration {
                 site.calibration().accuracy_scale_in(s)
             } else {
@@ -451,13 +456,13 @@ impl EngineConfig {
 
     /// The site's γ per motion scenario for epochs without a movement likelihood
     /// ([`Calibration::rssi_weight_by_scenario`](crate::site::Calibration)), in
-    /// [`MdiScenario::ALL`](crate::sensors::MdiScenario::ALL) order. `None` for every scenario
+    /// [`MotionScenario::ALL`](crate::sensors::MotionScenario::ALL) order. `None` for every scenario
     /// when `rssi_weight` or `rssi_weight_without_movement` is given (an explicit γ overrides
     /// every calibrated one) or without `site_calibration`; an epoch with `None` takes its
     /// floor's γ without movement ([`floor_rssi_weights`](Self::floor_rssi_weights)).
     pub fn scenario_rssi_weights(&self, site: &crate::Site) -> [Option<f64>; 4] {
         let explicit = self.rssi_weight.is_some() || self.rssi_weight_without_movement.is_some();
-        crate::sensors::MdiScenario::ALL.map(|s| {
+        crate::sensors::MotionScenario::ALL.map(|s| {
             if self.site_calibration && !explicit {
                 site.calibration().rssi_weight_by_scenario.get(s)
             } else {
@@ -511,7 +516,7 @@ impl EngineConfig {
                 ));
             }
         }
-        let h = &self.hipe;
+        let h = &self.regions;
         let positive = |v: f64| v.is_finite() && v > 0.0;
         let tolerances_ok = h.distance_tolerance_fraction.is_finite()
             && h.distance_tolerance_fraction >= 0.0
@@ -527,7 +532,9 @@ impl EngineConfig {
                 h.transition_ratio_min
             ));
         }
-        if !positive(self.hoang.movement_variance_m2) || !positive(self.hoang.mahalanobis_cap) {
+        if !positive(self.movement_vector.movement_variance_m2)
+            || !positive(self.movement_vector.mahalanobis_cap)
+        {
             return fail("hoang: movement_variance_m2 and mahalanobis_cap must be finite and > 0".into());
         }
         if let Some(g) = self.rssi_weight {

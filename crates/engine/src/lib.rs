@@ -32,7 +32,8 @@ pub mod sensors;
 pub mod site;
 
 pub use config::{
-    EngineConfig, HipeConfig, HoangConfig, TransitionModel, ZoneHysteresis, DEFAULT_ESTIMATE_STATES,
+    EngineConfig, MovementVectorConfig, RegionsConfig, TransitionModel, ZoneHysteresis,
+    DEFAULT_ESTIMATE_STATES,
 };
 #[cfg(feature = "fault-injection")]
 pub use engine::FAULT_INJECTION_MID_EPOCH_NS;

@@ -288,13 +288,13 @@ fn each_epoch_weighs_the_radio_by_the_gamma_of_the_floor_it_is_on() {
 /// none of its own. A bad factor is refused with its path.
 #[test]
 fn radius_factors_follow_the_epochs_scenario() {
-    use waymark_engine::sensors::MdiScenario;
+    use waymark_engine::sensors::MotionScenario;
     use waymark_engine::site::{Calibration, ScenarioScales};
     let radius = |calibration: Calibration| {
         let site = Arc::new(two_floor_site().with_calibration(calibration).unwrap());
         let mut engine = Engine::new(site, EngineConfig::default()).unwrap();
         let p = engine.push_scan(&scan(SECOND, &readings_at(0, 3.0))).unwrap().position;
-        assert_eq!(p.scenario, MdiScenario::Speed);
+        assert_eq!(p.scenario, MotionScenario::Speed);
         (p.accuracy_m, p.accuracy_95_m)
     };
     let plain = radius(Calibration::default());
@@ -302,18 +302,18 @@ fn radius_factors_follow_the_epochs_scenario() {
     let scaled = radius(site_wide);
     assert!((scaled.0 - 2.0 * plain.0).abs() < 1e-9, "{plain:?} {scaled:?}");
     let mut by_scenario = ScenarioScales::default();
-    by_scenario.set(MdiScenario::Speed, Some([5.0, 7.0]));
+    by_scenario.set(MotionScenario::Speed, Some([5.0, 7.0]));
     let own = radius(Calibration { accuracy_scale_by_scenario: by_scenario, ..site_wide });
     assert!((own.0 - 5.0 * plain.0).abs() < 1e-9, "{plain:?} {own:?}");
     assert!((own.1 - (7.0 * plain.1).max(own.0)).abs() < 1e-9, "{plain:?} {own:?}");
     // Another scenario's factors leave a speed-only epoch at the site-wide ones.
     let mut other = ScenarioScales::default();
-    other.set(MdiScenario::DistanceHeading, Some([5.0, 7.0]));
+    other.set(MotionScenario::DistanceHeading, Some([5.0, 7.0]));
     let fallback = radius(Calibration { accuracy_scale_by_scenario: other, ..site_wide });
     assert!((fallback.0 - scaled.0).abs() < 1e-12);
 
     let mut bad = ScenarioScales::default();
-    bad.set(MdiScenario::Distance, Some([f64::NAN, 2.0]));
+    bad.set(MotionScenario::Distance, Some([f64::NAN, 2.0]));
     let refused =
         two_floor_site().with_calibration(Calibration { accuracy_scale_by_scenario: bad, ..site_wide });
     let message = format!("{:?}", refused.err());
@@ -326,12 +326,12 @@ fn radius_factors_follow_the_epochs_scenario() {
 /// configuration overrides both, and a γ out of (0, 1] is refused with its path.
 #[test]
 fn an_epoch_without_movement_takes_its_scenarios_gamma() {
-    use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+    use waymark_engine::sensors::{MotionScenario, MotionState, MotionUpdate};
     use waymark_engine::site::{Calibration, PerScenario};
     let (without, distance_only) = (0.3, 0.05);
     let site = |by_scenario: Option<f64>, without: f64| {
         let mut rssi_weight_by_scenario = PerScenario::default();
-        rssi_weight_by_scenario.set(MdiScenario::Distance, by_scenario);
+        rssi_weight_by_scenario.set(MotionScenario::Distance, by_scenario);
         let calibration = Calibration {
             rssi_weight_without_movement: Some(without),
             rssi_weight_by_scenario,
@@ -354,14 +354,14 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
                     distance_m: Some(1.0),
                     distance_sigma_m: 0.1,
                     motion_state: MotionState::Walking,
-                    scenario: MdiScenario::Distance,
+                    scenario: MotionScenario::Distance,
                     ..MotionUpdate::default()
                 };
                 engine.push_scan_with_motion(&s, &motion).unwrap().position
             } else {
                 engine.push_scan(&s).unwrap().position
             };
-            assert_eq!(p.scenario, if walked { MdiScenario::Distance } else { MdiScenario::Speed });
+            assert_eq!(p.scenario, if walked { MotionScenario::Distance } else { MotionScenario::Speed });
             posteriors.push(engine.posterior().to_vec());
         }
         posteriors
@@ -388,7 +388,7 @@ fn an_epoch_without_movement_takes_its_scenarios_gamma() {
 
 /// Second k of a walk: `distance_m` walked in two steps, no heading.
 fn walking(k: u64, distance_m: f64) -> waymark_engine::sensors::MotionUpdate {
-    use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+    use waymark_engine::sensors::{MotionScenario, MotionState, MotionUpdate};
     MotionUpdate {
         start_ns: (k - 1) * SECOND,
         end_ns: k * SECOND,
@@ -396,7 +396,7 @@ fn walking(k: u64, distance_m: f64) -> waymark_engine::sensors::MotionUpdate {
         distance_m: Some(distance_m),
         distance_sigma_m: 0.1,
         motion_state: MotionState::Walking,
-        scenario: MdiScenario::Distance,
+        scenario: MotionScenario::Distance,
         ..MotionUpdate::default()
     }
 }
@@ -473,7 +473,7 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
     use common::wifi;
     use nalgebra::Point2;
     use waymark_engine::radio::{Reading, Scan};
-    use waymark_engine::sensors::{MdiScenario, MotionUpdate};
+    use waymark_engine::sensors::{MotionScenario, MotionUpdate};
     use waymark_engine::site::{BuildOptions, Calibration, SiteBuilder, StateKind};
     let level = |t: u8, x: f64| -40.0 - 4.0 * (x - 6.0 * f64::from(t)).abs();
     let site = |unsurveyed: bool| {
@@ -517,7 +517,7 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
         heading_rad: Some(std::f64::consts::FRAC_PI_2),
         heading_sigma_rad: 0.1,
         displacement_m: Some([3.0, 0.0]),
-        scenario: MdiScenario::DistanceHeading,
+        scenario: MotionScenario::DistanceHeading,
         ..walking(k, 3.0)
     };
     let explained_at = |x: f64| -> Vec<(u8, f64)> { (0..3).map(|t| (t, level(t, x))).collect() };
@@ -588,7 +588,7 @@ fn beyond_the_map_the_motion_carries_the_estimate_onto_unsurveyed_states() {
 /// the first scan, whose posterior holds one scan as after a sparse one.
 #[test]
 fn sparse_scans_take_their_own_radius_factors_and_gamma() {
-    use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+    use waymark_engine::sensors::{MotionScenario, MotionState, MotionUpdate};
     use waymark_engine::site::{Calibration, FloorReliability, SparseScans, SPARSE_BANDS};
     let mut accuracy_scale_by_since = [None; SPARSE_BANDS];
     accuracy_scale_by_since[0] = Some([3.0, 4.0]);
@@ -620,7 +620,7 @@ fn sparse_scans_take_their_own_radius_factors_and_gamma() {
                     heading_sigma_rad: 0.1,
                     displacement_m: Some([0.3, 0.0]),
                     motion_state: MotionState::Walking,
-                    scenario: MdiScenario::DistanceHeading,
+                    scenario: MotionScenario::DistanceHeading,
                     ..MotionUpdate::default()
                 };
                 let p = if scan_at(t / SECOND) {

@@ -5,7 +5,7 @@ mod common;
 
 use common::{scan, two_floor_site};
 use std::sync::Arc;
-use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+use waymark_engine::sensors::{MotionScenario, MotionState, MotionUpdate};
 use waymark_engine::TransitionModel;
 use waymark_engine::{Engine, EngineConfig, Epoch, InputError, Position, StatusEvent, TrackPoint};
 
@@ -26,7 +26,7 @@ fn walking(steps: u32) -> MotionUpdate {
         heading_sigma_rad: 0.1,
         displacement_m: Some([d, 0.0]),
         motion_state: MotionState::Walking,
-        scenario: MdiScenario::DistanceHeading,
+        scenario: MotionScenario::DistanceHeading,
         ..MotionUpdate::default()
     }
 }
@@ -51,7 +51,7 @@ impl Recorder {
 
 #[test]
 fn every_model_follows_a_walk_and_the_track_has_every_epoch() {
-    for model in [TransitionModel::Reach, TransitionModel::Hipe, TransitionModel::Hoang] {
+    for model in [TransitionModel::Reach, TransitionModel::Regions, TransitionModel::MovementVector] {
         let config = EngineConfig { transition: model, ..EngineConfig::default() };
         let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
         for k in 0..5u64 {
@@ -61,7 +61,7 @@ fn every_model_follows_a_walk_and_the_track_has_every_epoch() {
                 .unwrap()
                 .position;
             assert!((p.x - x).abs() < 1.0 && p.floor == 0, "{model:?}: {p:?}");
-            assert_eq!(p.scenario, MdiScenario::DistanceHeading);
+            assert_eq!(p.scenario, MotionScenario::DistanceHeading);
         }
         let track = engine.track();
         assert_eq!(track.len(), 5);
@@ -131,8 +131,8 @@ fn scenario_and_motion_changes_are_announced() {
         vec![
             StatusEvent::ScenarioChanged {
                 timestamp_ns: 2 * SECOND,
-                from: MdiScenario::Speed,
-                to: MdiScenario::DistanceHeading
+                from: MotionScenario::Speed,
+                to: MotionScenario::DistanceHeading
             },
             StatusEvent::MotionStateChanged {
                 timestamp_ns: 2 * SECOND,
@@ -189,11 +189,11 @@ fn standing_still_holds_the_estimate_that_walking_would_move() {
         distance_sigma_m: 0.0,
         displacement_m: Some([0.0, 0.0]),
         motion_state: MotionState::Stationary,
-        scenario: MdiScenario::Distance,
+        scenario: MotionScenario::Distance,
         ..MotionUpdate::default()
     };
     let run = |motion: &MotionUpdate| {
-        let config = EngineConfig { transition: TransitionModel::Hipe, ..EngineConfig::default() };
+        let config = EngineConfig { transition: TransitionModel::Regions, ..EngineConfig::default() };
         let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
         engine.push_scan(&scan(SECOND, &readings_at(0, 6.0))).unwrap();
         // The radio now leans towards x = 9 by about 3.6 nats.
@@ -207,7 +207,7 @@ fn standing_still_holds_the_estimate_that_walking_would_move() {
 
 #[test]
 fn motion_epochs_move_the_estimate_without_radio() {
-    let config = EngineConfig { transition: TransitionModel::Hoang, ..EngineConfig::default() };
+    let config = EngineConfig { transition: TransitionModel::MovementVector, ..EngineConfig::default() };
     let mut engine = Engine::new(Arc::new(two_floor_site()), config).unwrap();
     engine.push_scan(&scan(SECOND, &readings_at(0, 0.0))).unwrap();
     let mut p = None;
@@ -263,8 +263,11 @@ fn corridor_walk() -> waymark_sim::imu::ImuTrace {
 fn hoang_engines<const N: usize>(min_motion_step_s: [f64; N]) -> [Engine; N] {
     let site = Arc::new(two_floor_site());
     min_motion_step_s.map(|min_motion_step_s| {
-        let config =
-            EngineConfig { transition: TransitionModel::Hoang, min_motion_step_s, ..EngineConfig::default() };
+        let config = EngineConfig {
+            transition: TransitionModel::MovementVector,
+            min_motion_step_s,
+            ..EngineConfig::default()
+        };
         Engine::new(Arc::clone(&site), config).unwrap()
     })
 }

@@ -172,10 +172,10 @@ fn the_bias_of_external_fixes_is_learned_and_taken_off() {
         };
         engine.push_fix(&fix).unwrap();
     }
-    assert_eq!(engine.fix_error().bias_m, [0.0, 0.0], "nothing learned yet");
+    assert_eq!(engine.fix_bias().bias_m, [0.0, 0.0], "nothing learned yet");
     let report = engine.learn_habits().unwrap();
     assert_eq!(report.fix_epochs, 40, "{report:?}");
-    let learned = engine.fix_error();
+    let learned = engine.fix_bias();
     // 40 fixes against 5 pseudo-fixes at zero bias: about 40/45 of the true bias.
     assert!((learned.bias_m[0] - bias[0]).abs() < 0.8, "{learned:?}");
     assert!((learned.bias_m[1] - bias[1]).abs() < 0.5, "{learned:?}");

@@ -4,7 +4,7 @@
 //! chosen from what delivered, and bad input never panicking.
 
 use waymark_engine::sensors::{
-    MdiScenario, MotionConfig, MotionState, MotionTracker, SensorSample, StepDetectorKind,
+    MotionConfig, MotionScenario, MotionState, MotionTracker, SensorSample, StepDetectorKind,
 };
 use waymark_engine::Error;
 use waymark_sim::imu::{shaken_in_place, synthesize, ImuConfig, ImuTrace};
@@ -132,7 +132,7 @@ fn walk_gives_displacement_and_scenarios_follow_the_sensors() {
     assert!(walking.len() > 10);
     let mut sum = [0.0, 0.0];
     for u in &walking {
-        assert_eq!(u.scenario, MdiScenario::DistanceHeading, "{u:?}");
+        assert_eq!(u.scenario, MotionScenario::DistanceHeading, "{u:?}");
         let d = u.displacement_m.unwrap();
         sum[0] += d[0];
         sum[1] += d[1];
@@ -160,7 +160,7 @@ fn walk_gives_displacement_and_scenarios_follow_the_sensors() {
 
     // No magnetometer: gyro-only, no absolute heading.
     let (_, updates) = run_trace(&trace, walk_config(&imu), [true, true, false]);
-    assert!(updates.iter().filter(|u| u.steps > 0).all(|u| u.scenario == MdiScenario::Distance
+    assert!(updates.iter().filter(|u| u.steps > 0).all(|u| u.scenario == MotionScenario::Distance
         && u.heading_rad.is_none()
         && u.displacement_m.is_none()));
     // No accelerometer: heading and an assumed speed.
@@ -168,14 +168,14 @@ fn walk_gives_displacement_and_scenarios_follow_the_sensors() {
     assert!(updates
         .iter()
         .skip(1)
-        .all(|u| u.scenario == MdiScenario::HeadingSpeed && u.distance_m.is_none()));
+        .all(|u| u.scenario == MotionScenario::HeadingSpeed && u.distance_m.is_none()));
     assert!(updates.iter().all(|u| u.motion_state == MotionState::Unknown));
     // Only a gyroscope: nothing measured.
     let (_, updates) = run_trace(&trace, walk_config(&imu), [false, true, false]);
-    assert!(updates.iter().all(|u| u.scenario == MdiScenario::Speed));
+    assert!(updates.iter().all(|u| u.scenario == MotionScenario::Speed));
     // Compass only (no gyroscope): still a measured heading.
     let (_, updates) = run_trace(&trace, walk_config(&imu), [true, false, true]);
-    let with_heading = updates.iter().filter(|u| u.scenario == MdiScenario::DistanceHeading).count();
+    let with_heading = updates.iter().filter(|u| u.scenario == MotionScenario::DistanceHeading).count();
     assert!(with_heading * 10 >= updates.len() * 9, "{with_heading} of {}", updates.len());
 }
 
@@ -211,7 +211,7 @@ fn s(t: u64, x: f64, y: f64, z: f64) -> SensorSample {
 fn bad_input_never_panics() {
     let mut m = MotionTracker::new(MotionConfig::default()).unwrap();
     let u = m.update(0);
-    assert_eq!((u.steps, u.distance_m, u.scenario), (0, None, MdiScenario::Speed));
+    assert_eq!((u.steps, u.distance_m, u.scenario), (0, None, MotionScenario::Speed));
     assert_eq!(m.push_accelerometer(&[]).accepted, 0);
     let r = m.push_accelerometer(&[
         s(1_000, f64::NAN, 0.0, 9.8),

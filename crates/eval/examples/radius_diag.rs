@@ -15,7 +15,7 @@
 //! calibration scores them; test: a test walk scored at its WiFi scans, as `eval` does),
 //! `throttled`, `floor`, `walk`, `error_m` (horizontal), `r68`, `r95` (the posterior's radii,
 //! without factors or `beyond_radio_m`), `beyond_radio_m`, `scenario` (index in
-//! `MdiScenario::ALL`), `fit` (radio fit of the latest scan), `band` (sparse band, -1 none),
+//! `MotionScenario::ALL`), `fit` (radio fit of the latest scan), `band` (sparse band, -1 none),
 //! `off_map_m` (how far the truth is beyond the map the walk was replayed on), `floor_ok`,
 //! `states_8m` (fingerprinted states of the estimate's floor within 8 m of it), `lag_d` (how far
 //! the fixed-lag estimate of the epoch `lag` epochs back lies from that epoch's live one: what

@@ -21,7 +21,7 @@
 //! `FP_RADIUS` surveys with that fingerprint radius, m (default the uncalibrated
 //! `SurveyOptions` one; the evaluation calibrates it);
 //! `ESTIMATE_STATES`, `MAX_SPEED`, `MOVEMENT_VAR`, `SPACING`, `MAX_STD` and `AGE_MS` set
-//! `EngineConfig::estimate_states`, `max_speed_mps`, `HoangConfig::movement_variance_m2`,
+//! `EngineConfig::estimate_states`, `max_speed_mps`, `MovementVectorConfig::movement_variance_m2`,
 //! `SurveyOptions::spacing_m`, the fit's `max_std_db` and the reading-age limit (ms);
 //! `RADIO_FIT_FLOOR` the site's `Calibration::radio_fit_floor` (none by default; the evaluation
 //! calibrates it); `FRACTION` keeps that share of each floor's survey walks, as `eval
@@ -60,8 +60,8 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     options.calibration.engine.estimate_states =
         std::env::var("ESTIMATE_STATES").ok().and_then(|v| v.parse().ok());
     options.calibration.engine.max_speed_mps = env_or("MAX_SPEED", options.calibration.engine.max_speed_mps);
-    options.calibration.engine.hoang.movement_variance_m2 =
-        env_or("MOVEMENT_VAR", options.calibration.engine.hoang.movement_variance_m2);
+    options.calibration.engine.movement_vector.movement_variance_m2 =
+        env_or("MOVEMENT_VAR", options.calibration.engine.movement_vector.movement_variance_m2);
     options.calibration.survey.spacing_m = env_or("SPACING", options.calibration.survey.spacing_m);
     options.calibration.survey.fingerprint_radius_m =
         env_or("FP_RADIUS", options.calibration.survey.fingerprint_radius_m);

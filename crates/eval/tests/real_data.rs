@@ -39,7 +39,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     assert!(scale.iter().all(|s| s.is_finite() && *s > 0.0));
     // Per motion scenario where enough held-out epochs were on the map.
     assert!(calibration.epochs > 0);
-    for scenario in waymark_engine::sensors::MdiScenario::ALL {
+    for scenario in waymark_engine::sensors::MotionScenario::ALL {
         let own = calibration.accuracy_scale_by_scenario.get(scenario);
         let enough = calibration.scenario_epochs[scenario.index()] >= calibrate::MIN_SCENARIO_EPOCHS;
         assert_eq!(own.is_some(), enough, "{scenario:?}: {calibration:?}");
@@ -47,7 +47,7 @@ fn a_slice_of_real_walks_surveys_calibrates_and_replays() {
     }
     assert!(calibration
         .accuracy_scale_by_scenario
-        .get(waymark_engine::sensors::MdiScenario::DistanceHeading)
+        .get(waymark_engine::sensors::MotionScenario::DistanceHeading)
         .is_some());
     assert!(calibration.motion.is_some(), "step length and north fitted");
     // The fingerprint radius: neighbouring radii of the grid from its middle scored on

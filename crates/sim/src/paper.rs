@@ -156,7 +156,7 @@ pub fn run_papers(experiment: &PaperExperiment) -> Result<PaperReport, Error> {
     // Hoang's fixed Σ_v, as the paper simulates it.
     let with = |transition| {
         let mut config = EngineConfig { transition, ..EngineConfig::default() };
-        config.hoang.measured_spread = false;
+        config.movement_vector.measured_spread = false;
         config
     };
     let methods = [
@@ -169,43 +169,43 @@ pub fn run_papers(experiment: &PaperExperiment) -> Result<PaperReport, Error> {
         Method {
             name: "rssi_step_uncensored",
             site: Arc::clone(&naive),
-            config: with(TransitionModel::Hoang),
+            config: with(TransitionModel::MovementVector),
             sensors: Sensors::ALL,
         },
         Method {
             name: "rssi_step",
             site: Arc::clone(&surveyed),
-            config: with(TransitionModel::Hoang),
+            config: with(TransitionModel::MovementVector),
             sensors: Sensors::ALL,
         },
         Method {
             name: "rssi_step_pseudo",
             site: Arc::clone(&pseudo),
-            config: with(TransitionModel::Hoang),
+            config: with(TransitionModel::MovementVector),
             sensors: Sensors::ALL,
         },
         Method {
             name: "distance_heading",
             site: Arc::clone(&pseudo),
-            config: with(TransitionModel::Hipe),
+            config: with(TransitionModel::Regions),
             sensors: Sensors::ALL,
         },
         Method {
             name: "distance",
             site: Arc::clone(&pseudo),
-            config: with(TransitionModel::Hipe),
+            config: with(TransitionModel::Regions),
             sensors: Sensors { accelerometer: true, ..Sensors::NONE },
         },
         Method {
             name: "heading_speed",
             site: Arc::clone(&pseudo),
-            config: with(TransitionModel::Hipe),
+            config: with(TransitionModel::Regions),
             sensors: Sensors { accelerometer: false, ..Sensors::ALL },
         },
         Method {
             name: "speed",
             site: Arc::clone(&pseudo),
-            config: with(TransitionModel::Hipe),
+            config: with(TransitionModel::Regions),
             sensors: Sensors::NONE,
         },
     ];

@@ -13,7 +13,7 @@ use rand::{RngExt, SeedableRng};
 use serde_json::json;
 use waymark_engine::hmm::Transition;
 use waymark_engine::radio::{Reading, Scan, TransmitterId};
-use waymark_engine::sensors::{MdiScenario, MotionState, MotionUpdate};
+use waymark_engine::sensors::{MotionScenario, MotionState, MotionUpdate};
 use waymark_engine::Site;
 
 /// What a scaled site looks like.
@@ -227,7 +227,7 @@ impl ScaleSite {
                     heading_sigma_rad: 0.1,
                     displacement_m: Some(d),
                     motion_state: MotionState::Walking,
-                    scenario: MdiScenario::DistanceHeading,
+                    scenario: MotionScenario::DistanceHeading,
                     compass_disturbed: false,
                 };
                 ScaleEpoch { scan: self.scan_at(truth, t_ns, &mut rng), motion, truth }

@@ -5,7 +5,7 @@
 use crate::io::ilc::{Event, EventOptions};
 use crate::io::Trace;
 use serde::{Deserialize, Serialize};
-use waymark_engine::sensors::{MdiScenario, MotionState, MotionTracker, MotionUpdate};
+use waymark_engine::sensors::{MotionScenario, MotionState, MotionTracker, MotionUpdate};
 use waymark_engine::{Engine, Position, TrackPoint};
 
 /// Which motion information the engine may use (HIPE Table 1), forced by withholding it.
@@ -37,22 +37,22 @@ impl MotionMask {
     pub fn apply(self, mut update: MotionUpdate, compass: Option<(f64, f64)>) -> MotionUpdate {
         let scenario = match self {
             MotionMask::Auto => return update,
-            MotionMask::DistanceHeading => MdiScenario::DistanceHeading,
-            MotionMask::Distance => MdiScenario::Distance,
-            MotionMask::HeadingSpeed => MdiScenario::HeadingSpeed,
-            MotionMask::Speed => MdiScenario::Speed,
+            MotionMask::DistanceHeading => MotionScenario::DistanceHeading,
+            MotionMask::Distance => MotionScenario::Distance,
+            MotionMask::HeadingSpeed => MotionScenario::HeadingSpeed,
+            MotionMask::Speed => MotionScenario::Speed,
         };
-        if matches!(scenario, MdiScenario::Distance | MdiScenario::Speed) {
+        if matches!(scenario, MotionScenario::Distance | MotionScenario::Speed) {
             update.heading_rad = None;
         }
-        if matches!(scenario, MdiScenario::HeadingSpeed | MdiScenario::Speed) {
+        if matches!(scenario, MotionScenario::HeadingSpeed | MotionScenario::Speed) {
             // Without step detection there is no distance, no walking or standing still, and no
             // direction of travel from the steps: the tracker's heading of an epoch with steps
             // is their length-weighted mean direction, withheld when they turned too much,
             // which only a step detector knows (`docs/tuning.md#heading-speed-mask`).
             update.distance_m = None;
             update.motion_state = MotionState::Unknown;
-            if scenario == MdiScenario::HeadingSpeed {
+            if scenario == MotionScenario::HeadingSpeed {
                 (update.heading_rad, update.heading_sigma_rad) = match compass {
                     Some((h, sigma)) => (Some(h), sigma),
                     None => (None, std::f64::consts::PI),
@@ -66,10 +66,10 @@ impl MotionMask {
         }
         // A scenario is only what the measurements support.
         update.scenario = match (update.distance_m.is_some(), update.heading_rad.is_some()) {
-            (true, true) => MdiScenario::DistanceHeading,
-            (true, false) => MdiScenario::Distance,
-            (false, true) => MdiScenario::HeadingSpeed,
-            (false, false) => MdiScenario::Speed,
+            (true, true) => MotionScenario::DistanceHeading,
+            (true, false) => MotionScenario::Distance,
+            (false, true) => MotionScenario::HeadingSpeed,
+            (false, false) => MotionScenario::Speed,
         };
         update
     }
@@ -328,7 +328,7 @@ mod tests {
             heading_sigma_rad: 0.1,
             motion_state: MotionState::Walking,
             displacement_m: Some([0.9, 1.8]),
-            scenario: MdiScenario::DistanceHeading,
+            scenario: MotionScenario::DistanceHeading,
             ..MotionUpdate::default()
         }
     }
@@ -344,20 +344,20 @@ mod tests {
         let d = MotionMask::Distance.apply(walking(), COMPASS);
         assert_eq!(
             (d.distance_m, d.heading_rad, d.displacement_m, d.scenario),
-            (Some(2.0), None, None, MdiScenario::Distance)
+            (Some(2.0), None, None, MotionScenario::Distance)
         );
         // Heading only: where the compass points, not the steps' direction, and no motion
         // state; without a trusted compass heading that is the assumed speed alone.
         let h = MotionMask::HeadingSpeed.apply(walking(), COMPASS);
         assert_eq!(
             (h.distance_m, h.heading_rad, h.heading_sigma_rad, h.displacement_m, h.scenario),
-            (None, Some(0.9), 0.2, None, MdiScenario::HeadingSpeed)
+            (None, Some(0.9), 0.2, None, MotionScenario::HeadingSpeed)
         );
         assert_eq!(h.motion_state, MotionState::Unknown);
         let blind = MotionMask::HeadingSpeed.apply(walking(), None);
-        assert_eq!((blind.heading_rad, blind.scenario), (None, MdiScenario::Speed));
+        assert_eq!((blind.heading_rad, blind.scenario), (None, MotionScenario::Speed));
         let s = MotionMask::Speed.apply(walking(), COMPASS);
-        assert_eq!((s.distance_m, s.heading_rad, s.scenario), (None, None, MdiScenario::Speed));
+        assert_eq!((s.distance_m, s.heading_rad, s.scenario), (None, None, MotionScenario::Speed));
         assert_eq!(s.motion_state, MotionState::Unknown);
         // With steps, the motion state stays.
         assert_eq!(MotionMask::Distance.apply(walking(), COMPASS).motion_state, MotionState::Walking);
@@ -365,9 +365,9 @@ mod tests {
         let no_heading = MotionUpdate {
             heading_rad: None,
             displacement_m: None,
-            scenario: MdiScenario::Distance,
+            scenario: MotionScenario::Distance,
             ..walking()
         };
-        assert_eq!(MotionMask::DistanceHeading.apply(no_heading, COMPASS).scenario, MdiScenario::Distance);
+        assert_eq!(MotionMask::DistanceHeading.apply(no_heading, COMPASS).scenario, MotionScenario::Distance);
     }
 }

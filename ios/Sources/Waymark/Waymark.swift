@@ -1234,7 +1234,7 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
      * The fix error learned so far: zero bias and spread 1 before any fix was learned from.
      * Throws `Internal` (never a made-up value) if it could not be read.
      */
-    func fixError() throws  -> FixError
+    func fixBias() throws  -> FixBias
     
     /**
      * The fixed-lag position: a few epochs old, but revised by what came after.
@@ -1585,10 +1585,10 @@ open func exportHabits()throws  -> String  {
      * The fix error learned so far: zero bias and spread 1 before any fix was learned from.
      * Throws `Internal` (never a made-up value) if it could not be read.
      */
-open func fixError()throws  -> FixError  {
-    return try  FfiConverterTypeFixError_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+open func fixBias()throws  -> FixBias  {
+    return try  FfiConverterTypeFixBias_lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
         uniffiCallStatus in
-    uniffi_waymark_fn_method_positioningengine_fix_error(
+    uniffi_waymark_fn_method_positioningengine_fix_bias(
             self.uniffiCloneHandle(),uniffiCallStatus
     )
 })
@@ -3087,7 +3087,7 @@ public func FfiConverterTypeErrorReport_lower(_ value: ErrorReport) -> RustBuffe
  * The learned error of external position fixes (`pushFix`): subtract the bias from a fix,
  * then widen its accuracy by `spread`. The engine does both to every fix it takes.
  */
-public struct FixError: Equatable, Hashable {
+public struct FixBias: Equatable, Hashable {
     /**
      * Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
      */
@@ -3126,23 +3126,23 @@ public struct FixError: Equatable, Hashable {
 }
 
 #if compiler(>=6)
-extension FixError: Sendable {}
+extension FixBias: Sendable {}
 #endif
 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public struct FfiConverterTypeFixError: FfiConverterRustBuffer {
-    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> FixError {
+public struct FfiConverterTypeFixBias: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> FixBias {
         return
-            try FixError(
+            try FixBias(
                 biasXM: FfiConverterDouble.read(from: &buf), 
                 biasYM: FfiConverterDouble.read(from: &buf), 
                 spread: FfiConverterDouble.read(from: &buf)
         )
     }
 
-    public static func write(_ value: FixError, into buf: inout [UInt8]) {
+    public static func write(_ value: FixBias, into buf: inout [UInt8]) {
         FfiConverterDouble.write(value.biasXM, into: &buf)
         FfiConverterDouble.write(value.biasYM, into: &buf)
         FfiConverterDouble.write(value.spread, into: &buf)
@@ -3153,15 +3153,15 @@ public struct FfiConverterTypeFixError: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public func FfiConverterTypeFixError_lift(_ buf: RustBuffer) throws -> FixError {
-    return try FfiConverterTypeFixError.lift(buf)
+public func FfiConverterTypeFixBias_lift(_ buf: RustBuffer) throws -> FixBias {
+    return try FfiConverterTypeFixBias.lift(buf)
 }
 
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
-public func FfiConverterTypeFixError_lower(_ value: FixError) -> RustBuffer {
-    return FfiConverterTypeFixError.lower(value)
+public func FfiConverterTypeFixBias_lower(_ value: FixBias) -> RustBuffer {
+    return FfiConverterTypeFixBias.lower(value)
 }
 
 
@@ -6443,13 +6443,13 @@ public enum TransitionKind: Equatable, Hashable {
      */
     case reach
     /**
-     * HIPE's high/low regions from distance and heading.
+     * High/low probability regions from the walked distance and heading (HIPE eqs. 5-11).
      */
-    case hipe
+    case regions
     /**
-     * Hoang's Gaussian on the movement vector (the default).
+     * A Gaussian on the movement vector between states, the default (Hoang eq. 11).
      */
-    case hoang
+    case movementVector
 
 
 
@@ -6473,9 +6473,9 @@ public struct FfiConverterTypeTransitionKind: FfiConverterRustBuffer {
         
         case 1: return .reach
         
-        case 2: return .hipe
+        case 2: return .regions
         
-        case 3: return .hoang
+        case 3: return .movementVector
         
         default: throw UniffiInternalError.unexpectedEnumCase
         }
@@ -6489,11 +6489,11 @@ public struct FfiConverterTypeTransitionKind: FfiConverterRustBuffer {
             writeInt(&buf, Int32(1))
         
         
-        case .hipe:
+        case .regions:
             writeInt(&buf, Int32(2))
         
         
-        case .hoang:
+        case .movementVector:
             writeInt(&buf, Int32(3))
         
         }
@@ -7471,7 +7471,7 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_export_habits() != 63461) {
         return InitializationResult.apiChecksumMismatch
     }
-    if (uniffi_waymark_checksum_method_positioningengine_fix_error() != 22503) {
+    if (uniffi_waymark_checksum_method_positioningengine_fix_bias() != 41494) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_fixed_lag_position() != 40760) {

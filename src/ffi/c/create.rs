@@ -42,8 +42,8 @@ fn options_arg(options: *const waymark_engine_options) -> Result<Options, waymar
     let transition = match o.transition {
         t if t == waymark_transition::Default as u32 => None,
         t if t == waymark_transition::Reach as u32 => Some(TransitionModel::Reach),
-        t if t == waymark_transition::Hipe as u32 => Some(TransitionModel::Hipe),
-        t if t == waymark_transition::Hoang as u32 => Some(TransitionModel::Hoang),
+        t if t == waymark_transition::Hipe as u32 => Some(TransitionModel::Regions),
+        t if t == waymark_transition::Hoang as u32 => Some(TransitionModel::MovementVector),
         t => return Err(fail(waymark_result::InvalidConfig, format!("transition {t} does not exist"))),
     };
     let salt = match (o.site_salt.is_null(), o.site_salt_len) {

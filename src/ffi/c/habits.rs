@@ -1,7 +1,7 @@
 //! The C API's habit learning: learn, export, import, clear, and the learned fix error.
 
 use super::{
-    call, copy_string, fail, fail_with, read, string_arg, waymark_engine, waymark_fix_error,
+    call, copy_string, fail, fail_with, read, string_arg, waymark_engine, waymark_fix_bias,
     waymark_habit_report, waymark_result, with_handle, write,
 };
 use crate::ffi::error::PositioningError;
@@ -112,16 +112,16 @@ pub extern "C" fn waymark_engine_clear_habits(engine: *mut waymark_engine) -> wa
 /// The fix error learned so far into `*out`: zero bias and spread 1 before any fix was
 /// learned from.
 #[no_mangle]
-pub extern "C" fn waymark_engine_fix_error(
+pub extern "C" fn waymark_engine_fix_bias(
     engine: *const waymark_engine,
-    out: *mut waymark_fix_error,
+    out: *mut waymark_fix_bias,
 ) -> waymark_result {
     if out.is_null() {
         return fail(waymark_result::NullParameter, "out must not be NULL");
     }
     read(
         engine,
-        |e| e.fix_error().into(),
+        |e| e.fix_bias().into(),
         |error| {
             write(out, error);
             waymark_result::Ok

@@ -2,7 +2,7 @@
 //! conversions from the core's types. cbindgen writes them into `bindings/c/waymark.h`.
 
 use crate::ffi::error::{ErrorCode, PositioningError};
-use ::waymark_engine::sensors::{MdiScenario, MotionState};
+use ::waymark_engine::sensors::{MotionScenario, MotionState};
 use ::waymark_engine::site::Site;
 use ::waymark_engine::{self as engine, Position};
 use std::ffi::{c_char, c_void};
@@ -345,7 +345,7 @@ pub struct waymark_status {
 /// accuracy by `spread` (the engine does both to every fix it takes).
 #[repr(C)]
 #[derive(Clone, Copy, Debug)]
-pub struct waymark_fix_error {
+pub struct waymark_fix_bias {
     /// Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
     pub bias_x_m: f64,
     /// Mean error along the site's y axis, m.
@@ -354,8 +354,8 @@ pub struct waymark_fix_error {
     pub spread: f64,
 }
 
-impl From<::waymark_engine::habits::FixError> for waymark_fix_error {
-    fn from(e: ::waymark_engine::habits::FixError) -> Self {
+impl From<::waymark_engine::habits::FixBias> for waymark_fix_bias {
+    fn from(e: ::waymark_engine::habits::FixBias) -> Self {
         Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
     }
 }
@@ -516,12 +516,12 @@ pub(crate) fn motion_state(s: MotionState) -> u32 {
     }
 }
 
-pub(crate) fn scenario(s: MdiScenario) -> u32 {
+pub(crate) fn scenario(s: MotionScenario) -> u32 {
     match s {
-        MdiScenario::DistanceHeading => 0,
-        MdiScenario::Distance => 1,
-        MdiScenario::HeadingSpeed => 2,
-        MdiScenario::Speed => 3,
+        MotionScenario::DistanceHeading => 0,
+        MotionScenario::Distance => 1,
+        MotionScenario::HeadingSpeed => 2,
+        MotionScenario::Speed => 3,
     }
 }
 

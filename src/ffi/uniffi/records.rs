@@ -12,10 +12,10 @@ use waymark_engine::TransitionModel;
 pub enum TransitionKind {
     /// Radio only: uniform over the states reachable at the maximum speed.
     Reach,
-    /// HIPE's high/low regions from distance and heading.
-    Hipe,
-    /// Hoang's Gaussian on the movement vector (the default).
-    Hoang,
+    /// High/low probability regions from the walked distance and heading (HIPE eqs. 5-11).
+    Regions,
+    /// A Gaussian on the movement vector between states, the default (Hoang eq. 11).
+    MovementVector,
 }
 
 /// Engine settings an app may change; every field has a default.
@@ -92,8 +92,8 @@ impl EngineOptions {
         Options {
             transition: self.transition.map(|t| match t {
                 TransitionKind::Reach => TransitionModel::Reach,
-                TransitionKind::Hipe => TransitionModel::Hipe,
-                TransitionKind::Hoang => TransitionModel::Hoang,
+                TransitionKind::Regions => TransitionModel::Regions,
+                TransitionKind::MovementVector => TransitionModel::MovementVector,
             }),
             fixed_lag_epochs: Some(self.fixed_lag_epochs as usize),
             track: Some(self.track),
@@ -412,7 +412,7 @@ pub struct TrackPoint {
 /// The learned error of external position fixes (`pushFix`): subtract the bias from a fix,
 /// then widen its accuracy by `spread`. The engine does both to every fix it takes.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
-pub struct FixError {
+pub struct FixBias {
     /// Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
     pub bias_x_m: f64,
     /// Mean error of the fixes along the site's y axis, m.
@@ -422,8 +422,8 @@ pub struct FixError {
     pub spread: f64,
 }
 
-impl From<waymark_engine::habits::FixError> for FixError {
-    fn from(e: waymark_engine::habits::FixError) -> Self {
+impl From<waymark_engine::habits::FixBias> for FixBias {
+    fn from(e: waymark_engine::habits::FixBias) -> Self {
         Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
     }
 }
@@ -626,12 +626,12 @@ pub enum StatusUpdate {
     },
 }
 
-fn scenario(s: sensors::MdiScenario) -> MotionScenario {
+fn scenario(s: sensors::MotionScenario) -> MotionScenario {
     match s {
-        sensors::MdiScenario::DistanceHeading => MotionScenario::DistanceHeading,
-        sensors::MdiScenario::Distance => MotionScenario::Distance,
-        sensors::MdiScenario::HeadingSpeed => MotionScenario::HeadingSpeed,
-        sensors::MdiScenario::Speed => MotionScenario::Speed,
+        sensors::MotionScenario::DistanceHeading => MotionScenario::DistanceHeading,
+        sensors::MotionScenario::Distance => MotionScenario::Distance,
+        sensors::MotionScenario::HeadingSpeed => MotionScenario::HeadingSpeed,
+        sensors::MotionScenario::Speed => MotionScenario::Speed,
     }
 }
 

@@ -313,7 +313,7 @@ final class WaymarkTests: XCTestCase {
     // imported into a second engine, refused with a typed error when they do not fit, cleared.
     func testHabitsLearnExportImport() throws {
         let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
-        XCTAssertEqual(try engine.fixError(), FixError(biasXM: 0, biasYM: 0, spread: 1))
+        XCTAssertEqual(try engine.fixBias(), FixBias(biasXM: 0, biasYM: 0, spread: 1))
         var positions = 0, fixes = 0, confirmations = 0
         for epoch in try walk().epochs {
             _ = try engine.pushAccelerometer(batch: samples(epoch.accelerometer))
@@ -344,7 +344,7 @@ final class WaymarkTests: XCTestCase {
         XCTAssertEqual(report.totalEpochs, UInt64(report.epochs))
         XCTAssertEqual(version(), "0.1.0")
         XCTAssertEqual(try engine.inputStats().fixesAccepted, UInt64(fixes))
-        let learned = try engine.fixError()
+        let learned = try engine.fixBias()
         // 1.5 m east, 0.5 m north, shrunk toward 0 by the prior's 5 pseudo-fixes.
         XCTAssertGreaterThan(learned.biasXM, 0.3)
         XCTAssertGreaterThan(learned.biasYM, 0)
@@ -357,7 +357,7 @@ final class WaymarkTests: XCTestCase {
         XCTAssertNotEqual(empty, json)
         try other.importHabits(json: json)
         XCTAssertEqual(try other.exportHabits(), json)
-        XCTAssertEqual(try other.fixError(), learned)
+        XCTAssertEqual(try other.fixBias(), learned)
 
         let newer = json.replacingOccurrences(of: "\"version\":1,", with: "\"version\":99,")
         XCTAssertNotEqual(newer, json)
@@ -373,7 +373,7 @@ final class WaymarkTests: XCTestCase {
         }
         try other.clearHabits()
         XCTAssertEqual(try other.exportHabits(), empty)
-        XCTAssertEqual(try other.fixError(), FixError(biasXM: 0, biasYM: 0, spread: 1))
+        XCTAssertEqual(try other.fixBias(), FixBias(biasXM: 0, biasYM: 0, spread: 1))
     }
 
     // A site whose transmitter ids are salted hashes: with its salt the engine positions exactly

@@ -178,7 +178,7 @@ impl Engine {
     pub(super) fn fix_epoch(&mut self, fix: &PositionFix) -> Result<Epoch, InputError> {
         self.check_time(fix.timestamp_ns)?;
         // The learned fix error (§II-C): the bias taken off, the spread widened.
-        let error = self.fix_error();
+        let error = self.fix_bias();
         let corrected = PositionFix {
             x: fix.x - error.bias_m[0],
             y: fix.y - error.bias_m[1],
@@ -362,7 +362,7 @@ impl Engine {
         let walked = match (motion.distance_m, motion.motion_state) {
             (Some(d), _) => d,
             (None, MotionState::Stationary) => 0.0,
-            (None, _) => self.config.hipe.assumed_speed_mps * dt_s.unwrap_or(0.0),
+            (None, _) => self.config.regions.assumed_speed_mps * dt_s.unwrap_or(0.0),
         };
         before + walked
     }

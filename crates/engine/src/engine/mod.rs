@@ -14,7 +14,7 @@ mod vertical;
 
 use crate::config::EngineConfig;
 use crate::error::Error;
-use crate::habits::{FixError, HabitError, HabitModel, HabitPrior, HabitReport};
+use crate::habits::{FixBias, HabitError, HabitModel, HabitPrior, HabitReport};
 use crate::history::{EpochRecord, History};
 use crate::hmm::{estimate, FixedLagSmoother, ForwardFilter, ViterbiWindow};
 use crate::radio::{DeviceOffset, ScanHasher};
@@ -404,8 +404,8 @@ impl Engine {
     }
 
     /// The fix error learned so far (zero bias, unit spread before any fix was learned from).
-    pub fn fix_error(&self) -> FixError {
-        self.habits.fix_error(&self.config.habits)
+    pub fn fix_bias(&self) -> FixBias {
+        self.habits.fix_bias(&self.config.habits)
     }
 
     /// The learned habits as JSON, to keep per user ([`HabitModel::to_json`]).

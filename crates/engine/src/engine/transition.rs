@@ -4,8 +4,8 @@
 use super::{Engine, Position};
 use crate::config::{EngineConfig, TransitionModel};
 use crate::habits::{HabitPrior, Habitual};
-use crate::hmm::{HipeRegion, HipeTransition, HoangTransition, Transition, UniformReach};
-use crate::sensors::{MdiScenario, MotionState, MotionUpdate};
+use crate::hmm::{HipeRegion, MovementVectorTransition, RegionsTransition, Transition, UniformReach};
+use crate::sensors::{MotionScenario, MotionState, MotionUpdate};
 use crate::site::{ReachTable, Site};
 use std::sync::Arc;
 
@@ -83,8 +83,8 @@ impl Engine {
         let config = &self.config;
         let region = hipe_region(config, motion, dt_s);
         let needed = match config.transition {
-            TransitionModel::Reach | TransitionModel::Hoang => config.max_speed_mps * dt_s,
-            TransitionModel::Hipe => region.outer_radius_m(),
+            TransitionModel::Reach | TransitionModel::MovementVector => config.max_speed_mps * dt_s,
+            TransitionModel::Regions => region.outer_radius_m(),
         };
         (needed <= self.reach.radius_m()).then_some(region)
     }
@@ -102,7 +102,7 @@ impl Engine {
         let ratio = config.transition_ratio;
         let kind = match config.transition {
             TransitionModel::Reach => StepKind::Reach,
-            TransitionModel::Hipe => {
+            TransitionModel::Regions => {
                 StepKind::Hipe { region, ratio: hipe_ratio(config, motion, self.step_position()) }
             }
             // Hoang's Gaussian needs a measured distance (the movement vector, or the distance
@@ -112,19 +112,19 @@ impl Engine {
             // heading, with the same floor K as its other epochs: HIPE's adaptive K, down to
             // 200, leaks most of the mass of a large multi-floor site each epoch
             // (docs/tuning.md#adaptive-k).
-            TransitionModel::Hoang
-                if motion.displacement_m.is_none() && motion.scenario == MdiScenario::HeadingSpeed =>
+            TransitionModel::MovementVector
+                if motion.displacement_m.is_none() && motion.scenario == MotionScenario::HeadingSpeed =>
             {
                 StepKind::Hipe { region, ratio }
             }
-            TransitionModel::Hoang => {
-                let base_variance = config.hoang.movement_variance_m2
-                    + if config.hoang.quantisation_variance {
+            TransitionModel::MovementVector => {
+                let base_variance = config.movement_vector.movement_variance_m2
+                    + if config.movement_vector.quantisation_variance {
                         self.site.spacing_m().powi(2) / 6.0
                     } else {
                         0.0
                     };
-                let spread = match (config.hoang.measured_spread, motion.distance_m) {
+                let spread = match (config.movement_vector.measured_spread, motion.distance_m) {
                     (true, Some(d)) => {
                         (motion.distance_sigma_m.powi(2), (d * motion.heading_sigma_rad).powi(2))
                     }
@@ -132,7 +132,7 @@ impl Engine {
                 };
                 StepKind::Hoang {
                     movement_m: motion.displacement_m,
-                    walked_m: motion.distance_m.filter(|_| motion.scenario == MdiScenario::Distance),
+                    walked_m: motion.distance_m.filter(|_| motion.scenario == MotionScenario::Distance),
                     variance_m2: base_variance + spread.0,
                     across_variance_m2: base_variance + spread.1,
                     exponent: self.epoch_rssi_weight(timestamp_ns, motion).map_or(1.0, |g| 1.0 - g),
@@ -150,7 +150,7 @@ impl Engine {
             reach: Arc::clone(&self.reach),
             map_reach: self.map_reach.clone(),
             habits: Arc::clone(&self.habit_prior),
-            mahalanobis_cap: self.config.hoang.mahalanobis_cap,
+            mahalanobis_cap: self.config.movement_vector.mahalanobis_cap,
         }
     }
 
@@ -177,7 +177,7 @@ impl Engine {
         if self.config.max_speed_mps * dt_s > self.reach.radius_m() {
             return without;
         }
-        if self.config.transition == TransitionModel::Hoang && motion.displacement_m.is_some() {
+        if self.config.transition == TransitionModel::MovementVector && motion.displacement_m.is_some() {
             let sparse = self.scan_timing.sparse_band(timestamp_ns).and(self.sparse_scans.rssi_weight);
             sparse.or(with_movement)
         } else {
@@ -257,7 +257,7 @@ enum StepKind {
     Reach,
     /// HIPE's region, with its K.
     Hipe { region: HipeRegion, ratio: f64 },
-    /// Hoang's movement-vector Gaussian (the fields of [`HoangTransition`]).
+    /// Hoang's movement-vector Gaussian (the fields of [`MovementVectorTransition`]).
     Hoang {
         movement_m: Option<[f64; 2]>,
         walked_m: Option<f64>,
@@ -287,11 +287,11 @@ impl TransitionParts {
                 &reach
             }
             StepKind::Hipe { region, ratio } => {
-                hipe = HipeTransition { site: &self.site, table, region, ratio };
+                hipe = RegionsTransition { site: &self.site, table, region, ratio };
                 &hipe
             }
             StepKind::Hoang { movement_m, walked_m, variance_m2, across_variance_m2, exponent } => {
-                hoang = HoangTransition {
+                hoang = MovementVectorTransition {
                     site: &self.site,
                     table,
                     reach: table.cut(model.reach_m),
@@ -332,11 +332,11 @@ pub(super) fn prediction_table<'a>(
 
 /// HIPE's region for this epoch (HIPE eqs. 7-10, tolerances of Table 4).
 pub(super) fn hipe_region(config: &EngineConfig, motion: &MotionUpdate, dt_s: f64) -> HipeRegion {
-    let h = &config.hipe;
+    let h = &config.regions;
     let range_m = h.assumed_speed_mps * dt_s;
     let tolerance = |d: f64| (h.distance_tolerance_fraction * d).max(h.distance_tolerance_min_m);
     match (motion.scenario, motion.distance_m, motion.heading_rad) {
-        (MdiScenario::DistanceHeading, Some(d), Some(heading_rad)) if d > 0.0 => HipeRegion::RingSector {
+        (MotionScenario::DistanceHeading, Some(d), Some(heading_rad)) if d > 0.0 => HipeRegion::RingSector {
             distance_m: d,
             tolerance_m: tolerance(d),
             heading_rad,
@@ -344,10 +344,10 @@ pub(super) fn hipe_region(config: &EngineConfig, motion: &MotionUpdate, dt_s: f6
         },
         // Standing still, or distance without heading: the ring (a disc of the tolerance when
         // d = 0).
-        (MdiScenario::DistanceHeading | MdiScenario::Distance, Some(d), _) => {
+        (MotionScenario::DistanceHeading | MotionScenario::Distance, Some(d), _) => {
             HipeRegion::Ring { distance_m: d, tolerance_m: tolerance(d) }
         }
-        (MdiScenario::HeadingSpeed, _, Some(heading_rad)) => {
+        (MotionScenario::HeadingSpeed, _, Some(heading_rad)) => {
             HipeRegion::Sector { range_m, heading_rad, tolerance_rad: h.heading_tolerance_rad }
         }
         _ => HipeRegion::Disc { range_m },
@@ -362,7 +362,7 @@ pub(super) fn hipe_region(config: &EngineConfig, motion: &MotionUpdate, dt_s: f6
 /// (docs/tuning.md#adaptive-k). r_estimate is how far the previous 68% radius is within the
 /// least distance tolerance (1.5 m).
 pub(super) fn hipe_ratio(config: &EngineConfig, motion: &MotionUpdate, previous: Option<&Position>) -> f64 {
-    let h = &config.hipe;
+    let h = &config.regions;
     let within = |spread: f64, tolerance: f64| (1.0 - spread / tolerance).clamp(0.0, 1.0);
     let distance_tolerance = motion.distance_m.map_or(h.distance_tolerance_min_m, |d| {
         (h.distance_tolerance_fraction * d).max(h.distance_tolerance_min_m)
@@ -371,10 +371,10 @@ pub(super) fn hipe_ratio(config: &EngineConfig, motion: &MotionUpdate, previous:
     let r_heading = within(motion.heading_sigma_rad, h.heading_tolerance_rad);
     let r_motion = match motion.scenario {
         _ if motion.motion_state == MotionState::Stationary => 1.0,
-        MdiScenario::DistanceHeading => r_distance * r_heading,
-        MdiScenario::Distance => r_distance,
-        MdiScenario::HeadingSpeed => 0.5 * r_heading,
-        MdiScenario::Speed => 0.0,
+        MotionScenario::DistanceHeading => r_distance * r_heading,
+        MotionScenario::Distance => r_distance,
+        MotionScenario::HeadingSpeed => 0.5 * r_heading,
+        MotionScenario::Speed => 0.0,
     };
     let r_estimate = previous.map_or(0.0, |p| (h.distance_tolerance_min_m / p.accuracy_m).min(1.0));
     let r = r_motion * r_estimate;

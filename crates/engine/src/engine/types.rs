@@ -5,7 +5,7 @@
 use super::{Engine, MAX_RSSI_DBM};
 use crate::history::EpochRecord;
 use crate::radio::RadioMap;
-use crate::sensors::{MdiScenario, MotionState};
+use crate::sensors::{MotionScenario, MotionState};
 use crate::site::{Site, SparseScans, SPARSE_SCAN_GAP_S};
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex, Weak};
@@ -44,7 +44,7 @@ pub struct Position {
     /// Walking, stationary, or unknown (no accelerometer).
     pub motion_state: MotionState,
     /// The motion information this epoch had (HIPE Table 1).
-    pub scenario: MdiScenario,
+    pub scenario: MotionScenario,
     /// Steps detected since the previous epoch.
     pub steps: u32,
     /// ln p(scan | earlier input): how well the radio map explains this scan; `None` for an
@@ -90,9 +90,9 @@ pub enum StatusEvent {
         /// When, ns.
         timestamp_ns: u64,
         /// Before.
-        from: MdiScenario,
+        from: MotionScenario,
         /// Now.
-        to: MdiScenario,
+        to: MotionScenario,
     },
     /// The person started or stopped walking.
     MotionStateChanged {

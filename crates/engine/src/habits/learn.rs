@@ -59,7 +59,7 @@ impl HabitModel {
         let mut fix_stats = FixStatistics::default();
         let mut previous: Option<f64> = None;
         for iteration in 0..=options.max_iterations {
-            let fix_error = {
+            let fix_bias = {
                 let mut total = self.fix.clone();
                 total.add(&fix_stats);
                 total.estimate(options.fix_prior_fixes)
@@ -68,7 +68,7 @@ impl HabitModel {
             let mut next_fix = FixStatistics::default();
             let mut log_likelihood = 0.0;
             for segment in &segments {
-                let e = segment.expect(site, self, &learned, fix_error, options, &mut next, &mut next_fix)?;
+                let e = segment.expect(site, self, &learned, fix_bias, options, &mut next, &mut next_fix)?;
                 log_likelihood += e.0;
                 if iteration == 0 {
                     report.restarts += e.1;
@@ -113,7 +113,7 @@ impl HabitModel {
             self.learned_through_ns = Some(self.learned_through_ns.map_or(n, |a| a.max(n)));
         }
         report.learned_transitions = self.learned_transitions();
-        report.fix_error = self.fix_error(options);
+        report.fix_bias = self.fix_bias(options);
         Ok(report)
     }
 }
@@ -137,7 +137,7 @@ impl HabitModel {
         for (k, segment) in segments.iter().enumerate() {
             let mut fix = FixStatistics::default();
             let mut own = BTreeMap::new();
-            segment.expect(site, &uniform, &none, FixError::default(), options, &mut own, &mut fix)?;
+            segment.expect(site, &uniform, &none, FixBias::default(), options, &mut own, &mut fix)?;
             for (&key, &c) in &own {
                 *halves[k % 2].entry(key).or_insert(0.0) += c;
             }
@@ -324,7 +324,7 @@ impl Segment {
         site: &Site,
         model: &HabitModel,
         learned: &BTreeMap<(u32, u32), f64>,
-        fix_error: FixError,
+        fix_bias: FixBias,
         options: &HabitOptions,
         next: &mut BTreeMap<(u32, u32), f64>,
         next_fix: &mut FixStatistics,
@@ -353,7 +353,7 @@ impl Segment {
         let mut values = Vec::with_capacity(n * self.epochs.len());
         for o in &self.epochs {
             let (bx, by, spread) = match o.fix {
-                Some(_) => (fix_error.bias_m[0], fix_error.bias_m[1], fix_error.spread),
+                Some(_) => (fix_bias.bias_m[0], fix_bias.bias_m[1], fix_bias.spread),
                 None => (0.0, 0.0, 1.0),
             };
             let sigma = o.sigma * spread;
@@ -395,7 +395,7 @@ impl Segment {
                 let r = [o.x - s.position.x, o.y - s.position.y];
                 residual[0] += g * r[0];
                 residual[1] += g * r[1];
-                let d = [r[0] - fix_error.bias_m[0], r[1] - fix_error.bias_m[1]];
+                let d = [r[0] - fix_bias.bias_m[0], r[1] - fix_bias.bias_m[1]];
                 square += g * (d[0] * d[0] + d[1] * d[1]) * 0.5 * w;
                 mass += g;
             }

@@ -165,14 +165,14 @@ pub struct FixStatistics {
 
 /// A learned fix error: subtract `bias_m` from a fix, then widen its σ by `spread`.
 #[derive(Clone, Copy, Debug, PartialEq, Serialize)]
-pub struct FixError {
+pub struct FixBias {
     /// Mean error of the fixes, m (x, y in the site frame).
     pub bias_m: [f64; 2],
     /// Factor on the fixes' own σ (1: they are as good as they say).
     pub spread: f64,
 }
 
-impl Default for FixError {
+impl Default for FixBias {
     fn default() -> Self {
         Self { bias_m: [0.0, 0.0], spread: 1.0 }
     }
@@ -181,15 +181,15 @@ impl Default for FixError {
 impl FixStatistics {
     /// The MAP estimate with `prior_fixes` pseudo-fixes at zero bias and unit spread: each
     /// pseudo-fix weighs as the fixes' average 1/σ².
-    pub fn estimate(&self, prior_fixes: f64) -> FixError {
+    pub fn estimate(&self, prior_fixes: f64) -> FixBias {
         if self.fixes <= 0.0 {
-            return FixError::default();
+            return FixBias::default();
         }
         let mean_weight = self.weight / self.fixes;
         let w = self.weight + prior_fixes * mean_weight;
         let bias = self.weighted_residual.map(|r| if w > 0.0 { r / w } else { 0.0 });
         let spread = ((self.normalised_square + prior_fixes) / (self.fixes + prior_fixes)).sqrt();
-        FixError { bias_m: bias, spread: if spread.is_finite() && spread > 0.0 { spread } else { 1.0 } }
+        FixBias { bias_m: bias, spread: if spread.is_finite() && spread > 0.0 { spread } else { 1.0 } }
     }
 
     fn add(&mut self, other: &FixStatistics) {
@@ -269,7 +269,7 @@ pub struct HabitReport {
     /// Transitions with a learned count, after the pass.
     pub learned_transitions: usize,
     /// The fix error after the pass.
-    pub fix_error: FixError,
+    pub fix_bias: FixBias,
     /// Per strength of [`STRENGTHS`]: ln p of the held-out segments' moves under the other
     /// half's habits, minus ln p under the uniform reachability, nats per move (the first
     /// half predicting the second and the reverse). Empty with fewer than two segments.
@@ -351,7 +351,7 @@ impl HabitModel {
     }
 
     /// The learned fix error, with `options`' prior.
-    pub fn fix_error(&self, options: &HabitOptions) -> FixError {
+    pub fn fix_bias(&self, options: &HabitOptions) -> FixBias {
         self.fix.estimate(options.fix_prior_fixes)
     }
 }

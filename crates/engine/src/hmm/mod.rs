@@ -12,7 +12,9 @@ mod viterbi;
 
 pub use estimate::{estimate, positions_by_states, Estimate};
 pub use forward::{FilterError, ForwardFilter};
-pub use motion::{angle_between, azimuth, HipeRegion, HipeTransition, HoangTransition, PreparedHoang};
+pub use motion::{
+    angle_between, azimuth, HipeRegion, MovementVectorTransition, PreparedHoang, RegionsTransition,
+};
 pub use smoother::{FixedLagSmoother, STEP_BYTES_PER_STATE};
 pub use transition::{
     hipe_probabilities, predict, predict_and_viterbi_step, viterbi_step, BackPointer, RowBounds, Transition,

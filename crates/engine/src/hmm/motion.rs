@@ -67,7 +67,7 @@ pub fn azimuth(v: Vector2<f64>) -> f64 {
 
 /// HIPE's transition: a_h on the region, a_l = a_h / K elsewhere (eqs. 5-6).
 #[derive(Clone, Copy, Debug)]
-pub struct HipeTransition<'a> {
+pub struct RegionsTransition<'a> {
     /// The site (state positions for directions).
     pub site: &'a Site,
     /// Walking distances.
@@ -78,7 +78,7 @@ pub struct HipeTransition<'a> {
     pub ratio: f64,
 }
 
-impl HipeTransition<'_> {
+impl RegionsTransition<'_> {
     fn in_region(&self, i: usize, j: u32, walk_m: f64, near: bool) -> bool {
         let states = self.site.states();
         let heading_ok = |heading: f64, tolerance: f64| {
@@ -103,7 +103,7 @@ impl HipeTransition<'_> {
     }
 }
 
-impl Transition for HipeTransition<'_> {
+impl Transition for RegionsTransition<'_> {
     fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
         let outer = self.region.outer_radius_m();
         let candidates = self.table.reachable(i, outer);
@@ -139,7 +139,7 @@ impl Transition for HipeTransition<'_> {
 /// cannot make a state impossible: beyond the cap every state has the cap's density, which is
 /// also the density of the floor entries.
 #[derive(Clone, Copy, Debug)]
-pub struct HoangTransition<'a> {
+pub struct MovementVectorTransition<'a> {
     /// The site (state positions).
     pub site: &'a Site,
     /// Walking distances.
@@ -165,7 +165,7 @@ pub struct HoangTransition<'a> {
     pub exponent: f64,
 }
 
-/// What every entry of a row of [`HoangTransition`] shares, computed once per row: the
+/// What every entry of a row of [`MovementVectorTransition`] shares, computed once per row: the
 /// measured movement, its direction and the normalisers.
 struct Measured {
     v: Vector2<f64>,
@@ -174,7 +174,7 @@ struct Measured {
     ln_walked_normaliser: f64,
 }
 
-impl HoangTransition<'_> {
+impl MovementVectorTransition<'_> {
     fn measured(&self) -> Measured {
         let v = self.movement_m.map_or(Vector2::zeros(), |[x, y]| Vector2::new(x, y));
         Measured {
@@ -233,7 +233,7 @@ impl HoangTransition<'_> {
     }
 }
 
-impl Transition for HoangTransition<'_> {
+impl Transition for MovementVectorTransition<'_> {
     fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
         self.prepared().row(i, row)
     }
@@ -254,17 +254,17 @@ impl Transition for HoangTransition<'_> {
     }
 }
 
-/// A [`HoangTransition`] with what all its rows share computed once: the measured movement,
+/// A [`MovementVectorTransition`] with what all its rows share computed once: the measured movement,
 /// its direction, the normalisers and the density at the Mahalanobis cap. Its rows are the
 /// model's, value for value; an epoch writes thousands of them.
 pub struct PreparedHoang<'t, 'a> {
-    model: &'t HoangTransition<'a>,
+    model: &'t MovementVectorTransition<'a>,
     measured: Measured,
     /// exp of the movement term at the cap.
     capped: f64,
 }
 
-impl<'a> HoangTransition<'a> {
+impl<'a> MovementVectorTransition<'a> {
     /// The model ready to write many rows.
     pub fn prepared(&self) -> PreparedHoang<'_, 'a> {
         PreparedHoang { model: self, measured: self.measured(), capped: self.ln_movement_range().0.exp() }
@@ -323,7 +323,7 @@ impl PreparedHoang<'_, '_> {
     }
 }
 
-impl HoangTransition<'_> {
+impl MovementVectorTransition<'_> {
     /// The movement term at the Mahalanobis cap (the floor entries' density) and the largest
     /// any entry can have (at distance 0 or at the cap, whichever the exponent's sign makes
     /// larger): every row entry is `high · exp` of a value between the two.
@@ -380,7 +380,7 @@ mod tests {
         let table = ReachTable::build(&site, 9.0);
         let centre = 12; // (2, 2)
         let at = |x: u32, y: u32| y * 5 + x;
-        let t = |region| HipeTransition { site: &site, table: &table, region, ratio: 1000.0 };
+        let t = |region| RegionsTransition { site: &site, table: &table, region, ratio: 1000.0 };
         // Ring of walking distance 2 ± 0.5 around the centre: the 8 states two steps away.
         let ring = high_set(&t(HipeRegion::Ring { distance_m: 2.0, tolerance_m: 0.5 }), centre);
         assert_eq!(ring.len(), 8);
@@ -419,8 +419,8 @@ mod tests {
         table: &'a ReachTable,
         [along, across]: [f64; 2],
         cap: f64,
-    ) -> HoangTransition<'a> {
-        HoangTransition {
+    ) -> MovementVectorTransition<'a> {
+        MovementVectorTransition {
             site,
             table,
             reach: table.cut(4.5),
@@ -478,7 +478,7 @@ mod tests {
         // Anisotropic (direction and both spreads), isotropic, and distance alone.
         let vector = one_metre_east(&site, &table, [0.3, 0.1], 3.0);
         let round = one_metre_east(&site, &table, [0.3, 0.3], 3.0);
-        let walked = HoangTransition { movement_m: None, walked_m: Some(1.5), ..vector };
+        let walked = MovementVectorTransition { movement_m: None, walked_m: Some(1.5), ..vector };
         // Every third state weighted, by weights so small that only their sign tells them.
         let weights: Vec<f64> =
             (0..25).map(|j| if j % 3 == 0 { 1e-200 * (j + 1) as f64 } else { 0.0 }).collect();
@@ -498,7 +498,7 @@ mod tests {
     fn distance_alone_is_a_gaussian_ring_in_walking_distance() {
         let site = grid();
         let table = ReachTable::build(&site, 9.0);
-        let t = HoangTransition {
+        let t = MovementVectorTransition {
             movement_m: None,
             walked_m: Some(2.0),
             ..one_metre_east(&site, &table, [0.25, 0.25], 3.0)
@@ -562,10 +562,10 @@ mod tests {
                 -60.0 * u
             }
         };
-        let mut models: Vec<HoangTransition> = Vec::new();
+        let mut models: Vec<MovementVectorTransition> = Vec::new();
         for (movement_m, walked_m) in [(Some([1.0, 0.0]), None), (None, Some(2.0)), (None, None)] {
             for exponent in [1.0, 0.97, -0.5] {
-                models.push(HoangTransition {
+                models.push(MovementVectorTransition {
                     movement_m,
                     walked_m,
                     exponent,
@@ -608,7 +608,7 @@ mod tests {
         use crate::hmm::{ForwardFilter, ViterbiWindow};
         let site = grid();
         let table = ReachTable::build(&site, 9.0);
-        let t = HoangTransition { exponent: 0.97, ..one_metre_east(&site, &table, [0.1, 0.4], 3.0) };
+        let t = MovementVectorTransition { exponent: 0.97, ..one_metre_east(&site, &table, [0.1, 0.4], 3.0) };
         let (mut fused, mut fused_path) = (ForwardFilter::new(25), ViterbiWindow::new(25, 8));
         let (mut apart, mut apart_path) = (ForwardFilter::new(25), ViterbiWindow::new(25, 8));
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();
@@ -643,12 +643,12 @@ mod tests {
         use crate::hmm::{FixedLagSmoother, ForwardFilter};
         let site = grid();
         let table = ReachTable::build(&site, 9.0);
-        let hoang = HoangTransition {
+        let hoang = MovementVectorTransition {
             reach: table.cut(2.0),
             exponent: 0.97,
             ..one_metre_east(&site, &table, [0.1, 0.4], 3.0)
         };
-        let walked = HoangTransition { movement_m: None, walked_m: Some(1.0), ..hoang };
+        let walked = MovementVectorTransition { movement_m: None, walked_m: Some(1.0), ..hoang };
         let uniform = UniformReach { table: &table, rho_m: 1.5, ratio: 1000.0 };
         let transitions: [&dyn Transition; 3] = [&hoang, &walked, &uniform];
         let bits = |v: &[f64]| v.iter().map(|x| x.to_bits()).collect::<Vec<_>>();

@@ -4,7 +4,7 @@
 //! scenario of HIPE Table 1.
 //!
 //! INTERFACE CONTRACT (used by the engine and the HMM; keep these names and meanings):
-//! - [`SensorSample`], [`MotionState`], [`MdiScenario`], [`MotionUpdate`], [`BatchReport`].
+//! - [`SensorSample`], [`MotionState`], [`MotionScenario`], [`MotionUpdate`], [`BatchReport`].
 //! - `MotionTracker::new(MotionConfig) -> Result<MotionTracker, crate::Error>`,
 //!   `push_accelerometer / push_gyroscope / push_magnetometer(&mut self, &[SensorSample]) -> BatchReport`,
 //!   `update(&mut self, until_ns: u64) -> MotionUpdate`, `stats(&self) -> &MotionStats`.
@@ -79,7 +79,7 @@ pub enum MotionState {
 /// HIPE Table 1: which motion information (MDI) an epoch has.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
-pub enum MdiScenario {
+pub enum MotionScenario {
     /// Measured distance (steps × step length) and measured absolute heading.
     DistanceHeading,
     /// Measured distance, heading unknown.
@@ -91,18 +91,22 @@ pub enum MdiScenario {
     Speed,
 }
 
-impl MdiScenario {
+impl MotionScenario {
     /// Every scenario, from the most motion information to the least.
-    pub const ALL: [MdiScenario; 4] =
-        [MdiScenario::DistanceHeading, MdiScenario::Distance, MdiScenario::HeadingSpeed, MdiScenario::Speed];
+    pub const ALL: [MotionScenario; 4] = [
+        MotionScenario::DistanceHeading,
+        MotionScenario::Distance,
+        MotionScenario::HeadingSpeed,
+        MotionScenario::Speed,
+    ];
 
     /// Its position in [`ALL`](Self::ALL).
     pub fn index(self) -> usize {
         match self {
-            MdiScenario::DistanceHeading => 0,
-            MdiScenario::Distance => 1,
-            MdiScenario::HeadingSpeed => 2,
-            MdiScenario::Speed => 3,
+            MotionScenario::DistanceHeading => 0,
+            MotionScenario::Distance => 1,
+            MotionScenario::HeadingSpeed => 2,
+            MotionScenario::Speed => 3,
         }
     }
 }
@@ -131,7 +135,7 @@ pub struct MotionUpdate {
     /// Motion state at the end of the interval.
     pub motion_state: MotionState,
     /// The HIPE scenario this interval supports.
-    pub scenario: MdiScenario,
+    pub scenario: MotionScenario,
     /// Whether the compass was judged disturbed during the interval.
     pub compass_disturbed: bool,
 }
@@ -173,10 +177,10 @@ impl MotionUpdate {
             _ => latest,
         };
         let scenario = match (distance_m.is_some(), heading.is_some()) {
-            (true, true) => MdiScenario::DistanceHeading,
-            (true, false) => MdiScenario::Distance,
-            (false, true) => MdiScenario::HeadingSpeed,
-            (false, false) => MdiScenario::Speed,
+            (true, true) => MotionScenario::DistanceHeading,
+            (true, false) => MotionScenario::Distance,
+            (false, true) => MotionScenario::HeadingSpeed,
+            (false, false) => MotionScenario::Speed,
         };
         MotionUpdate {
             start_ns: self.start_ns,
@@ -263,9 +267,9 @@ mod tests {
             displacement_m: distance_m.map(|_| [d * heading_rad.sin(), d * heading_rad.cos()]),
             motion_state: MotionState::Walking,
             scenario: if distance_m.is_some() {
-                MdiScenario::DistanceHeading
+                MotionScenario::DistanceHeading
             } else {
-                MdiScenario::HeadingSpeed
+                MotionScenario::HeadingSpeed
             },
             compass_disturbed: false,
         }
@@ -284,7 +288,7 @@ mod tests {
         assert!((d[0] - 3.0).abs() < 1e-12 && (d[1] - 3.0).abs() < 1e-12, "{d:?}");
         assert!((both.heading_rad.unwrap() - FRAC_PI_4).abs() < 1e-12);
         assert!((both.heading_sigma_rad - (0.1 + FRAC_PI_2 / 10.0)).abs() < 1e-12);
-        assert_eq!(both.scenario, MdiScenario::DistanceHeading);
+        assert_eq!(both.scenario, MotionScenario::DistanceHeading);
         // Out and back: no direction of travel, so the latest heading.
         let back = north.then(&part(1, Some(3.0), PI));
         assert!(back.displacement_m.unwrap()[1].abs() < 1e-12);
@@ -299,11 +303,11 @@ mod tests {
         let unknown = part(1, None, 0.0);
         let half = known.then(&unknown);
         assert_eq!((half.distance_m, half.displacement_m), (Some(2.0), None));
-        assert_eq!(half.scenario, MdiScenario::DistanceHeading);
+        assert_eq!(half.scenario, MotionScenario::DistanceHeading);
         let longer = MotionUpdate { end_ns: 4_000_000_000, ..unknown.clone() };
         let mostly_unknown = known.then(&longer);
         assert_eq!((mostly_unknown.distance_m, mostly_unknown.distance_sigma_m), (None, 0.0));
-        assert_eq!(mostly_unknown.scenario, MdiScenario::HeadingSpeed);
+        assert_eq!(mostly_unknown.scenario, MotionScenario::HeadingSpeed);
         // Standing still measures no displacement without a heading, and moves nothing.
         let still =
             MotionUpdate { distance_m: Some(0.0), heading_rad: None, displacement_m: None, ..known.clone() };

@@ -5,7 +5,7 @@ use super::config::{MotionConfig, StepLengthModel};
 use super::filter::{s_to_ns, wrap_angle};
 use super::heading::HeadingTracker;
 use super::step::{GaitStep, GaitValidator, StepDetector};
-use super::{refuse_ahead, BatchReport, MdiScenario, MotionState, MotionUpdate, SensorSample};
+use super::{refuse_ahead, BatchReport, MotionScenario, MotionState, MotionUpdate, SensorSample};
 use crate::error::Error;
 use nalgebra::Vector3;
 use serde::Serialize;
@@ -445,10 +445,10 @@ impl MotionTracker {
             None => (None, PI),
         };
         let scenario = match (distance_m.is_some(), heading_rad.is_some()) {
-            (true, true) => MdiScenario::DistanceHeading,
-            (true, false) => MdiScenario::Distance,
-            (false, true) => MdiScenario::HeadingSpeed,
-            (false, false) => MdiScenario::Speed,
+            (true, true) => MotionScenario::DistanceHeading,
+            (true, false) => MotionScenario::Distance,
+            (false, true) => MotionScenario::HeadingSpeed,
+            (false, false) => MotionScenario::Speed,
         };
         self.stats.rejected_step_candidates = self.gait.rejected();
         MotionUpdate {
@@ -581,7 +581,7 @@ mod tests {
         assert_eq!(u.distance_m, Some(0.0));
         assert_eq!(u.displacement_m, Some([0.0, 0.0]));
         assert_eq!(u.motion_state, MotionState::Stationary);
-        assert_eq!(u.scenario, MdiScenario::DistanceHeading);
+        assert_eq!(u.scenario, MotionScenario::DistanceHeading);
         // Flat, field to +y: heading north = site +y with zero declination and rotation.
         assert!(u.heading_rad.unwrap().abs() < 1e-6);
         let u = m.update(3_000_000_000);

@@ -333,7 +333,7 @@ impl Calibration {
                 }
             }
         }
-        for s in crate::sensors::MdiScenario::ALL {
+        for s in crate::sensors::MotionScenario::ALL {
             if let Some(g) = self.rssi_weight_by_scenario.get(s) {
                 if !(g > 0.0 && g <= 1.0) {
                     let path = format!("calibration.rssi_weight_by_scenario.{}", ScenarioScales::key(s));
@@ -365,7 +365,7 @@ impl Calibration {
         if self.estimate_states == Some(0) {
             return Err(("calibration.estimate_states".into(), "must be at least 1".into()));
         }
-        let by_scenario = crate::sensors::MdiScenario::ALL.map(|s| {
+        let by_scenario = crate::sensors::MotionScenario::ALL.map(|s| {
             (
                 format!("calibration.accuracy_scale_by_scenario.{}", ScenarioScales::key(s)),
                 self.accuracy_scale_by_scenario.get(s),
@@ -389,7 +389,7 @@ impl Calibration {
 
     /// The 68% and 95% radius factors of an epoch in `scenario`: its own, else the site's,
     /// else none (1).
-    pub fn accuracy_scale_in(&self, scenario: crate::sensors::MdiScenario) -> [f64; 2] {
+    pub fn accuracy_scale_in(&self, scenario: crate::sensors::MotionScenario) -> [f64; 2] {
         self.accuracy_scale_by_scenario.get(scenario).or(self.accuracy_scale).unwrap_or([1.0, 1.0])
     }
 }
@@ -428,22 +428,22 @@ pub struct PerScenario<T> {
 impl<T: Clone> PerScenario<T> {
     /// Whether no scenario has a value.
     pub fn is_empty(&self) -> bool {
-        crate::sensors::MdiScenario::ALL.iter().all(|&s| self.slot(s).is_none())
+        crate::sensors::MotionScenario::ALL.iter().all(|&s| self.slot(s).is_none())
     }
 
     /// The value of `scenario`.
-    pub fn get(&self, scenario: crate::sensors::MdiScenario) -> Option<T> {
+    pub fn get(&self, scenario: crate::sensors::MotionScenario) -> Option<T> {
         self.slot(scenario).clone()
     }
 
     /// Sets the value of `scenario`.
-    pub fn set(&mut self, scenario: crate::sensors::MdiScenario, value: Option<T>) {
+    pub fn set(&mut self, scenario: crate::sensors::MotionScenario, value: Option<T>) {
         *self.slot_mut(scenario) = value;
     }
 
     /// Its key in the site file.
-    pub fn key(scenario: crate::sensors::MdiScenario) -> &'static str {
-        use crate::sensors::MdiScenario::*;
+    pub fn key(scenario: crate::sensors::MotionScenario) -> &'static str {
+        use crate::sensors::MotionScenario::*;
         match scenario {
             DistanceHeading => "distance_heading",
             Distance => "distance",
@@ -452,8 +452,8 @@ impl<T: Clone> PerScenario<T> {
         }
     }
 
-    fn slot(&self, scenario: crate::sensors::MdiScenario) -> &Option<T> {
-        use crate::sensors::MdiScenario::*;
+    fn slot(&self, scenario: crate::sensors::MotionScenario) -> &Option<T> {
+        use crate::sensors::MotionScenario::*;
         match scenario {
             DistanceHeading => &self.distance_heading,
             Distance => &self.distance,
@@ -462,8 +462,8 @@ impl<T: Clone> PerScenario<T> {
         }
     }
 
-    fn slot_mut(&mut self, scenario: crate::sensors::MdiScenario) -> &mut Option<T> {
-        use crate::sensors::MdiScenario::*;
+    fn slot_mut(&mut self, scenario: crate::sensors::MotionScenario) -> &mut Option<T> {
+        use crate::sensors::MotionScenario::*;
         match scenario {
             DistanceHeading => &mut self.distance_heading,
             Distance => &mut self.distance,

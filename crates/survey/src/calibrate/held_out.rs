@@ -3,7 +3,7 @@
 
 use crate::io::Trace;
 use crate::scoring::{live_estimates, quantile, score, Scored};
-use waymark_engine::sensors::MdiScenario;
+use waymark_engine::sensors::MotionScenario;
 use waymark_engine::site::{
     scaled_radii, Calibration, FloorReliability, StateKind, FLOOR_BANDS, FLOOR_MISS_BANDS,
 };
@@ -42,7 +42,7 @@ pub(super) struct Tag {
     /// Where the truth was, in its floor's frame, m.
     pub truth: [f64; 2],
     /// The scenario the engine positioned it in.
-    pub scenario: MdiScenario,
+    pub scenario: MotionScenario,
     /// The radio fit of its scan.
     pub radio_fit: Option<f64>,
     /// In the sparse regime, its band of time since the sparse scan
@@ -224,7 +224,7 @@ mod tests {
             },
             beyond_map_m: 0.0,
             truth: [error_m, 0.0],
-            scenario: MdiScenario::DistanceHeading,
+            scenario: MotionScenario::DistanceHeading,
             radio_fit: None,
             band: None,
             beyond_radio_m,

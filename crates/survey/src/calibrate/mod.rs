@@ -31,7 +31,7 @@ use held_out::{floor_reliability, radius_factors, tag, HeldOut, Tag, Tagged, Wal
 use radius::calibrate_fingerprint_radius;
 use shipped::{covered_replays, CoveredGamma, HeldOutSite};
 use std::sync::Arc;
-use waymark_engine::sensors::MdiScenario;
+use waymark_engine::sensors::MotionScenario;
 use waymark_engine::site::{Calibration, FloorReliability, North, Site, SparseScans, SPARSE_BANDS};
 use waymark_engine::{Engine, EngineConfig};
 
@@ -430,7 +430,7 @@ pub fn survey_calibrated(
     };
     // Distance only and heading only: their own γ when it beats the γ without movement on
     // their own held-out curve by more than its standard error (`own_gamma`).
-    for (mask, scenario) in [(2, MdiScenario::Distance), (3, MdiScenario::HeadingSpeed)] {
+    for (mask, scenario) in [(2, MotionScenario::Distance), (3, MotionScenario::HeadingSpeed)] {
         let (curve, best) = gamma_curve(&walks, mask);
         let own = own_gamma(&curve, best, calibration.rssi_weight_without_movement);
         calibration.rssi_weight_by_scenario.set(scenario, own);
@@ -530,11 +530,11 @@ pub fn survey_calibrated(
         // and sector) run at their scenario's γ if the site has one, and they and speed only
         // otherwise at the γ chosen without one.
         let at = |g: Option<f64>| g.and_then(|g| GAMMA_GRID.iter().position(|&x| x == g));
-        let chosen = MdiScenario::ALL.map(|sc| match sc {
-            MdiScenario::DistanceHeading => g,
+        let chosen = MotionScenario::ALL.map(|sc| match sc {
+            MotionScenario::DistanceHeading => g,
             _ => at(calibration.rssi_weight_by_scenario.get(sc)).or(g_still),
         });
-        for scenario in MdiScenario::ALL {
+        for scenario in MotionScenario::ALL {
             let Some(chosen) = chosen[scenario.index()] else { continue };
             for walk in &mine_tagged {
                 for (m, run) in walk[chosen].iter().enumerate() {
@@ -571,7 +571,7 @@ pub fn survey_calibrated(
     // The forced scenarios' factors, from the runs with the motion withheld at each γ; the
     // scenarios the engine as shipped positions enough epochs in get theirs from its own
     // replays below.
-    for scenario in MdiScenario::ALL {
+    for scenario in MotionScenario::ALL {
         let (points, every) = (&by_scenario[scenario.index()], &every_by_scenario[scenario.index()]);
         report.scenario_epochs[scenario.index()] = points.len();
         let scale = if points.len() >= MIN_SCENARIO_EPOCHS { radius_factors(points, every) } else { None };
@@ -649,7 +649,7 @@ pub fn survey_calibrated(
     let on: Vec<&Tag> = tags.iter().copied().filter(|t| t.beyond_map_m == 0.0).collect();
     calibration.accuracy_scale = radius_factors(&on, &tags);
     report.epochs = on.len();
-    for scenario in MdiScenario::ALL {
+    for scenario in MotionScenario::ALL {
         let points: Vec<&Tag> = on.iter().copied().filter(|t| t.scenario == scenario).collect();
         if points.len() >= MIN_SCENARIO_EPOCHS {
             let every: Vec<&Tag> = tags.iter().copied().filter(|t| t.scenario == scenario).collect();

@@ -177,7 +177,7 @@ pub struct CalibrationReport {
     /// calibration's replays with the motion as the sensors give it, withheld, distance only
     /// and heading only, at each floor's γ; a scenario with fewer than that in both has none.
     pub accuracy_scale_by_scenario: waymark_engine::site::ScenarioScales,
-    /// Those epochs per scenario ([`MdiScenario::ALL`](waymark_engine::sensors::MdiScenario::ALL) order).
+    /// Those epochs per scenario ([`MotionScenario::ALL`](waymark_engine::sensors::MotionScenario::ALL) order).
     pub scenario_epochs: [usize; 4],
     /// Held-out epochs on the map replayed with the engine as shipped: what
     /// `accuracy_scale`'s 68% factor was fitted on.

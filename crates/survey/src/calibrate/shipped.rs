@@ -172,14 +172,14 @@ const _: () = assert!(RUNS > SPARSE);
 mod tests {
     use super::*;
     use crate::calibrate::gamma::tests::scored;
-    use waymark_engine::sensors::MdiScenario;
+    use waymark_engine::sensors::MotionScenario;
 
     fn tag(beyond_map_m: f64) -> Tag {
         Tag {
             scored: scored(1.0),
             beyond_map_m,
             truth: [0.0, 0.0],
-            scenario: MdiScenario::DistanceHeading,
+            scenario: MotionScenario::DistanceHeading,
             radio_fit: None,
             band: None,
             beyond_radio_m: 0.0,

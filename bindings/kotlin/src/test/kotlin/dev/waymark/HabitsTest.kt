@@ -64,7 +64,7 @@ class HabitsTest {
     @Test
     fun learnExportImportRoundTrip() {
         PositioningEngine(siteJson, EngineOptions()).use { engine ->
-            assertEquals(FixError(0.0, 0.0, 1.0), engine.fixError())
+            assertEquals(FixBias(0.0, 0.0, 1.0), engine.fixBias())
             val (fixes, confirmations) = replayWithFixes(engine)
             assertTrue("$fixes fixes, $confirmations confirmations", fixes > 5 && confirmations > 2)
 
@@ -72,7 +72,7 @@ class HabitsTest {
             assertTrue("$report", report.epochs > 10u)
             assertTrue("$report", report.learnedTransitions > 0uL)
             assertEquals(report.epochs.toULong(), report.totalEpochs)
-            val learned = engine.fixError()
+            val learned = engine.fixBias()
             // 1.5 m east, 0.5 m north, shrunk toward 0 by the prior's 5 pseudo-fixes.
             assertTrue("$learned", learned.biasXM > 0.3 && learned.biasYM > 0.0 && learned.biasXM > learned.biasYM)
 
@@ -88,10 +88,10 @@ class HabitsTest {
                 assertNotEquals(empty, json)
                 other.importHabits(json)
                 assertEquals(json, other.exportHabits())
-                assertEquals(learned, other.fixError())
+                assertEquals(learned, other.fixBias())
                 other.clearHabits()
                 assertEquals(empty, other.exportHabits())
-                assertEquals(FixError(0.0, 0.0, 1.0), other.fixError())
+                assertEquals(FixBias(0.0, 0.0, 1.0), other.fixBias())
             }
         }
     }
