@@ -15,8 +15,9 @@ use std::process::ExitCode;
 use waymark_engine::radio::RssiModel;
 use waymark_engine::EngineConfig;
 use waymark_engine::TransitionModel;
+use waymark_experiments as experiments;
+use waymark_experiments::{Experiment, PaperExperiment};
 use waymark_sim as sim;
-use waymark_sim::{Experiment, PaperExperiment};
 
 #[derive(Parser)]
 #[command(name = "waymark", version, about = "Indoor positioning engine: demo and tools")]
@@ -225,7 +226,7 @@ fn demo(args: &DemoArgs) -> ExitCode {
     if let Some(m) = args.top_m {
         experiment.engine = EngineConfig { estimate_states: Some(m), ..experiment.engine };
     }
-    let report = match sim::run(&experiment) {
+    let report = match experiments::run(&experiment) {
         Ok(report) => report,
         Err(e) => {
             eprintln!("waymark demo: {e}");
@@ -341,7 +342,7 @@ fn simulate(args: &SimulateArgs) -> ExitCode {
     }
     let runs = args.runs.unwrap_or(100);
     if args.motion || args.experiment == SimExperiment::Motion {
-        let report = sim::motion_eval::evaluate(args.seed, runs);
+        let report = experiments::motion_eval::evaluate(args.seed, runs);
         match serde_json::to_string_pretty(&report) {
             Ok(text) => println!("{text}"),
             Err(e) => {
@@ -352,7 +353,7 @@ fn simulate(args: &SimulateArgs) -> ExitCode {
         return ExitCode::SUCCESS;
     }
     let experiment = PaperExperiment { seed: args.seed, runs, ..PaperExperiment::default() };
-    let report = match sim::run_papers(&experiment) {
+    let report = match experiments::run_papers(&experiment) {
         Ok(report) => report,
         Err(e) => {
             eprintln!("waymark simulate: {e}");
@@ -420,7 +421,7 @@ fn simulate(args: &SimulateArgs) -> ExitCode {
 }
 
 fn baum_welch(args: &SimulateArgs) -> ExitCode {
-    use sim::baum_welch::{self, BaumWelchExperiment, Bias};
+    use experiments::baum_welch::{self, BaumWelchExperiment, Bias};
     let defaults = BaumWelchExperiment::default();
     let bias = match (args.exponential_bias, defaults.bias) {
         // The same mean bias, as the paper compares them (§IV-B).
@@ -502,7 +503,7 @@ fn baum_welch(args: &SimulateArgs) -> ExitCode {
 }
 
 fn long_run(args: &SimulateArgs) -> ExitCode {
-    use sim::longrun::{self, LongRunConfig};
+    use experiments::longrun::{self, LongRunConfig};
     let config = LongRunConfig {
         hours: args.hours,
         seed: args.seed,
@@ -615,7 +616,7 @@ fn long_run(args: &SimulateArgs) -> ExitCode {
 }
 
 fn recovery(args: &SimulateArgs) -> ExitCode {
-    use sim::recovery::{self, RecoveryConfig, ScenarioReport};
+    use experiments::recovery::{self, RecoveryConfig, ScenarioReport};
     let config = RecoveryConfig { seeds: args.seeds, first_seed: args.seed, ..RecoveryConfig::default() };
     let json = args.json;
     let result = recovery::run(&config, |scenario, run| {
@@ -734,7 +735,7 @@ fn recovery(args: &SimulateArgs) -> ExitCode {
 fn sim_export(args: &SimExportArgs) -> ExitCode {
     let office =
         sim::Office::generate(&sim::OfficeConfig { seed: args.seed, ..sim::OfficeConfig::default() });
-    let walk = office.walk(sim::walk_seed(args.seed, 0), args.walk_length_m);
+    let walk = office.walk(experiments::walk_seed(args.seed, 0), args.walk_length_m);
     let write = |name: &str, text: String| std::fs::write(args.out.join(name), text);
     let result = std::fs::create_dir_all(args.out.join("survey"))
         .and_then(|_| write("site.json", office.site.to_json()))
@@ -743,7 +744,7 @@ fn sim_export(args: &SimExportArgs) -> ExitCode {
     let result = (1..=args.survey_walks).try_fold((), |(), k| {
         result.as_ref().map_err(|e| std::io::Error::new(e.kind(), e.to_string()))?;
         let seed = args.seed.wrapping_add(1000 + k);
-        let survey = office.walk(sim::walk_seed(seed, 0), args.survey_length_m);
+        let survey = office.walk(experiments::walk_seed(seed, 0), args.survey_length_m);
         write(&format!("survey/walk-{k}.json"), walk_json(&survey, seed, true).to_string())
     });
     match result {
