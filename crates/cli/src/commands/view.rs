@@ -4,7 +4,7 @@
 //! and the truth when it is known, with play, pause and a time slider; and where the survey's
 //! held-out walks were beyond the map (`waymark survey --coverage-out`) (docs/view.md).
 
-use crate::real::SaltArgs;
+use crate::shared::SaltArgs;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
