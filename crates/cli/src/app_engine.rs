@@ -6,7 +6,7 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use waymark_engine::radio::{Scan, TransmitterId};
 use waymark_engine::sensors::SensorSample;
-use waymark_sim::longrun::AppEngine;
+use waymark_experiments::longrun::AppEngine;
 use waymark_sim::session::ImuSink;
 
 /// Counts what an app's listener receives.

@@ -28,7 +28,7 @@
 //!   refuted (seed 17 then; on seed 2 now the true parameters score 42%: per-cell moments of a
 //!   room with heavy-tailed estimates, `src/sim/baum_welch.rs`).
 
-use waymark_sim::baum_welch::{self, BaumWelchExperiment, BaumWelchReport, Feedback, Schedule};
+use waymark_experiments::baum_welch::{self, BaumWelchExperiment, BaumWelchReport, Feedback, Schedule};
 
 fn experiment(seed: u64) -> BaumWelchReport {
     let schedule =

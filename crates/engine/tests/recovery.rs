@@ -5,7 +5,7 @@
 //! rule and why). The 20- and 50-seed figures are `waymark simulate --experiment recovery`
 //! (README).
 
-use waymark_sim::recovery::{self, RecoveryConfig, HOLD_EPOCHS, SAME_PLACE_M, TARGET_EPOCHS};
+use waymark_experiments::recovery::{self, RecoveryConfig, HOLD_EPOCHS, SAME_PLACE_M, TARGET_EPOCHS};
 
 #[test]
 fn the_engine_recovers_from_a_kidnap_and_a_radio_outage_within_ten_epochs() {

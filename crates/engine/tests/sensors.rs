@@ -7,8 +7,8 @@ use waymark_engine::sensors::{
     MotionConfig, MotionScenario, MotionState, MotionTracker, SensorSample, StepDetectorKind,
 };
 use waymark_engine::Error;
+use waymark_experiments::motion_eval::{evaluate, evaluate_with, EvalOptions, MotionReport};
 use waymark_sim::imu::{shaken_in_place, synthesize, ImuConfig, ImuTrace};
-use waymark_sim::motion_eval::{evaluate, evaluate_with, EvalOptions, MotionReport};
 
 /// Prints the full report: `cargo test --release -p waymark-engine --test sensors -- --ignored --nocapture`.
 /// Seed and runs from WAYMARK_EVAL_SEED and WAYMARK_EVAL_RUNS (default 1 and 10); a tracker

@@ -2,8 +2,10 @@
 //! must position to within the paper's ballpark.
 
 use waymark_engine::radio::RssiModel;
+use waymark_experiments as experiments;
+use waymark_experiments::Experiment;
 use waymark_sim as sim;
-use waymark_sim::{Experiment, OfficeConfig};
+use waymark_sim::OfficeConfig;
 
 fn experiment(seed: u64, model: RssiModel) -> Experiment {
     let base = Experiment::rssi_only();
@@ -14,7 +16,7 @@ fn experiment(seed: u64, model: RssiModel) -> Experiment {
 fn rssi_only_tracking_is_near_hoangs_figure() {
     // Hoang Table 1, RSSI only: 1.74 m. Seeds 11-12 are used nowhere else.
     for seed in [11, 12] {
-        let report = sim::run(&experiment(seed, RssiModel::CensoredGaussian)).unwrap();
+        let report = experiments::run(&experiment(seed, RssiModel::CensoredGaussian)).unwrap();
         let s = &report.summary;
         assert_eq!(report.states, 81);
         assert!(s.epochs > 2000, "{s:?}");
@@ -34,15 +36,16 @@ fn fusion_from_raw_imu_beats_radio_alone() {
         ..Experiment::default()
     };
     let radio = Experiment { office: fused.office.clone(), walks: 10, ..Experiment::rssi_only() };
-    let (fused, radio) = (sim::run(&fused).unwrap().summary, sim::run(&radio).unwrap().summary);
+    let (fused, radio) =
+        (experiments::run(&fused).unwrap().summary, experiments::run(&radio).unwrap().summary);
     assert!(fused.mean_error_m < 0.7 * radio.mean_error_m, "fused {fused:?}\nradio {radio:?}");
     assert!(fused.p90_error_m < radio.p90_error_m, "fused {fused:?}\nradio {radio:?}");
 }
 
 #[test]
 fn the_demo_is_deterministic() {
-    let a = sim::run(&experiment(3, RssiModel::CensoredGaussian)).unwrap();
-    let b = sim::run(&experiment(3, RssiModel::CensoredGaussian)).unwrap();
+    let a = experiments::run(&experiment(3, RssiModel::CensoredGaussian)).unwrap();
+    let b = experiments::run(&experiment(3, RssiModel::CensoredGaussian)).unwrap();
     assert_eq!(a.summary, b.summary);
     assert_eq!(a.first_track, b.first_track);
 }
@@ -59,7 +62,7 @@ fn the_simulated_site_survives_its_own_file_format() {
 
 #[test]
 fn both_papers_orderings_hold_on_a_few_walks() {
-    use waymark_sim::{run_papers, PaperExperiment};
+    use waymark_experiments::{run_papers, PaperExperiment};
     // Seed 21 is used nowhere else; 10 walks keep the debug-build test short.
     let report = run_papers(&PaperExperiment { seed: 21, runs: 10, ..PaperExperiment::default() }).unwrap();
     let t = &report.hoang_table1;

@@ -294,8 +294,9 @@ fn the_simulated_office_has_its_rooms_as_zones() {
 
 #[test]
 fn room_level_accuracy_on_simulated_walks() {
-    let experiment = waymark_sim::Experiment { walks: 5, ..waymark_sim::Experiment::default() };
-    let report = waymark_sim::run(&experiment).unwrap();
+    let experiment =
+        waymark_experiments::Experiment { walks: 5, ..waymark_experiments::Experiment::default() };
+    let report = waymark_experiments::run(&experiment).unwrap();
     let hit = report.summary.zone_hit.unwrap();
     assert!(hit > 0.8, "the right room in {:.1}% of epochs", 100.0 * hit);
 }

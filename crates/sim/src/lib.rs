@@ -1,26 +1,17 @@
 //! Synthetic buildings for testing and reproducing Hoang et al. §6.1: an office floor, access
 //! points with log-distance path loss and log-normal shadowing, clipping, training scans fitted
-//! by the EM, and random walks on the walkable graph. Everything is seeded and deterministic.
+//! by the EM, and random walks on the walkable graph; raw inertial samples along them, long
+//! sessions, recorded-trace walks and sites of any size. Everything is seeded and deterministic.
 
 #![deny(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
-pub mod baum_welch;
-mod experiment;
 pub mod imu;
-pub mod longrun;
-pub mod motion_eval;
-mod paper;
 pub mod recorded;
-pub mod recovery;
 pub mod scale;
 pub mod session;
 mod trajectory;
 
-pub use experiment::{
-    errors, run, track_walk, walk_seed, Experiment, ExperimentReport, Sensors, TrackPoint, TrackedWalk,
-};
-pub use paper::{run_papers, HipeTable5, HoangTable1, PaperExperiment, PaperReport, Table5Row};
 pub use trajectory::{Pose, Trajectory};
 
 use nalgebra::Point2;
@@ -309,6 +300,11 @@ impl Office {
     /// Surveyed state positions, by state index.
     pub fn points(&self) -> &[Point2<f64>] {
         &self.points
+    }
+
+    /// The surveyed states one walkable edge away from `state`, in the order the plan adds them.
+    pub fn neighbours(&self, state: u32) -> &[u32] {
+        &self.adjacency[state as usize]
     }
 
     /// A random walk of about `length_m` on the walkable graph (Hoang §6.1: "random walk on

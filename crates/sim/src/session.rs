@@ -5,7 +5,7 @@
 //! samples ([`super::imu`]). A [`Feeder`] hands the samples to an engine in app-sized batches
 //! up to each epoch and says where the person really was then.
 //!
-//! Used by the long-run and recovery experiments ([`crate::longrun`], [`crate::recovery`]).
+//! The long-run and recovery experiments drive engines with it for hours of simulated time.
 
 use super::imu::{lying_still, synthesize, ImuConfig, ImuTrace};
 use super::{Office, Trajectory};

@@ -4,13 +4,14 @@
 //! and the truth when it is known, with play, pause and a time slider; and where the survey's
 //! held-out walks were beyond the map (`waymark survey --coverage-out`) (docs/view.md).
 
-use crate::real::SaltArgs;
+use crate::shared::SaltArgs;
 use serde::Serialize;
 use std::path::{Path, PathBuf};
 use std::process::ExitCode;
 use std::sync::Arc;
 use waymark_engine::site::{LatLon, StateKind, PSEUDO_SPACING_M};
 use waymark_engine::{Engine, EngineConfig, Site};
+use waymark_experiments as experiments;
 use waymark_sim as sim;
 use waymark_survey::io::{FloorPlan, FloorPlanError, TraceError};
 use waymark_survey::replay::{self as replaying, ReplayOptions};
@@ -194,7 +195,7 @@ fn demo(seed: u64, walk_length_m: f64) -> Result<(Arc<Site>, Track), ViewError> 
     if !(walk_length_m.is_finite() && walk_length_m > 0.0) {
         return Err(ViewError::Argument(format!("--walk-length-m must be positive, got {walk_length_m}")));
     }
-    let mut experiment = sim::Experiment::default();
+    let mut experiment = experiments::Experiment::default();
     experiment.office.seed = seed;
     let office = sim::Office::generate(&experiment.office);
     let site = Arc::new(if experiment.pseudo_states {
@@ -202,10 +203,10 @@ fn demo(seed: u64, walk_length_m: f64) -> Result<(Arc<Site>, Track), ViewError> 
     } else {
         office.site.clone()
     });
-    let walk_seed = sim::walk_seed(seed, 0);
+    let walk_seed = experiments::walk_seed(seed, 0);
     let walk = office.walk(walk_seed, walk_length_m);
     let imu = sim::imu::synthesize(&walk.trajectory, &experiment.imu, walk_seed);
-    let tracked = sim::track_walk(&site, &experiment.engine, experiment.sensors, &walk, &imu, 0)?;
+    let tracked = experiments::track_walk(&site, &experiment.engine, experiment.sensors, &walk, &imu, 0)?;
     let epochs = tracked
         .points
         .iter()

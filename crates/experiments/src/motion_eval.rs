@@ -1,17 +1,17 @@
-//! Measured figures of the [`MotionTracker`] on simulated phones ([`super::imu`]): step
+//! Measured figures of the [`MotionTracker`] on simulated phones ([`waymark_sim::imu`]): step
 //! detection at several sampling rates for both detectors, steps counted on a phone lying
 //! still or shaken in place (which must be none), and heading error of the fused filter
 //! against compass-only and gyro-only tracking on walks past steel. The tracker only ever sees
 //! raw samples, pushed in batches ahead of each update as a phone would deliver them.
 
-use super::imu::{lying_still, shaken_in_place, synthesize, ImuConfig, ImuTrace, MagneticDisturbance};
-use super::Trajectory;
 use nalgebra::{Point2, Vector2};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::Serialize;
 use std::f64::consts::{FRAC_PI_2, FRAC_PI_4, PI};
 use waymark_engine::sensors::{wrap_angle, MotionConfig, MotionTracker, StepDetectorKind};
+use waymark_sim::imu::{lying_still, shaken_in_place, synthesize, ImuConfig, ImuTrace, MagneticDisturbance};
+use waymark_sim::Trajectory;
 
 /// What to measure.
 #[derive(Clone, Debug, PartialEq)]

@@ -2,7 +2,7 @@
 //! error after (a) being "kidnapped" — the person is carried to the far end of the building
 //! and walks on there — or (b) ten minutes of walking without radio.
 //!
-//! Each run walks the simulated office as in [`super::longrun`] (raw 100 Hz IMU in batches of
+//! Each run walks the simulated office as in [`crate::longrun`] (raw 100 Hz IMU in batches of
 //! 50, a scan every 2 s, the default engine) and has an undisturbed twin:
 //!
 //! - **kidnapped**: a first walk (80-120 m) lets the engine converge; at its end the person
@@ -45,8 +45,6 @@
 //! The first rule's figures on the disturbed runs, the references, the twins and the fresh
 //! engines are reported alongside (`tolerance_recovery` and the like).
 
-use super::session::{Feeder, ImuSink, SessionConfig, SessionGenerator};
-use super::{Office, OfficeConfig};
 use nalgebra::Point2;
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
@@ -57,9 +55,11 @@ use waymark_engine::site::{Site, PSEUDO_SPACING_M};
 use waymark_engine::Engine;
 use waymark_engine::EngineConfig;
 use waymark_engine::Error;
+use waymark_sim::session::{Feeder, ImuSink, SessionConfig, SessionGenerator};
+use waymark_sim::{Office, OfficeConfig};
 use waymark_survey::scoring::quantile;
 
-use super::longrun::{BATCH_SAMPLES, SCAN_INTERVAL_NS};
+use crate::longrun::{BATCH_SAMPLES, SCAN_INTERVAL_NS};
 
 /// Consecutive epochs at the normal error (by either rule) that count as recovered: 5 (10 s at
 /// one scan every 2 s), so a single lucky epoch is not a recovery. A definition, not a tuned
@@ -312,7 +312,7 @@ impl ImuSink for EngineSink<'_> {
 
 /// Walking distances from `from` over the office's graph (Dijkstra; the office is small).
 fn walking_distances(office: &Office, from: u32) -> Vec<f64> {
-    let n = office.points.len();
+    let n = office.points().len();
     let mut distance = vec![f64::INFINITY; n];
     let mut done = vec![false; n];
     distance[from as usize] = 0.0;
@@ -322,8 +322,8 @@ fn walking_distances(office: &Office, from: u32) -> Vec<f64> {
             break;
         };
         done[i] = true;
-        for &j in &office.adjacency[i] {
-            let d = distance[i] + nalgebra::distance(&office.points[i], &office.points[j as usize]);
+        for &j in office.neighbours(i as u32) {
+            let d = distance[i] + nalgebra::distance(&office.points()[i], &office.points()[j as usize]);
             if d < distance[j as usize] {
                 distance[j as usize] = d;
             }
@@ -379,7 +379,7 @@ fn pass(
 ) -> Result<Pass, Error> {
     let mut engine = Engine::new(Arc::clone(site), config.engine.clone())?;
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4ec0_7e47);
-    let start_state = rng.random_range(0..office.points.len()) as u32;
+    let start_state = rng.random_range(0..office.points().len()) as u32;
     let start_ns = START_NS;
     let generator =
         SessionGenerator::new(office, config.session.clone(), rng.random(), start_state, start_ns);
@@ -408,7 +408,7 @@ fn pass(
 /// The end of the first segment of the session of run `seed`, and the state it ends at.
 fn first_segment_end(office: &Office, config: &RecoveryConfig, seed: u64) -> (u64, u32) {
     let mut rng = ChaCha8Rng::seed_from_u64(seed ^ 0x4ec0_7e47);
-    let start_state = rng.random_range(0..office.points.len()) as u32;
+    let start_state = rng.random_range(0..office.points().len()) as u32;
     let mut generator =
         SessionGenerator::new(office, config.session.clone(), rng.random(), start_state, START_NS);
     let first = generator.next_segment();

@@ -1,8 +1,6 @@
 //! Simulated walks tracked by fresh engines fed exactly as an app feeds them: raw inertial
 //! batches up to each scan, then the scan: the demo, the papers' experiments and the tests.
 
-use super::imu::{synthesize, ImuConfig, ImuTrace};
-use super::{Office, OfficeConfig, Walk};
 use nalgebra::Point2;
 use std::sync::Arc;
 use waymark_engine::sensors::SensorSample;
@@ -10,6 +8,8 @@ use waymark_engine::site::{Site, PSEUDO_SPACING_M};
 use waymark_engine::Error;
 use waymark_engine::{Engine, Position};
 use waymark_engine::{EngineConfig, TransitionModel};
+use waymark_sim::imu::{synthesize, ImuConfig, ImuTrace};
+use waymark_sim::{Office, OfficeConfig, Walk};
 use waymark_survey::metrics::{EpochError, ErrorSummary};
 
 /// Which inertial streams a run feeds to the engine.

@@ -1,7 +1,7 @@
 //! `waymark benchmark`: the accuracy benchmark over buildings (`docs/benchmark.md`), and its
 //! verdict on a change against a baseline run.
 
-use indicatif::{ProgressBar, ProgressStyle};
+use crate::shared;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
@@ -45,18 +45,7 @@ pub struct BenchmarkArgs {
 }
 
 fn fail(e: impl std::fmt::Display) -> ExitCode {
-    eprintln!("waymark benchmark: {e}");
-    ExitCode::FAILURE
-}
-
-fn progress_bar(len: u64, message: String) -> ProgressBar {
-    let bar = ProgressBar::new(len);
-    bar.set_style(
-        ProgressStyle::with_template("{msg} [{bar:30}] {pos}/{len}, {elapsed}")
-            .unwrap_or_else(|_| ProgressStyle::default_bar()),
-    );
-    bar.set_message(message);
-    bar
+    shared::fail("benchmark", e)
 }
 
 pub fn benchmark(args: &BenchmarkArgs) -> ExitCode {
@@ -143,9 +132,10 @@ fn run(args: &BenchmarkArgs) -> Result<BenchmarkReport, String> {
         };
         // One bar: the calibration's steps, then one step per test walk.
         let walks: usize = floors.iter().map(|f| f.test.len()).sum();
-        let bar = progress_bar(
+        let bar = shared::progress_bar(
+            false,
             (calibration_steps(&floors, &options.calibration) + walks) as u64,
-            "  calibrating, then replaying the test walks".into(),
+            "  calibrating, then replaying the test walks",
         );
         let tick = || bar.inc(1);
         let report = evaluate_row(row, &floors, &options, started, &tick, &tick)

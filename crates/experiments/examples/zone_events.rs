@@ -3,7 +3,7 @@
 //! every inertial sensor, and the zone enter and exit events each band of thresholds reports
 //! against the rooms the walker was really in.
 //!
-//! `cargo run --release -p waymark-sim --example zone_events [walks]` prints one row per band:
+//! `cargo run --release -p waymark-experiments --example zone_events [walks]` prints one row per band:
 //! the room visits (runs of scans in one room, three scans or more), the share of them during
 //! which the engine reported the walker inside that room, the median delay of that report in
 //! scans, the entries reported, and the entries left again within two scans (flaps).
@@ -12,8 +12,8 @@ use std::collections::HashSet;
 use std::sync::Arc;
 use waymark_engine::site::PSEUDO_SPACING_M;
 use waymark_engine::{EngineConfig, StatusEvent, ZoneHysteresis};
+use waymark_experiments::{track_walk, walk_seed, Sensors};
 use waymark_sim::imu::{synthesize, ImuConfig};
-use waymark_sim::{track_walk, walk_seed, Sensors};
 use waymark_sim::{Office, OfficeConfig};
 
 /// Visits shorter than this many scans are passages, not visits.

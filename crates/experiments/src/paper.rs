@@ -3,15 +3,15 @@
 //! Table 5 (the four MDI scenarios and the MLE fingerprint baseline). Motion always comes from
 //! raw synthetic IMU samples through the engine's own tracker.
 
-use super::experiment::{errors, track_walk, walk_seed, Sensors};
-use super::imu::{synthesize, ImuConfig};
-use super::{Office, OfficeConfig, Walk};
+use crate::experiment::{errors, track_walk, walk_seed, Sensors};
 use serde::Serialize;
 use std::sync::Arc;
 use waymark_engine::radio::RssiModel;
 use waymark_engine::site::{Site, PSEUDO_SPACING_M};
 use waymark_engine::Error;
 use waymark_engine::{EngineConfig, TransitionModel};
+use waymark_sim::imu::{synthesize, ImuConfig};
+use waymark_sim::{Office, OfficeConfig, Walk};
 use waymark_survey::metrics::{EpochError, ErrorSummary};
 
 /// The papers' artificial-data experiments on one simulated building: Hoang et al. Table 1

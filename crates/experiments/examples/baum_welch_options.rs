@@ -1,16 +1,16 @@
 //! The measurement behind `FitOptions::default()`: the Baum-Welch experiment
-//! ([`waymark_sim::baum_welch`], El Gemayel §IV) on seeds other than the default, once per variant of one option,
+//! ([`waymark_experiments::baum_welch`], El Gemayel §IV) on seeds other than the default, once per variant of one option,
 //! printing each curve's room accuracy after the last run, the mean Baum-Welch iterations per
 //! run and the CPU-bound wall time.
 //!
 //! ```sh
-//! cargo run --release -p waymark-sim --example baum_welch_options            # seeds 1 2 3
-//! cargo run --release -p waymark-sim --example baum_welch_options -- 4 5     # other seeds
+//! cargo run --release -p waymark-experiments --example baum_welch_options            # seeds 1 2 3
+//! cargo run --release -p waymark-experiments --example baum_welch_options -- 4 5     # other seeds
 //! ```
 
 use std::time::Instant;
 use waymark_engine::hmm::learn::FitOptions;
-use waymark_sim::baum_welch::{self, BaumWelchExperiment};
+use waymark_experiments::baum_welch::{self, BaumWelchExperiment};
 
 fn main() {
     let seeds: Vec<u64> = std::env::args().skip(1).filter_map(|a| a.parse().ok()).collect();

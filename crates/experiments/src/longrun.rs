@@ -12,8 +12,6 @@
 //! `/proc/self/status`), the engine's accounted track memory and the error against the truth
 //! are recorded.
 
-use super::session::{Activity, Feeder, ImuSink, SessionConfig, SessionGenerator};
-use super::{Office, OfficeConfig};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::Serialize;
@@ -27,6 +25,8 @@ use waymark_engine::site::{Site, PSEUDO_SPACING_M};
 use waymark_engine::Engine;
 use waymark_engine::EngineConfig;
 use waymark_engine::Error;
+use waymark_sim::session::{Activity, Feeder, ImuSink, SessionConfig, SessionGenerator};
+use waymark_sim::{Office, OfficeConfig};
 
 /// One scan every 2 s: an unthrottled Android phone, the same as the replay's timer
 /// ([`ReplayOptions::timer_ns`](waymark_survey::replay::ReplayOptions::timer_ns),

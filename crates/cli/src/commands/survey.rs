@@ -1,0 +1,138 @@
+//! `waymark survey`: a site file from recorded survey walks, calibrated on them.
+
+use crate::shared::{fail, print_calibration, progress_bar, write_site, SaltArgs};
+use std::path::PathBuf;
+use std::process::ExitCode;
+use waymark_survey::calibrate::{self, CalibrationOptions, WalkSplit};
+
+#[derive(clap::Args)]
+pub struct SurveyArgs {
+    /// Floor folders of one building (each with `path_data_files/`, and `floor_info.json` +
+    /// `geojson_map.json` if there is a plan), or one folder of GetSensorData logfiles. Every
+    /// walk in them is a survey walk.
+    #[arg(required = true)]
+    floors: Vec<PathBuf>,
+    /// Where to write the site file.
+    #[arg(long)]
+    out: PathBuf,
+    /// The site's name.
+    #[arg(long, default_value = "site")]
+    name: String,
+    /// Unsurveyed states (no fingerprint) fill walkable space this far beyond the surveyed
+    /// states, m, for the estimate to follow the motion off the map (0: none; the site then
+    /// loads in builds before unsurveyed states).
+    #[arg(long, default_value_t = waymark_survey::UNSURVEYED_MARGIN_M)]
+    unsurveyed_margin_m: f64,
+    /// Also write where the held-out walks went beyond the map the other walks made, as
+    /// GeoJSON points: the stretches to walk again. Needs every floor's plan (for WGS84), and
+    /// fails at once without.
+    #[arg(long)]
+    coverage_out: Option<PathBuf>,
+    #[command(flatten)]
+    salt: SaltArgs,
+}
+
+pub fn survey(args: &SurveyArgs) -> ExitCode {
+    // Every walk surveys.
+    let floors = match calibrate::load_building(&args.floors, &WalkSplit::All, None) {
+        Ok(f) => f,
+        Err(e) => return fail("survey", e),
+    };
+    // A coverage map needs WGS84, which only plans for every floor give: say so before the
+    // calibration's minutes, not after.
+    if args.coverage_out.is_some() {
+        let plans: Vec<_> = floors.iter().map(|f| f.plan.as_ref()).collect();
+        if waymark_survey::geo_reference(&plans).0.is_none() {
+            let missing: Vec<&str> =
+                floors.iter().filter(|f| f.plan.is_none()).map(|f| f.name.as_str()).collect();
+            return fail(
+                "survey",
+                if missing.is_empty() {
+                    "--coverage-out needs a geo-referenced site, and the plans give no place on the Earth"
+                        .to_owned()
+                } else {
+                    format!(
+                        "--coverage-out needs a geo-referenced site, which needs every floor's plan: none for {}",
+                        missing.join(", ")
+                    )
+                },
+            );
+        }
+    }
+    let mut options = CalibrationOptions::default();
+    options.survey.unsurveyed_margin_m = args.unsurveyed_margin_m;
+    let bar = progress_bar(
+        false,
+        calibrate::calibration_steps(&floors, &options) as u64,
+        "calibrating (leave one walk out)",
+    );
+    let (site, report, calibration) = match calibrate::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
+        Ok(s) => s,
+        Err(e) => return fail("survey", e),
+    };
+    bar.finish_and_clear();
+    let site = site.with_name(&args.name);
+    let site = match args.salt.salt() {
+        Err(e) => return fail("survey", e),
+        Ok(None) => site,
+        Ok(Some((salt, source))) => match site.hashed(&salt) {
+            Ok(hashed) => {
+                println!("transmitter ids hashed with the salt from {source}");
+                hashed
+            }
+            Err(e) => return fail("survey", e),
+        },
+    };
+    if let Err(e) = write_site(&args.out, &site) {
+        return fail("survey", e);
+    }
+    if let Some(path) = &args.coverage_out {
+        // Checked before the calibration; only a site that lost its anchor on the way fails here.
+        let Some(geojson) = calibrate::coverage_geojson(&site, &calibration) else {
+            return fail(
+                "survey",
+                format!("{} written, but it is not geo-referenced: no coverage map", args.out.display()),
+            );
+        };
+        if let Err(e) = std::fs::write(path, geojson.to_string()) {
+            return fail("survey", format!("{}: {e}", path.display()));
+        }
+        let points = geojson.features.len();
+        println!(
+            "coverage map: {points} held-out epochs beyond the others' map written to {}",
+            path.display()
+        );
+    }
+    for f in &report.floors {
+        println!(
+            "{:>4}: {} walks, {} scans → {} states and {} unsurveyed around them, {} edges ({} through walls the plan has, walked)",
+            f.name, f.walks, f.scans, f.states, f.unsurveyed_states, f.edges, f.walked_edges
+        );
+    }
+    print_calibration(&calibration);
+    match site.anchor() {
+        Some(a) => {
+            let levels: Vec<String> = site
+                .floors()
+                .iter()
+                .map(|f| format!("{} {}", f.name, f.level.map_or("-".into(), |l| l.to_string())))
+                .collect();
+            println!(
+                "geo-referenced from the plans: origin {:.7}, {:.7}, scale {:.5} x {:.5}; levels {}",
+                a.lat_deg,
+                a.lon_deg,
+                a.scale[0],
+                a.scale[1],
+                levels.join(", ")
+            );
+        }
+        None => println!("not geo-referenced (a floor has no plan)"),
+    }
+    println!(
+        "{} transmitters ({} radios send two or more); site written to {}",
+        report.transmitters,
+        report.shared_radios,
+        args.out.display()
+    );
+    ExitCode::SUCCESS
+}
