@@ -84,10 +84,11 @@ pub fn demo(args: &DemoArgs) -> ExitCode {
         Fit::Em => "censored_em",
         Fit::Naive => "naive",
     };
+    // The model's wire name, as site and option files write it (`hipe`, `hoang`, `reach`).
     let mode = if args.rssi_only {
-        "rssi_only".to_owned()
+        serde_json::json!("rssi_only")
     } else {
-        format!("{:?}", experiment.engine.transition).to_lowercase()
+        serde_json::to_value(experiment.engine.transition).expect("a unit variant serialises")
     };
     if args.json {
         let value = serde_json::json!({
