@@ -236,10 +236,8 @@ fn fail_with(e: &PositioningError) -> waymark_result {
 /// `waymark_last_error` (docs/errors.md#callbacks).
 fn boundary(body: impl FnOnce() -> waymark_result) -> waymark_result {
     let hold = crate::ffi::logging::hold();
-    let code = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)) {
-        Ok(code) => code,
-        Err(_) => fail(waymark_result::Panic, "Waymark panicked; the call had no effect"),
-    };
+    let code = super::panic::guard(body)
+        .unwrap_or_else(|_| fail(waymark_result::Panic, "Waymark panicked; the call had no effect"));
     if hold.will_flush() {
         let message = LAST_ERROR.with(|e| std::mem::take(&mut *e.borrow_mut()));
         drop(hold);

@@ -10,7 +10,7 @@
 
 use super::delivery::{lock, Delivery};
 use super::error::PositioningError;
-use std::panic::{catch_unwind, AssertUnwindSafe};
+use super::panic::{deliver_to_app, guard};
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use waymark_engine::radio::Scan;
@@ -186,7 +186,7 @@ impl<L: Listeners> Handle<L> {
                     "an earlier call panicked and left the engine unusable: create a new engine",
                 ))
             } else {
-                match catch_unwind(AssertUnwindSafe(|| f(&mut engine))) {
+                match guard(|| f(&mut engine)) {
                     Ok(result) => {
                         self.events.commit();
                         result
@@ -334,9 +334,7 @@ impl<L: Listeners> Handle<L> {
     /// skipped; the others still hear the event.
     fn deliver(&self) {
         self.events.deliver(|event| {
-            if catch_unwind(AssertUnwindSafe(|| self.listeners.deliver(&event, &self.site))).is_err() {
-                log::warn!("a listener panicked or threw");
-            }
+            deliver_to_app("a listener", || self.listeners.deliver(&event, &self.site));
         });
     }
 }

@@ -10,6 +10,7 @@ mod delivery;
 pub mod error;
 mod handle;
 pub mod logging;
+mod panic;
 pub mod uniffi;
 
 use waymark_engine::radio::TransmitterId;

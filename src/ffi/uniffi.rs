@@ -18,7 +18,7 @@ pub use route::*;
 
 use super::delivery::lock;
 use super::handle::{Event, Handle, Listeners};
-use std::panic::{catch_unwind, AssertUnwindSafe};
+use super::panic::deliver_to_app;
 use std::sync::{Arc, Mutex, Weak};
 use waymark_engine as engine;
 use waymark_engine::site::Site as CoreSite;
@@ -62,14 +62,11 @@ impl Listeners for Subscribers {
             if !lock(&self.list).iter().any(|(l, _)| l == id) {
                 continue;
             }
-            let outcome = catch_unwind(AssertUnwindSafe(|| match event {
+            deliver_to_app("a position listener", || match event {
                 Event::Position(p) => listener.on_position(estimate(p, site)),
                 Event::Status(s) => listener.on_status(status_update(s, site)),
                 Event::Error(e) => listener.on_error(e.report()),
-            }));
-            if outcome.is_err() {
-                log::warn!("a position listener panicked or threw");
-            }
+            });
         }
     }
 }

@@ -2,7 +2,6 @@
 
 use super::records::{samples, MotionSample, RadioScan};
 use crate::ffi::delivery::lock;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Mutex;
 use waymark_engine::recorder::{self as core, RecorderError};
 
@@ -194,8 +193,7 @@ fn summary(s: &core::RecordingStats) -> SurveySummary {
     }
 }
 
-/// Runs `f`, turning a panic into `Internal`.
+/// Runs `f`, turning a panic into `Internal` (`ffi::panic`).
 fn guarded<T>(f: impl FnOnce() -> Result<T, SurveyError>) -> Result<T, SurveyError> {
-    catch_unwind(AssertUnwindSafe(f))
-        .unwrap_or_else(|_| Err(SurveyError::Internal { reason: "Waymark panicked".into() }))
+    crate::ffi::panic::or_internal(f, || SurveyError::Internal { reason: "Waymark panicked".into() })
 }

@@ -4,7 +4,6 @@
 
 use super::{PositionEstimate, PositioningEngine, Site};
 use crate::ffi::delivery::lock;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
 use waymark_engine::route::{self as core, RouteTracker as CoreTracker};
 use waymark_engine::site::Site as CoreSite;
@@ -182,10 +181,11 @@ impl From<uniffi::UnexpectedUniFFICallbackError> for RouteError {
     }
 }
 
-/// Runs `f`, turning a panic into `Internal`.
+/// Runs `f`, turning a panic into `Internal` (`ffi::panic`).
 fn guarded<T>(f: impl FnOnce() -> Result<T, RouteError>) -> Result<T, RouteError> {
-    catch_unwind(AssertUnwindSafe(f))
-        .unwrap_or_else(|_| Err(RouteError::Internal { reason: "Waymark panicked; nothing changed".into() }))
+    crate::ffi::panic::or_internal(f, || RouteError::Internal {
+        reason: "Waymark panicked; nothing changed".into(),
+    })
 }
 
 fn point(p: &FloorPoint) -> core::FloorPoint {
