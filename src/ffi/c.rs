@@ -23,7 +23,8 @@ pub use types::*;
 // The engine crate is `::waymark_engine` in the C modules: `waymark_engine` is C's handle.
 use super::delivery::lock;
 use super::error::PositioningError;
-use super::handle::{Event, Handle, Listeners, Options, Status};
+use super::handle::{Event, Handle, Listeners, Options};
+use super::record::AppStatus;
 use ::waymark_engine::radio::{Reading, Scan, TransmitterId};
 use ::waymark_engine::sensors::{PressureSample, SensorSample};
 use ::waymark_engine::site::Site;
@@ -128,7 +129,7 @@ impl Listeners for Callbacks {
             Event::Status(s) => {
                 let callback = *lock(&self.status);
                 if let Some(callback) = callback {
-                    deliver_status(callback, s, site);
+                    deliver_status(callback, s);
                 }
             }
             Event::Error(e) => {
@@ -162,39 +163,39 @@ fn status(kind: waymark_status_kind, timestamp_ns: u64) -> waymark_status {
     }
 }
 
-fn deliver_status(callback: Callback<waymark_status>, s: &Status, site: &Site) {
+fn deliver_status(callback: Callback<waymark_status>, s: &AppStatus) {
     match s {
-        Status::ScenarioChanged { timestamp_ns, scenario: to } => callback.call(&waymark_status {
-            scenario: scenario(*to),
-            ..status(waymark_status_kind::ScenarioChanged, *timestamp_ns)
+        &AppStatus::ScenarioChanged { timestamp_ns, scenario: to } => callback.call(&waymark_status {
+            scenario: scenario(to),
+            ..status(waymark_status_kind::ScenarioChanged, timestamp_ns)
         }),
-        Status::MotionStateChanged { timestamp_ns, state } => callback.call(&waymark_status {
-            motion_state: motion_state(*state),
-            ..status(waymark_status_kind::MotionStateChanged, *timestamp_ns)
+        &AppStatus::MotionStateChanged { timestamp_ns, state } => callback.call(&waymark_status {
+            motion_state: motion_state(state),
+            ..status(waymark_status_kind::MotionStateChanged, timestamp_ns)
         }),
-        Status::NoSiteCoverage { timestamp_ns } => {
-            callback.call(&status(waymark_status_kind::NoSiteCoverage, *timestamp_ns))
+        &AppStatus::NoSiteCoverage { timestamp_ns } => {
+            callback.call(&status(waymark_status_kind::NoSiteCoverage, timestamp_ns))
         }
-        Status::TrackRevised { points } => {
-            let points: Vec<waymark_track_point> = points.iter().map(track_point).collect();
+        AppStatus::TrackRevised { points } => {
+            let points: Vec<waymark_track_point> = points.iter().copied().map(Into::into).collect();
             callback.call(&waymark_status {
                 points: points.as_ptr(),
                 point_count: points.len(),
                 ..status(waymark_status_kind::TrackRevised, 0)
             })
         }
-        &Status::Zone { timestamp_ns, zone, entered, probability } => {
+        AppStatus::Zone { timestamp_ns, zone, name, entered, probability } => {
             let kind =
-                if entered { waymark_status_kind::ZoneEntered } else { waymark_status_kind::ZoneExited };
-            let name = c_string(&site.zones()[zone].name);
+                if *entered { waymark_status_kind::ZoneEntered } else { waymark_status_kind::ZoneExited };
+            let name = c_string(name);
             callback.call(&waymark_status {
-                zone: i32::try_from(zone).unwrap_or(-1),
+                zone: *zone,
                 name: name.as_ptr(),
-                probability,
-                ..status(kind, timestamp_ns)
+                probability: *probability,
+                ..status(kind, *timestamp_ns)
             })
         }
-        Status::Geofence { timestamp_ns, id, entered, probability } => {
+        AppStatus::Geofence { timestamp_ns, id, entered, probability } => {
             let kind = if *entered {
                 waymark_status_kind::GeofenceEntered
             } else {

@@ -11,6 +11,7 @@ pub mod error;
 mod handle;
 pub mod logging;
 mod panic;
+mod record;
 pub mod uniffi;
 
 use waymark_engine::radio::TransmitterId;

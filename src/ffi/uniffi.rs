@@ -19,6 +19,7 @@ pub use route::*;
 use super::delivery::lock;
 use super::handle::{Event, Handle, Listeners};
 use super::panic::deliver_to_app;
+use super::record::{AppFixBias, AppHabitReport};
 use std::sync::{Arc, Mutex, Weak};
 use waymark_engine as engine;
 use waymark_engine::site::Site as CoreSite;
@@ -64,7 +65,7 @@ impl Listeners for Subscribers {
             }
             deliver_to_app("a position listener", || match event {
                 Event::Position(p) => listener.on_position(estimate(p, site)),
-                Event::Status(s) => listener.on_status(status_update(s, site)),
+                Event::Status(s) => listener.on_status(s.into()),
                 Event::Error(e) => listener.on_error(e.report()),
             });
         }
@@ -347,7 +348,7 @@ impl PositioningEngine {
     /// the result with `exportHabits`.
     pub fn learn_habits(&self) -> Result<HabitReport, PositioningError> {
         self.handle.call(|e| match e.learn_habits() {
-            Ok(report) => Ok(habit_report(&report, e.habits())),
+            Ok(report) => Ok(AppHabitReport::new(&report, e.habits()).into()),
             // Its input is the engine's own history and validated options: a bug.
             Err(err) => Err(PositioningError::internal(format!("learning habits: {err}"))),
         })
@@ -381,7 +382,7 @@ impl PositioningEngine {
     /// The fix error learned so far: zero bias and spread 1 before any fix was learned from.
     /// Throws `Internal` (never a made-up value) if it could not be read.
     pub fn fix_bias(&self) -> Result<FixBias, PositioningError> {
-        self.handle.read(|e| e.fix_bias().into())
+        self.handle.read(|e| AppFixBias::from(e.fix_bias()).into())
     }
 
     /// What the engine took and refused since it was created, and why.

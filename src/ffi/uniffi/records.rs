@@ -1,7 +1,8 @@
 //! The records and enums of the Kotlin and Swift API, and their conversions from the core's
 //! types. A change here is a possible breaking change for apps (CHANGELOG, "Breaking changes").
 
-use crate::ffi::handle::{Options, Status};
+use crate::ffi::handle::Options;
+use crate::ffi::record::{AppFixBias, AppHabitReport, AppPosition, AppStatus, AppTrackPoint};
 use waymark_engine as engine;
 use waymark_engine::sensors::{self, SensorSample};
 use waymark_engine::site::Site;
@@ -422,9 +423,9 @@ pub struct FixBias {
     pub spread: f64,
 }
 
-impl From<waymark_engine::habits::FixBias> for FixBias {
-    fn from(e: waymark_engine::habits::FixBias) -> Self {
-        Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
+impl From<AppFixBias> for FixBias {
+    fn from(e: AppFixBias) -> Self {
+        Self { bias_x_m: e.bias_x_m, bias_y_m: e.bias_y_m, spread: e.spread }
     }
 }
 
@@ -448,15 +449,14 @@ fn count(n: usize) -> u32 {
     u32::try_from(n).unwrap_or(u32::MAX)
 }
 
-pub(crate) fn habit_report(
-    r: &waymark_engine::habits::HabitReport,
-    model: &waymark_engine::habits::HabitModel,
-) -> HabitReport {
-    HabitReport {
-        epochs: count(r.epochs),
-        total_epochs: model.epochs(),
-        learned_transitions: r.learned_transitions as u64,
-        applied: model.strength().is_some(),
+impl From<AppHabitReport> for HabitReport {
+    fn from(r: AppHabitReport) -> Self {
+        Self {
+            epochs: count(r.epochs),
+            total_epochs: r.total_epochs,
+            learned_transitions: r.learned_transitions as u64,
+            applied: r.applied,
+        }
     }
 }
 
@@ -643,34 +643,47 @@ fn motion_state(s: sensors::MotionState) -> MotionState {
     }
 }
 
-pub(crate) fn track_point(p: &engine::TrackPoint) -> TrackPoint {
-    TrackPoint { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor as u32 }
+impl From<AppTrackPoint> for TrackPoint {
+    fn from(p: AppTrackPoint) -> Self {
+        Self { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor }
+    }
 }
 
-pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
-    let geo = site.lat_lon(p.floor, p.x, p.y);
-    PositionEstimate {
-        timestamp_ns: p.timestamp_ns,
-        x: p.x,
-        y: p.y,
-        floor: p.floor as u32,
-        floor_name: site.floors().get(p.floor).map(|f| f.name.clone()).unwrap_or_default(),
-        floor_level: site.floor_level(p.floor),
-        floor_probability: p.floor_probability,
-        latitude_deg: geo.map(|g| g.lat_deg),
-        longitude_deg: geo.map(|g| g.lon_deg),
-        zone: p.zone.and_then(|z| site.zones().get(z)).map(|z| z.name.clone()),
-        zone_probability: p.zone_probability,
-        accuracy_m: p.accuracy_m,
-        accuracy_95_m: p.accuracy_95_m,
-        heading_deg: p.heading_rad.map(f64::to_degrees),
-        heading_accuracy_deg: p.heading_accuracy_rad.map(f64::to_degrees),
-        bearing_deg: p.heading_rad.and_then(|h| site.bearing_deg(h)),
-        motion_state: motion_state(p.motion_state),
-        scenario: scenario(p.scenario),
-        steps: p.steps,
-        beyond_radio_m: p.beyond_radio_m,
+impl From<AppPosition<'_>> for PositionEstimate {
+    fn from(p: AppPosition<'_>) -> Self {
+        Self {
+            timestamp_ns: p.timestamp_ns,
+            x: p.x,
+            y: p.y,
+            floor: p.floor,
+            floor_name: p.floor_name.to_owned(),
+            floor_level: p.floor_level,
+            floor_probability: p.floor_probability,
+            latitude_deg: p.latitude_deg,
+            longitude_deg: p.longitude_deg,
+            zone: p.zone_name.map(str::to_owned),
+            zone_probability: p.zone_probability,
+            accuracy_m: p.accuracy_m,
+            accuracy_95_m: p.accuracy_95_m,
+            heading_deg: p.heading_deg,
+            heading_accuracy_deg: p.heading_accuracy_deg,
+            bearing_deg: p.bearing_deg,
+            motion_state: motion_state(p.motion_state),
+            scenario: scenario(p.scenario),
+            steps: p.steps,
+            beyond_radio_m: p.beyond_radio_m,
+        }
     }
+}
+
+/// The position `p` of an engine on `site`.
+pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
+    AppPosition::new(p, site).into()
+}
+
+/// The track point `p`.
+pub(crate) fn track_point(p: &engine::TrackPoint) -> TrackPoint {
+    AppTrackPoint::from(p).into()
 }
 
 impl PositionFix {
@@ -698,34 +711,34 @@ impl PositionFix {
     }
 }
 
-pub(crate) fn status_update(status: &Status, site: &Site) -> StatusUpdate {
-    match status {
-        Status::ScenarioChanged { scenario: s, .. } => {
-            StatusUpdate::ScenarioChanged { scenario: scenario(*s) }
-        }
-        Status::MotionStateChanged { state, .. } => {
-            StatusUpdate::MotionStateChanged { state: motion_state(*state) }
-        }
-        Status::NoSiteCoverage { timestamp_ns } => {
-            StatusUpdate::NoSiteCoverage { timestamp_ns: *timestamp_ns }
-        }
-        Status::TrackRevised { points } => {
-            StatusUpdate::TrackRevised { points: points.iter().map(track_point).collect() }
-        }
-        &Status::Zone { timestamp_ns, zone, entered, probability } => {
-            let zone = site.zones()[zone].name.clone();
-            if entered {
-                StatusUpdate::ZoneEntered { timestamp_ns, zone, probability }
-            } else {
-                StatusUpdate::ZoneExited { timestamp_ns, zone, probability }
+impl From<&AppStatus> for StatusUpdate {
+    fn from(status: &AppStatus) -> Self {
+        match status {
+            &AppStatus::ScenarioChanged { scenario: s, .. } => {
+                StatusUpdate::ScenarioChanged { scenario: scenario(s) }
             }
-        }
-        Status::Geofence { timestamp_ns, id, entered, probability } => {
-            let (timestamp_ns, id, probability) = (*timestamp_ns, id.clone(), *probability);
-            if *entered {
-                StatusUpdate::GeofenceEntered { timestamp_ns, id, probability }
-            } else {
-                StatusUpdate::GeofenceExited { timestamp_ns, id, probability }
+            &AppStatus::MotionStateChanged { state, .. } => {
+                StatusUpdate::MotionStateChanged { state: motion_state(state) }
+            }
+            &AppStatus::NoSiteCoverage { timestamp_ns } => StatusUpdate::NoSiteCoverage { timestamp_ns },
+            AppStatus::TrackRevised { points } => {
+                StatusUpdate::TrackRevised { points: points.iter().copied().map(TrackPoint::from).collect() }
+            }
+            AppStatus::Zone { timestamp_ns, name, entered, probability, .. } => {
+                let (timestamp_ns, zone, probability) = (*timestamp_ns, name.clone(), *probability);
+                if *entered {
+                    StatusUpdate::ZoneEntered { timestamp_ns, zone, probability }
+                } else {
+                    StatusUpdate::ZoneExited { timestamp_ns, zone, probability }
+                }
+            }
+            AppStatus::Geofence { timestamp_ns, id, entered, probability } => {
+                let (timestamp_ns, id, probability) = (*timestamp_ns, id.clone(), *probability);
+                if *entered {
+                    StatusUpdate::GeofenceEntered { timestamp_ns, id, probability }
+                } else {
+                    StatusUpdate::GeofenceExited { timestamp_ns, id, probability }
+                }
             }
         }
     }
