@@ -96,12 +96,13 @@ impl From<RecorderError> for SurveyError {
 /// and at `finish`. Files only ever hold whole lines. After an `Io` error every call throws
 /// until `resume` succeeds (docs/surveying.md#durability).
 #[derive(uniffi::Object)]
-pub struct SurveyRecorder {
+#[uniffi(name = "SurveyRecorder")]
+pub struct FfiSurveyRecorder {
     inner: Mutex<core::SurveyRecorder>,
 }
 
-#[uniffi::export]
-impl SurveyRecorder {
+#[uniffi::export(name = "SurveyRecorder")]
+impl FfiSurveyRecorder {
     /// A recording into `directory` (created if missing); before the first waypoint the lines
     /// go to `directory/.WALK.pending`, then into the first walk file. Throws `InputRejected`
     /// for a walk name or site id that cannot be used.
@@ -173,7 +174,7 @@ impl SurveyRecorder {
     }
 }
 
-impl SurveyRecorder {
+impl FfiSurveyRecorder {
     fn call<T>(
         &self,
         f: impl FnOnce(&mut core::SurveyRecorder) -> Result<T, SurveyError>,

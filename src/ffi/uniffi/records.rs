@@ -4,7 +4,7 @@
 use crate::ffi::handle::Options;
 use crate::ffi::record::{AppFixBias, AppHabitReport, AppPosition, AppStatus, AppTrackPoint};
 use waymark_engine as engine;
-use waymark_engine::sensors::{self, SensorSample};
+use waymark_engine::sensors::SensorSample;
 use waymark_engine::site::Site;
 use waymark_engine::TransitionModel;
 
@@ -241,9 +241,16 @@ impl RadioScan {
     }
 }
 
+pub use waymark_engine::sensors::{MotionScenario, MotionState};
+pub use waymark_engine::site::ZoneKind;
+
+// The core's enums, exported as they are (uniffi remote types): their variants are what an app
+// sees, so there is one type and no conversion. The doc comments here are the ones Kotlin and
+// Swift get.
+
 /// Walking or not.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
-pub enum MotionState {
+#[uniffi::remote(Enum)]
+enum MotionState {
     /// No accelerometer data.
     Unknown,
     /// Still.
@@ -253,8 +260,8 @@ pub enum MotionState {
 }
 
 /// Which motion information the engine had (HIPE's four scenarios).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
-pub enum MotionScenario {
+#[uniffi::remote(Enum)]
+enum MotionScenario {
     /// Steps and heading.
     DistanceHeading,
     /// Steps, no trustworthy heading.
@@ -332,7 +339,8 @@ pub struct PositionEstimate {
 /// either `x` and `y` in the site's frame, or `latitudeDeg` and `longitudeDeg` on a
 /// geo-referenced site (its file has an `anchor`); anything else throws `InputRejected`.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
-pub struct PositionFix {
+#[uniffi(name = "PositionFix")]
+pub struct FfiPositionFix {
     /// When it was measured, ns, on the clock of every other input.
     pub timestamp_ns: u64,
     /// x in the site's metric frame, m.
@@ -356,8 +364,8 @@ pub struct PositionFix {
 }
 
 /// What kind of place a zone is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
-pub enum ZoneKind {
+#[uniffi::remote(Enum)]
+enum ZoneKind {
     /// A room (an office, a kitchen, a shop).
     Room,
     /// A corridor or aisle.
@@ -385,21 +393,10 @@ pub struct ZoneProbability {
     pub probability: f64,
 }
 
-pub(crate) fn zone_kind(k: waymark_engine::site::ZoneKind) -> ZoneKind {
-    match k {
-        waymark_engine::site::ZoneKind::Room => ZoneKind::Room,
-        waymark_engine::site::ZoneKind::Corridor => ZoneKind::Corridor,
-        waymark_engine::site::ZoneKind::Hall => ZoneKind::Hall,
-        waymark_engine::site::ZoneKind::Stairs => ZoneKind::Stairs,
-        waymark_engine::site::ZoneKind::Lift => ZoneKind::Lift,
-        waymark_engine::site::ZoneKind::Entrance => ZoneKind::Entrance,
-        waymark_engine::site::ZoneKind::Other => ZoneKind::Other,
-    }
-}
-
 /// One point of the smoothed track.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
-pub struct TrackPoint {
+#[uniffi(name = "TrackPoint")]
+pub struct FfiTrackPoint {
     /// Epoch time, ns.
     pub timestamp_ns: u64,
     /// x, m.
@@ -413,7 +410,8 @@ pub struct TrackPoint {
 /// The learned error of external position fixes (`pushFix`): subtract the bias from a fix,
 /// then widen its accuracy by `spread`. The engine does both to every fix it takes.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
-pub struct FixBias {
+#[uniffi(name = "FixBias")]
+pub struct FfiFixBias {
     /// Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
     pub bias_x_m: f64,
     /// Mean error of the fixes along the site's y axis, m.
@@ -423,7 +421,7 @@ pub struct FixBias {
     pub spread: f64,
 }
 
-impl From<AppFixBias> for FixBias {
+impl From<AppFixBias> for FfiFixBias {
     fn from(e: AppFixBias) -> Self {
         Self { bias_x_m: e.bias_x_m, bias_y_m: e.bias_y_m, spread: e.spread }
     }
@@ -431,7 +429,8 @@ impl From<AppFixBias> for FixBias {
 
 /// What one `learnHabits` pass did.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
-pub struct HabitReport {
+#[uniffi(name = "HabitReport")]
+pub struct FfiHabitReport {
     /// Epochs of the history learned from in this pass (those learned before are skipped); 0
     /// when there was nothing new to learn from.
     pub epochs: u32,
@@ -449,7 +448,7 @@ fn count(n: usize) -> u32 {
     u32::try_from(n).unwrap_or(u32::MAX)
 }
 
-impl From<AppHabitReport> for HabitReport {
+impl From<AppHabitReport> for FfiHabitReport {
     fn from(r: AppHabitReport) -> Self {
         Self {
             epochs: count(r.epochs),
@@ -464,7 +463,8 @@ impl From<AppHabitReport> for HabitReport {
 /// diagnostics screen or logs (a phone whose scans are mostly refused is misconfigured, or
 /// outside the site). Every rejected input also made its call throw.
 #[derive(Clone, Debug, Default, PartialEq, Eq, uniffi::Record)]
-pub struct InputStats {
+#[uniffi(name = "InputStats")]
+pub struct FfiInputStats {
     /// Scans that made a position.
     pub scans_accepted: u64,
     /// Scans refused because their time was not after the last position's.
@@ -513,7 +513,7 @@ pub struct InputStats {
     pub pressure_dropped: u64,
 }
 
-impl From<&engine::InputStats> for InputStats {
+impl From<&engine::InputStats> for FfiInputStats {
     fn from(s: &engine::InputStats) -> Self {
         Self {
             scans_accepted: s.scans_accepted,
@@ -585,7 +585,7 @@ pub enum StatusUpdate {
     /// Earlier positions were revised by later evidence.
     TrackRevised {
         /// The revised points, oldest first.
-        points: Vec<TrackPoint>,
+        points: Vec<FfiTrackPoint>,
     },
     /// The person entered one of the site's zones (its posterior mass reached the engine's
     /// enter threshold; docs/zones.md).
@@ -626,24 +626,7 @@ pub enum StatusUpdate {
     },
 }
 
-fn scenario(s: sensors::MotionScenario) -> MotionScenario {
-    match s {
-        sensors::MotionScenario::DistanceHeading => MotionScenario::DistanceHeading,
-        sensors::MotionScenario::Distance => MotionScenario::Distance,
-        sensors::MotionScenario::HeadingSpeed => MotionScenario::HeadingSpeed,
-        sensors::MotionScenario::Speed => MotionScenario::Speed,
-    }
-}
-
-fn motion_state(s: sensors::MotionState) -> MotionState {
-    match s {
-        sensors::MotionState::Unknown => MotionState::Unknown,
-        sensors::MotionState::Stationary => MotionState::Stationary,
-        sensors::MotionState::Walking => MotionState::Walking,
-    }
-}
-
-impl From<AppTrackPoint> for TrackPoint {
+impl From<AppTrackPoint> for FfiTrackPoint {
     fn from(p: AppTrackPoint) -> Self {
         Self { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor }
     }
@@ -668,8 +651,8 @@ impl From<AppPosition<'_>> for PositionEstimate {
             heading_deg: p.heading_deg,
             heading_accuracy_deg: p.heading_accuracy_deg,
             bearing_deg: p.bearing_deg,
-            motion_state: motion_state(p.motion_state),
-            scenario: scenario(p.scenario),
+            motion_state: p.motion_state,
+            scenario: p.scenario,
             steps: p.steps,
             beyond_radio_m: p.beyond_radio_m,
         }
@@ -682,11 +665,11 @@ pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
 }
 
 /// The track point `p`.
-pub(crate) fn track_point(p: &engine::TrackPoint) -> TrackPoint {
+pub(crate) fn track_point(p: &engine::TrackPoint) -> FfiTrackPoint {
     AppTrackPoint::from(p).into()
 }
 
-impl PositionFix {
+impl FfiPositionFix {
     /// The core fix: `x` and `y` as given, or the latitude/longitude in the site's frame
     /// (on the fix's floor, when the floors' frames differ). `Err` says why it is neither.
     pub(crate) fn to_core(self, site: &Site) -> Result<waymark_engine::PositionFix, String> {
@@ -714,16 +697,12 @@ impl PositionFix {
 impl From<&AppStatus> for StatusUpdate {
     fn from(status: &AppStatus) -> Self {
         match status {
-            &AppStatus::ScenarioChanged { scenario: s, .. } => {
-                StatusUpdate::ScenarioChanged { scenario: scenario(s) }
-            }
-            &AppStatus::MotionStateChanged { state, .. } => {
-                StatusUpdate::MotionStateChanged { state: motion_state(state) }
-            }
+            &AppStatus::ScenarioChanged { scenario, .. } => StatusUpdate::ScenarioChanged { scenario },
+            &AppStatus::MotionStateChanged { state, .. } => StatusUpdate::MotionStateChanged { state },
             &AppStatus::NoSiteCoverage { timestamp_ns } => StatusUpdate::NoSiteCoverage { timestamp_ns },
-            AppStatus::TrackRevised { points } => {
-                StatusUpdate::TrackRevised { points: points.iter().copied().map(TrackPoint::from).collect() }
-            }
+            AppStatus::TrackRevised { points } => StatusUpdate::TrackRevised {
+                points: points.iter().copied().map(FfiTrackPoint::from).collect(),
+            },
             AppStatus::Zone { timestamp_ns, name, entered, probability, .. } => {
                 let (timestamp_ns, zone, probability) = (*timestamp_ns, name.clone(), *probability);
                 if *entered {
