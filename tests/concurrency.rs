@@ -9,8 +9,8 @@ use std::sync::mpsc;
 use std::sync::{Arc, Barrier, LazyLock, Mutex, Weak};
 use std::time::{Duration, Instant};
 use waymark::{
-    EngineOptions, ErrorReport, MotionSample, PositionEstimate, PositionListener, PositioningEngine,
-    PositioningError, RadioScan, StatusUpdate, Subscription, TrackPoint, WifiReading,
+    EngineOptions, ErrorReport, FfiTrackPoint, MotionSample, PositionEstimate, PositionListener,
+    PositioningEngine, PositioningError, RadioScan, StatusUpdate, Subscription, WifiReading,
 };
 use waymark_engine::sensors::SensorSample;
 use waymark_engine::TransmitterId;
@@ -229,7 +229,7 @@ fn finite(p: &PositionEstimate) -> bool {
         && p.accuracy_m > 0.0
 }
 
-fn finite_point(p: &TrackPoint) -> bool {
+fn finite_point(p: &FfiTrackPoint) -> bool {
     p.x.is_finite() && p.y.is_finite()
 }
 

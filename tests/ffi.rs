@@ -5,7 +5,7 @@
 use std::sync::atomic::{AtomicUsize, Ordering};
 use std::sync::{Arc, Mutex};
 use waymark::{
-    BeaconReading, EngineOptions, ErrorReport, FixBias, MotionSample, PositionEstimate, PositionFix,
+    BeaconReading, EngineOptions, ErrorReport, FfiFixBias, FfiPositionFix, MotionSample, PositionEstimate,
     PositionListener, PositioningEngine, PositioningError, RadioScan, StatusUpdate, WifiReading,
 };
 use waymark_engine::radio::TransmitterId;
@@ -355,7 +355,7 @@ fn walk_with_fixes_and_feedback(engine: &PositioningEngine, office: &Office, see
             }
         }
         if k % 3 == 1 {
-            let fix = PositionFix {
+            let fix = FfiPositionFix {
                 timestamp_ns: t + 500_000_000,
                 x: Some(epoch.truth.x + 1.5),
                 y: Some(epoch.truth.y + 0.5),
@@ -376,7 +376,7 @@ fn walk_with_fixes_and_feedback(engine: &PositioningEngine, office: &Office, see
 fn habits_are_learned_exported_and_imported_through_the_ffi() {
     let office = Office::generate(&OfficeConfig { training_scans: 20, ..OfficeConfig::default() });
     let engine = PositioningEngine::new(office.site.to_json(), EngineOptions::default()).unwrap();
-    let unlearned = FixBias { bias_x_m: 0.0, bias_y_m: 0.0, spread: 1.0 };
+    let unlearned = FfiFixBias { bias_x_m: 0.0, bias_y_m: 0.0, spread: 1.0 };
     assert_eq!(engine.fix_bias().unwrap(), unlearned);
     let (fixes, confirmations) = walk_with_fixes_and_feedback(&engine, &office, 11);
     assert!(fixes > 10 && confirmations > 3, "{fixes} fixes, {confirmations} confirmations");
@@ -488,7 +488,7 @@ fn learning_while_other_threads_push_and_read() {
 fn one_shared_site_serves_several_engines() {
     let office = Office::generate(&OfficeConfig::default());
     let json = office.site.to_json();
-    let site = waymark::Site::from_bytes(office.site.to_binary()).unwrap();
+    let site = waymark::FfiSite::from_bytes(office.site.to_binary()).unwrap();
     assert_eq!(site.floor_names(), vec!["office".to_string()]);
     assert_eq!(site.zone_names().len(), office.site.zones().len());
     let walk = office.walk(5, 40.0);
@@ -501,7 +501,7 @@ fn one_shared_site_serves_several_engines() {
     assert!(own.iter().filter(|p| p.is_some()).count() > walk.epochs.len() / 2);
     assert_eq!(own, first);
     assert_eq!(own, second);
-    let bad = waymark::Site::from_bytes(b"{".to_vec());
+    let bad = waymark::FfiSite::from_bytes(b"{".to_vec());
     assert!(matches!(bad, Err(PositioningError::InvalidSite { .. })));
 }
 

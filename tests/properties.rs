@@ -26,7 +26,7 @@ mod common;
 use proptest::prelude::*;
 use std::sync::{Arc, LazyLock, Mutex};
 use waymark::{
-    BeaconReading, EngineOptions, MotionSample, PositionEstimate, PositionFix as FfiFix,
+    BeaconReading, EngineOptions, FfiPositionFix, MotionSample, PositionEstimate,
     PositionListener as FfiListener, PositioningEngine, PositioningError, RadioScan, StatusUpdate,
     TransitionKind, WifiReading,
 };
@@ -837,7 +837,7 @@ impl FfiListener for FfiRecorder {
     }
 }
 
-fn check_ffi_track(f: &Fixture, track: &[waymark::TrackPoint]) -> Result<(), TestCaseError> {
+fn check_ffi_track(f: &Fixture, track: &[waymark::FfiTrackPoint]) -> Result<(), TestCaseError> {
     for p in track {
         check_on_site(f, p.floor as usize, p.x, p.y, "FFI track point")?;
     }
@@ -997,7 +997,7 @@ fn run_ffi(fixture: usize, options: EngineOptions, calls: &[Call]) -> Result<(),
                 Some((
                     t,
                     Kind::Fix,
-                    engine.push_fix(FfiFix {
+                    engine.push_fix(FfiPositionFix {
                         timestamp_ns: t,
                         x: Some(x),
                         y: Some(y),

@@ -328,9 +328,9 @@ fn a_noisy_walk_along_the_route_stays_on_it_and_a_detour_leaves_it() {
 #[test]
 fn the_uniffi_surface_routes_and_tracks() {
     use waymark as api;
-    let site = Arc::new(api::Site::from_bytes(two_floors().to_json().into_bytes()).unwrap());
-    let from = api::FloorPoint { floor: 0, x: 4.9, y: 2.0 };
-    let to = api::Destination::Zone { name: "upstairs room 10".into() };
+    let site = Arc::new(api::FfiSite::from_bytes(two_floors().to_json().into_bytes()).unwrap());
+    let from = api::FfiFloorPoint { floor: 0, x: 4.9, y: 2.0 };
+    let to = api::FfiDestination::Zone { name: "upstairs room 10".into() };
     let route = site.route(from, to.clone()).unwrap();
     let core = Route::plan(
         two_floors(),
@@ -342,18 +342,18 @@ fn the_uniffi_surface_routes_and_tracks() {
     assert!((route.length_m - core.length_m()).abs() < 1e-9);
     assert_eq!(route.legs.iter().filter(|l| l.floor_change).count(), 1);
     assert_eq!(route.legs[0].turn, None);
-    assert_eq!(route.legs[1].turn, core.legs()[1].turn.map(Into::into));
-    let tracker = api::RouteTracker::new(Arc::clone(&site), from, to).unwrap();
+    assert_eq!(route.legs[1].turn, core.legs()[1].turn);
+    let tracker = api::FfiRouteTracker::new(Arc::clone(&site), from, to).unwrap();
     assert_eq!(tracker.route(), route);
-    let p = tracker.update_point(api::FloorPoint { floor: 0, x: 4.9, y: 2.5 }, 1.0).unwrap();
+    let p = tracker.update_point(api::FfiFloorPoint { floor: 0, x: 4.9, y: 2.5 }, 1.0).unwrap();
     assert!(!p.off_route && (p.remaining_m - route.length_m).abs() < 1.0);
     assert!(matches!(
-        tracker.update_point(api::FloorPoint { floor: 9, x: 0.0, y: 0.0 }, 1.0),
-        Err(api::RouteError::OffGraph { .. })
+        tracker.update_point(api::FfiFloorPoint { floor: 9, x: 0.0, y: 0.0 }, 1.0),
+        Err(api::FfiRouteError::OffGraph { .. })
     ));
     assert!(matches!(
-        site.route(from, api::Destination::Zone { name: "nope".into() }),
-        Err(api::RouteError::UnknownZone { .. })
+        site.route(from, api::FfiDestination::Zone { name: "nope".into() }),
+        Err(api::FfiRouteError::UnknownZone { .. })
     ));
     let rerouted = tracker.reroute().unwrap();
     assert_eq!(rerouted.end, route.end);

@@ -62,7 +62,7 @@ pub fn estimate(p: &ffi::PositionEstimate, floor_names: &[String]) {
 }
 
 /// FFI track points.
-pub fn ffi_track(points: &[ffi::TrackPoint], floors: usize) {
+pub fn ffi_track(points: &[ffi::FfiTrackPoint], floors: usize) {
     for p in points {
         assert!((p.floor as usize) < floors && p.x.is_finite() && p.y.is_finite(), "track point {p:?}");
     }

@@ -1,15 +1,20 @@
 //! The C ABI, in rustls-ffi's conventions: one `waymark_` prefix, opaque handles, a
 //! `waymark_result` code from every call, out-parameters last, NULL checks, every body behind
 //! a panic boundary, a thread-local last-error message, `_free` for what Waymark allocates.
-//! The engine is the same `Handle` (`handle.rs`) Kotlin and Swift use; this file only converts C
-//! arguments and results (`types`). The header `bindings/c/waymark.h` is generated from
-//! these two files by cbindgen.
+//! The engine is the same `Handle` (`handle.rs`) Kotlin and Swift use; the C side only converts
+//! arguments and results (`types`). This file holds the engine handle's lifetime, the panic
+//! boundary and last error, the engine's inputs and reads, and setting its callbacks; `c/`
+//! holds how the callbacks are called (`callbacks`), construction (`create`), geofences,
+//! habits, the log callback (`log_hook`), the survey recorder and routes. The header
+//! `bindings/c/waymark.h` is generated from this file and `c/` by cbindgen, functions in source
+//! order, this file's first.
 #![deny(clippy::undocumented_unsafe_blocks)]
 #![allow(non_camel_case_types)]
 // These functions are called from C, which cannot see `unsafe`: each pointer's contract is in
 // the header, and each dereference carries a SAFETY comment (as rustls-ffi does).
 #![allow(clippy::not_unsafe_ptr_arg_deref)]
 
+mod callbacks;
 mod create;
 mod geofence;
 mod habits;
@@ -20,10 +25,12 @@ mod types;
 
 pub use types::*;
 
+use callbacks::{replace_callback, Callbacks};
+
 // The engine crate is `::waymark_engine` in the C modules: `waymark_engine` is C's handle.
 use super::delivery::lock;
 use super::error::PositioningError;
-use super::handle::{Event, Handle, Listeners, Options, Status};
+use super::handle::{Handle, Options};
 use ::waymark_engine::radio::{Reading, Scan, TransmitterId};
 use ::waymark_engine::sensors::{PressureSample, SensorSample};
 use ::waymark_engine::site::Site;
@@ -80,136 +87,6 @@ impl Drop for Running {
     }
 }
 
-/// The app's callbacks, as `waymark_engine_set_callback` and
-/// `waymark_engine_set_status_callback` left them.
-#[derive(Default)]
-struct Callbacks {
-    position: Mutex<Option<Callback<waymark_position>>>,
-    status: Mutex<Option<Callback<waymark_status>>>,
-    /// Held while a callback runs, so that setting another one can wait for it to return.
-    calling: Mutex<()>,
-}
-
-struct Callback<T> {
-    function: unsafe extern "C" fn(userdata: *mut c_void, event: *const T),
-    userdata: usize,
-}
-
-impl<T> Clone for Callback<T> {
-    fn clone(&self) -> Self {
-        *self
-    }
-}
-
-impl<T> Copy for Callback<T> {}
-
-impl<T> Callback<T> {
-    fn call(self, event: &T) {
-        // SAFETY: the function and its userdata were registered together by the caller of
-        // `waymark_engine_set_callback` / `_set_status_callback`, who guarantees they stay
-        // valid until replaced; a replacement waits for this call to return (`calling`).
-        unsafe { (self.function)(self.userdata as *mut c_void, event) };
-    }
-}
-
-impl Listeners for Callbacks {
-    /// Reads the callback afresh for each event.
-    fn deliver(&self, event: &Event, site: &Site) {
-        let _calling = lock(&self.calling);
-        match event {
-            // Each callback is copied out before it is called: the lock must be free so the
-            // callback can replace itself (a guard in the `if let` would live through the call).
-            Event::Position(p) => {
-                let callback = *lock(&self.position);
-                if let Some(callback) = callback {
-                    callback.call(&position(p, site));
-                }
-            }
-            Event::Status(s) => {
-                let callback = *lock(&self.status);
-                if let Some(callback) = callback {
-                    deliver_status(callback, s, site);
-                }
-            }
-            Event::Error(e) => {
-                let callback = *lock(&self.status);
-                if let Some(callback) = callback {
-                    let message = c_string(&e.to_string());
-                    callback.call(&waymark_status {
-                        error: e.into(),
-                        message: message.as_ptr(),
-                        ..status(waymark_status_kind::Error, 0)
-                    });
-                }
-            }
-        }
-    }
-}
-
-fn status(kind: waymark_status_kind, timestamp_ns: u64) -> waymark_status {
-    waymark_status {
-        kind,
-        timestamp_ns,
-        scenario: 0,
-        motion_state: 0,
-        points: std::ptr::null(),
-        point_count: 0,
-        error: waymark_result::Ok,
-        message: std::ptr::null(),
-        zone: -1,
-        name: std::ptr::null(),
-        probability: 0.0,
-    }
-}
-
-fn deliver_status(callback: Callback<waymark_status>, s: &Status, site: &Site) {
-    match s {
-        Status::ScenarioChanged { timestamp_ns, scenario: to } => callback.call(&waymark_status {
-            scenario: scenario(*to),
-            ..status(waymark_status_kind::ScenarioChanged, *timestamp_ns)
-        }),
-        Status::MotionStateChanged { timestamp_ns, state } => callback.call(&waymark_status {
-            motion_state: motion_state(*state),
-            ..status(waymark_status_kind::MotionStateChanged, *timestamp_ns)
-        }),
-        Status::NoSiteCoverage { timestamp_ns } => {
-            callback.call(&status(waymark_status_kind::NoSiteCoverage, *timestamp_ns))
-        }
-        Status::TrackRevised { points } => {
-            let points: Vec<waymark_track_point> = points.iter().map(track_point).collect();
-            callback.call(&waymark_status {
-                points: points.as_ptr(),
-                point_count: points.len(),
-                ..status(waymark_status_kind::TrackRevised, 0)
-            })
-        }
-        &Status::Zone { timestamp_ns, zone, entered, probability } => {
-            let kind =
-                if entered { waymark_status_kind::ZoneEntered } else { waymark_status_kind::ZoneExited };
-            let name = c_string(&site.zones()[zone].name);
-            callback.call(&waymark_status {
-                zone: i32::try_from(zone).unwrap_or(-1),
-                name: name.as_ptr(),
-                probability,
-                ..status(kind, timestamp_ns)
-            })
-        }
-        Status::Geofence { timestamp_ns, id, entered, probability } => {
-            let kind = if *entered {
-                waymark_status_kind::GeofenceEntered
-            } else {
-                waymark_status_kind::GeofenceExited
-            };
-            let name = c_string(id);
-            callback.call(&waymark_status {
-                name: name.as_ptr(),
-                probability: *probability,
-                ..status(kind, *timestamp_ns)
-            })
-        }
-    }
-}
-
 /// `text` as a C string, each NUL in it replaced (a message never holds one in practice).
 fn c_string(text: &str) -> CString {
     CString::new(text.replace('\0', " ")).unwrap_or_default()
@@ -236,10 +113,8 @@ fn fail_with(e: &PositioningError) -> waymark_result {
 /// `waymark_last_error` (docs/errors.md#callbacks).
 fn boundary(body: impl FnOnce() -> waymark_result) -> waymark_result {
     let hold = crate::ffi::logging::hold();
-    let code = match std::panic::catch_unwind(std::panic::AssertUnwindSafe(body)) {
-        Ok(code) => code,
-        Err(_) => fail(waymark_result::Panic, "Waymark panicked; the call had no effect"),
-    };
+    let code = super::panic::guard(body)
+        .unwrap_or_else(|_| fail(waymark_result::Panic, "Waymark panicked; the call had no effect"));
     if hold.will_flush() {
         let message = LAST_ERROR.with(|e| std::mem::take(&mut *e.borrow_mut()));
         drop(hold);
@@ -809,22 +684,6 @@ pub extern "C" fn waymark_engine_set_status_callback(
     userdata: *mut c_void,
 ) -> waymark_result {
     with_handle(engine, |handle| replace_callback(handle, |c| &c.status, callback, userdata))
-}
-
-/// Puts `callback` with `userdata` in the slot `slot` picks, then waits for a callback running
-/// on another thread to return (not on the delivering thread itself: it would wait for itself).
-fn replace_callback<T>(
-    handle: &Handle<Callbacks>,
-    slot: impl FnOnce(&Callbacks) -> &Mutex<Option<Callback<T>>>,
-    callback: Option<unsafe extern "C" fn(userdata: *mut c_void, event: *const T)>,
-    userdata: *mut c_void,
-) -> waymark_result {
-    let callbacks = handle.listeners();
-    *lock(slot(callbacks)) = callback.map(|function| Callback { function, userdata: userdata as usize });
-    if !handle.on_delivering_thread() {
-        drop(lock(&callbacks.calling));
-    }
-    waymark_result::Ok
 }
 
 /// Copies the calling thread's last error message into `buf` (NUL-terminated, truncated to

@@ -10,13 +10,13 @@
 
 use super::delivery::{lock, Delivery};
 use super::error::PositioningError;
-use std::panic::{catch_unwind, AssertUnwindSafe};
+use super::panic::{deliver_to_app, guard};
+use super::record::AppStatus;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use waymark_engine::radio::Scan;
-use waymark_engine::sensors::{MotionScenario, MotionState};
 use waymark_engine::site::Site;
-use waymark_engine::{self as engine, Engine, EngineConfig, Epoch, Position, TransitionModel};
+use waymark_engine::{Engine, EngineConfig, Epoch, Position, TransitionModel};
 
 /// What an epoch produced, or a call's failure, waiting for delivery to the app.
 #[derive(Clone, Debug)]
@@ -24,26 +24,9 @@ pub(crate) enum Event {
     /// A new position.
     Position(Position),
     /// Something about the session changed.
-    Status(Status),
+    Status(AppStatus),
     /// A call failed (it also returned the error).
     Error(PositioningError),
-}
-
-/// A status change, in core terms; each FFI converts it.
-#[derive(Clone, Debug)]
-pub(crate) enum Status {
-    /// The motion information available changed.
-    ScenarioChanged { timestamp_ns: u64, scenario: MotionScenario },
-    /// The person started or stopped walking.
-    MotionStateChanged { timestamp_ns: u64, state: MotionState },
-    /// A scan heard no transmitter of the site.
-    NoSiteCoverage { timestamp_ns: u64 },
-    /// Earlier positions were revised by later evidence.
-    TrackRevised { points: Vec<engine::TrackPoint> },
-    /// The person entered (`entered`) or left one of the site's zones, by index.
-    Zone { timestamp_ns: u64, zone: usize, entered: bool, probability: f64 },
-    /// The person entered or left one of the app's geofences.
-    Geofence { timestamp_ns: u64, id: String, entered: bool, probability: f64 },
 }
 
 /// How an FFI calls its app's listeners. Called with no lock of the handle held, never from
@@ -186,7 +169,7 @@ impl<L: Listeners> Handle<L> {
                     "an earlier call panicked and left the engine unusable: create a new engine",
                 ))
             } else {
-                match catch_unwind(AssertUnwindSafe(|| f(&mut engine))) {
+                match guard(|| f(&mut engine)) {
                     Ok(result) => {
                         self.events.commit();
                         result
@@ -224,30 +207,12 @@ impl<L: Listeners> Handle<L> {
         let events = Arc::clone(&self.events);
         self.call_undoable(|engine| {
             let Epoch { position, status, revised_track } = f(engine)?;
+            let site = engine.site();
             for change in status {
-                events.stage(Event::Status(match change {
-                    engine::StatusEvent::ScenarioChanged { timestamp_ns, to, .. } => {
-                        Status::ScenarioChanged { timestamp_ns, scenario: to }
-                    }
-                    engine::StatusEvent::MotionStateChanged { timestamp_ns, to, .. } => {
-                        Status::MotionStateChanged { timestamp_ns, state: to }
-                    }
-                    engine::StatusEvent::ZoneEntered { timestamp_ns, zone, probability } => {
-                        Status::Zone { timestamp_ns, zone, entered: true, probability }
-                    }
-                    engine::StatusEvent::ZoneExited { timestamp_ns, zone, probability } => {
-                        Status::Zone { timestamp_ns, zone, entered: false, probability }
-                    }
-                    engine::StatusEvent::GeofenceEntered { timestamp_ns, id, probability } => {
-                        Status::Geofence { timestamp_ns, id, entered: true, probability }
-                    }
-                    engine::StatusEvent::GeofenceExited { timestamp_ns, id, probability } => {
-                        Status::Geofence { timestamp_ns, id, entered: false, probability }
-                    }
-                }));
+                events.stage(Event::Status(AppStatus::new(change, site)));
             }
             if !revised_track.is_empty() {
-                events.stage(Event::Status(Status::TrackRevised { points: revised_track }));
+                events.stage(Event::Status(AppStatus::track_revised(&revised_track)));
             }
             events.stage(Event::Position(position.clone()));
             Ok(position)
@@ -282,7 +247,7 @@ impl<L: Listeners> Handle<L> {
             }
             let result = engine.push_scan(scan);
             if let Err(waymark_engine::InputError::NoKnownTransmitter { .. }) = result {
-                events.stage(Event::Status(Status::NoSiteCoverage { timestamp_ns: scan.timestamp_ns }));
+                events.stage(Event::Status(AppStatus::NoSiteCoverage { timestamp_ns: scan.timestamp_ns }));
             }
             result
         })
@@ -334,9 +299,7 @@ impl<L: Listeners> Handle<L> {
     /// skipped; the others still hear the event.
     fn deliver(&self) {
         self.events.deliver(|event| {
-            if catch_unwind(AssertUnwindSafe(|| self.listeners.deliver(&event, &self.site))).is_err() {
-                log::warn!("a listener panicked or threw");
-            }
+            deliver_to_app("a listener", || self.listeners.deliver(&event, &self.site));
         });
     }
 }

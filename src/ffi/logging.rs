@@ -10,7 +10,6 @@
 
 use std::cell::RefCell;
 use std::collections::VecDeque;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex, Once, OnceLock};
 
 /// Severity of a log record.
@@ -168,7 +167,8 @@ fn flush() {
 fn send(record: Record) {
     let sink = SINK.lock().ok().and_then(|s| s.clone());
     if let Some(sink) = sink {
-        let _ = catch_unwind(AssertUnwindSafe(|| sink.log(record.level, record.target, record.message)));
+        // Not `deliver_to_app`: a sink that fails cannot be told so through itself.
+        let _ = super::panic::guard(|| sink.log(record.level, record.target, record.message));
     }
 }
 

@@ -10,6 +10,8 @@ mod delivery;
 pub mod error;
 mod handle;
 pub mod logging;
+mod panic;
+mod record;
 pub mod uniffi;
 
 use waymark_engine::radio::TransmitterId;

@@ -11,17 +11,18 @@ mod route;
 pub use super::error::{ErrorCode, ErrorReport, PositioningError};
 #[cfg(feature = "fault-injection")]
 pub use super::handle::{FAULT_INJECTION_HABITS_JSON, FAULT_INJECTION_TIMESTAMP_NS};
-pub use geofence::{Geofence, GeofenceShape, SitePoint};
+pub use geofence::{FfiGeofence, FfiGeofenceShape, SitePoint};
 pub use recorder::*;
 pub use records::*;
 pub use route::*;
 
 use super::delivery::lock;
 use super::handle::{Event, Handle, Listeners};
-use std::panic::{catch_unwind, AssertUnwindSafe};
+use super::panic::deliver_to_app;
+use super::record::{AppFixBias, AppHabitReport};
 use std::sync::{Arc, Mutex, Weak};
 use waymark_engine as engine;
-use waymark_engine::site::Site as CoreSite;
+use waymark_engine::site::Site;
 
 /// Waymark's version, as `"0.1.0"`: the version of the Rust library the app bundles.
 #[uniffi::export]
@@ -55,21 +56,18 @@ struct Subscribers {
 impl Listeners for Subscribers {
     /// A listener subscribed during an event hears the events after it; one cancelled during
     /// an event hears nothing more.
-    fn deliver(&self, event: &Event, site: &CoreSite) {
+    fn deliver(&self, event: &Event, site: &Site) {
         let listeners = lock(&self.list).clone();
         for (id, listener) in &listeners {
             // Cancelled by a callback earlier in this event.
             if !lock(&self.list).iter().any(|(l, _)| l == id) {
                 continue;
             }
-            let outcome = catch_unwind(AssertUnwindSafe(|| match event {
+            deliver_to_app("a position listener", || match event {
                 Event::Position(p) => listener.on_position(estimate(p, site)),
-                Event::Status(s) => listener.on_status(status_update(s, site)),
+                Event::Status(s) => listener.on_status(s.into()),
                 Event::Error(e) => listener.on_error(e.report()),
-            }));
-            if outcome.is_err() {
-                log::warn!("a position listener panicked or threw");
-            }
+            });
         }
     }
 }
@@ -78,24 +76,25 @@ impl Listeners for Subscribers {
 /// (`PositioningEngine.withSite`): one per user, or a new one per session, without reading the
 /// file again or holding it twice in memory.
 #[derive(uniffi::Object)]
-pub struct Site {
-    inner: Arc<CoreSite>,
+#[uniffi(name = "Site")]
+pub struct FfiSite {
+    inner: Arc<Site>,
 }
 
-#[uniffi::export]
-impl Site {
+#[uniffi::export(name = "Site")]
+impl FfiSite {
     /// A site file's contents: the binary encoding (what an app should ship, see
     /// docs/site-files.md#binary-encoding) or JSON. Throws `InvalidSite` for a file that is not
     /// a valid site.
     #[uniffi::constructor]
     pub fn from_bytes(site: Vec<u8>) -> Result<Arc<Self>, PositioningError> {
-        Ok(Arc::new(Self { inner: Arc::new(CoreSite::from_bytes(&site)?) }))
+        Ok(Arc::new(Self { inner: Arc::new(Site::from_bytes(&site)?) }))
     }
 
     /// The site file (binary or JSON) at `path`.
     #[uniffi::constructor]
     pub fn from_path(path: String) -> Result<Arc<Self>, PositioningError> {
-        Ok(Arc::new(Self { inner: Arc::new(CoreSite::load(&path)?) }))
+        Ok(Arc::new(Self { inner: Arc::new(Site::load(&path)?) }))
     }
 
     /// The names of the site's floors, by floor index.
@@ -150,7 +149,7 @@ impl Drop for Subscription {
 }
 
 impl PositioningEngine {
-    fn create(site: Arc<CoreSite>, options: &EngineOptions) -> Result<Arc<Self>, PositioningError> {
+    fn create(site: Arc<Site>, options: &EngineOptions) -> Result<Arc<Self>, PositioningError> {
         let subscribers = Subscribers { list: Mutex::new(Vec::new()), next: Mutex::new(0) };
         let handle = Handle::new(site, &options.to_options(), subscribers)?;
         Ok(Arc::new(Self { handle }))
@@ -184,7 +183,7 @@ impl PositioningEngine {
     /// An engine on the site file given as JSON text.
     #[uniffi::constructor]
     pub fn new(site_json: String, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
-        let site = CoreSite::from_json(site_json.as_bytes())?;
+        let site = Site::from_json(site_json.as_bytes())?;
         Self::create(Arc::new(site), &options)
     }
 
@@ -192,14 +191,14 @@ impl PositioningEngine {
     /// loads faster and in less memory, docs/site-files.md#binary-encoding) or JSON.
     #[uniffi::constructor]
     pub fn from_site_bytes(site: Vec<u8>, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
-        let site = CoreSite::from_bytes(&site)?;
+        let site = Site::from_bytes(&site)?;
         Self::create(Arc::new(site), &options)
     }
 
     /// An engine on the site file (binary or JSON) at `path`.
     #[uniffi::constructor]
     pub fn from_path(path: String, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
-        let site = CoreSite::load(&path)?;
+        let site = Site::load(&path)?;
         Self::create(Arc::new(site), &options)
     }
 
@@ -207,7 +206,7 @@ impl PositioningEngine {
     /// (one per user, or a new one per session) share one site in memory, and none of them
     /// reads or checks the file again.
     #[uniffi::constructor]
-    pub fn with_site(site: Arc<Site>, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
+    pub fn with_site(site: Arc<FfiSite>, options: EngineOptions) -> Result<Arc<Self>, PositioningError> {
         Self::create(Arc::clone(&site.inner), &options)
     }
 
@@ -265,7 +264,7 @@ impl PositioningEngine {
     /// infinite coordinate, an accuracy not > 0, an unknown floor, or a fix too far from the
     /// site for its accuracy; and for a latitude/longitude on a site that is not
     /// geo-referenced, or without its floor on a site whose floors have different frames.
-    pub fn push_fix(&self, fix: PositionFix) -> Result<PositionEstimate, PositioningError> {
+    pub fn push_fix(&self, fix: FfiPositionFix) -> Result<PositionEstimate, PositioningError> {
         let core = fix.to_core(self.handle.site()).map_err(|reason| self.reject(reason))?;
         self.epoch(|engine| engine.push_fix(&core))
     }
@@ -302,7 +301,7 @@ impl PositioningEngine {
     /// the site's zones; a person already inside is reported as entering. Throws
     /// `InputRejected`, changing nothing, for an empty or taken id, an unknown floor, a shape
     /// that is not finite or has no area, or one that holds no place of the site.
-    pub fn add_geofence(&self, geofence: Geofence) -> Result<(), PositioningError> {
+    pub fn add_geofence(&self, geofence: FfiGeofence) -> Result<(), PositioningError> {
         self.handle.call_undoable(|engine| Ok(engine.add_geofence(geofence.into())?))
     }
 
@@ -312,8 +311,8 @@ impl PositioningEngine {
     }
 
     /// The engine's geofences, in the order they were added.
-    pub fn geofences(&self) -> Result<Vec<Geofence>, PositioningError> {
-        self.handle.read(|engine| engine.geofences().map(Geofence::from).collect())
+    pub fn geofences(&self) -> Result<Vec<FfiGeofence>, PositioningError> {
+        self.handle.read(|engine| engine.geofences().map(FfiGeofence::from).collect())
     }
 
     /// The probability of being inside geofence `id` now; `null` / `nil` for no such geofence.
@@ -331,11 +330,7 @@ impl PositioningEngine {
             .zones()
             .iter()
             .zip(posterior)
-            .map(|(z, probability)| ZoneProbability {
-                name: z.name.clone(),
-                kind: zone_kind(z.kind),
-                probability,
-            })
+            .map(|(z, probability)| ZoneProbability { name: z.name.clone(), kind: z.kind, probability })
             .collect())
     }
 
@@ -348,9 +343,9 @@ impl PositioningEngine {
     /// hundred milliseconds on a large site: call it off the main thread, e.g. when a walk
     /// ends. Other calls on the engine wait for it; listeners are not called from it. Keep
     /// the result with `exportHabits`.
-    pub fn learn_habits(&self) -> Result<HabitReport, PositioningError> {
+    pub fn learn_habits(&self) -> Result<FfiHabitReport, PositioningError> {
         self.handle.call(|e| match e.learn_habits() {
-            Ok(report) => Ok(habit_report(&report, e.habits())),
+            Ok(report) => Ok(AppHabitReport::new(&report, e.habits()).into()),
             // Its input is the engine's own history and validated options: a bug.
             Err(err) => Err(PositioningError::internal(format!("learning habits: {err}"))),
         })
@@ -383,12 +378,12 @@ impl PositioningEngine {
 
     /// The fix error learned so far: zero bias and spread 1 before any fix was learned from.
     /// Throws `Internal` (never a made-up value) if it could not be read.
-    pub fn fix_bias(&self) -> Result<FixBias, PositioningError> {
-        self.handle.read(|e| e.fix_bias().into())
+    pub fn fix_bias(&self) -> Result<FfiFixBias, PositioningError> {
+        self.handle.read(|e| AppFixBias::from(e.fix_bias()).into())
     }
 
     /// What the engine took and refused since it was created, and why.
-    pub fn input_stats(&self) -> Result<InputStats, PositioningError> {
+    pub fn input_stats(&self) -> Result<FfiInputStats, PositioningError> {
         self.handle.read(|e| e.stats().into())
     }
 
@@ -399,12 +394,12 @@ impl PositioningEngine {
     }
 
     /// The most likely recent track, oldest first.
-    pub fn track(&self) -> Result<Vec<TrackPoint>, PositioningError> {
+    pub fn track(&self) -> Result<Vec<FfiTrackPoint>, PositioningError> {
         self.handle.read(|e| e.track().iter().map(track_point).collect())
     }
 
     /// The fixed-lag position: a few epochs old, but revised by what came after.
-    pub fn fixed_lag_position(&self) -> Result<Option<TrackPoint>, PositioningError> {
+    pub fn fixed_lag_position(&self) -> Result<Option<FfiTrackPoint>, PositioningError> {
         self.handle.read(|e| e.fixed_lag_position().as_ref().map(track_point))
     }
 

@@ -5,6 +5,7 @@ use super::{
     waymark_habit_report, waymark_result, with_handle, write,
 };
 use crate::ffi::error::PositioningError;
+use crate::ffi::record::{AppFixBias, AppHabitReport};
 use ::waymark_engine::Engine;
 use std::ffi::c_char;
 
@@ -21,12 +22,7 @@ pub extern "C" fn waymark_engine_learn_habits(
     out: *mut waymark_habit_report,
 ) -> waymark_result {
     let learn = |e: &mut Engine| match e.learn_habits() {
-        Ok(report) => Ok(waymark_habit_report {
-            epochs: report.epochs,
-            total_epochs: e.habits().epochs(),
-            learned_transitions: report.learned_transitions,
-            applied: e.habits().strength().is_some(),
-        }),
+        Ok(report) => Ok(waymark_habit_report::from(AppHabitReport::new(&report, e.habits()))),
         // Its input is the engine's own history and validated options: a bug.
         Err(err) => Err(PositioningError::internal(format!("learning habits: {err}"))),
     };
@@ -121,7 +117,7 @@ pub extern "C" fn waymark_engine_fix_bias(
     }
     read(
         engine,
-        |e| e.fix_bias().into(),
+        |e| waymark_fix_bias::from(AppFixBias::from(e.fix_bias())),
         |error| {
             write(out, error);
             waymark_result::Ok

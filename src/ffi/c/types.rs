@@ -2,6 +2,7 @@
 //! conversions from the core's types. cbindgen writes them into `bindings/c/waymark.h`.
 
 use crate::ffi::error::{ErrorCode, PositioningError};
+use crate::ffi::record::{AppFixBias, AppHabitReport, AppPosition, AppTrackPoint};
 use ::waymark_engine::sensors::{MotionScenario, MotionState};
 use ::waymark_engine::site::Site;
 use ::waymark_engine::{self as engine, Position};
@@ -354,9 +355,9 @@ pub struct waymark_fix_bias {
     pub spread: f64,
 }
 
-impl From<::waymark_engine::habits::FixBias> for waymark_fix_bias {
-    fn from(e: ::waymark_engine::habits::FixBias) -> Self {
-        Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
+impl From<AppFixBias> for waymark_fix_bias {
+    fn from(e: AppFixBias) -> Self {
+        Self { bias_x_m: e.bias_x_m, bias_y_m: e.bias_y_m, spread: e.spread }
     }
 }
 
@@ -374,6 +375,17 @@ pub struct waymark_habit_report {
     /// Whether the learned moves now weigh on the positions: they do once they predict parts
     /// of the history they were not learned from better than the motion alone.
     pub applied: bool,
+}
+
+impl From<AppHabitReport> for waymark_habit_report {
+    fn from(r: AppHabitReport) -> Self {
+        Self {
+            epochs: r.epochs,
+            total_epochs: r.total_epochs,
+            learned_transitions: r.learned_transitions,
+            applied: r.applied,
+        }
+    }
 }
 
 /// What the engine took and refused since it was created, and why
@@ -480,32 +492,37 @@ pub type waymark_log_callback = Option<
     unsafe extern "C" fn(userdata: *mut c_void, level: u32, target: *const c_char, message: *const c_char),
 >;
 
-pub(crate) fn position(p: &Position, site: &Site) -> waymark_position {
-    let level = site.floor_level(p.floor);
-    let geo = site.lat_lon(p.floor, p.x, p.y);
-    waymark_position {
-        timestamp_ns: p.timestamp_ns,
-        x: p.x,
-        y: p.y,
-        floor: p.floor as u32,
-        floor_probability: p.floor_probability,
-        has_floor_level: level.is_some(),
-        floor_level: level.unwrap_or(0),
-        latitude_deg: geo.map_or(f64::NAN, |g| g.lat_deg),
-        longitude_deg: geo.map_or(f64::NAN, |g| g.lon_deg),
-        // At most i32::MAX zones (`site::MAX_ZONES`).
-        zone: p.zone.map_or(-1, |z| i32::try_from(z).unwrap_or(-1)),
-        zone_probability: p.zone_probability,
-        accuracy_m: p.accuracy_m,
-        accuracy_95_m: p.accuracy_95_m,
-        heading_deg: p.heading_rad.map_or(f64::NAN, f64::to_degrees),
-        heading_accuracy_deg: p.heading_accuracy_rad.map_or(f64::NAN, f64::to_degrees),
-        bearing_deg: p.heading_rad.and_then(|h| site.bearing_deg(h)).unwrap_or(f64::NAN),
-        motion_state: motion_state(p.motion_state),
-        scenario: scenario(p.scenario),
-        steps: p.steps,
-        beyond_radio_m: p.beyond_radio_m,
+impl From<AppPosition<'_>> for waymark_position {
+    fn from(p: AppPosition<'_>) -> Self {
+        let nan = f64::NAN;
+        waymark_position {
+            timestamp_ns: p.timestamp_ns,
+            x: p.x,
+            y: p.y,
+            floor: p.floor,
+            floor_probability: p.floor_probability,
+            has_floor_level: p.floor_level.is_some(),
+            floor_level: p.floor_level.unwrap_or(0),
+            latitude_deg: p.latitude_deg.unwrap_or(nan),
+            longitude_deg: p.longitude_deg.unwrap_or(nan),
+            zone: p.zone.unwrap_or(-1),
+            zone_probability: p.zone_probability,
+            accuracy_m: p.accuracy_m,
+            accuracy_95_m: p.accuracy_95_m,
+            heading_deg: p.heading_deg.unwrap_or(nan),
+            heading_accuracy_deg: p.heading_accuracy_deg.unwrap_or(nan),
+            bearing_deg: p.bearing_deg.unwrap_or(nan),
+            motion_state: motion_state(p.motion_state),
+            scenario: scenario(p.scenario),
+            steps: p.steps,
+            beyond_radio_m: p.beyond_radio_m,
+        }
     }
+}
+
+/// The position `p` of an engine on `site`.
+pub(crate) fn position(p: &Position, site: &Site) -> waymark_position {
+    AppPosition::new(p, site).into()
 }
 
 pub(crate) fn motion_state(s: MotionState) -> u32 {
@@ -525,6 +542,8 @@ pub(crate) fn scenario(s: MotionScenario) -> u32 {
     }
 }
 
-pub(crate) fn track_point(p: &engine::TrackPoint) -> waymark_track_point {
-    waymark_track_point { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor as u32 }
+impl From<AppTrackPoint> for waymark_track_point {
+    fn from(p: AppTrackPoint) -> Self {
+        waymark_track_point { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor }
+    }
 }

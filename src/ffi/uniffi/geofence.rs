@@ -1,6 +1,6 @@
 //! Geofences as Kotlin and Swift see them.
 
-use waymark_engine::geofence::{Geofence as CoreGeofence, GeofenceShape as CoreShape};
+use waymark_engine::geofence::{Geofence, GeofenceShape};
 
 /// A point of the site's metric frame, m.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
@@ -13,7 +13,8 @@ pub struct SitePoint {
 
 /// The outline of a geofence, in the site's metric frame.
 #[derive(Clone, Debug, PartialEq, uniffi::Enum)]
-pub enum GeofenceShape {
+#[uniffi(name = "GeofenceShape")]
+pub enum FfiGeofenceShape {
     /// The points within `radius_m` of (x, y).
     Circle {
         /// Centre, x, m.
@@ -33,37 +34,38 @@ pub enum GeofenceShape {
 /// A region of one floor whose entries and exits the engine reports as
 /// `StatusUpdate.GeofenceEntered` and `GeofenceExited` (docs/zones.md).
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
-pub struct Geofence {
+#[uniffi(name = "Geofence")]
+pub struct FfiGeofence {
     /// The app's name for it, unique among the engine's geofences; the events carry it.
     pub id: String,
     /// Floor index, as in `PositionEstimate.floor`.
     pub floor: u32,
     /// Its outline.
-    pub shape: GeofenceShape,
+    pub shape: FfiGeofenceShape,
 }
 
-impl From<Geofence> for CoreGeofence {
-    fn from(g: Geofence) -> Self {
+impl From<FfiGeofence> for Geofence {
+    fn from(g: FfiGeofence) -> Self {
         let shape = match g.shape {
-            GeofenceShape::Circle { x, y, radius_m } => CoreShape::Circle { x, y, radius_m },
-            GeofenceShape::Polygon { vertices } => {
-                CoreShape::Polygon { vertices: vertices.iter().map(|p| [p.x, p.y]).collect() }
+            FfiGeofenceShape::Circle { x, y, radius_m } => GeofenceShape::Circle { x, y, radius_m },
+            FfiGeofenceShape::Polygon { vertices } => {
+                GeofenceShape::Polygon { vertices: vertices.iter().map(|p| [p.x, p.y]).collect() }
             }
         };
-        CoreGeofence { id: g.id, floor: g.floor as usize, shape }
+        Geofence { id: g.id, floor: g.floor as usize, shape }
     }
 }
 
-impl From<&CoreGeofence> for Geofence {
-    fn from(g: &CoreGeofence) -> Self {
+impl From<&Geofence> for FfiGeofence {
+    fn from(g: &Geofence) -> Self {
         let shape = match &g.shape {
-            CoreShape::Circle { x, y, radius_m } => {
-                GeofenceShape::Circle { x: *x, y: *y, radius_m: *radius_m }
+            GeofenceShape::Circle { x, y, radius_m } => {
+                FfiGeofenceShape::Circle { x: *x, y: *y, radius_m: *radius_m }
             }
-            CoreShape::Polygon { vertices } => GeofenceShape::Polygon {
+            GeofenceShape::Polygon { vertices } => FfiGeofenceShape::Polygon {
                 vertices: vertices.iter().map(|v| SitePoint { x: v[0], y: v[1] }).collect(),
             },
         };
-        Geofence { id: g.id.clone(), floor: g.floor as u32, shape }
+        FfiGeofence { id: g.id.clone(), floor: g.floor as u32, shape }
     }
 }

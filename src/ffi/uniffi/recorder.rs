@@ -2,7 +2,6 @@
 
 use super::records::{samples, MotionSample, RadioScan};
 use crate::ffi::delivery::lock;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::Mutex;
 use waymark_engine::recorder::{self as core, RecorderError};
 
@@ -97,12 +96,13 @@ impl From<RecorderError> for SurveyError {
 /// and at `finish`. Files only ever hold whole lines. After an `Io` error every call throws
 /// until `resume` succeeds (docs/surveying.md#durability).
 #[derive(uniffi::Object)]
-pub struct SurveyRecorder {
+#[uniffi(name = "SurveyRecorder")]
+pub struct FfiSurveyRecorder {
     inner: Mutex<core::SurveyRecorder>,
 }
 
-#[uniffi::export]
-impl SurveyRecorder {
+#[uniffi::export(name = "SurveyRecorder")]
+impl FfiSurveyRecorder {
     /// A recording into `directory` (created if missing); before the first waypoint the lines
     /// go to `directory/.WALK.pending`, then into the first walk file. Throws `InputRejected`
     /// for a walk name or site id that cannot be used.
@@ -174,7 +174,7 @@ impl SurveyRecorder {
     }
 }
 
-impl SurveyRecorder {
+impl FfiSurveyRecorder {
     fn call<T>(
         &self,
         f: impl FnOnce(&mut core::SurveyRecorder) -> Result<T, SurveyError>,
@@ -194,8 +194,7 @@ fn summary(s: &core::RecordingStats) -> SurveySummary {
     }
 }
 
-/// Runs `f`, turning a panic into `Internal`.
+/// Runs `f`, turning a panic into `Internal` (`ffi::panic`).
 fn guarded<T>(f: impl FnOnce() -> Result<T, SurveyError>) -> Result<T, SurveyError> {
-    catch_unwind(AssertUnwindSafe(f))
-        .unwrap_or_else(|_| Err(SurveyError::Internal { reason: "Waymark panicked".into() }))
+    crate::ffi::panic::or_internal(f, || SurveyError::Internal { reason: "Waymark panicked".into() })
 }

@@ -1,9 +1,10 @@
 //! The records and enums of the Kotlin and Swift API, and their conversions from the core's
 //! types. A change here is a possible breaking change for apps (CHANGELOG, "Breaking changes").
 
-use crate::ffi::handle::{Options, Status};
+use crate::ffi::handle::Options;
+use crate::ffi::record::{AppFixBias, AppHabitReport, AppPosition, AppStatus, AppTrackPoint};
 use waymark_engine as engine;
-use waymark_engine::sensors::{self, SensorSample};
+use waymark_engine::sensors::SensorSample;
 use waymark_engine::site::Site;
 use waymark_engine::TransitionModel;
 
@@ -240,9 +241,16 @@ impl RadioScan {
     }
 }
 
+pub use waymark_engine::sensors::{MotionScenario, MotionState};
+pub use waymark_engine::site::ZoneKind;
+
+// The core's enums, exported as they are (uniffi remote types): their variants are what an app
+// sees, so there is one type and no conversion. The doc comments here are the ones Kotlin and
+// Swift get.
+
 /// Walking or not.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
-pub enum MotionState {
+#[uniffi::remote(Enum)]
+enum MotionState {
     /// No accelerometer data.
     Unknown,
     /// Still.
@@ -252,8 +260,8 @@ pub enum MotionState {
 }
 
 /// Which motion information the engine had (HIPE's four scenarios).
-#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
-pub enum MotionScenario {
+#[uniffi::remote(Enum)]
+enum MotionScenario {
     /// Steps and heading.
     DistanceHeading,
     /// Steps, no trustworthy heading.
@@ -331,7 +339,8 @@ pub struct PositionEstimate {
 /// either `x` and `y` in the site's frame, or `latitudeDeg` and `longitudeDeg` on a
 /// geo-referenced site (its file has an `anchor`); anything else throws `InputRejected`.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
-pub struct PositionFix {
+#[uniffi(name = "PositionFix")]
+pub struct FfiPositionFix {
     /// When it was measured, ns, on the clock of every other input.
     pub timestamp_ns: u64,
     /// x in the site's metric frame, m.
@@ -355,8 +364,8 @@ pub struct PositionFix {
 }
 
 /// What kind of place a zone is.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
-pub enum ZoneKind {
+#[uniffi::remote(Enum)]
+enum ZoneKind {
     /// A room (an office, a kitchen, a shop).
     Room,
     /// A corridor or aisle.
@@ -384,21 +393,10 @@ pub struct ZoneProbability {
     pub probability: f64,
 }
 
-pub(crate) fn zone_kind(k: waymark_engine::site::ZoneKind) -> ZoneKind {
-    match k {
-        waymark_engine::site::ZoneKind::Room => ZoneKind::Room,
-        waymark_engine::site::ZoneKind::Corridor => ZoneKind::Corridor,
-        waymark_engine::site::ZoneKind::Hall => ZoneKind::Hall,
-        waymark_engine::site::ZoneKind::Stairs => ZoneKind::Stairs,
-        waymark_engine::site::ZoneKind::Lift => ZoneKind::Lift,
-        waymark_engine::site::ZoneKind::Entrance => ZoneKind::Entrance,
-        waymark_engine::site::ZoneKind::Other => ZoneKind::Other,
-    }
-}
-
 /// One point of the smoothed track.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
-pub struct TrackPoint {
+#[uniffi(name = "TrackPoint")]
+pub struct FfiTrackPoint {
     /// Epoch time, ns.
     pub timestamp_ns: u64,
     /// x, m.
@@ -412,7 +410,8 @@ pub struct TrackPoint {
 /// The learned error of external position fixes (`pushFix`): subtract the bias from a fix,
 /// then widen its accuracy by `spread`. The engine does both to every fix it takes.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
-pub struct FixBias {
+#[uniffi(name = "FixBias")]
+pub struct FfiFixBias {
     /// Mean error of the fixes along the site's x axis, m (0 before any fix was learned from).
     pub bias_x_m: f64,
     /// Mean error of the fixes along the site's y axis, m.
@@ -422,15 +421,16 @@ pub struct FixBias {
     pub spread: f64,
 }
 
-impl From<waymark_engine::habits::FixBias> for FixBias {
-    fn from(e: waymark_engine::habits::FixBias) -> Self {
-        Self { bias_x_m: e.bias_m[0], bias_y_m: e.bias_m[1], spread: e.spread }
+impl From<AppFixBias> for FfiFixBias {
+    fn from(e: AppFixBias) -> Self {
+        Self { bias_x_m: e.bias_x_m, bias_y_m: e.bias_y_m, spread: e.spread }
     }
 }
 
 /// What one `learnHabits` pass did.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
-pub struct HabitReport {
+#[uniffi(name = "HabitReport")]
+pub struct FfiHabitReport {
     /// Epochs of the history learned from in this pass (those learned before are skipped); 0
     /// when there was nothing new to learn from.
     pub epochs: u32,
@@ -448,15 +448,14 @@ fn count(n: usize) -> u32 {
     u32::try_from(n).unwrap_or(u32::MAX)
 }
 
-pub(crate) fn habit_report(
-    r: &waymark_engine::habits::HabitReport,
-    model: &waymark_engine::habits::HabitModel,
-) -> HabitReport {
-    HabitReport {
-        epochs: count(r.epochs),
-        total_epochs: model.epochs(),
-        learned_transitions: r.learned_transitions as u64,
-        applied: model.strength().is_some(),
+impl From<AppHabitReport> for FfiHabitReport {
+    fn from(r: AppHabitReport) -> Self {
+        Self {
+            epochs: count(r.epochs),
+            total_epochs: r.total_epochs,
+            learned_transitions: r.learned_transitions as u64,
+            applied: r.applied,
+        }
     }
 }
 
@@ -464,7 +463,8 @@ pub(crate) fn habit_report(
 /// diagnostics screen or logs (a phone whose scans are mostly refused is misconfigured, or
 /// outside the site). Every rejected input also made its call throw.
 #[derive(Clone, Debug, Default, PartialEq, Eq, uniffi::Record)]
-pub struct InputStats {
+#[uniffi(name = "InputStats")]
+pub struct FfiInputStats {
     /// Scans that made a position.
     pub scans_accepted: u64,
     /// Scans refused because their time was not after the last position's.
@@ -513,7 +513,7 @@ pub struct InputStats {
     pub pressure_dropped: u64,
 }
 
-impl From<&engine::InputStats> for InputStats {
+impl From<&engine::InputStats> for FfiInputStats {
     fn from(s: &engine::InputStats) -> Self {
         Self {
             scans_accepted: s.scans_accepted,
@@ -585,7 +585,7 @@ pub enum StatusUpdate {
     /// Earlier positions were revised by later evidence.
     TrackRevised {
         /// The revised points, oldest first.
-        points: Vec<TrackPoint>,
+        points: Vec<FfiTrackPoint>,
     },
     /// The person entered one of the site's zones (its posterior mass reached the engine's
     /// enter threshold; docs/zones.md).
@@ -626,54 +626,50 @@ pub enum StatusUpdate {
     },
 }
 
-fn scenario(s: sensors::MotionScenario) -> MotionScenario {
-    match s {
-        sensors::MotionScenario::DistanceHeading => MotionScenario::DistanceHeading,
-        sensors::MotionScenario::Distance => MotionScenario::Distance,
-        sensors::MotionScenario::HeadingSpeed => MotionScenario::HeadingSpeed,
-        sensors::MotionScenario::Speed => MotionScenario::Speed,
+impl From<AppTrackPoint> for FfiTrackPoint {
+    fn from(p: AppTrackPoint) -> Self {
+        Self { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor }
     }
 }
 
-fn motion_state(s: sensors::MotionState) -> MotionState {
-    match s {
-        sensors::MotionState::Unknown => MotionState::Unknown,
-        sensors::MotionState::Stationary => MotionState::Stationary,
-        sensors::MotionState::Walking => MotionState::Walking,
+impl From<AppPosition<'_>> for PositionEstimate {
+    fn from(p: AppPosition<'_>) -> Self {
+        Self {
+            timestamp_ns: p.timestamp_ns,
+            x: p.x,
+            y: p.y,
+            floor: p.floor,
+            floor_name: p.floor_name.to_owned(),
+            floor_level: p.floor_level,
+            floor_probability: p.floor_probability,
+            latitude_deg: p.latitude_deg,
+            longitude_deg: p.longitude_deg,
+            zone: p.zone_name.map(str::to_owned),
+            zone_probability: p.zone_probability,
+            accuracy_m: p.accuracy_m,
+            accuracy_95_m: p.accuracy_95_m,
+            heading_deg: p.heading_deg,
+            heading_accuracy_deg: p.heading_accuracy_deg,
+            bearing_deg: p.bearing_deg,
+            motion_state: p.motion_state,
+            scenario: p.scenario,
+            steps: p.steps,
+            beyond_radio_m: p.beyond_radio_m,
+        }
     }
 }
 
-pub(crate) fn track_point(p: &engine::TrackPoint) -> TrackPoint {
-    TrackPoint { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor as u32 }
-}
-
+/// The position `p` of an engine on `site`.
 pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
-    let geo = site.lat_lon(p.floor, p.x, p.y);
-    PositionEstimate {
-        timestamp_ns: p.timestamp_ns,
-        x: p.x,
-        y: p.y,
-        floor: p.floor as u32,
-        floor_name: site.floors().get(p.floor).map(|f| f.name.clone()).unwrap_or_default(),
-        floor_level: site.floor_level(p.floor),
-        floor_probability: p.floor_probability,
-        latitude_deg: geo.map(|g| g.lat_deg),
-        longitude_deg: geo.map(|g| g.lon_deg),
-        zone: p.zone.and_then(|z| site.zones().get(z)).map(|z| z.name.clone()),
-        zone_probability: p.zone_probability,
-        accuracy_m: p.accuracy_m,
-        accuracy_95_m: p.accuracy_95_m,
-        heading_deg: p.heading_rad.map(f64::to_degrees),
-        heading_accuracy_deg: p.heading_accuracy_rad.map(f64::to_degrees),
-        bearing_deg: p.heading_rad.and_then(|h| site.bearing_deg(h)),
-        motion_state: motion_state(p.motion_state),
-        scenario: scenario(p.scenario),
-        steps: p.steps,
-        beyond_radio_m: p.beyond_radio_m,
-    }
+    AppPosition::new(p, site).into()
 }
 
-impl PositionFix {
+/// The track point `p`.
+pub(crate) fn track_point(p: &engine::TrackPoint) -> FfiTrackPoint {
+    AppTrackPoint::from(p).into()
+}
+
+impl FfiPositionFix {
     /// The core fix: `x` and `y` as given, or the latitude/longitude in the site's frame
     /// (on the fix's floor, when the floors' frames differ). `Err` says why it is neither.
     pub(crate) fn to_core(self, site: &Site) -> Result<waymark_engine::PositionFix, String> {
@@ -698,34 +694,30 @@ impl PositionFix {
     }
 }
 
-pub(crate) fn status_update(status: &Status, site: &Site) -> StatusUpdate {
-    match status {
-        Status::ScenarioChanged { scenario: s, .. } => {
-            StatusUpdate::ScenarioChanged { scenario: scenario(*s) }
-        }
-        Status::MotionStateChanged { state, .. } => {
-            StatusUpdate::MotionStateChanged { state: motion_state(*state) }
-        }
-        Status::NoSiteCoverage { timestamp_ns } => {
-            StatusUpdate::NoSiteCoverage { timestamp_ns: *timestamp_ns }
-        }
-        Status::TrackRevised { points } => {
-            StatusUpdate::TrackRevised { points: points.iter().map(track_point).collect() }
-        }
-        &Status::Zone { timestamp_ns, zone, entered, probability } => {
-            let zone = site.zones()[zone].name.clone();
-            if entered {
-                StatusUpdate::ZoneEntered { timestamp_ns, zone, probability }
-            } else {
-                StatusUpdate::ZoneExited { timestamp_ns, zone, probability }
+impl From<&AppStatus> for StatusUpdate {
+    fn from(status: &AppStatus) -> Self {
+        match status {
+            &AppStatus::ScenarioChanged { scenario, .. } => StatusUpdate::ScenarioChanged { scenario },
+            &AppStatus::MotionStateChanged { state, .. } => StatusUpdate::MotionStateChanged { state },
+            &AppStatus::NoSiteCoverage { timestamp_ns } => StatusUpdate::NoSiteCoverage { timestamp_ns },
+            AppStatus::TrackRevised { points } => StatusUpdate::TrackRevised {
+                points: points.iter().copied().map(FfiTrackPoint::from).collect(),
+            },
+            AppStatus::Zone { timestamp_ns, name, entered, probability, .. } => {
+                let (timestamp_ns, zone, probability) = (*timestamp_ns, name.clone(), *probability);
+                if *entered {
+                    StatusUpdate::ZoneEntered { timestamp_ns, zone, probability }
+                } else {
+                    StatusUpdate::ZoneExited { timestamp_ns, zone, probability }
+                }
             }
-        }
-        Status::Geofence { timestamp_ns, id, entered, probability } => {
-            let (timestamp_ns, id, probability) = (*timestamp_ns, id.clone(), *probability);
-            if *entered {
-                StatusUpdate::GeofenceEntered { timestamp_ns, id, probability }
-            } else {
-                StatusUpdate::GeofenceExited { timestamp_ns, id, probability }
+            AppStatus::Geofence { timestamp_ns, id, entered, probability } => {
+                let (timestamp_ns, id, probability) = (*timestamp_ns, id.clone(), *probability);
+                if *entered {
+                    StatusUpdate::GeofenceEntered { timestamp_ns, id, probability }
+                } else {
+                    StatusUpdate::GeofenceExited { timestamp_ns, id, probability }
+                }
             }
         }
     }

@@ -2,16 +2,16 @@
 //! and the `RouteTracker` that follows positions along a route (docs/routes.md). A change
 //! here is a possible breaking change for apps (CHANGELOG, "Breaking changes").
 
-use super::{PositionEstimate, PositioningEngine, Site};
+use super::{FfiSite, PositionEstimate, PositioningEngine};
 use crate::ffi::delivery::lock;
-use std::panic::{catch_unwind, AssertUnwindSafe};
 use std::sync::{Arc, Mutex};
-use waymark_engine::route::{self as core, RouteTracker as CoreTracker};
-use waymark_engine::site::Site as CoreSite;
+use waymark_engine::route::{self as core, RouteTracker};
+use waymark_engine::site::Site;
 
 /// A point of the site: a floor index and a position in the site's metric frame, m.
 #[derive(Clone, Copy, Debug, PartialEq, uniffi::Record)]
-pub struct FloorPoint {
+#[uniffi(name = "FloorPoint")]
+pub struct FfiFloorPoint {
     /// Floor index in the site file.
     pub floor: u32,
     /// x in the site's metric frame, m.
@@ -22,11 +22,12 @@ pub struct FloorPoint {
 
 /// Where a route goes.
 #[derive(Clone, Debug, PartialEq, uniffi::Enum)]
-pub enum Destination {
+#[uniffi(name = "Destination")]
+pub enum FfiDestination {
     /// A point: the route ends at the walkable place nearest it on its floor.
     Point {
         /// The point.
-        point: FloorPoint,
+        point: FfiFloorPoint,
     },
     /// A zone of the site (`Site.zoneNames`): the route ends at its nearest place on foot.
     Zone {
@@ -35,10 +36,15 @@ pub enum Destination {
     },
 }
 
+pub use waymark_engine::route::Turn;
+
+// The core's type, exported as it is (a uniffi remote type): its variants are what an app
+// sees. The doc comments here are the ones Kotlin and Swift get.
+
 /// Which way to turn onto a leg, by the angle between the legs: straight under 11°, slight
 /// 11-45°, left / right 45-135°, sharp 135-160°, u-turn from 160°.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, uniffi::Enum)]
-pub enum Turn {
+#[uniffi::remote(Enum)]
+enum Turn {
     /// Under 11° either way.
     Straight,
     /// 11-45° to the left.
@@ -55,21 +61,6 @@ pub enum Turn {
     SharpRight,
     /// 160° or more: back the way the user came.
     UTurn,
-}
-
-impl From<core::Turn> for Turn {
-    fn from(t: core::Turn) -> Self {
-        match t {
-            core::Turn::Straight => Turn::Straight,
-            core::Turn::SlightLeft => Turn::SlightLeft,
-            core::Turn::SlightRight => Turn::SlightRight,
-            core::Turn::Left => Turn::Left,
-            core::Turn::Right => Turn::Right,
-            core::Turn::SharpLeft => Turn::SharpLeft,
-            core::Turn::SharpRight => Turn::SharpRight,
-            core::Turn::UTurn => Turn::UTurn,
-        }
-    }
 }
 
 /// One leg of a route: a straight walk on one floor, or a change of floor (stairs, a lift).
@@ -89,20 +80,21 @@ pub struct RouteLeg {
     /// The signed angle of that turn, degrees, positive to the left.
     pub turn_deg: Option<f64>,
     /// The places it passes, first to last, for drawing (each on its own floor).
-    pub points: Vec<FloorPoint>,
+    pub points: Vec<FfiFloorPoint>,
 }
 
 /// A route over the site's walkable graph.
 #[derive(Clone, Debug, PartialEq, uniffi::Record)]
-pub struct Route {
+#[uniffi(name = "Route")]
+pub struct FfiRoute {
     /// Its legs in walking order; empty when the start is already at the destination.
     pub legs: Vec<RouteLeg>,
     /// Walking length, m: the sum of the legs'.
     pub length_m: f64,
     /// Where it starts: the walkable place nearest the origin.
-    pub start: FloorPoint,
+    pub start: FfiFloorPoint,
     /// Where it ends.
-    pub end: FloorPoint,
+    pub end: FfiFloorPoint,
     /// Straight-line distance from the origin to `start`, m (not part of the route).
     pub start_snap_m: f64,
     /// Straight-line distance from a destination point to `end`, m; 0 for a zone.
@@ -130,7 +122,8 @@ pub struct RouteProgress {
 
 /// Why no route was made, or a position was not taken.
 #[derive(Clone, Debug, PartialEq, thiserror::Error, uniffi::Error)]
-pub enum RouteError {
+#[uniffi(name = "RouteError")]
+pub enum FfiRouteError {
     /// The destination names a zone the site does not have.
     #[error("unknown zone: {name}")]
     UnknownZone {
@@ -163,47 +156,48 @@ pub enum RouteError {
     },
 }
 
-impl From<core::RouteError> for RouteError {
+impl From<core::RouteError> for FfiRouteError {
     fn from(e: core::RouteError) -> Self {
         match e {
-            core::RouteError::UnknownZone(name) => RouteError::UnknownZone { name },
+            core::RouteError::UnknownZone(name) => FfiRouteError::UnknownZone { name },
             e @ (core::RouteError::UnknownFloor { .. }
             | core::RouteError::NotFinite(_)
-            | core::RouteError::OffGraph { .. }) => RouteError::OffGraph { reason: e.to_string() },
-            e @ core::RouteError::Unreachable { .. } => RouteError::Unreachable { reason: e.to_string() },
-            core::RouteError::NoPosition => RouteError::NoPosition,
+            | core::RouteError::OffGraph { .. }) => FfiRouteError::OffGraph { reason: e.to_string() },
+            e @ core::RouteError::Unreachable { .. } => FfiRouteError::Unreachable { reason: e.to_string() },
+            core::RouteError::NoPosition => FfiRouteError::NoPosition,
         }
     }
 }
 
-impl From<uniffi::UnexpectedUniFFICallbackError> for RouteError {
+impl From<uniffi::UnexpectedUniFFICallbackError> for FfiRouteError {
     fn from(e: uniffi::UnexpectedUniFFICallbackError) -> Self {
-        RouteError::Internal { reason: format!("foreign callback failed: {}", e.reason) }
+        FfiRouteError::Internal { reason: format!("foreign callback failed: {}", e.reason) }
     }
 }
 
-/// Runs `f`, turning a panic into `Internal`.
-fn guarded<T>(f: impl FnOnce() -> Result<T, RouteError>) -> Result<T, RouteError> {
-    catch_unwind(AssertUnwindSafe(f))
-        .unwrap_or_else(|_| Err(RouteError::Internal { reason: "Waymark panicked; nothing changed".into() }))
+/// Runs `f`, turning a panic into `Internal` (`ffi::panic`).
+fn guarded<T>(f: impl FnOnce() -> Result<T, FfiRouteError>) -> Result<T, FfiRouteError> {
+    crate::ffi::panic::or_internal(f, || FfiRouteError::Internal {
+        reason: "Waymark panicked; nothing changed".into(),
+    })
 }
 
-fn point(p: &FloorPoint) -> core::FloorPoint {
+fn point(p: &FfiFloorPoint) -> core::FloorPoint {
     core::FloorPoint::new(p.floor as usize, p.x, p.y)
 }
 
-fn floor_point(p: &core::FloorPoint) -> FloorPoint {
-    FloorPoint { floor: p.floor as u32, x: p.x, y: p.y }
+fn floor_point(p: &core::FloorPoint) -> FfiFloorPoint {
+    FfiFloorPoint { floor: p.floor as u32, x: p.x, y: p.y }
 }
 
-fn destination(d: &Destination) -> core::Destination {
+fn destination(d: &FfiDestination) -> core::Destination {
     match d {
-        Destination::Point { point: p } => core::Destination::Point(point(p)),
-        Destination::Zone { name } => core::Destination::Zone(name.clone()),
+        FfiDestination::Point { point: p } => core::Destination::Point(point(p)),
+        FfiDestination::Zone { name } => core::Destination::Zone(name.clone()),
     }
 }
 
-fn route(r: &core::Route) -> Route {
+fn route(r: &core::Route) -> FfiRoute {
     let legs = r
         .legs()
         .iter()
@@ -212,12 +206,12 @@ fn route(r: &core::Route) -> Route {
             to_floor: l.to_floor as u32,
             floor_change: l.is_floor_change(),
             distance_m: l.distance_m,
-            turn: l.turn.map(Turn::from),
+            turn: l.turn,
             turn_deg: l.turn_angle_rad.map(f64::to_degrees),
             points: r.points()[l.first..=l.last].iter().map(floor_point).collect(),
         })
         .collect();
-    Route {
+    FfiRoute {
         legs,
         length_m: r.length_m(),
         start: floor_point(&r.start()),
@@ -238,13 +232,13 @@ fn progress(p: &core::Progress) -> RouteProgress {
     }
 }
 
-#[uniffi::export]
-impl Site {
+#[uniffi::export(name = "Site")]
+impl FfiSite {
     /// The shortest walkable route from `from` to `destination`, over the site's walkable
     /// graph, floor changes included where the site has stairs or lifts. `from` snaps to the
     /// nearest walkable place on its floor within the site's spacing. Throws `UnknownZone`,
     /// `OffGraph` or `Unreachable`.
-    pub fn route(&self, from: FloorPoint, destination: Destination) -> Result<Route, RouteError> {
+    pub fn route(&self, from: FfiFloorPoint, destination: FfiDestination) -> Result<FfiRoute, FfiRouteError> {
         guarded(|| {
             Ok(route(&core::Route::plan(&self.inner, &point(&from), &self::destination(&destination))?))
         })
@@ -256,7 +250,7 @@ impl PositioningEngine {
     /// The route from the latest position to `destination` (the position snaps within the
     /// site's spacing plus its accuracy). Throws `NoPosition` before the first epoch, else as
     /// `Site.route`.
-    pub fn route_to(&self, destination: Destination) -> Result<Route, RouteError> {
+    pub fn route_to(&self, destination: FfiDestination) -> Result<FfiRoute, FfiRouteError> {
         guarded(|| {
             let tracker = self.tracker_to(&destination)?;
             Ok(route(tracker.route()))
@@ -265,24 +259,24 @@ impl PositioningEngine {
 
     /// A tracker on the route from the latest position to `destination`, to follow it as
     /// positions arrive (`RouteTracker.update`). Throws as `routeTo`.
-    pub fn navigate_to(&self, destination: Destination) -> Result<Arc<RouteTracker>, RouteError> {
+    pub fn navigate_to(&self, destination: FfiDestination) -> Result<Arc<FfiRouteTracker>, FfiRouteError> {
         guarded(|| {
             let tracker = self.tracker_to(&destination)?;
-            Ok(Arc::new(RouteTracker { site: Arc::clone(self.handle.site()), inner: Mutex::new(tracker) }))
+            Ok(Arc::new(FfiRouteTracker { site: Arc::clone(self.handle.site()), inner: Mutex::new(tracker) }))
         })
     }
 }
 
 impl PositioningEngine {
-    fn tracker_to(&self, to: &Destination) -> Result<CoreTracker, RouteError> {
+    fn tracker_to(&self, to: &FfiDestination) -> Result<RouteTracker, FfiRouteError> {
         let position = self
             .handle
             .read(|e| e.position().cloned())
-            .map_err(|e| RouteError::Internal { reason: e.to_string() })?
-            .ok_or(RouteError::NoPosition)?;
+            .map_err(|e| FfiRouteError::Internal { reason: e.to_string() })?
+            .ok_or(FfiRouteError::NoPosition)?;
         let from = core::FloorPoint::new(position.floor, position.x, position.y);
         let route = core::Route::plan_from(self.handle.site(), &from, position.accuracy_m, &destination(to))?;
-        let mut tracker = CoreTracker::new(route);
+        let mut tracker = RouteTracker::new(route);
         tracker.update(&from, position.accuracy_m)?;
         Ok(tracker)
     }
@@ -291,43 +285,52 @@ impl PositioningEngine {
 /// Follows a route as positions arrive: distance remaining, the current leg, arrival, and
 /// whether the user left the route (then call `reroute`). Thread-safe.
 #[derive(uniffi::Object)]
-pub struct RouteTracker {
-    site: Arc<CoreSite>,
-    inner: Mutex<CoreTracker>,
+#[uniffi(name = "RouteTracker")]
+pub struct FfiRouteTracker {
+    site: Arc<Site>,
+    inner: Mutex<RouteTracker>,
 }
 
-#[uniffi::export]
-impl RouteTracker {
+#[uniffi::export(name = "RouteTracker")]
+impl FfiRouteTracker {
     /// A tracker on the route from `from` to `destination` on `site`; throws as `Site.route`.
     #[uniffi::constructor]
-    pub fn new(site: Arc<Site>, from: FloorPoint, destination: Destination) -> Result<Arc<Self>, RouteError> {
+    pub fn new(
+        site: Arc<FfiSite>,
+        from: FfiFloorPoint,
+        destination: FfiDestination,
+    ) -> Result<Arc<Self>, FfiRouteError> {
         guarded(|| {
             let route = core::Route::plan(&site.inner, &point(&from), &self::destination(&destination))?;
-            Ok(Arc::new(Self { site: Arc::clone(&site.inner), inner: Mutex::new(CoreTracker::new(route)) }))
+            Ok(Arc::new(Self { site: Arc::clone(&site.inner), inner: Mutex::new(RouteTracker::new(route)) }))
         })
     }
 
     /// The route followed.
-    pub fn route(&self) -> Route {
+    pub fn route(&self) -> FfiRoute {
         route(lock(&self.inner).route())
     }
 
     /// Takes a position from the engine and says where it puts the user on the route.
     /// Throws `OffGraph`, changing nothing, for a NaN or infinite value or an unknown floor.
-    pub fn update(&self, position: PositionEstimate) -> Result<RouteProgress, RouteError> {
-        let at = FloorPoint { floor: position.floor, x: position.x, y: position.y };
+    pub fn update(&self, position: PositionEstimate) -> Result<RouteProgress, FfiRouteError> {
+        let at = FfiFloorPoint { floor: position.floor, x: position.x, y: position.y };
         self.update_point(at, position.accuracy_m)
     }
 
     /// As `update`, from a position given as a point and the radius of its 68% circle, m.
-    pub fn update_point(&self, point: FloorPoint, accuracy_m: f64) -> Result<RouteProgress, RouteError> {
+    pub fn update_point(
+        &self,
+        point: FfiFloorPoint,
+        accuracy_m: f64,
+    ) -> Result<RouteProgress, FfiRouteError> {
         guarded(|| Ok(progress(&lock(&self.inner).update(&self::point(&point), accuracy_m)?)))
     }
 
     /// Plans a new route to the same destination from the latest position given to
     /// `update`, and follows it from its start. Throws `NoPosition` before the first
     /// update, else as `Site.route`; on an error the tracker keeps its route.
-    pub fn reroute(&self) -> Result<Route, RouteError> {
+    pub fn reroute(&self) -> Result<FfiRoute, FfiRouteError> {
         guarded(|| Ok(route(lock(&self.inner).reroute(&self.site, None)?)))
     }
 }
