@@ -1,5 +1,6 @@
 //! The crate's error types.
 
+use crate::sensors::MotionConfigError;
 use crate::site::SiteError;
 
 /// Everything that can go wrong in Waymark.
@@ -14,6 +15,13 @@ pub enum Error {
     /// An input was rejected; the engine is unchanged.
     #[error(transparent)]
     Input(#[from] InputError),
+}
+
+impl From<MotionConfigError> for Error {
+    /// A motion configuration field out of range is the engine's configuration out of range.
+    fn from(e: MotionConfigError) -> Self {
+        Error::InvalidConfig(e.0)
+    }
 }
 
 /// Why an input was rejected. A rejected input leaves the engine exactly as it was, and is
@@ -110,3 +118,4 @@ pub enum InputError {
         limit_m: f64,
     },
 }
+
