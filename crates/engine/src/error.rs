@@ -1,5 +1,6 @@
 //! The crate's error types.
 
+use crate::radio::ScanError;
 use crate::sensors::MotionConfigError;
 use crate::site::SiteError;
 
@@ -56,7 +57,7 @@ pub enum InputError {
         /// Its transmitter.
         transmitter: String,
     },
-    /// A reading's RSSI is above [`MAX_RSSI_DBM`](crate::engine::MAX_RSSI_DBM) (+100 dBm), which
+    /// A reading's RSSI is above [`MAX_RSSI_DBM`](crate::radio::MAX_RSSI_DBM) (+100 dBm), which
     /// no receiver reports: the scan is corrupt and is rejected whole.
     #[error("reading {index} ({transmitter}) has an RSSI of {rssi_dbm} dBm, above any receiver's")]
     RssiTooHigh {
@@ -119,3 +120,18 @@ pub enum InputError {
     },
 }
 
+impl From<ScanError> for InputError {
+    /// A scan whose readings fail [`check_readings`](crate::radio::check_readings) is rejected
+    /// as the input error of the same name.
+    fn from(e: ScanError) -> Self {
+        match e {
+            ScanError::EmptyScan => InputError::EmptyScan,
+            ScanError::NonFiniteRssi { index, transmitter } => {
+                InputError::NonFiniteRssi { index, transmitter }
+            }
+            ScanError::RssiTooHigh { index, transmitter, rssi_dbm } => {
+                InputError::RssiTooHigh { index, transmitter, rssi_dbm }
+            }
+        }
+    }
+}

@@ -22,17 +22,10 @@ use crate::sensors::{Barometer, MotionStats, MotionTracker, MotionUpdate};
 use crate::site::{FloorReliability, ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
-pub(crate) use epoch::check_readings;
+pub use crate::radio::MAX_RSSI_DBM;
 pub use types::{
     EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent, TrackPoint,
 };
-
-/// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
-/// BLE transmit at most +36 dBm EIRP. A higher value is a corrupt producer, and one far higher
-/// (found by fuzzing, `engine_calls`: `f64::MAX` dBm) makes every state's log-likelihood
-/// -∞, so no state explains the scan. Values at or below the clip level are fine: they read as
-/// "not heard".
-pub const MAX_RSSI_DBM: f64 = 100.0;
 
 /// An epoch (a scan or an advance) at this time panics after it has stepped the filter and
 /// the track, moved the clock, raised the counters and worked out its status events, just

@@ -28,9 +28,8 @@ use error::io_error;
 use options::{check_header_text, check_name};
 use output::{open_file, Opener, Output};
 
-use crate::engine::check_readings;
 use crate::error::InputError;
-use crate::radio::{Scan, TransmitterId};
+use crate::radio::{check_readings, Scan, TransmitterId};
 use crate::sensors::{refuse_ahead, BatchReport, MotionConfig, SensorSample, MAX_TIMESTAMP_NS};
 use std::fmt::Write as _;
 use std::path::PathBuf;
