@@ -5,6 +5,7 @@
 //! The engine is single-threaded and deterministic, so a replay is exact; the FFI layer puts
 //! it behind a lock.
 
+mod calibration;
 mod epoch;
 mod input;
 mod presence;
