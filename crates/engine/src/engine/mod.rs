@@ -8,8 +8,8 @@
 mod calibration;
 mod epoch;
 mod input;
+mod prediction;
 mod presence;
-mod transition;
 mod types;
 mod vertical;
 
@@ -52,7 +52,7 @@ pub struct Engine {
     /// `None` when the configuration turns the track off.
     viterbi: Option<ViterbiWindow>,
     /// The filter's last steps, for the fixed-lag estimate.
-    smoother: FixedLagSmoother<transition::StepModel>,
+    smoother: FixedLagSmoother<prediction::StepModel>,
     tracker: MotionTracker,
     ln_emission: Vec<f64>,
     scratch: Vec<(f64, f64)>,
