@@ -218,12 +218,12 @@ impl Engine {
         })
     }
 
-    /// For the survey's calibration, not apps: takes each scan's likelihoods from `shared`,
-    /// which the other engines replaying walks on this same site fill, instead of computing
-    /// them again ([`SharedEmissions`]). The positions are the same to the bit. `Err` when
-    /// `shared` is of another radio map (another allocation, even if equal: a site and its
-    /// copies share theirs).
-    #[doc(hidden)]
+    /// Takes each scan's likelihoods (Hoang eqs. 9-10) from `shared`, which the other engines
+    /// on this site's radio map fill, instead of computing them again ([`SharedEmissions`]):
+    /// for tools that replay many walks on one site, such as the survey's calibration and the
+    /// evaluation (docs/tuning.md#evaluation-speed). An app runs one engine per site and has no
+    /// use for it. The positions are the same to the bit. `Err` when `shared` is of another
+    /// radio map (another allocation, even if equal: a site and its copies share theirs).
     pub fn share_emissions(&mut self, shared: Arc<SharedEmissions>) -> Result<(), Error> {
         if !shared.is_of(&self.site) {
             return Err(Error::InvalidConfig("scan likelihoods shared from another site".into()));
@@ -308,8 +308,10 @@ impl Engine {
         self.smoother.memory_bytes()
     }
 
-    /// The engine's state, for tests (see [`EngineSnapshot`]).
-    #[doc(hidden)]
+    /// Everything the engine holds that decides its later answers ([`EngineSnapshot`]), for
+    /// tests that check a rejected or panicking call left it as it was. Only with the
+    /// `fault-injection` feature, which test builds turn on.
+    #[cfg(feature = "fault-injection")]
     pub fn snapshot(&self) -> EngineSnapshot {
         EngineSnapshot {
             last_epoch_ns: self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns),
