@@ -3,8 +3,9 @@
 use std::path::{Path, PathBuf};
 
 /// Why a recorder call failed. A call that fails writes and counts nothing. After
-/// [`RecorderError::Io`] every call but [`SurveyRecorder::resume`](super::SurveyRecorder::resume) and
-/// [`SurveyRecorder::stats`](super::SurveyRecorder::stats) fails with the same error until `resume` succeeds.
+/// [`RecorderError::Io`] every call but [`SurveyRecorder::resume`](super::SurveyRecorder::resume)
+/// and [`SurveyRecorder::stats`](super::SurveyRecorder::stats) fails with the same error until
+/// `resume` succeeds.
 #[derive(Clone, Debug, thiserror::Error)]
 pub enum RecorderError {
     /// Creating or writing a walk file failed (or the file exists: a recording never

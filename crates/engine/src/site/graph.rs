@@ -16,12 +16,13 @@ pub struct Floor {
     /// basement), as Core Location's `CLFloor.level`; `None` when the site file gives none.
     pub level: Option<i32>,
     /// Where this floor's frame has its origin in the site frame, m: (0, 0) when every floor is
-    /// drawn in the site frame; the plans of a survey that frames each floor on its own box
-    /// (the competition's) differ ([`Site::lat_lon`](super::Site::lat_lon) adds it before the anchor).
+    /// drawn in the site frame; the plans of a survey that frames each floor on its own box (the
+    /// competition's) differ ([`Site::lat_lon`](super::Site::lat_lon) adds it before the anchor).
     pub origin_m: [f64; 2],
-    /// γ of Hoang eq. 14 while the engine is on this floor (its latest estimate's floor), in
-    /// epochs with a movement likelihood, chosen by leave-one-walk-out over the floor's survey
-    /// walks (Hoang §6.2's jackknife). `None`: the site-wide [`Calibration::rssi_weight`](super::Calibration::rssi_weight).
+    /// γ of Hoang eq. 14 while the engine is on this floor (its latest estimate's floor), in epochs
+    /// with a movement likelihood, chosen by leave-one-walk-out over the floor's survey walks
+    /// (Hoang §6.2's jackknife). `None`: the site-wide
+    /// [`Calibration::rssi_weight`](super::Calibration::rssi_weight).
     pub rssi_weight: Option<f64>,
     /// The same in epochs without a movement likelihood; `None`: the site-wide
     /// [`Calibration::rssi_weight_without_movement`](super::Calibration::rssi_weight_without_movement).

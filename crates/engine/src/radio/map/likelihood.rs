@@ -95,20 +95,19 @@ impl RadioMap {
         absent * self.unheard_ln_absent + terms.shared
     }
 
-    /// One scan's measurement of the phone's RSSI offset ([`DeviceOffset`](crate::radio::DeviceOffset),
-    /// docs/accuracy.md#device-offset): for each reading heard above the clip level, the
-    /// reading less the mean μ of the fingerprints of the states that model its transmitter,
-    /// weighted by `weights` (where the phone is believed to be, a distribution over states).
-    /// A transmitter counts only where the states that model it hold at least half the weight
-    /// (elsewhere the belief says little about what it should read), and where that mean, moved
-    /// by the current estimate `offset_db`, is two σ or more above the clip level (nearer it,
-    /// the phone hears only the readings that came out strong, and their residual is biased
-    /// upwards). Returns the mean residual and its variance, the mean over the transmitters
-    /// of each reading's variance given the belief (its fingerprints' σ² and the spread of μ
-    /// over the believed states): one scan's residuals
-    /// share where the phone was believed to be, so they count as one reading, not as many
-    /// independent ones (were the belief a few metres off, every transmitter would say so
-    /// together); `None` when none counts.
+    /// One scan's measurement of the phone's RSSI offset
+    /// ([`DeviceOffset`](crate::radio::DeviceOffset), docs/accuracy.md#device-offset): for each
+    /// reading heard above the clip level, the reading less the mean μ of the fingerprints of the
+    /// states that model its transmitter, weighted by `weights` (where the phone is believed to be,
+    /// a distribution over states). A transmitter counts only where the states that model it hold
+    /// at least half the weight (elsewhere the belief says little about what it should read), and
+    /// where that mean, moved by the current estimate `offset_db`, is two σ or more above the clip
+    /// level (nearer it, the phone hears only the readings that came out strong, and their residual
+    /// is biased upwards). Returns the mean residual and its variance, the mean over the
+    /// transmitters of each reading's variance given the belief (its fingerprints' σ² and the
+    /// spread of μ over the believed states): one scan's residuals share where the phone was
+    /// believed to be, so they count as one reading, not as many independent ones (were the belief
+    /// a few metres off, every transmitter would say so together); `None` when none counts.
     pub fn offset_residual(
         &self,
         observations: &[(u32, f64)],
