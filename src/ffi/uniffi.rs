@@ -170,8 +170,9 @@ impl PositioningEngine {
     }
 
     /// The core engine's state and the last position in FFI form, for tests that check a
-    /// failed call changed nothing. Not part of the Kotlin / Swift API.
-    #[doc(hidden)]
+    /// failed call changed nothing. Not part of the Kotlin / Swift API: only with the
+    /// `fault-injection` feature, which test builds turn on.
+    #[cfg(feature = "fault-injection")]
     pub fn snapshot(&self) -> (engine::EngineSnapshot, Option<PositionEstimate>) {
         let engine = self.handle.lock_engine();
         (engine.snapshot(), engine.position().map(|p| estimate(p, self.handle.site())))

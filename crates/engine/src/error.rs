@@ -1,5 +1,7 @@
 //! The crate's error types.
 
+use crate::radio::ScanError;
+use crate::sensors::MotionConfigError;
 use crate::site::SiteError;
 
 /// Everything that can go wrong in Waymark.
@@ -14,6 +16,13 @@ pub enum Error {
     /// An input was rejected; the engine is unchanged.
     #[error(transparent)]
     Input(#[from] InputError),
+}
+
+impl From<MotionConfigError> for Error {
+    /// A motion configuration field out of range is the engine's configuration out of range.
+    fn from(e: MotionConfigError) -> Self {
+        Error::InvalidConfig(e.0)
+    }
 }
 
 /// Why an input was rejected. A rejected input leaves the engine exactly as it was, and is
@@ -48,7 +57,7 @@ pub enum InputError {
         /// Its transmitter.
         transmitter: String,
     },
-    /// A reading's RSSI is above [`MAX_RSSI_DBM`](crate::engine::MAX_RSSI_DBM) (+100 dBm), which
+    /// A reading's RSSI is above [`MAX_RSSI_DBM`](crate::radio::MAX_RSSI_DBM) (+100 dBm), which
     /// no receiver reports: the scan is corrupt and is rejected whole.
     #[error("reading {index} ({transmitter}) has an RSSI of {rssi_dbm} dBm, above any receiver's")]
     RssiTooHigh {
@@ -109,4 +118,20 @@ pub enum InputError {
         /// The most it may be, m.
         limit_m: f64,
     },
+}
+
+impl From<ScanError> for InputError {
+    /// A scan whose readings fail [`check_readings`](crate::radio::check_readings) is rejected
+    /// as the input error of the same name.
+    fn from(e: ScanError) -> Self {
+        match e {
+            ScanError::EmptyScan => InputError::EmptyScan,
+            ScanError::NonFiniteRssi { index, transmitter } => {
+                InputError::NonFiniteRssi { index, transmitter }
+            }
+            ScanError::RssiTooHigh { index, transmitter, rssi_dbm } => {
+                InputError::RssiTooHigh { index, transmitter, rssi_dbm }
+            }
+        }
+    }
 }

@@ -1,11 +1,11 @@
 //! One epoch: the scan's emissions, the filter step, the estimate and what it returns.
 
 use super::input::check_motion;
-use super::{Engine, Epoch, Position, StatusEvent, TrackPoint, MAX_RSSI_DBM};
+use super::{Engine, Epoch, Position, StatusEvent, TrackPoint};
 use crate::error::InputError;
 use crate::history::{EpochInput, EpochRecord, History};
 use crate::hmm::estimate;
-use crate::radio::Scan;
+use crate::radio::{check_readings, Scan};
 use crate::sensors::MotionUpdate;
 use crate::site::{most_likely_zone, scaled_radii};
 
@@ -341,31 +341,6 @@ fn best_fingerprinted(ln_emission: &[f64], unsurveyed: &[u32], silent: &[bool]) 
         }
     }
     best
-}
-
-/// The checks a scan's readings pass before anything is done with them (an engine's epoch, a
-/// survey recording): at least one reading, every RSSI plausible and not above
-/// [`MAX_RSSI_DBM`].
-pub(crate) fn check_readings(scan: &Scan) -> Result<(), InputError> {
-    if scan.readings.is_empty() {
-        return Err(InputError::EmptyScan);
-    }
-    if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| !plausible_rssi(r.rssi_dbm)) {
-        return Err(InputError::NonFiniteRssi { index, transmitter: r.transmitter.to_string() });
-    }
-    if let Some((index, r)) = scan.readings.iter().enumerate().find(|(_, r)| r.rssi_dbm > MAX_RSSI_DBM) {
-        let transmitter = r.transmitter.to_string();
-        return Err(InputError::RssiTooHigh { index, transmitter, rssi_dbm: r.rssi_dbm });
-    }
-    Ok(())
-}
-
-/// Whether an RSSI can be a measurement, as far as its lower end goes: finite and not below
-/// -1000 dBm (receivers report about -120 to +20). Below that it is a corrupt producer, as NaN
-/// is, and near -1e154 the squared deviation of every fingerprint overflows, so no state could
-/// explain the scan. Above [`MAX_RSSI_DBM`] is `RssiTooHigh`.
-fn plausible_rssi(rssi_dbm: f64) -> bool {
-    rssi_dbm.is_finite() && rssi_dbm >= -1000.0
 }
 
 impl Position {

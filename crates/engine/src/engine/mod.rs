@@ -5,10 +5,11 @@
 //! The engine is single-threaded and deterministic, so a replay is exact; the FFI layer puts
 //! it behind a lock.
 
+mod calibration;
 mod epoch;
 mod input;
+mod prediction;
 mod presence;
-mod transition;
 mod types;
 mod vertical;
 
@@ -22,17 +23,10 @@ use crate::sensors::{Barometer, MotionStats, MotionTracker, MotionUpdate};
 use crate::site::{FloorReliability, ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
-pub(crate) use epoch::check_readings;
+pub use crate::radio::MAX_RSSI_DBM;
 pub use types::{
     EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent, TrackPoint,
 };
-
-/// The highest RSSI a scan may report, dBm: +100 dBm is 10 kW at the antenna, where WiFi and
-/// BLE transmit at most +36 dBm EIRP. A higher value is a corrupt producer, and one far higher
-/// (found by fuzzing, `engine_calls`: `f64::MAX` dBm) makes every state's log-likelihood
-/// -∞, so no state explains the scan. Values at or below the clip level are fine: they read as
-/// "not heard".
-pub const MAX_RSSI_DBM: f64 = 100.0;
 
 /// An epoch (a scan or an advance) at this time panics after it has stepped the filter and
 /// the track, moved the clock, raised the counters and worked out its status events, just
@@ -58,7 +52,7 @@ pub struct Engine {
     /// `None` when the configuration turns the track off.
     viterbi: Option<ViterbiWindow>,
     /// The filter's last steps, for the fixed-lag estimate.
-    smoother: FixedLagSmoother<transition::StepModel>,
+    smoother: FixedLagSmoother<prediction::StepModel>,
     tracker: MotionTracker,
     ln_emission: Vec<f64>,
     scratch: Vec<(f64, f64)>,
@@ -224,12 +218,12 @@ impl Engine {
         })
     }
 
-    /// For the survey's calibration, not apps: takes each scan's likelihoods from `shared`,
-    /// which the other engines replaying walks on this same site fill, instead of computing
-    /// them again ([`SharedEmissions`]). The positions are the same to the bit. `Err` when
-    /// `shared` is of another radio map (another allocation, even if equal: a site and its
-    /// copies share theirs).
-    #[doc(hidden)]
+    /// Takes each scan's likelihoods (Hoang eqs. 9-10) from `shared`, which the other engines
+    /// on this site's radio map fill, instead of computing them again ([`SharedEmissions`]):
+    /// for tools that replay many walks on one site, such as the survey's calibration and the
+    /// evaluation (docs/tuning.md#evaluation-speed). An app runs one engine per site and has no
+    /// use for it. The positions are the same to the bit. `Err` when `shared` is of another
+    /// radio map (another allocation, even if equal: a site and its copies share theirs).
     pub fn share_emissions(&mut self, shared: Arc<SharedEmissions>) -> Result<(), Error> {
         if !shared.is_of(&self.site) {
             return Err(Error::InvalidConfig("scan likelihoods shared from another site".into()));
@@ -314,8 +308,10 @@ impl Engine {
         self.smoother.memory_bytes()
     }
 
-    /// The engine's state, for tests (see [`EngineSnapshot`]).
-    #[doc(hidden)]
+    /// Everything the engine holds that decides its later answers ([`EngineSnapshot`]), for
+    /// tests that check a rejected or panicking call left it as it was. Only with the
+    /// `fault-injection` feature, which test builds turn on.
+    #[cfg(feature = "fault-injection")]
     pub fn snapshot(&self) -> EngineSnapshot {
         EngineSnapshot {
             last_epoch_ns: self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns),

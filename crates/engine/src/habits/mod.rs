@@ -40,6 +40,7 @@
 
 mod file;
 mod learn;
+mod options;
 mod prior;
 
 use crate::hmm::learn::LearnError;
@@ -47,8 +48,8 @@ use crate::site::Site;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
-pub use crate::config::HabitOptions;
 pub use learn::clustered_ratio;
+pub use options::HabitOptions;
 pub use prior::{HabitPrior, Habitual};
 
 /// The `format` field of an exported model.
@@ -74,16 +75,6 @@ const NEGLIGIBLE_COUNT: f64 = 1e-6;
 /// where a state needs about a thousand passes through it per reachable neighbour before its
 /// habits double a move's weight. A log grid, as for γ.
 pub const STRENGTHS: [f64; 7] = [1.0, 3.0, 10.0, 30.0, 100.0, 300.0, 1000.0];
-
-impl HabitOptions {
-    /// Checks every field.
-    pub fn check(&self) -> Result<(), HabitError> {
-        match self.invalid_field() {
-            Some((path, message)) => Err(HabitError::Invalid { path, message }),
-            None => Ok(()),
-        }
-    }
-}
 
 /// Why habits could not be learned, imported or applied. Nothing changes when one is returned.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]

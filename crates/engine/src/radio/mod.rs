@@ -1,11 +1,14 @@
 //! Radio: transmitter identities, scans as the app delivers them, RSSI models (Hoang §3) and the
 //! radio map that turns a scan into one log-likelihood per state.
 
+mod check;
 mod gaussian;
 mod hash;
 mod map;
 mod offset;
 
+pub use check::MAX_RSSI_DBM;
+pub(crate) use check::{check_readings, ScanError};
 pub use gaussian::{
     fit_censored, fit_naive, ln_std_normal_cdf, ln_std_normal_cdf_tabled, ln_std_normal_pdf,
     lower_tail_hazard, unheard_model, CensoredFit, FitOptions, Gaussian, LnCdfTable, RssiModel,

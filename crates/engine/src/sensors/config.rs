@@ -4,7 +4,6 @@
 //! shaken, walks past steel), one field changed at a time, and real walks, in
 //! `docs/tuning.md#step-detector` and `#heading-filter`.
 
-use crate::error::Error;
 use serde::{Deserialize, Serialize};
 use std::f64::consts::PI;
 
@@ -263,21 +262,27 @@ impl Default for MotionConfig {
     }
 }
 
+/// A [`MotionConfig`] field out of range; the message names the field and the rule. The
+/// engine reports it as [`Error::InvalidConfig`](crate::Error::InvalidConfig).
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+#[error("invalid configuration: {0}")]
+pub struct MotionConfigError(pub String);
+
 impl MotionConfig {
     /// Checks every field; the message names the field and the rule.
-    pub fn validate(&self) -> Result<(), Error> {
-        fn positive(name: &str, v: f64) -> Result<(), Error> {
+    pub fn validate(&self) -> Result<(), MotionConfigError> {
+        fn positive(name: &str, v: f64) -> Result<(), MotionConfigError> {
             if v.is_finite() && v > 0.0 {
                 Ok(())
             } else {
-                Err(Error::InvalidConfig(format!("{name} must be finite and > 0 (got {v})")))
+                Err(MotionConfigError(format!("{name} must be finite and > 0 (got {v})")))
             }
         }
-        fn finite(name: &str, v: f64) -> Result<(), Error> {
+        fn finite(name: &str, v: f64) -> Result<(), MotionConfigError> {
             if v.is_finite() {
                 Ok(())
             } else {
-                Err(Error::InvalidConfig(format!("{name} must be finite (got {v})")))
+                Err(MotionConfigError(format!("{name} must be finite (got {v})")))
             }
         }
         match self.step_length {
@@ -293,7 +298,7 @@ impl MotionConfig {
         if let Some(field) = self.earth_field {
             positive("earth_field.magnitude_ut", field.magnitude_ut)?;
             if !(field.dip_rad.is_finite() && field.dip_rad.abs() <= PI / 2.0) {
-                return Err(Error::InvalidConfig(format!(
+                return Err(MotionConfigError(format!(
                     "earth_field.dip_rad must be within ±π/2 (got {})",
                     field.dip_rad
                 )));
@@ -306,7 +311,7 @@ impl MotionConfig {
         positive("step_threshold_mps2", self.step_threshold_mps2)?;
         finite("step_rearm_mps2", self.step_rearm_mps2)?;
         if self.step_rearm_mps2 >= self.step_threshold_mps2 {
-            return Err(Error::InvalidConfig(format!(
+            return Err(MotionConfigError(format!(
                 "step_rearm_mps2 ({}) must be below step_threshold_mps2 ({})",
                 self.step_rearm_mps2, self.step_threshold_mps2
             )));
@@ -316,13 +321,13 @@ impl MotionConfig {
         positive("min_cadence_hz", self.min_cadence_hz)?;
         positive("max_cadence_hz", self.max_cadence_hz)?;
         if self.min_cadence_hz >= self.max_cadence_hz {
-            return Err(Error::InvalidConfig(format!(
+            return Err(MotionConfigError(format!(
                 "min_cadence_hz ({}) must be below max_cadence_hz ({})",
                 self.min_cadence_hz, self.max_cadence_hz
             )));
         }
         if !(1..=64).contains(&self.confirm_steps) {
-            return Err(Error::InvalidConfig(format!(
+            return Err(MotionConfigError(format!(
                 "confirm_steps must be within 1..=64 (got {})",
                 self.confirm_steps
             )));
@@ -336,7 +341,7 @@ impl MotionConfig {
         positive("gyro_heading_noise", self.gyro_heading_noise)?;
         positive("free_heading_noise", self.free_heading_noise)?;
         if !(self.heading_sigma_floor_rad.is_finite() && self.heading_sigma_floor_rad >= 0.0) {
-            return Err(Error::InvalidConfig(format!(
+            return Err(MotionConfigError(format!(
                 "heading_sigma_floor_rad must be finite and >= 0 (got {})",
                 self.heading_sigma_floor_rad
             )));
@@ -346,19 +351,19 @@ impl MotionConfig {
         positive("dip_tolerance_rad", self.dip_tolerance_rad)?;
         positive("disagreement_rad", self.disagreement_rad)?;
         if !(self.disturbance_hold_s.is_finite() && self.disturbance_hold_s >= 0.0) {
-            return Err(Error::InvalidConfig(format!(
+            return Err(MotionConfigError(format!(
                 "disturbance_hold_s must be finite and >= 0 (got {})",
                 self.disturbance_hold_s
             )));
         }
         if !(self.disturbed_variance_factor.is_finite() && self.disturbed_variance_factor >= 1.0) {
-            return Err(Error::InvalidConfig(format!(
+            return Err(MotionConfigError(format!(
                 "disturbed_variance_factor must be finite and >= 1 (got {})",
                 self.disturbed_variance_factor
             )));
         }
         if !(self.distance_sigma_fraction.is_finite() && self.distance_sigma_fraction >= 0.0) {
-            return Err(Error::InvalidConfig(format!(
+            return Err(MotionConfigError(format!(
                 "distance_sigma_fraction must be finite and >= 0 (got {})",
                 self.distance_sigma_fraction
             )));
@@ -366,7 +371,7 @@ impl MotionConfig {
         positive("max_gap_s", self.max_gap_s)?;
         positive("max_backlog_s", self.max_backlog_s)?;
         if self.max_backlog_s > 3600.0 {
-            return Err(Error::InvalidConfig(format!(
+            return Err(MotionConfigError(format!(
                 "max_backlog_s must be at most 3600 (got {})",
                 self.max_backlog_s
             )));

@@ -5,16 +5,17 @@
 //!
 //! INTERFACE CONTRACT (used by the engine and the HMM; keep these names and meanings):
 //! - [`SensorSample`], [`MotionState`], [`MotionScenario`], [`MotionUpdate`], [`BatchReport`].
-//! - `MotionTracker::new(MotionConfig) -> Result<MotionTracker, crate::Error>`,
+//! - `MotionTracker::new(MotionConfig) -> Result<MotionTracker, MotionConfigError>`,
 //!   `push_accelerometer / push_gyroscope / push_magnetometer(&mut self, &[SensorSample]) -> BatchReport`,
 //!   `update(&mut self, until_ns: u64) -> MotionUpdate`, `stats(&self) -> &MotionStats`.
 //!
-//! Files: `config.rs` ([`MotionConfig`], every default cited or measured), `filter.rs`
-//! (angle wrapping, a moving average over a duration), `step.rs` (gravity learning, the two
-//! detectors, the gait check that keeps shaking out), `heading.rs` (tilt-compensated compass,
-//! gyro yaw rate, the 1-D Kalman filter, disturbance detection), `tracker.rs`
-//! ([`MotionTracker`]: buffering, time ordering, epochs). Their measured accuracy on simulated
-//! phones is in `docs/tuning.md#step-detector` and `#heading-filter`.
+//! Files: `config.rs` ([`MotionConfig`], every default cited or measured, and
+//! [`MotionConfigError`]), `filter.rs` (angle wrapping, a moving average over a duration),
+//! `step.rs` (gravity learning, the two detectors, the gait check that keeps shaking out),
+//! `heading.rs` (tilt-compensated compass, gyro yaw rate, the 1-D Kalman filter, disturbance
+//! detection), `tracker.rs` ([`MotionTracker`]: buffering, time ordering, epochs). Their
+//! measured accuracy on simulated phones is in `docs/tuning.md#step-detector` and
+//! `#heading-filter`.
 
 mod barometer;
 mod clock;
@@ -28,7 +29,7 @@ pub(crate) use barometer::Barometer;
 pub use barometer::{pressure_height_m, PressureSample, PRESSURE_RANGE_HPA};
 pub(crate) use clock::refuse_ahead;
 pub use clock::MAX_TIMESTAMP_NS;
-pub use config::{EarthField, MotionConfig, StepDetectorKind, StepLengthModel};
+pub use config::{EarthField, MotionConfig, MotionConfigError, StepDetectorKind, StepLengthModel};
 pub use filter::wrap_angle;
 pub use heading::{compass_azimuth, field_dip, gyro_yaw_rate};
 pub use tracker::{HeadingEstimate, MotionStats, MotionTracker, StepEvent, StreamStats};

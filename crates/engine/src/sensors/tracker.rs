@@ -1,12 +1,11 @@
 //! The [`MotionTracker`]: buffers the three sensor streams, processes them in timestamp order,
 //! and summarises each epoch as a [`MotionUpdate`] with its HIPE Table 1 scenario.
 
-use super::config::{MotionConfig, StepLengthModel};
+use super::config::{MotionConfig, MotionConfigError, StepLengthModel};
 use super::filter::{s_to_ns, wrap_angle};
 use super::heading::HeadingTracker;
 use super::step::{GaitStep, GaitValidator, StepDetector};
 use super::{refuse_ahead, BatchReport, MotionScenario, MotionState, MotionUpdate, SensorSample};
-use crate::error::Error;
 use nalgebra::Vector3;
 use serde::Serialize;
 use std::collections::VecDeque;
@@ -124,8 +123,8 @@ pub struct MotionTracker {
 }
 
 impl MotionTracker {
-    /// A tracker; fails with [`Error::InvalidConfig`] naming the bad field.
-    pub fn new(config: MotionConfig) -> Result<Self, Error> {
+    /// A tracker; fails with [`MotionConfigError`] naming the bad field.
+    pub fn new(config: MotionConfig) -> Result<Self, MotionConfigError> {
         config.validate()?;
         let max_backlog_ns = s_to_ns(config.max_backlog_s);
         // At most 1 kHz per stream is kept.
