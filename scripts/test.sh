@@ -53,11 +53,14 @@ python3 scripts/check-docs.py
 step "Lints (cargo clippy, warnings denied)"
 cargo clippy --workspace --exclude uniffi-bindgen --all-targets --all-features --locked -- -D warnings
 
-step "The shipped library as apps build it: no features, no tool crates"
-cargo build -p waymark --lib --locked
+step "The shipped library as apps build it: no features, no tool crates, warnings denied"
+cargo clippy -p waymark -p waymark-engine --lib --locked -- -D warnings
 
 step "API docs of the whole workspace, warnings denied"
 RUSTDOCFLAGS="-D warnings" cargo doc --workspace --exclude uniffi-bindgen --no-deps --locked --quiet
+
+step "docs/api.md lists the engine's public items, each with a user (scripts/check-api.py)"
+python3 scripts/check-api.py --check
 
 step "Rust tests (unit, integration, property, doc)"
 # Real-data tests skip without the data, and fail without it where it is expected: CI sets

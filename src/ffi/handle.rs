@@ -13,7 +13,7 @@ use super::error::PositioningError;
 use super::panic::{deliver_to_app, guard};
 use super::record::AppStatus;
 use std::sync::atomic::{AtomicBool, Ordering};
-use std::sync::{Arc, Mutex, MutexGuard};
+use std::sync::{Arc, Mutex};
 use waymark_engine::radio::Scan;
 use waymark_engine::site::Site;
 use waymark_engine::{Engine, EngineConfig, Epoch, Position, TransitionModel};
@@ -290,7 +290,8 @@ impl<L: Listeners> Handle<L> {
 
     /// The engine, locked, for tests that look at its state. Not for the FFI calls: they go
     /// through [`call`](Self::call).
-    pub(crate) fn lock_engine(&self) -> MutexGuard<'_, Engine> {
+    #[cfg(feature = "fault-injection")]
+    pub(crate) fn lock_engine(&self) -> std::sync::MutexGuard<'_, Engine> {
         lock(&self.engine)
     }
 

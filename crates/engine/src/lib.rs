@@ -35,12 +35,11 @@ pub use config::{
     EngineConfig, MovementVectorConfig, RegionsConfig, TransitionModel, ZoneHysteresis,
     DEFAULT_ESTIMATE_STATES,
 };
-#[cfg(feature = "fault-injection")]
-pub use engine::FAULT_INJECTION_MID_EPOCH_NS;
 pub use engine::{
-    Engine, EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent,
-    TrackPoint, MAX_RSSI_DBM,
+    Engine, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent, TrackPoint, MAX_RSSI_DBM,
 };
+#[cfg(feature = "fault-injection")]
+pub use engine::{EngineSnapshot, FAULT_INJECTION_MID_EPOCH_NS};
 pub use error::{Error, InputError};
 pub use fix::PositionFix;
 pub use geofence::{Geofence, GeofenceError, GeofenceShape};

@@ -24,9 +24,9 @@ use crate::site::{FloorReliability, ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
 pub use crate::radio::MAX_RSSI_DBM;
-pub use types::{
-    EngineSnapshot, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent, TrackPoint,
-};
+#[cfg(feature = "fault-injection")]
+pub use types::EngineSnapshot;
+pub use types::{Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent, TrackPoint};
 
 /// An epoch (a scan or an advance) at this time panics after it has stepped the filter and
 /// the track, moved the clock, raised the counters and worked out its status events, just

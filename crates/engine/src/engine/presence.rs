@@ -96,6 +96,7 @@ impl Presence {
 
     /// Whether the person is inside each site zone and each geofence (by id), as last
     /// reported: for snapshots.
+    #[cfg(feature = "fault-injection")]
     pub(super) fn flags(&self) -> (Vec<bool>, Vec<(String, bool)>) {
         let fences = self.fences.iter().map(|f| (f.fence.id.clone(), f.inside)).collect();
         (self.zones.clone(), fences)

@@ -3,6 +3,7 @@
 
 #[allow(unused_imports)] // doc links
 use super::{Engine, MAX_RSSI_DBM};
+#[cfg(feature = "fault-injection")]
 use crate::history::EpochRecord;
 use crate::radio::RadioMap;
 use crate::sensors::{MotionScenario, MotionState};
@@ -214,8 +215,9 @@ pub struct InputStats {
 
 /// Everything an engine holds that decides its later answers, for tests that check a call
 /// changed nothing (a rejected scan must leave the engine as it was). Not a stable API: the
-/// internals are compared through their `Debug` renderings, which show every field.
-#[doc(hidden)]
+/// internals are compared through their `Debug` renderings, which show every field. Built
+/// with the `fault-injection` feature only, as [`Engine::snapshot`](super::Engine::snapshot) is.
+#[cfg(feature = "fault-injection")]
 #[derive(Clone, Debug, PartialEq)]
 pub struct EngineSnapshot {
     /// Time of the last epoch.
@@ -272,7 +274,6 @@ impl ScanTiming {
 /// engine per site, which never sees a scan twice. Hand it to engines with
 /// [`Engine::share_emissions`]; it holds every distinct scan's likelihoods (8 bytes per state
 /// each) until dropped.
-#[doc(hidden)]
 #[derive(Debug)]
 pub struct SharedEmissions {
     /// The radio map the likelihoods are of, held weakly so that its address names it: a site
