@@ -341,7 +341,7 @@ impl Engine {
 
     /// The position `fixed_lag_epochs` epochs ago, smoothed by what came after: the exact
     /// fixed-lag posterior P(s | o_1..t) of that epoch (the backward pass of the
-    /// forward-backward recursion over the lag, [`FixedLagSmoother`]), and Hoang eq. 4 over it,
+    /// forward-backward recursion over the lag, `FixedLagSmoother`), and Hoang eq. 4 over it,
     /// as the live estimate is over the filtered posterior. Fewer epochs back when the filter
     /// restarted, bridged a gap or was pinned by feedback since, as the filter's history
     /// begins there. `state` is the state of most smoothed mass. The lag:

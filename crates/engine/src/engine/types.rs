@@ -237,7 +237,7 @@ pub struct EngineSnapshot {
 }
 
 /// When the latest scan an engine accepted came and how long after the one before it: whether
-/// the engine is in the sparse regime ([`SPARSE_SCAN_GAP_S`]) and how long since its scan.
+/// the engine is in the sparse regime (more than 10 s apart) and how long since its scan.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct ScanTiming {
     /// The latest scan's time, ns.

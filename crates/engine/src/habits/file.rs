@@ -31,7 +31,7 @@ struct RowFile {
 }
 
 impl HabitModel {
-    /// The model as JSON (`format` [`FORMAT`], `version` [`VERSION`]).
+    /// The model as JSON (`format` `"waymark-habits"`, `version` [`VERSION`]).
     pub fn to_json(&self) -> String {
         let file = ModelFile {
             format: FORMAT.into(),

@@ -9,7 +9,7 @@
 //!   one factor on the fixes' spread.
 //!
 //! The learned transitions are a prior multiplied into the motion-based transition of every
-//! epoch ([`HabitPrior`], [`Habitual`]): each row keeps its total, so habits only redistribute
+//! epoch (`HabitPrior`, `Habitual`): each row keeps its total, so habits only redistribute
 //! a state's mass among the states the motion already allows. A state never learned keeps its
 //! row exactly.
 //!
@@ -50,22 +50,23 @@ use std::collections::BTreeMap;
 
 pub use learn::clustered_ratio;
 pub use options::HabitOptions;
-pub use prior::{HabitPrior, Habitual};
+pub(crate) use prior::HabitPrior;
+pub(crate) use prior::Habitual;
 
 /// The `format` field of an exported model.
-pub const FORMAT: &str = "waymark-habits";
+pub(crate) const FORMAT: &str = "waymark-habits";
 
 /// The layout version this build writes; it reads this and older ones.
 pub const VERSION: u32 = 1;
 
 /// Observations farther than this many σ from a state are taken to say nothing for it:
 /// exp(−4²/2) = 3.4e-4 of the Gaussian's peak. Bounds the states a pass considers.
-pub const CANDIDATE_SIGMAS: f64 = 4.0;
+pub(crate) const CANDIDATE_SIGMAS: f64 = 4.0;
 
 /// The largest count or strength a model file may hold: 10¹², more moves than a phone makes in
 /// a lifetime of 1 s epochs (3·10⁹ in a century). Bounds every sum of counts far from overflow,
 /// so no multiplier can be infinite or NaN.
-pub const MAX_COUNT: f64 = 1e12;
+pub(crate) const MAX_COUNT: f64 = 1e12;
 
 /// Expected counts below this are not stored: such a count moves a multiplier by under 1e-6 of
 /// the pseudo-count.
@@ -220,13 +221,13 @@ pub struct StrengthGain {
 
 /// Habits are applied only when their held-out gain exceeds this many standard errors: about
 /// 97.7% one-sided confidence that they predict the user's moves at all (the usual two-σ level).
-pub const SIGNIFICANT_GAIN_ERRORS: f64 = 2.0;
+pub(crate) const SIGNIFICANT_GAIN_ERRORS: f64 = 2.0;
 
 /// The strength to apply, from the held-out gains: the weakest (largest κ) whose gain is within
 /// one standard error of the best (the one-standard-error rule of cross-validation: Breiman et
 /// al. 1984, §3.4.3; Hastie, Tibshirani & Friedman, *Elements of Statistical Learning* §7.10),
 /// and only when that gain is significantly above zero ([`SIGNIFICANT_GAIN_ERRORS`]).
-pub fn choose_strength(gains: &[StrengthGain]) -> Option<f64> {
+pub(crate) fn choose_strength(gains: &[StrengthGain]) -> Option<f64> {
     let best = gains.iter().max_by(|a, b| a.gain.total_cmp(&b.gain))?;
     let chosen = gains
         .iter()
@@ -322,7 +323,7 @@ impl HabitModel {
 
     /// Sets κ (`None`: the learned moves are not applied), for a strength chosen outside the
     /// pass, e.g. by positioning error on labelled walks (docs/tuning.md#habit-strength). Refused,
-    /// leaving the model unchanged, unless finite, > 0 and at most [`MAX_COUNT`].
+    /// leaving the model unchanged, unless finite, > 0 and at most 10¹².
     pub fn set_strength(&mut self, strength: Option<f64>) -> Result<(), HabitError> {
         if let Some(k) = strength {
             if !(k.is_finite() && k > 0.0 && k <= MAX_COUNT) {

@@ -149,7 +149,7 @@ impl ForwardFilter {
     }
 
     /// [`ViterbiWindow::step`] and then [`step`](Self::step) with the same transition, with
-    /// each row of the transition written once for both ([`predict_and_viterbi_step`]); the
+    /// each row of the transition written once for both (`predict_and_viterbi_step`); the
     /// results are exactly those of the two calls.
     pub fn step_with_viterbi(
         &mut self,

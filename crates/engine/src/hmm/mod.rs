@@ -12,12 +12,11 @@ mod viterbi;
 
 pub use estimate::{estimate, positions_by_states, Estimate};
 pub use forward::{FilterError, ForwardFilter};
-pub use motion::{
-    angle_between, azimuth, HipeRegion, MovementVectorTransition, PreparedHoang, RegionsTransition,
-};
-pub use smoother::{FixedLagSmoother, STEP_BYTES_PER_STATE};
-pub use transition::{
-    hipe_probabilities, predict, predict_and_viterbi_step, viterbi_step, BackPointer, RowBounds, Transition,
-    UniformReach,
-};
-pub use viterbi::{BackPointers, ViterbiWindow};
+pub use motion::azimuth;
+pub(crate) use motion::HipeRegion;
+pub(crate) use motion::MovementVectorTransition;
+pub(crate) use motion::RegionsTransition;
+pub(crate) use smoother::FixedLagSmoother;
+pub use smoother::STEP_BYTES_PER_STATE;
+pub use transition::{predict, RowBounds, Transition, UniformReach};
+pub use viterbi::ViterbiWindow;

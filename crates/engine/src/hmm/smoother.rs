@@ -76,6 +76,7 @@ impl<M: Clone> FixedLagSmoother<M> {
     }
 
     /// Whether no step is held.
+    #[cfg(test)]
     pub fn is_empty(&self) -> bool {
         self.steps.is_empty()
     }

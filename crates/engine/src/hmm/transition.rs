@@ -34,7 +34,7 @@ pub trait Transition {
 /// and every `ln f_ij ≤ ln_most_factor`: the floor weight of a row (exactly what
 /// [`Transition::row`] returns) and a bound on its explicit weights, from the row's reachable
 /// count alone. The Viterbi step skips a row whose best explicit weight cannot beat the best
-/// path through a floor weight ([`viterbi_step`]).
+/// path through a floor weight (`viterbi_step`).
 #[derive(Clone, Copy, Debug)]
 pub struct RowBounds<'a> {
     /// Walking-distance table.

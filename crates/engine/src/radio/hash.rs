@@ -59,7 +59,7 @@ impl PartialEq for Salt {
 }
 
 impl Salt {
-    /// A salt of at least [`MIN_SALT_BYTES`] bytes (32 random bytes are recommended:
+    /// A salt of at least 16 bytes (32 random bytes are recommended:
     /// `openssl rand -hex 32`).
     pub fn new(bytes: impl Into<Vec<u8>>) -> Result<Salt, String> {
         let bytes = bytes.into();
@@ -127,7 +127,7 @@ impl Salt {
 }
 
 /// Hashes the ids of an engine's scans with the site's salt, remembering up to
-/// [`ID_CACHE_CAPACITY`] of them so that a transmitter heard again costs a lookup, not an HMAC.
+/// 4 096 of them so that a transmitter heard again costs a lookup, not an HMAC.
 #[derive(Clone, Debug)]
 pub struct ScanHasher {
     salt: Salt,

@@ -9,16 +9,19 @@ mod offset;
 
 pub use check::MAX_RSSI_DBM;
 pub(crate) use check::{check_readings, ScanError};
-pub use gaussian::{
-    fit_censored, fit_naive, ln_std_normal_cdf, ln_std_normal_cdf_tabled, ln_std_normal_pdf,
-    lower_tail_hazard, unheard_model, CensoredFit, FitOptions, Gaussian, LnCdfTable, RssiModel,
-};
-pub use hash::{
-    Salt, ScanHasher, HASH_HEX_DIGITS, ID_CACHE_CAPACITY, ID_HASH_SCHEME, ID_HASH_VERSION, MIN_SALT_BYTES,
-};
+pub(crate) use gaussian::ln_std_normal_pdf;
+pub(crate) use gaussian::unheard_model;
+pub use gaussian::{FitOptions, Gaussian, LnCdfTable, RssiModel};
+pub(crate) use hash::HASH_HEX_DIGITS;
+pub use hash::{Salt, ScanHasher, ID_HASH_SCHEME, ID_HASH_VERSION};
 pub(crate) use map::quantise;
-pub use map::{RadioMap, ResolvedScan, LEVEL_STEP_DB, MAX_ABS_LEVEL_DBM, MAX_STORED_STD_DB, MIN_STD_DB};
-pub use offset::{DeviceOffset, DEVICE_OFFSET_PRIOR_STD_DB, DEVICE_OFFSET_Z, MAX_DEVICE_OFFSET_DB};
+pub(crate) use map::LEVEL_STEP_DB;
+pub(crate) use map::MAX_ABS_LEVEL_DBM;
+pub(crate) use map::MAX_STORED_STD_DB;
+pub(crate) use map::MIN_STD_DB;
+pub use map::{RadioMap, ResolvedScan};
+pub(crate) use offset::DeviceOffset;
+pub use offset::DEVICE_OFFSET_PRIOR_STD_DB;
 
 use serde::{Deserialize, Serialize};
 use std::fmt;

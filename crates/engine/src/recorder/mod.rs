@@ -22,7 +22,6 @@ mod output;
 
 pub use error::RecorderError;
 pub use options::{RecorderOptions, RecordingStats};
-pub use output::SYNC_INTERVAL;
 
 use error::io_error;
 use options::{check_header_text, check_name};
@@ -45,7 +44,7 @@ const STREAMS: [&str; 3] = ["TYPE_ACCELEROMETER", "TYPE_GYROSCOPE", "TYPE_MAGNET
 /// A survey walk being recorded.
 ///
 /// Each call that returns `Ok` has written its lines to the OS before it returns (a killed app
-/// loses none of them), and every [`SYNC_INTERVAL`] they are synced to storage; files only ever
+/// loses none of them), and every second they are synced to storage; files only ever
 /// hold whole lines (docs/surveying.md#durability).
 pub struct SurveyRecorder {
     directory: PathBuf,

@@ -38,7 +38,7 @@ pub enum Turn {
 
 impl Turn {
     /// The class of a signed angle, radians, positive to the left (counter-clockwise in the
-    /// site's frame, x east and y north), by [`TURN_BANDS_DEG`].
+    /// site's frame, x east and y north), by bands at 11°, 45°, 135° and 160°.
     pub fn from_angle(angle_rad: f64) -> Turn {
         let degrees = angle_rad.to_degrees();
         let left = degrees > 0.0;

@@ -11,10 +11,8 @@ mod legs;
 mod search;
 mod track;
 
-pub use legs::{Leg, Turn, MERGE_MAX_DEVIATION_RAD, TURN_BANDS_DEG};
-pub use track::{
-    Progress, RouteTracker, OFF_ROUTE_ENTER_SIGMAS, OFF_ROUTE_EXIT_SIGMAS, SIGMA_PER_ACCURACY_68,
-};
+pub use legs::{Leg, Turn};
+pub use track::{Progress, RouteTracker, SIGMA_PER_ACCURACY_68};
 
 use crate::site::Site;
 use nalgebra::Point2;
@@ -86,7 +84,7 @@ pub enum RouteError {
         y: f64,
         /// Distance to the nearest state on the floor, m (infinite on a floor without states).
         nearest_m: f64,
-        /// How far a point may be from the graph, m (see [`snap_tolerance_m`]).
+        /// How far a point may be from the graph, m (see `snap_tolerance_m`).
         tolerance_m: f64,
     },
     /// No walkable path joins the start to the destination.
@@ -106,13 +104,13 @@ pub enum RouteError {
 /// (a point more than one cell ([`Site::spacing_m`]) from every state is outside the surveyed
 /// area), plus the point's 68% accuracy radius when it is a position estimate, whose error
 /// may carry it that much further (docs/routes.md#snapping).
-pub fn snap_tolerance_m(site: &Site, accuracy_m: f64) -> f64 {
+pub(crate) fn snap_tolerance_m(site: &Site, accuracy_m: f64) -> f64 {
     site.spacing_m() + accuracy_m
 }
 
 /// The walkable state nearest `point` on its floor, with its distance, within
 /// [`snap_tolerance_m`] for a point with `accuracy_m` (0 for a free point).
-pub fn snap(site: &Site, point: &FloorPoint, accuracy_m: f64) -> Result<(u32, f64), RouteError> {
+pub(crate) fn snap(site: &Site, point: &FloorPoint, accuracy_m: f64) -> Result<(u32, f64), RouteError> {
     if point.floor >= site.floors().len() {
         return Err(RouteError::UnknownFloor { floor: point.floor, floors: site.floors().len() });
     }
@@ -181,7 +179,7 @@ impl Route {
     }
 
     /// As [`plan`](Self::plan), from a position estimate whose 68% radius is `accuracy_m`
-    /// (it widens the snapping tolerance: [`snap_tolerance_m`]).
+    /// (it widens the snapping tolerance: `snap_tolerance_m`).
     pub fn plan_from(
         site: &Site,
         from: &FloorPoint,

@@ -1,3 +1,4 @@
+use super::track::{OFF_ROUTE_ENTER_SIGMAS, OFF_ROUTE_EXIT_SIGMAS};
 use super::*;
 use crate::site::{BuildOptions, SiteBuilder, ZoneKind};
 use std::f64::consts::PI;

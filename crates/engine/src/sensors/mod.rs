@@ -26,12 +26,12 @@ mod step;
 mod tracker;
 
 pub(crate) use barometer::Barometer;
-pub use barometer::{pressure_height_m, PressureSample, PRESSURE_RANGE_HPA};
+pub use barometer::{pressure_height_m, PressureSample};
 pub(crate) use clock::refuse_ahead;
 pub use clock::MAX_TIMESTAMP_NS;
 pub use config::{EarthField, MotionConfig, MotionConfigError, StepDetectorKind, StepLengthModel};
 pub use filter::wrap_angle;
-pub use heading::{compass_azimuth, field_dip, gyro_yaw_rate};
+pub use heading::{compass_azimuth, gyro_yaw_rate};
 pub use tracker::{HeadingEstimate, MotionStats, MotionTracker, StepEvent, StreamStats};
 pub(crate) use tracker::{ACCEL, GYRO, MAG};
 

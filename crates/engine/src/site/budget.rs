@@ -31,7 +31,7 @@ pub const MAX_EDGES_PER_STATE: usize = 64;
 
 /// Most transmitters one state's fingerprint models: at most 655 on F1 (2 531 transmitters),
 /// about 200 on the simulated sites; a phone's scan lists a few hundred at most.
-pub const MAX_TRANSMITTERS_PER_STATE: usize = 4096;
+pub(crate) const MAX_TRANSMITTERS_PER_STATE: usize = 4096;
 
 /// Most fingerprint entries in a site, what its radio map holds (4 bytes each, 12 while the
 /// map is built): 11.6 times the mall's 2.9 million, 3.6 times the bench's 50 000-state
@@ -55,7 +55,7 @@ pub const MAX_REACH_ENTRIES: usize = 1 << 23;
 /// time grows with, once the entries are bounded, on a site whose states have many edges.
 /// 1.8 million on F1 and 24 million on the bench's 50 000-state site; this many take about
 /// half a second (docs/errors.md#site-limits).
-pub const MAX_REACH_EDGE_VISITS: u64 = 1 << 26;
+pub(crate) const MAX_REACH_EDGE_VISITS: u64 = 1 << 26;
 
 /// The refusal of a site over the limit `name` (`limit`), `what` saying where.
 pub(super) fn over(name: &'static str, limit: u64, what: impl Into<String>) -> SiteError {

@@ -75,7 +75,7 @@ pub const SPARSE_SCAN_GAP_S: f64 = 10.0;
 /// epoch (docs/tuning.md#sparse-scans).
 pub const SINCE_SPARSE_SCAN_BANDS_S: [f64; 4] = [2.0, 5.0, 10.0, 20.0];
 
-/// What differs when scans are far apart ([`SPARSE_SCAN_GAP_S`]): the motion has carried
+/// What differs when scans are far apart (more than 10 s apart): the motion has carried
 /// the estimate alone for a long while, so the scan that ends it weighs differently against
 /// the motion than one of a steady stream, and the posterior after it is not spread as after
 /// a stream's. Fitted by the survey's calibration on the held-out walks replayed under

@@ -18,24 +18,25 @@ mod reach_cache;
 mod schema;
 mod zones;
 
-pub use binary::{LAYOUT_VERSION as BINARY_LAYOUT_VERSION, SIGNATURE as BINARY_SIGNATURE};
 pub use builder::fit_columns;
 pub use builder::{BuildOptions, SiteBuilder, TrainingScan};
+pub(crate) use calibration::SPARSE_SCAN_GAP_S;
 pub use calibration::{
     scaled_radii, BandScales, Calibration, PerScenario, ScenarioScales, SparseScans,
-    SINCE_SPARSE_SCAN_BANDS_S, SPARSE_BANDS, SPARSE_SCAN_GAP_S,
+    SINCE_SPARSE_SCAN_BANDS_S, SPARSE_BANDS,
 };
 pub use error::SiteError;
-pub use file::MAX_COORDINATE_M;
+pub(crate) use file::MAX_COORDINATE_M;
 pub use floor_reliability::{FloorReliability, FLOOR_BANDS, FLOOR_MISS_BANDS};
-pub use geo::{Anchor, GeoError, LatLon, MAX_ANCHOR_LATITUDE_DEG};
+pub use geo::{Anchor, GeoError, LatLon};
 pub use graph::{Edge, Floor, Neighbours, North, State, StateKind};
 pub use id_hash::IdHashing;
-pub use pseudo::{interpolate as interpolate_pseudo, PSEUDO_SPACING_M};
+pub use pseudo::PSEUDO_SPACING_M;
 pub use reach::{Reach, ReachCut, ReachTable};
 pub use reach_cache::ReachTables;
 pub use schema::{FORMAT_VERSION, OLDEST_FORMAT_VERSION};
-pub use zones::{most_likely_zone, Zone, ZoneKind, MAX_ZONES};
+pub(crate) use zones::most_likely_zone;
+pub use zones::{Zone, ZoneKind, MAX_ZONES};
 
 use crate::radio::RadioMap;
 use graph::median_edge_length;

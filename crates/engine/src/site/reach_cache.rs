@@ -30,7 +30,7 @@ impl Site {
     /// once per radius and shared. Refused ([`SiteError::OverLimit`]) when they would pass the site
     /// budget ([`budget::MAX_REACHABLE_STATES`](super::budget::MAX_REACHABLE_STATES),
     /// [`budget::MAX_REACH_ENTRIES`](super::budget::MAX_REACH_ENTRIES),
-    /// [`budget::MAX_REACH_EDGE_VISITS`](super::budget::MAX_REACH_EDGE_VISITS)): the build stops
+    /// `budget::MAX_REACH_EDGE_VISITS`): the build stops
     /// there, having allocated no more.
     pub fn reach_tables(&self, radius_m: f64) -> Result<ReachTables, SiteError> {
         self.cached_reach_tables(radius_m, || ReachTable::build_both(self, radius_m, None))

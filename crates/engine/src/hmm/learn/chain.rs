@@ -47,7 +47,7 @@ pub struct SparseTransition {
 
 impl SparseTransition {
     /// From rows of (destination, probability). Each row must be a distribution (within
-    /// [`ROW_SUM_TOLERANCE`], then divided by its sum) and name each destination at most once;
+    /// 10⁻⁶, then divided by its sum) and name each destination at most once;
     /// entries given with probability 0 stay allowed.
     pub fn from_rows(rows: Vec<Vec<(u32, f64)>>) -> Result<Self, LearnError> {
         let n = rows.len();
@@ -169,7 +169,7 @@ pub struct Chain {
 
 impl Chain {
     /// Checks that `initial` is a distribution over the transition's states (within
-    /// [`ROW_SUM_TOLERANCE`], then divided by its sum).
+    /// 10⁻⁶, then divided by its sum).
     pub fn new(mut initial: Vec<f64>, transition: SparseTransition) -> Result<Self, LearnError> {
         let n = transition.states();
         if initial.len() != n {

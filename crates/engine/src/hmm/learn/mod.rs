@@ -14,7 +14,7 @@
 //! - [`json`]: the JSON documents of a decode and a fit, for tools and tests.
 //!
 //! These recursions are exact: unlike [`predict`](super::predict) and
-//! [`viterbi_step`](super::viterbi_step), which prune rows and paths for the live engine, they
+//! `viterbi_step`, which prune rows and paths for the live engine, they
 //! keep every state's forward and backward variable as a logarithm and drop none (see
 //! [`forward_backward`]).
 //!
@@ -44,12 +44,10 @@ mod inference;
 pub mod json;
 
 pub use baum_welch::{fit, log_likelihood, FitOptions, FitReport, GaussianHmm, Sequence};
-pub use chain::{Chain, SparseTransition, ROW_SUM_TOLERANCE};
+pub use chain::{Chain, SparseTransition};
 pub use emission::{Gaussian, GaussianMixtures};
-pub use inference::{
-    decode, expected_counts, forward_backward, viterbi, Decoded, EpochMatrix, ExpectedCounts, Known,
-    Posterior,
-};
+pub(crate) use inference::expected_counts;
+pub use inference::{decode, forward_backward, viterbi, Decoded, EpochMatrix, Known, Posterior};
 
 /// Why a model, an observation sequence or a fit was refused. Nothing is changed when one is
 /// returned.
@@ -84,7 +82,7 @@ pub enum LearnError {
         /// The value.
         value: f64,
     },
-    /// A distribution does not sum to 1 within [`ROW_SUM_TOLERANCE`].
+    /// A distribution does not sum to 1 within 10⁻⁶.
     #[error("{what} sums to {sum}, not 1")]
     NotStochastic {
         /// The distribution, e.g. `initial` or `transition[4]`.

@@ -96,7 +96,7 @@ impl RadioMap {
     }
 
     /// One scan's measurement of the phone's RSSI offset
-    /// ([`DeviceOffset`](crate::radio::DeviceOffset), docs/accuracy.md#device-offset): for each
+    /// (`DeviceOffset`, docs/accuracy.md#device-offset): for each
     /// reading heard above the clip level, the reading less the mean μ of the fingerprints of the
     /// states that model its transmitter, weighted by `weights` (where the phone is believed to be,
     /// a distribution over states). A transmitter counts only where the states that model it hold

@@ -136,7 +136,7 @@ fn level(steps: impl Into<f64>) -> f64 {
 /// Every transmitter of the map enters every state's likelihood: heard ones through their
 /// reading, the others as "below the clip level" (eq. 10). A state with no model of a
 /// transmitter uses the map's `unheard` model for it (Hoang §3: μ ≪ c, average σ).
-/// Fingerprint models are stored to [`LEVEL_STEP_DB`]; [`fingerprints`](Self::fingerprints)
+/// Fingerprint models are stored to 0.01 dB; [`fingerprints`](Self::fingerprints)
 /// returns the stored values.
 #[derive(Clone, Debug)]
 pub struct RadioMap {
@@ -184,10 +184,10 @@ fn kind(id: &TransmitterId) -> u8 {
 
 impl RadioMap {
     /// Builds a map over `state_count` states from `(state, transmitter, model)` triples,
-    /// storing each model to [`LEVEL_STEP_DB`].
+    /// storing each model to 0.01 dB.
     ///
     /// Fails, with a message, on a duplicate transmitter id, an index out of range, a model
-    /// outside the stored range ([`MAX_ABS_LEVEL_DBM`], [`MAX_STORED_STD_DB`]) or a transmitter
+    /// outside the stored range (levels within ±320 dBm, spreads up to 650 dB) or a transmitter
     /// modelled twice at one state.
     pub fn new(
         model: RssiModel,
