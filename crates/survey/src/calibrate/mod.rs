@@ -102,9 +102,11 @@ impl CalibrationOptions {
     }
 
     /// The engine the calibration replays its held-out walks with: `engine` without the
-    /// Viterbi track, which nothing it scores reads (the live positions are the same).
+    /// Viterbi track and without the fixed-lag smoother's steps, which nothing it scores reads
+    /// ([`calibration_replay`](Self::calibration_replay) scores the live positions, and those
+    /// are the same either way).
     pub fn calibration_engine(&self) -> EngineConfig {
-        EngineConfig { track: false, ..self.engine.clone() }
+        EngineConfig { track: false, fixed_lag_epochs: 0, ..self.engine.clone() }
     }
 
     /// [`calibration_replay`](Self::calibration_replay) with the scans throttled as
