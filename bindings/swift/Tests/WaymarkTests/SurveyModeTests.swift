@@ -192,6 +192,27 @@ final class SurveyModeTests: XCTestCase {
         XCTAssertFalse(h.manager.isSurveying)
     }
 
+    // Readings still in the manager's batches reach the survey at finishSurvey(), and at
+    // stop() (the engine gets no epoch for them, the survey does not need one).
+    func testTheLastReadingsReachTheSurvey() throws {
+        let dir = FileManager.default.temporaryDirectory.appendingPathComponent("waymark-survey-mode-\(UUID().uuidString)")
+        defer { try? FileManager.default.removeItem(at: dir) }
+        let h = try Harness(siteJson: try simSiteJson(), withEngine: false)
+        let walk = try loadWalk()
+        for (name, epoch) in [("finished", 1), ("stopped", 2)] {
+            try h.manager.startSurvey(SurveyRecorder(directory: dir.path, options: SurveyOptions(walkName: name)))
+            h.manager.start()
+            h.clock.set(walk.epochs[epoch - 1].timestampNs)
+            try h.manager.markWaypoint(x: 1, y: 1, floor: "F1")
+            // Fewer than a batch per sensor: all of them wait in the manager.
+            let readings = Array(Harness.readings(walk.epochs[epoch]).prefix(100))
+            h.motion.emit(readings)
+            if name == "stopped" { h.manager.stop() }
+            let summary = try h.manager.finishSurvey()
+            XCTAssertEqual(summary.samples, UInt64(readings.count), name)
+        }
+    }
+
     // A failing storage is one status (600) until resumed; nothing is pushed meanwhile.
     func testAFailingRecorderIsAStatusUntilResumed() throws {
         let dir = FileManager.default.temporaryDirectory.appendingPathComponent("waymark-survey-mode-\(UUID().uuidString)")
