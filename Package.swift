@@ -7,8 +7,8 @@
 //
 // The binary target is the XCFramework zip of a release (ios/build-xcframework.sh builds it,
 // prints its checksum and writes both lines below; docs/ios.md#releasing), or the XCFramework
-// that script built locally, at ios/WaymarkFFI.xcframework, when WAYMARK_LOCAL_XCFRAMEWORK is
-// set in the environment of Xcode or `swift build`.
+// that script built locally, at ios/WaymarkFFI.xcframework, before the first release or when
+// WAYMARK_LOCAL_XCFRAMEWORK is set in the environment of `xcodebuild` or `swift build`.
 //
 // On Linux, where SwiftPM takes no XCFramework, WaymarkFFI is the C header and module map of
 // the same library (ios/Sources/WaymarkFFI) linked to libwaymark.so: the Linux tests
