@@ -1,20 +1,18 @@
 // swift-tools-version:5.9
-// The Linux test package of the Swift bindings (run by test.sh in a Debian chroot). It
-// compiles the committed ios/Sources/ (through the symlinks in Sources/) against the FFI C
-// target and links the host-built libwaymark.so; test.sh passes `-L`/`-rpath` for it. App
-// developers use ios/Package.swift instead.
+// The Linux test package of the Swift bindings (run by test.sh in a Debian chroot). It tests
+// the repository's root package itself, by path: the Waymark target apps get, built from
+// ios/Sources/Waymark with its resources, over the root package's Linux WaymarkFFI (the
+// generated header linked to the host-built libwaymark.so; test.sh passes `-L`/`-rpath`).
 import PackageDescription
 
 let package = Package(
     name: "WaymarkLinuxTests",
+    dependencies: [.package(name: "Waymark", path: "../..")],
     targets: [
-        // Generated header and module map only; the code is libwaymark.so.
-        .target(
-            name: "WaymarkFFI",
-            path: "Sources/WaymarkFFI",
-            linkerSettings: [.linkedLibrary("waymark")]
+        .testTarget(
+            name: "WaymarkTests",
+            dependencies: [.product(name: "Waymark", package: "Waymark")],
+            path: "Tests/WaymarkTests"
         ),
-        .target(name: "Waymark", dependencies: ["WaymarkFFI"], path: "Sources/Waymark"),
-        .testTarget(name: "WaymarkTests", dependencies: ["Waymark"], path: "Tests/WaymarkTests"),
     ]
 )

@@ -1,7 +1,9 @@
 #!/usr/bin/env bash
 # The Swift bindings tested on Linux: builds libwaymark, checks that the Swift committed in
-# ios/Sources/ is what uniffi-bindgen generates today, exports a simulated walk, and runs the
-# XCTest suite in bindings/swift/ with Debian trixie's swiftlang inside a chroot.
+# ios/Sources/ is what uniffi-bindgen generates today, exports a simulated walk, checks that
+# the root Package.swift resolves from a fresh copy of the repository (and that its Apple
+# branch declares the binary target), and runs the XCTest suite in bindings/swift/, which
+# builds the root package's own Waymark target, with Debian trixie's swiftlang in a chroot.
 #
 #   bash bindings/swift/test.sh        # from anywhere; needs root (debootstrap, unshare, chroot)
 #
@@ -93,21 +95,59 @@ for path in sys.argv[1:]:
 PY
 } > "$REPO/bindings/swift/Tests/WaymarkTests/ReadmeQuickstart.swift"
 
-# --- 5. XCTest in the chroot. The checkout (and the target dir, if elsewhere) is bind-mounted
-# at the same path inside, so every path resolves identically.
-log "swift test (in $ROOT)"
+# Runs a command in the chroot. The checkout (and the target dir, if elsewhere) is
+# bind-mounted at the same path inside, so every path resolves identically.
 MOUNTS=("$REPO")
 [[ "$TARGET/" == "$REPO/"* ]] || MOUNTS+=("$TARGET")
-# shellcheck disable=SC2016
-unshare --mount --fork /bin/bash -euo pipefail -c '
-    root="$1"; target="$2"; package="$3"; shift 3
-    mount --make-rprivate /
-    for d in "$@"; do mkdir -p "$root$d"; mount --bind "$d" "$root$d"; done
-    mount -t proc proc "$root/proc"
-    mount --rbind /dev "$root/dev"
-    exec chroot "$root" /usr/bin/env -i PATH=/usr/bin:/bin HOME=/root LANG=C.UTF-8 \
-        WAYMARK_SIM_DIR="$target/sim-export" WAYMARK_CLI="$target/release/waymark" LD_LIBRARY_PATH="$target/debug" \
-        /usr/bin/swift test --disable-swift-testing \
-            --package-path "$package" --scratch-path "$target/swift-build" \
-            -Xlinker -L -Xlinker "$target/debug" -Xlinker -rpath -Xlinker "$target/debug"
-' _ "$ROOT" "$TARGET" "$REPO/bindings/swift" "${MOUNTS[@]}" 2>&1
+in_chroot() {
+    # shellcheck disable=SC2016
+    unshare --mount --fork /bin/bash -euo pipefail -c '
+        root="$1"; n="$2"; shift 2
+        mount --make-rprivate /
+        for ((i = 0; i < n; i++)); do mkdir -p "$root$1"; mount --bind "$1" "$root$1"; shift; done
+        mount -t proc proc "$root/proc"
+        mount --rbind /dev "$root/dev"
+        exec chroot "$root" /usr/bin/env -i PATH=/usr/bin:/bin HOME=/root LANG=C.UTF-8 "$@"
+    ' _ "$ROOT" "${#MOUNTS[@]}" "${MOUNTS[@]}" "$@"
+}
+
+# --- 5. The root package as SwiftPM sees it from the repository's git URL: a copy of the files a
+# clone of this tree holds (tracked, or new and not ignored), with nothing built.
+log "swift package describe (the root package, from a fresh copy)"
+CLONE="$TARGET/swift-clone"
+rm -rf "$CLONE" && mkdir -p "$CLONE"
+git -C "$REPO" ls-files -z --cached --others --exclude-standard |
+    while IFS= read -r -d '' f; do [[ -e "$REPO/$f" || -L "$REPO/$f" ]] && printf '%s\0' "$f"; done |
+    (cd "$REPO" && xargs -0 cp -P --parents -t "$CLONE")
+described="$(in_chroot /usr/bin/swift package describe --package-path "$CLONE" 2>&1)" ||
+    { echo "$described" >&2; log "the root Package.swift does not resolve"; exit 1; }
+for want in "Name: Waymark" "Path: ios/Sources/Waymark" "Path: ios/Sources/WaymarkFFI" \
+            "PrivacyInfo.xcprivacy" "LocationClient.swift" "Background.swift" "Waymark.swift"; do
+    grep -qF "$want" <<<"$described" || { echo "$described" >&2; log "describe lacks: $want"; exit 1; }
+done
+# The manifest's Apple branch (compiled only on a Mac) as SwiftPM reads it: with no release the
+# binary target is the local XCFramework; after set-package-release.sh, the release's zip.
+APPLE="$TARGET/swift-apple"
+rm -rf "$APPLE" && mkdir -p "$APPLE"
+sed 's/^#if os(Linux)$/#if false/' "$CLONE/Package.swift" > "$APPLE/Package.swift"
+grep -q '^#if false$' "$APPLE/Package.swift" || { log "Package.swift has no #if os(Linux) branch"; exit 1; }
+dumped="$(in_chroot /usr/bin/swift package dump-package --package-path "$APPLE" 2>&1)"
+grep -q '"path" : "ios/WaymarkFFI.xcframework"' <<<"$dumped" || { echo "$dumped" >&2; log "no local binary target"; exit 1; }
+zip_url="https://example.com/waymark/releases/download/0.1.0/WaymarkFFI.xcframework.zip"
+zip_sum="$(printf '%s' "$zip_url" | sha256sum | cut -d' ' -f1)"
+"$REPO/ios/set-package-release.sh" "$zip_url" "$zip_sum" "$APPLE/Package.swift" 2>/dev/null
+dumped="$(in_chroot /usr/bin/swift package dump-package --package-path "$APPLE" 2>&1)"
+grep -qF "\"url\" : \"$zip_url\"" <<<"$dumped" && grep -qF "\"checksum\" : \"$zip_sum\"" <<<"$dumped" ||
+    { echo "$dumped" >&2; log "set-package-release.sh did not give the binary target its URL and checksum"; exit 1; }
+# The iOS shell, which only Xcode compiles: at least it must parse as Swift.
+sed 's/^#if os(iOS)$/#if true/' "$GENERATED/Waymark/AppleAdapter.swift" > "$APPLE/AppleAdapter.swift"
+grep -q '^#if true$' "$APPLE/AppleAdapter.swift" || { log "AppleAdapter.swift has no #if os(iOS)"; exit 1; }
+in_chroot /usr/bin/swiftc -parse "$APPLE/AppleAdapter.swift" || { log "AppleAdapter.swift does not parse"; exit 1; }
+rm -rf "$CLONE" "$APPLE"
+
+# --- 6. XCTest in the chroot: bindings/swift depends on the root package by path.
+log "swift test (in $ROOT)"
+in_chroot WAYMARK_SIM_DIR="$TARGET/sim-export" WAYMARK_CLI="$TARGET/release/waymark" LD_LIBRARY_PATH="$TARGET/debug" \
+    /usr/bin/swift test --disable-swift-testing \
+        --package-path "$REPO/bindings/swift" --scratch-path "$TARGET/swift-build" \
+        -Xlinker -L -Xlinker "$TARGET/debug" -Xlinker -rpath -Xlinker "$TARGET/debug" 2>&1

@@ -1,11 +1,13 @@
-// The thin iOS shell: CoreMotion and CoreLocation behind the ports of LocationPorts.swift, and
-// CLLocation output. WaymarkLocationManager (LocationClient.swift) holds every decision and
-// Conversions.swift every unit and clock; this file only passes Apple's callbacks and numbers
-// on, and compiles only on Apple platforms (the Linux tests cover the rest against fakes).
-#if canImport(CoreMotion) && canImport(CoreLocation)
+// The thin iOS shell: CoreMotion, CoreLocation and UIKit behind the ports of
+// LocationPorts.swift, and CLLocation output. WaymarkLocationManager (LocationClient.swift)
+// holds every decision, Background.swift the background plan and Conversions.swift every unit
+// and clock; this file only passes Apple's callbacks and numbers on, and compiles only for iOS
+// (the Linux tests cover the rest against fakes; docs/ios.md#what-is-checked-where).
+#if os(iOS)
 import CoreLocation
 import CoreMotion
 import Foundation
+import UIKit
 
 /// The inertial sensors through one `CMMotionManager` (Apple: one per app). Readings are
 /// delivered on the manager's queue through an `OperationQueue` over it.
@@ -98,10 +100,17 @@ public final class CoreMotionAltimeter: WaymarkAltimeter {
     }
 }
 
-/// Beacon ranging and location authorization through a `CLLocationManager`. Make it on the
-/// main thread: Core Location calls its delegate on the run loop of the thread that made it,
-/// and every call here goes to the main queue.
-public final class CoreLocationBeaconRanger: NSObject, WaymarkBeaconRanger, CLLocationManagerDelegate, @unchecked Sendable {
+/// Beacon ranging, location authorization and the background services (background updates,
+/// beacon region monitoring) through one `CLLocationManager`. Make it on the main thread:
+/// Core Location calls its delegate on the run loop of the thread that made it, and every call
+/// here goes to the main queue.
+public final class CoreLocationBeaconRanger: NSObject, WaymarkBeaconRanger, WaymarkBackgroundLocation,
+    CLLocationManagerDelegate, @unchecked Sendable
+{
+    /// The prefix of the identifiers of the beacon regions Waymark monitors; other regions of
+    /// the app are left alone.
+    static let regionPrefix = "dev.waymark.site."
+
     private let manager: CLLocationManager
     private let lock = NSLock()
     private var current: WaymarkAuthorization
@@ -144,6 +153,53 @@ public final class CoreLocationBeaconRanger: NSObject, WaymarkBeaconRanger, CLLo
         }
     }
 
+    // MARK: WaymarkBackgroundLocation
+
+    public var capabilities: WaymarkBackgroundCapabilities {
+        WaymarkBackgroundCapabilities(
+            infoDictionary: Bundle.main.infoDictionary,
+            canMonitorBeaconRegions: CLLocationManager.isMonitoringAvailable(for: CLBeaconRegion.self))
+    }
+
+    public func apply(_ settings: WaymarkBackgroundSettings) {
+        let declared = capabilities.declaresLocationBackgroundMode
+        DispatchQueue.main.async {
+            let m = self.manager
+            // Without `location` in UIBackgroundModes this setter raises an exception; the plan
+            // never asks for it then, and the check here keeps it so.
+            m.allowsBackgroundLocationUpdates = settings.allowsBackgroundLocationUpdates && declared
+            m.showsBackgroundLocationIndicator = settings.showsBackgroundLocationIndicator
+            m.pausesLocationUpdatesAutomatically = settings.pausesLocationUpdatesAutomatically
+            if settings.updatesLocation {
+                // The updates keep the app running; the coarsest accuracy spares the GPS.
+                m.activityType = .otherNavigation
+                m.desiredAccuracy = kCLLocationAccuracyThreeKilometers
+                m.distanceFilter = kCLDistanceFilterNone
+                m.startUpdatingLocation()
+            } else {
+                m.stopUpdatingLocation()
+            }
+            let wanted = Set(settings.monitoredRegions.map { Self.regionPrefix + $0.uuidString })
+            for region in m.monitoredRegions where region.identifier.hasPrefix(Self.regionPrefix) {
+                if !wanted.contains(region.identifier) { m.stopMonitoring(for: region) }
+            }
+            let monitored = Set(m.monitoredRegions.map(\.identifier))
+            for uuid in settings.monitoredRegions where !monitored.contains(Self.regionPrefix + uuid.uuidString) {
+                let region = CLBeaconRegion(uuid: uuid, identifier: Self.regionPrefix + uuid.uuidString)
+                region.notifyOnEntry = true
+                region.notifyOnExit = true
+                region.notifyEntryStateOnDisplay = true
+                m.startMonitoring(for: region)
+            }
+        }
+    }
+
+    public func requestAlwaysAuthorization() {
+        DispatchQueue.main.async { self.manager.requestAlwaysAuthorization() }
+    }
+
+    // MARK: CLLocationManagerDelegate
+
     public func locationManager(_ manager: CLLocationManager, didRange beacons: [CLBeacon],
                                 satisfying constraint: CLBeaconIdentityConstraint) {
         let ranged = beacons.map {
@@ -167,6 +223,35 @@ public final class CoreLocationBeaconRanger: NSObject, WaymarkBeaconRanger, CLLo
         send(.authorizationChanged(new))
     }
 
+    public func locationManager(_ manager: CLLocationManager, didStartMonitoringFor region: CLRegion) {
+        manager.requestState(for: region)
+    }
+
+    /// Called when monitoring starts (`requestState`), on every entry and exit, and when the
+    /// screen lights up inside a region (`notifyEntryStateOnDisplay`).
+    public func locationManager(_ manager: CLLocationManager, didDetermineState state: CLRegionState,
+                                for region: CLRegion) {
+        guard let uuid = Self.siteUUID(region), state != .unknown else { return }
+        send(.regionStateChanged(uuid: uuid, inside: state == .inside))
+    }
+
+    public func locationManager(_ manager: CLLocationManager, monitoringDidFailFor region: CLRegion?,
+                                withError error: Error) {
+        guard let region, let uuid = Self.siteUUID(region) else { return }
+        let failure = error as NSError
+        send(.regionMonitoringFailed(uuid: uuid, code: failure.code, message: failure.localizedDescription))
+    }
+
+    /// The standard updates only keep the app running: Waymark's positions come from the engine.
+    public func locationManager(_ manager: CLLocationManager, didUpdateLocations locations: [CLLocation]) {}
+
+    public func locationManager(_ manager: CLLocationManager, didFailWithError error: Error) {}
+
+    private static func siteUUID(_ region: CLRegion) -> UUID? {
+        guard let beacon = region as? CLBeaconRegion, region.identifier.hasPrefix(regionPrefix) else { return nil }
+        return beacon.uuid
+    }
+
     private func send(_ event: WaymarkRangingEvent) {
         lock.lock()
         let target = self.target
@@ -180,84 +265,87 @@ public final class CoreLocationBeaconRanger: NSObject, WaymarkBeaconRanger, CLLo
     }
 }
 
+/// The app's foreground and background, from UIKit's notifications. Make it on the main
+/// thread (it reads `UIApplication.shared.applicationState` once).
+public final class UIKitAppLifecycle: WaymarkAppLifecycle, @unchecked Sendable {
+    private let lock = NSLock()
+    private var current: WaymarkAppState
+    private var observers: [NSObjectProtocol] = []
+
+    /// Observes `UIApplication.didEnterBackgroundNotification` and
+    /// `willEnterForegroundNotification`.
+    public init() {
+        current = UIApplication.shared.applicationState == .background ? .background : .foreground
+    }
+
+    deinit { observers.forEach { NotificationCenter.default.removeObserver($0) } }
+
+    public var state: WaymarkAppState { lock.lock(); defer { lock.unlock() }; return current }
+
+    public func setHandler(queue: DispatchQueue, handler: @escaping (WaymarkAppState) -> Void) {
+        let center = NotificationCenter.default
+        for (name, state) in [(UIApplication.didEnterBackgroundNotification, WaymarkAppState.background),
+                              (UIApplication.willEnterForegroundNotification, .foreground)] {
+            observers.append(center.addObserver(forName: name, object: nil, queue: nil) { [weak self] _ in
+                guard let self else { return }
+                self.lock.lock()
+                self.current = state
+                self.lock.unlock()
+                queue.async { handler(state) }
+            })
+        }
+    }
+}
+
 public extension WaymarkLocationManager {
-    /// A manager reading CoreMotion (the barometer too, where the device has one) and ranging
-    /// with CoreLocation, on the uptime clock, with a `DispatchSourceTimer` for `advance`.
-    /// Make it on the main thread.
+    /// A manager reading CoreMotion (the barometer too, where the device has one), ranging and
+    /// running in the background (as `request.background` says) with Core Location, following
+    /// the app's state through UIKit, on the uptime clock, with a `DispatchSourceTimer` for
+    /// `advance`. `engine` nil: a manager that only records surveys. Make it on the main thread.
     convenience init(
-        engine: PositioningEngine, request: WaymarkLocationRequest = WaymarkLocationRequest(),
+        engine: PositioningEngine?, request: WaymarkLocationRequest = WaymarkLocationRequest(),
         delegateQueue: DispatchQueue = .main
     ) throws {
-        try self.init(engine: engine, request: request, motion: CoreMotionSource(),
-                      ranger: CoreLocationBeaconRanger(), altimeter: CoreMotionAltimeter(),
+        let location = CoreLocationBeaconRanger()
+        try self.init(engine: engine, request: request, motion: CoreMotionSource(), ranger: location,
+                      altimeter: CoreMotionAltimeter(), backgroundLocation: location, lifecycle: UIKitAppLifecycle(),
                       delegateQueue: delegateQueue)
     }
 }
 
-/// A `CLFloor` with the level Waymark gives (Core Location offers no initialiser for one).
-final class WaymarkFloor: CLFloor {
-    private let logicalLevel: Int
-
-    init(level: Int) {
-        logicalLevel = level
-        super.init()
-    }
-
-    required init?(coder: NSCoder) {
-        logicalLevel = coder.decodeInteger(forKey: "waymarkLevel")
-        super.init(coder: coder)
-    }
-
-    override func encode(with coder: NSCoder) {
-        super.encode(with: coder)
-        coder.encode(logicalLevel, forKey: "waymarkLevel")
-    }
-
-    override class var supportsSecureCoding: Bool { true }
-
-    override var level: Int { logicalLevel }
-}
-
-/// A `CLLocation` that carries the floor (`CLLocation.floor` has no setter).
-final class WaymarkLocation: CLLocation {
-    private let waymarkFloor: CLFloor?
-
-    init(fields f: AppleLocationFields, timestamp: Date) {
-        waymarkFloor = f.floorLevel.map { WaymarkFloor(level: $0) }
-        super.init(
-            coordinate: CLLocationCoordinate2D(latitude: f.latitudeDeg, longitude: f.longitudeDeg),
-            altitude: 0, horizontalAccuracy: f.horizontalAccuracyM, verticalAccuracy: -1,
-            course: f.courseDeg, courseAccuracy: f.courseAccuracyDeg, speed: -1, speedAccuracy: -1,
-            timestamp: timestamp)
-    }
-
-    required init?(coder: NSCoder) {
-        waymarkFloor = coder.decodeObject(of: CLFloor.self, forKey: "waymarkFloor")
-        super.init(coder: coder)
-    }
-
-    override func encode(with coder: NSCoder) {
-        super.encode(with: coder)
-        coder.encode(waymarkFloor, forKey: "waymarkFloor")
-    }
-
-    override class var supportsSecureCoding: Bool { true }
-
-    override var floor: CLFloor? { waymarkFloor }
+/// A position as Core Location gives one: the `CLLocation` for MapKit and other location
+/// APIs, and the floor beside it. `CLLocation.floor` has no setter and `CLFloor` no public
+/// initialiser, so the floor travels next to the location rather than inside it (as indoor
+/// SDKs do); `clLocation.floor` is nil.
+public struct WaymarkLocation {
+    /// Latitude and longitude, `horizontalAccuracy` the 68% radius, `course` and
+    /// `courseAccuracy` (-1 when the heading is unknown), `timestamp` the position's time.
+    public let clLocation: CLLocation
+    /// The floor's logical level (0 ground, -1 first basement), as `CLFloor.level`; nil when
+    /// the site file gives none.
+    public let floorLevel: Int?
+    /// The floor's name in the site file ("F1").
+    public let floorName: String
+    /// The position it was made from.
+    public let position: PositionEstimate
 }
 
 public extension PositionEstimate {
-    /// The position as a CLLocation, or nil when the site file is not geo-referenced (has no
-    /// anchor): coordinates from the position itself, `horizontalAccuracy` the 68% radius (as
-    /// iOS defines it), course and course accuracy when the heading is known, and `floor`
-    /// with the floor's logical level when the site file gives one. Every value comes from
-    /// `locationFields`, which the Linux test covers. `timestamp` is when the position was
-    /// (its `timestampNs` on the uptime clock, as a `Date`).
-    func toCLLocation() -> CLLocation? {
-        guard let fields = locationFields else { return nil }
+    /// The position as a `WaymarkLocation`, or nil when the site file is not geo-referenced
+    /// (has no anchor). Every value comes from `locationFields`, which the Linux tests cover;
+    /// the timestamp is the position's `timestampNs` on the uptime clock, as a `Date`.
+    func toWaymarkLocation() -> WaymarkLocation? {
+        guard let f = locationFields else { return nil }
         let at = AppleSensorConversion.date(
             ofUptimeNs: timestampNs, uptimeNow: ProcessInfo.processInfo.systemUptime, now: Date())
-        return WaymarkLocation(fields: fields, timestamp: at)
+        let location = CLLocation(
+            coordinate: CLLocationCoordinate2D(latitude: f.latitudeDeg, longitude: f.longitudeDeg),
+            altitude: 0, horizontalAccuracy: f.horizontalAccuracyM, verticalAccuracy: -1,
+            course: f.courseDeg, courseAccuracy: f.courseAccuracyDeg, speed: -1, speedAccuracy: -1, timestamp: at)
+        return WaymarkLocation(clLocation: location, floorLevel: f.floorLevel, floorName: floorName, position: self)
     }
+
+    /// `toWaymarkLocation()?.clLocation`: the position for APIs that take a `CLLocation`.
+    func toCLLocation() -> CLLocation? { toWaymarkLocation()?.clLocation }
 }
 #endif

@@ -27,13 +27,22 @@ public struct WaymarkLocationRequest: Sendable, Equatable {
     /// Whether the barometer is read, where the device has one, for floor changes: true
     /// (docs/ios.md#the-barometer).
     public var usesBarometer: Bool
+    /// What happens when the app goes to the background: `.off`, the inputs pause until it
+    /// returns (docs/ios.md#background).
+    public var background: WaymarkBackgroundMode
+    /// Whether iOS shows its background location indicator while the app positions in the
+    /// background with "always" authorization: true. ("While using" apps always show it.)
+    public var showsBackgroundLocationIndicator: Bool
 
     /// A request with the documented defaults.
     public init(
         beaconUUIDs: [UUID] = [], motionInterval: TimeInterval = 0.01, motionBatchSize: Int = 50,
-        advanceInterval: TimeInterval = 2, requestsAuthorization: Bool = true, usesBarometer: Bool = true
+        advanceInterval: TimeInterval = 2, requestsAuthorization: Bool = true, usesBarometer: Bool = true,
+        background: WaymarkBackgroundMode = .off, showsBackgroundLocationIndicator: Bool = true
     ) {
         self.usesBarometer = usesBarometer
+        self.background = background
+        self.showsBackgroundLocationIndicator = showsBackgroundLocationIndicator
         self.beaconUUIDs = beaconUUIDs
         self.motionInterval = motionInterval
         self.motionBatchSize = motionBatchSize
@@ -46,6 +55,9 @@ public struct WaymarkLocationRequest: Sendable, Equatable {
         if !(motionInterval.isFinite && motionInterval > 0) { return "motionInterval must be > 0 s, got \(motionInterval)" }
         if motionBatchSize < 1 { return "motionBatchSize must be >= 1, got \(motionBatchSize)" }
         if !(advanceInterval.isFinite && advanceInterval > 0) { return "advanceInterval must be > 0 s, got \(advanceInterval)" }
+        if background == .wakeOnArrival && beaconUUIDs.isEmpty {
+            return "background .wakeOnArrival monitors the site's beacon regions: give beaconUUIDs"
+        }
         return nil
     }
 }
@@ -62,6 +74,10 @@ public enum WaymarkLocationState: Int, Sendable {
     case degraded
     /// Stopped by `stop()` or by the end of the last `locations()` stream.
     case stopped
+    /// Started, with its inputs paused: the app is in the background and the request's
+    /// `background` mode does not run there (or the user is away from every monitored beacon
+    /// region). It resumes by itself.
+    case paused
 }
 
 /// A coded status: what changed about the manager's inputs and what failed. `code` is stable
@@ -91,6 +107,22 @@ public enum WaymarkLocationStatus: Sendable, Equatable, CustomStringConvertible 
     /// 401: the engine refused a beacon scan (none of its beacons is in the site file: the
     /// phone is probably outside the site); `total` counts this session's refusals.
     case scanRejected(reason: String, total: UInt64)
+    /// 500: the request asks for background positioning, but the app's Info.plist has no
+    /// `location` in `UIBackgroundModes`: the inputs pause in the background.
+    case backgroundModeMissing
+    /// 501: `.wakeOnArrival` with "while using" authorization: positions continue in the
+    /// background, but iOS will not wake the app on arrival until the user allows "always".
+    case wakeOnArrivalNeedsAlways
+    /// 502: in the background with "while using" authorization, and the inputs were not
+    /// running when the app left the foreground: iOS allows no new location session there,
+    /// so they wait for the foreground.
+    case backgroundNeedsForegroundStart
+    /// 503: this device cannot monitor beacon regions, or monitoring one failed: no wake-up
+    /// on arrival.
+    case regionMonitoringUnavailable
+    /// 600: the survey recorder failed to write (`SurveyError.Io`); the survey takes no input
+    /// until `resumeSurvey()` succeeds.
+    case surveyFailed(reason: String)
 
     /// The stable code.
     public var code: Int {
@@ -107,6 +139,11 @@ public enum WaymarkLocationStatus: Sendable, Equatable, CustomStringConvertible 
         case .motionUnavailable(.magnetometer): return 302
         case .engineError: return 400
         case .scanRejected: return 401
+        case .backgroundModeMissing: return 500
+        case .wakeOnArrivalNeedsAlways: return 501
+        case .backgroundNeedsForegroundStart: return 502
+        case .regionMonitoringUnavailable: return 503
+        case .surveyFailed: return 600
         }
     }
 
@@ -135,6 +172,11 @@ public enum WaymarkLocationStatus: Sendable, Equatable, CustomStringConvertible 
         case .motionUnavailable(let sensor): text = "no \(sensor.rawValue)"
         case .engineError(let code, let message): text = "engine error \(code): \(message)"
         case .scanRejected(let reason, let total): text = "scan rejected (\(total) so far): \(reason)"
+        case .backgroundModeMissing: text = "no location in UIBackgroundModes: paused in the background"
+        case .wakeOnArrivalNeedsAlways: text = "wake-up on arrival needs always authorization"
+        case .backgroundNeedsForegroundStart: text = "background positioning must start in the foreground"
+        case .regionMonitoringUnavailable: text = "beacon region monitoring unavailable"
+        case .surveyFailed(let reason): text = "survey recording failed: \(reason)"
         }
         return "\(code) \(text)"
     }
@@ -171,10 +213,14 @@ public extension WaymarkLocationManagerDelegate {
 /// after the motion up to its time. When no epoch was made for `request.advanceInterval`
 /// (beacons out of range, or ranging off), the manager calls `advance` so the position keeps
 /// moving. Every epoch's time is after the one before. Every failure is a status; nothing is
-/// dropped silently.
+/// dropped silently. In the background it follows `request.background` (Background.swift).
+///
+/// Survey mode: with a `SurveyRecorder` attached (`startSurvey`), every sensor batch and
+/// scan the manager reads also goes to the recorder, and `markWaypoint` records the
+/// surveyor's tap at the current time; a manager made with no engine only records.
 public final class WaymarkLocationManager: @unchecked Sendable {
-    /// The engine fed.
-    public let engine: PositioningEngine
+    /// The engine fed; nil for a manager that only records surveys.
+    public let engine: PositioningEngine?
     /// What is read and how often.
     public let request: WaymarkLocationRequest
     /// Where the delegate is called.
@@ -183,24 +229,39 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     private let motion: WaymarkMotionSource
     private let ranger: WaymarkBeaconRanger
     private let altimeter: WaymarkAltimeter?
+    private let backgroundLocation: WaymarkBackgroundLocation?
+    private let lifecycle: WaymarkAppLifecycle?
     private let clock: WaymarkClock
     private let scheduler: WaymarkScheduler
 
     // Everything below is read and written on `queue` only, except what `lock` guards.
     private let queue = DispatchQueue(label: "dev.waymark.location-manager")
     private let onQueueKey = DispatchSpecificKey<Bool>()
+    /// Started (by `start()` or a `locations()` stream), until stopped.
     private var active = false
+    /// The sensors, ranging and the timer run: `active` and not paused by the background plan.
+    private var inputsOn = false
     private var startedExplicitly = false
     private var subscription: Subscription?
     private var pending: [WaymarkMotionSensor: [MotionSample]] = [:]
     private var pendingPressure: [PressureReading] = []
     private var barometerOn = false
     private var unavailableSensors: [WaymarkMotionSensor] = []
+    private var reportedSensors = false
     private var authorization: WaymarkAuthorization = .notDetermined
     private var askedAuthorization = false
+    private var askedAlways = false
     private var ranging = false
     private var rangingFailed = false
     private var reportedRangingUnavailable = false
+    private var appState: WaymarkAppState
+    /// The inputs ran, with location updates, when the app left the foreground.
+    private var keptRunning = false
+    /// Inside each monitored beacon region, as Core Location last said.
+    private var regionInside: [UUID: Bool] = [:]
+    private var regionMonitoringFailed = false
+    private var appliedSettings = WaymarkBackgroundSettings.off
+    private var backgroundProblem: WaymarkLocationStatus?
     /// The latest epoch time handed to the engine (accepted or not): the next one is after it.
     private var lastEpochTimeNs: UInt64?
     /// The latest accepted epoch, or the session's start: `advance` is due an interval later.
@@ -210,44 +271,60 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     /// so the listener's echo of it (`onError`) is not reported twice.
     private var inEngineCall = false
     private var locationStreams: [UUID: AsyncStream<PositionEstimate>.Continuation] = [:]
+    private var survey: SurveyRecorder?
+    /// The survey recorder threw `Io`: it takes nothing until `resumeSurvey()`.
+    private var surveyFailing = false
 
     private let lock = NSLock()
     private weak var _delegate: WaymarkLocationManagerDelegate?
     private var _state: WaymarkLocationState = .idle
     private var _rejectedScans: UInt64 = 0
     private var _usesBarometer = false
+    private var _surveying = false
     private var statusStreams: [UUID: AsyncStream<WaymarkLocationStatus>.Continuation] = [:]
 
-    /// A manager over the given ports (`altimeter` nil: a device without a barometer). Throws
-    /// `PositioningError.InvalidConfig` for a request with an interval not > 0 or a batch
-    /// size below 1.
+    /// A manager over the given ports (`altimeter` nil: a device without a barometer;
+    /// `backgroundLocation` and `lifecycle` nil: no background handling, the app counts as in
+    /// the foreground). `engine` nil makes a manager that only records surveys. Throws
+    /// `PositioningError.InvalidConfig` for a request with an interval not > 0, a batch size
+    /// below 1, `.wakeOnArrival` without beacon UUIDs, or a background mode without a
+    /// `backgroundLocation` port.
     public init(
-        engine: PositioningEngine, request: WaymarkLocationRequest = WaymarkLocationRequest(),
+        engine: PositioningEngine?, request: WaymarkLocationRequest = WaymarkLocationRequest(),
         motion: WaymarkMotionSource, ranger: WaymarkBeaconRanger, altimeter: WaymarkAltimeter? = nil,
+        backgroundLocation: WaymarkBackgroundLocation? = nil, lifecycle: WaymarkAppLifecycle? = nil,
         clock: WaymarkClock = UptimeClock(), scheduler: WaymarkScheduler = DispatchTimerScheduler(),
         delegateQueue: DispatchQueue = .main
     ) throws {
         if let problem = request.problem() { throw PositioningError.InvalidConfig(reason: problem) }
+        if request.background != .off && backgroundLocation == nil {
+            throw PositioningError.InvalidConfig(reason: "background \(request.background) needs a backgroundLocation port")
+        }
         self.engine = engine
         self.request = request
         self.motion = motion
         self.ranger = ranger
         self.altimeter = altimeter
+        self.backgroundLocation = backgroundLocation
+        self.lifecycle = lifecycle
         self.clock = clock
         self.scheduler = scheduler
         self.delegateQueue = delegateQueue
+        appState = lifecycle?.state ?? .foreground
         queue.setSpecific(key: onQueueKey, value: true)
         ranger.setEventHandler(queue: queue) { [weak self] event in self?.handle(event) }
+        lifecycle?.setHandler(queue: queue) { [weak self] state in self?.appStateChanged(state) }
     }
 
     deinit {
         subscription?.cancel()
         advanceTimer?.cancel()
-        if active {
+        if inputsOn {
             motion.stop()
             if barometerOn { altimeter?.stop() }
             if ranging { ranger.stopRanging() }
         }
+        if appliedSettings != .off { backgroundLocation?.apply(.off) }
         locationStreams.values.forEach { $0.finish() }
         statusStreams.values.forEach { $0.finish() }
     }
@@ -268,9 +345,13 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     /// Beacon scans the engine refused since the manager was made.
     public var rejectedScanCount: UInt64 { lock.lock(); defer { lock.unlock() }; return _rejectedScans }
 
+    /// Whether a survey recorder is attached (`startSurvey` until `finishSurvey` returns).
+    public var isSurveying: Bool { lock.lock(); defer { lock.unlock() }; return _surveying }
+
     /// Starts the sensors, ranging (when the request names beacon UUIDs and location is
-    /// authorized; it asks when the user was never asked) and the `advance` timer. Does
-    /// nothing when running. Call it from any thread but the manager's own.
+    /// authorized; it asks when the user was never asked) and the `advance` timer, as the
+    /// app's state and `request.background` allow. Does nothing when started. Call it from
+    /// any thread but the manager's own.
     public func start() {
         dispatchPrecondition(condition: .notOnQueue(queue))
         queue.sync {
@@ -279,11 +360,19 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         }
     }
 
-    /// Stops the sensors, ranging and the timer, cancels the engine subscription and ends
-    /// every `locations()` stream. `start()` resumes on the same engine.
+    /// Stops the sensors, ranging, the timer and every background location service, cancels
+    /// the engine subscription and ends every `locations()` stream. `start()` resumes on the
+    /// same engine. An attached survey stays attached (with the motion read so far).
     public func stop() {
         dispatchPrecondition(condition: .notOnQueue(queue))
         queue.sync { stopSession() }
+    }
+
+    /// The app entered the background or returned: for an app that drives the manager
+    /// itself, without a `lifecycle` port (the iOS initialiser observes UIKit's notifications).
+    public func appStateDidChange(to state: WaymarkAppState) {
+        dispatchPrecondition(condition: .notOnQueue(queue))
+        queue.sync { appStateChanged(state) }
     }
 
     /// Positions as they come. Starts the manager if it is not running; when the last stream
@@ -321,7 +410,88 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         return stream
     }
 
+    // MARK: - Survey mode
+
+    /// Attaches `recorder`: from now on every sensor batch and beacon scan the manager reads
+    /// goes to it too, as to the engine (the barometer excepted: survey files carry none).
+    /// It does not start the manager. Throws `SurveyError.InputRejected` when a survey is
+    /// attached already.
+    public func startSurvey(_ recorder: SurveyRecorder) throws {
+        dispatchPrecondition(condition: .notOnQueue(queue))
+        try queue.sync {
+            guard survey == nil else {
+                throw SurveyError.InputRejected(reason: "a survey is being recorded: finish it first")
+            }
+            // Motion read before the survey goes to the engine alone.
+            flush(upTo: UInt64.max)
+            survey = recorder
+            surveyFailing = false
+            setSurveying(true)
+        }
+    }
+
+    /// The surveyor's tap: they stand at (`x`, `y`) m on the plan of `floor` (its name, "F1")
+    /// now, on the clock every input is timed on. The motion read up to now goes to the
+    /// recorder first. Throws `SurveyError.InputRejected` with no survey attached or for a
+    /// coordinate that is not finite, `Io` when the storage refuses.
+    public func markWaypoint(x: Double, y: Double, floor: String) throws {
+        dispatchPrecondition(condition: .notOnQueue(queue))
+        try queue.sync {
+            guard let survey else { throw SurveyError.InputRejected(reason: "no survey is being recorded") }
+            let t = clock.nowNs()
+            flush(upTo: t)
+            try survey.markWaypoint(timestampNs: t, x: x, y: y, floor: floor)
+        }
+    }
+
+    /// Sends the motion read so far, closes the recording (`SurveyRecorder.finish`) and
+    /// detaches it. On a throw (`NoWaypoints`: tap first; `Io`) it stays attached.
+    public func finishSurvey() throws -> SurveySummary {
+        dispatchPrecondition(condition: .notOnQueue(queue))
+        return try queue.sync {
+            guard let survey else { throw SurveyError.InputRejected(reason: "no survey is being recorded") }
+            flush(upTo: UInt64.max)
+            let summary = try survey.finish()
+            self.survey = nil
+            surveyFailing = false
+            setSurveying(false)
+            return summary
+        }
+    }
+
+    /// After a `surveyFailed` status (600): `SurveyRecorder.resume`, then the survey takes
+    /// input again. Throws `Io` while the storage still refuses.
+    public func resumeSurvey() throws {
+        dispatchPrecondition(condition: .notOnQueue(queue))
+        try queue.sync {
+            guard let survey else { throw SurveyError.InputRejected(reason: "no survey is being recorded") }
+            try survey.resume()
+            surveyFailing = false
+        }
+    }
+
+    private func setSurveying(_ on: Bool) {
+        lock.lock(); defer { lock.unlock() }
+        _surveying = on
+    }
+
+    /// One call on the attached recorder. A refused input is counted by the recorder itself
+    /// (`SurveySummary.scansRejected`); a failed write is a status, once, until resumed.
+    private func record(_ call: (SurveyRecorder) throws -> Void) {
+        guard let survey, !surveyFailing else { return }
+        do {
+            try call(survey)
+        } catch SurveyError.InputRejected {
+        } catch {
+            surveyFailing = true
+            report(.surveyFailed(reason: String(describing: error)))
+        }
+    }
+
     // MARK: - Session (on `queue`)
+
+    /// Whether the request needs location authorization: to range, or to run in the background.
+    private var needsLocation: Bool { !request.beaconUUIDs.isEmpty || request.background != .off }
 
     private func startSession() {
         dispatchPrecondition(condition: .onQueue(queue))
@@ -329,33 +499,17 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         active = true
         rangingFailed = false
         reportedRangingUnavailable = false
-        pending = [:]
-        subscription = engine.subscribe(listener: EngineListener(self))
-
-        unavailableSensors = WaymarkMotionSensor.allCases.filter { !motion.isAvailable($0) }
-        unavailableSensors.forEach { report(.motionUnavailable($0)) }
-        let sensors = WaymarkMotionSensor.allCases.filter { !unavailableSensors.contains($0) }
-        if !sensors.isEmpty {
-            motion.start(sensors, interval: request.motionInterval, queue: queue) { [weak self] reading in
-                self?.receive(reading)
-            }
-        }
-
-        if request.usesBarometer, let altimeter, altimeter.isAvailable {
-            pendingPressure = []
-            barometerOn = true
-            altimeter.start(queue: queue) { [weak self] reading in self?.receive(reading) }
-        }
-        setUsesBarometer(barometerOn)
-
-        advanceFromNs = clock.nowNs()
-        armAdvance(after: request.advanceInterval)
-
-        if !request.beaconUUIDs.isEmpty {
+        reportedSensors = false
+        regionMonitoringFailed = false
+        regionInside = [:]
+        keptRunning = false
+        backgroundProblem = nil
+        if let engine { subscription = engine.subscribe(listener: EngineListener(self)) }
+        if needsLocation {
             authorization = ranger.authorization
             report(WaymarkLocationStatus(authorization))
         }
-        updateRanging()
+        update()
     }
 
     private func stopSession() {
@@ -363,22 +517,10 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         startedExplicitly = false
         guard active else { return }
         active = false
-        motion.stop()
-        if barometerOn {
-            altimeter?.stop()
-            barometerOn = false
-            setUsesBarometer(false)
-        }
-        pendingPressure = []
-        if ranging {
-            ranger.stopRanging()
-            ranging = false
-        }
-        advanceTimer?.cancel()
-        advanceTimer = nil
+        stopInputs()
+        apply(.off)
         subscription?.cancel()
         subscription = nil
-        pending = [:]
         let streams = locationStreams
         locationStreams = [:]
         streams.values.forEach { $0.finish() }
@@ -390,38 +532,135 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         if locationStreams.isEmpty && !startedExplicitly { stopSession() }
     }
 
-    /// Starts or stops ranging as authorization, availability and failures allow, asks for
-    /// authorization once, and sets the state.
-    private func updateRanging() {
+    private func startInputs() {
+        guard !inputsOn else { return }
+        inputsOn = true
+        pending = [:]
+        unavailableSensors = WaymarkMotionSensor.allCases.filter { !motion.isAvailable($0) }
+        if !reportedSensors {
+            reportedSensors = true
+            unavailableSensors.forEach { report(.motionUnavailable($0)) }
+        }
+        let sensors = WaymarkMotionSensor.allCases.filter { !unavailableSensors.contains($0) }
+        if !sensors.isEmpty {
+            motion.start(sensors, interval: request.motionInterval, queue: queue) { [weak self] reading in
+                self?.receive(reading)
+            }
+        }
+        if request.usesBarometer, let altimeter, altimeter.isAvailable {
+            pendingPressure = []
+            barometerOn = true
+            altimeter.start(queue: queue) { [weak self] reading in self?.receive(reading) }
+        }
+        setUsesBarometer(barometerOn)
+        if engine != nil {
+            advanceFromNs = clock.nowNs()
+            armAdvance(after: request.advanceInterval)
+        }
+    }
+
+    /// Stops the sensors, ranging and the timer. Motion read after the last epoch is
+    /// dropped, as the engine has no epoch for it, except that an attached survey gets it.
+    private func stopInputs() {
+        guard inputsOn else { return }
+        for sensor in WaymarkMotionSensor.allCases {
+            if let batch = pending[sensor], !batch.isEmpty { recordMotion(batch, of: sensor) }
+        }
+        inputsOn = false
+        motion.stop()
+        if barometerOn {
+            altimeter?.stop()
+            barometerOn = false
+            setUsesBarometer(false)
+        }
+        pendingPressure = []
+        pending = [:]
+        if ranging {
+            ranger.stopRanging()
+            ranging = false
+        }
+        advanceTimer?.cancel()
+        advanceTimer = nil
+    }
+
+    private func apply(_ settings: WaymarkBackgroundSettings) {
+        guard settings != appliedSettings else { return }
+        appliedSettings = settings
+        backgroundLocation?.apply(settings)
+    }
+
+    private func appStateChanged(_ new: WaymarkAppState) {
+        dispatchPrecondition(condition: .onQueue(queue))
+        guard new != appState else { return }
+        keptRunning = new == .background && inputsOn && appliedSettings.updatesLocation
+        appState = new
+        update()
+    }
+
+    /// Whether the user is inside a monitored beacon region: true inside any, false when
+    /// outside all of them, nil while one is not known.
+    private var insideSite: Bool? {
+        let monitored = appliedSettings.monitoredRegions
+        guard !monitored.isEmpty, !regionMonitoringFailed else { return nil }
+        let known = monitored.compactMap { regionInside[$0] }
+        if known.contains(true) { return true }
+        return known.count == monitored.count ? false : nil
+    }
+
+    /// Carries out the background plan, starts or stops ranging as authorization,
+    /// availability and failures allow, asks for authorization once, and sets the state.
+    private func update() {
         guard active else { return }
-        if !request.beaconUUIDs.isEmpty {
+        var capabilities = backgroundLocation?.capabilities
+            ?? WaymarkBackgroundCapabilities(declaresLocationBackgroundMode: false, declaresAlwaysUsage: false,
+                                             canMonitorBeaconRegions: false)
+        if regionMonitoringFailed { capabilities.canMonitorBeaconRegions = false }
+        let plan = WaymarkBackgroundPlan.make(
+            mode: request.background, beaconUUIDs: request.beaconUUIDs,
+            showsIndicator: request.showsBackgroundLocationIndicator, requestsAuthorization: request.requestsAuthorization,
+            authorization: authorization, appState: appState, capabilities: capabilities,
+            keptRunning: keptRunning, insideSite: insideSite)
+        if plan.problem != backgroundProblem {
+            backgroundProblem = plan.problem
+            if let problem = plan.problem { report(problem) }
+        }
+        if plan.requestsAlwaysAuthorization && !askedAlways && appState == .foreground {
+            askedAlways = true
+            backgroundLocation?.requestAlwaysAuthorization()
+        }
+        apply(plan.settings)
+        if plan.runsInputs { startInputs() } else { stopInputs() }
+
+        if !request.beaconUUIDs.isEmpty && inputsOn {
             let available = ranger.isRangingAvailable
             if authorization.allowsRanging && !available && !reportedRangingUnavailable {
                 reportedRangingUnavailable = true
                 report(.rangingUnavailable)
             }
-            if authorization == .notDetermined && request.requestsAuthorization && !askedAuthorization {
-                askedAuthorization = true
-                ranger.requestWhenInUseAuthorization()
-            }
-            let allowed = authorization.allowsRanging && available && !rangingFailed
-            if allowed && !ranging {
-                ranger.startRanging(uuids: request.beaconUUIDs)
-                ranging = true
-            } else if !allowed && ranging {
-                ranger.stopRanging()
-                ranging = false
-            }
+        }
+        if needsLocation && authorization == .notDetermined && request.requestsAuthorization && !askedAuthorization
+            && appState == .foreground {
+            askedAuthorization = true
+            ranger.requestWhenInUseAuthorization()
+        }
+        let allowed = inputsOn && !request.beaconUUIDs.isEmpty && authorization.allowsRanging
+            && ranger.isRangingAvailable && !rangingFailed
+        if allowed && !ranging {
+            ranger.startRanging(uuids: request.beaconUUIDs)
+            ranging = true
+        } else if !allowed && ranging {
+            ranger.stopRanging()
+            ranging = false
         }
         let missing = (!request.beaconUUIDs.isEmpty && !ranging) || !unavailableSensors.isEmpty
-        setState(missing ? .degraded : .running)
+        setState(!inputsOn ? .paused : missing ? .degraded : .running)
     }
 
     // MARK: - Inputs (on `queue`)
 
     private func receive(_ reading: WaymarkMotionReading) {
         dispatchPrecondition(condition: .onQueue(queue))
-        guard active else { return }
+        guard inputsOn else { return }
         let sample: MotionSample?
         switch reading.sensor {
         case .accelerometer:
@@ -441,7 +680,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
 
     private func receive(_ reading: WaymarkPressureReading) {
         dispatchPrecondition(condition: .onQueue(queue))
-        guard active, barometerOn else { return }
+        guard inputsOn, barometerOn else { return }
         guard let pressure = AppleSensorConversion.pressure(timestamp: reading.timestamp, kilopascals: reading.kilopascals)
         else { return }
         pendingPressure.append(pressure)
@@ -452,6 +691,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     }
 
     private func pushPressure(_ batch: [PressureReading]) {
+        guard let engine else { return }
         do {
             _ = try engineCall { try engine.pushPressure(batch: batch) }
         } catch {
@@ -481,17 +721,31 @@ public final class WaymarkLocationManager: @unchecked Sendable {
         }
     }
 
+    /// One batch to the engine and to the survey, the same samples.
     private func push(_ batch: [MotionSample], of sensor: WaymarkMotionSensor) {
-        do {
-            _ = try engineCall {
-                switch sensor {
-                case .accelerometer: return try engine.pushAccelerometer(batch: batch)
-                case .gyroscope: return try engine.pushGyroscope(batch: batch)
-                case .magnetometer: return try engine.pushMagnetometer(batch: batch)
+        if let engine {
+            do {
+                _ = try engineCall {
+                    switch sensor {
+                    case .accelerometer: return try engine.pushAccelerometer(batch: batch)
+                    case .gyroscope: return try engine.pushGyroscope(batch: batch)
+                    case .magnetometer: return try engine.pushMagnetometer(batch: batch)
+                    }
                 }
+            } catch {
+                reportEngineError(error)
             }
-        } catch {
-            reportEngineError(error)
+        }
+        recordMotion(batch, of: sensor)
+    }
+
+    private func recordMotion(_ batch: [MotionSample], of sensor: WaymarkMotionSensor) {
+        record { survey in
+            switch sensor {
+            case .accelerometer: _ = try survey.pushAccelerometer(batch: batch)
+            case .gyroscope: _ = try survey.pushGyroscope(batch: batch)
+            case .magnetometer: _ = try survey.pushMagnetometer(batch: batch)
+            }
         }
     }
 
@@ -502,16 +756,23 @@ public final class WaymarkLocationManager: @unchecked Sendable {
             guard new != authorization else { return }
             authorization = new
             if new.allowsRanging { rangingFailed = false }
-            guard active, !request.beaconUUIDs.isEmpty else { return }
+            guard active, needsLocation else { return }
             report(WaymarkLocationStatus(new))
-            updateRanging()
+            update()
+        case .regionStateChanged(let uuid, let inside):
+            regionInside[uuid] = inside
+            update()
+        case .regionMonitoringFailed:
+            guard active, !regionMonitoringFailed else { return }
+            regionMonitoringFailed = true
+            update()
         case .failed(let uuid, let code, let message):
             guard active, ranging else { return }
             rangingFailed = true
             report(.rangingFailed(uuid: uuid, code: code, message: message))
-            updateRanging()
+            update()
         case .ranged(let beacons, _):
-            guard active, ranging else { return }
+            guard inputsOn, ranging else { return }
             let now = Date()
             let readings = beacons.compactMap {
                 AppleSensorConversion.beacon(
@@ -520,18 +781,22 @@ public final class WaymarkLocationManager: @unchecked Sendable {
             guard !readings.isEmpty else { return }
             let t = nextEpochTime()
             flush(upTo: t)
-            do {
-                _ = try engineCall { try engine.pushScan(scan: RadioScan(timestampNs: t, wifi: [], beacons: readings)) }
-                advanceFromNs = t
-            } catch PositioningError.InputRejected(let reason) {
-                lock.lock()
-                _rejectedScans += 1
-                let total = _rejectedScans
-                lock.unlock()
-                report(.scanRejected(reason: reason, total: total))
-            } catch {
-                reportEngineError(error)
+            let scan = RadioScan(timestampNs: t, wifi: [], beacons: readings)
+            if let engine {
+                do {
+                    _ = try engineCall { try engine.pushScan(scan: scan) }
+                    advanceFromNs = t
+                } catch PositioningError.InputRejected(let reason) {
+                    lock.lock()
+                    _rejectedScans += 1
+                    let total = _rejectedScans
+                    lock.unlock()
+                    report(.scanRejected(reason: reason, total: total))
+                } catch {
+                    reportEngineError(error)
+                }
             }
+            record { try $0.pushScan(scan: scan) }
         }
     }
 
@@ -544,7 +809,7 @@ public final class WaymarkLocationManager: @unchecked Sendable {
     /// rest of it.
     private func advanceIfDue() {
         dispatchPrecondition(condition: .onQueue(queue))
-        guard active else { return }
+        guard inputsOn, let engine else { return }
         let now = clock.nowNs()
         let interval = AppleSensorConversion.nanoseconds(fromSeconds: request.advanceInterval) ?? UInt64.max
         let (due, overflow) = advanceFromNs.addingReportingOverflow(interval)

@@ -133,6 +133,12 @@ public enum WaymarkRangingEvent: Sendable {
     case failed(uuid: UUID, code: Int, message: String)
     /// `locationManagerDidChangeAuthorization(_:)`, with the new authorization.
     case authorizationChanged(WaymarkAuthorization)
+    /// `locationManager(_:didDetermineState:for:)` for the beacon region of `uuid` (also sent
+    /// on entry and exit): whether the user is inside it.
+    case regionStateChanged(uuid: UUID, inside: Bool)
+    /// `locationManager(_:monitoringDidFailFor:withError:)`: monitoring the region of `uuid`
+    /// failed (`CLError.Code` raw value and description); no wake-up on arrival.
+    case regionMonitoringFailed(uuid: UUID, code: Int, message: String)
 }
 
 /// Beacon ranging and location authorization (`CoreLocationBeaconRanger` on iOS).
@@ -149,6 +155,29 @@ public protocol WaymarkBeaconRanger: AnyObject {
     func startRanging(uuids: [UUID])
     /// Stops ranging every UUID.
     func stopRanging()
+}
+
+/// Core Location's background services (`CoreLocationBeaconRanger` on iOS, on the same
+/// `CLLocationManager` as ranging): what the manager's background plan sets
+/// (Background.swift). Its events (region states, authorization) come through the ranger's
+/// event handler.
+public protocol WaymarkBackgroundLocation: AnyObject {
+    /// What the app's Info.plist and the device allow.
+    var capabilities: WaymarkBackgroundCapabilities { get }
+    /// Sets `allowsBackgroundLocationUpdates`, `showsBackgroundLocationIndicator` and
+    /// `pausesLocationUpdatesAutomatically`, starts or stops standard location updates and
+    /// monitors exactly `settings.monitoredRegions` (asking each one's state when it starts).
+    func apply(_ settings: WaymarkBackgroundSettings)
+    /// Shows the system's "always" prompt (`requestAlwaysAuthorization`).
+    func requestAlwaysAuthorization()
+}
+
+/// Whether the app is in the foreground (`UIKitAppLifecycle` on iOS).
+public protocol WaymarkAppLifecycle: AnyObject {
+    /// The app's state now.
+    var state: WaymarkAppState { get }
+    /// Where changes go: `handler` is called on `queue`. Set once.
+    func setHandler(queue: DispatchQueue, handler: @escaping (WaymarkAppState) -> Void)
 }
 
 /// The monotonic clock every input is timed on: CoreMotion's, seconds since boot.

@@ -278,19 +278,25 @@ final class Harness {
     let scheduler = FakeScheduler()
     let delegateQueue = DispatchQueue(label: "test.delegate")
     let delegate = DelegateRecorder()
+    let background: FakeBackgroundLocation?
+    let lifecycle: FakeLifecycle?
     let manager: WaymarkLocationManager
 
+    /// `withEngine` false: a manager that only records surveys (`engine` is then unused).
     init(siteJson: String, request: WaymarkLocationRequest = WaymarkLocationRequest(beaconUUIDs: [beaconUUID]),
          authorization: WaymarkAuthorization = .authorizedWhenInUse, rangingAvailable: Bool = true,
-         clockStart: UInt64 = 0, barometer: Bool = true) throws {
+         clockStart: UInt64 = 0, barometer: Bool = true, background: FakeBackgroundLocation? = nil,
+         lifecycle: FakeLifecycle? = nil, withEngine: Bool = true) throws {
         engine = try RecordingEngine(siteJson: siteJson, options: EngineOptions())
         ranger = FakeRanger(authorization: authorization, isRangingAvailable: rangingAvailable)
+        self.background = background
+        self.lifecycle = lifecycle
         clock.set(clockStart)
         delegateQueue.setSpecific(key: DelegateRecorder.key, value: "delegate")
         manager = try WaymarkLocationManager(
-            engine: engine, request: request, motion: motion, ranger: ranger,
-            altimeter: barometer ? altimeter : nil, clock: clock,
-            scheduler: scheduler, delegateQueue: delegateQueue)
+            engine: withEngine ? engine : nil, request: request, motion: motion, ranger: ranger,
+            altimeter: barometer ? altimeter : nil, backgroundLocation: background, lifecycle: lifecycle,
+            clock: clock, scheduler: scheduler, delegateQueue: delegateQueue)
         manager.delegate = delegate
     }
 
@@ -320,31 +326,38 @@ final class Harness {
     }
 }
 
+/// The simulated site, as exported.
+func simSiteJson() throws -> String {
+    try String(contentsOf: WaymarkTests.simDir.appendingPathComponent("site.json"), encoding: .utf8)
+}
+
+/// The simulated site with its access points declared as iBeacons (see the file's comment).
+func makeBeaconSiteJson(_ site: String? = nil) throws -> String {
+    var json = try site ?? simSiteJson()
+    for minor in 0..<15 {
+        let byte = (minor < 16 ? "0" : "") + String(minor, radix: 16)
+        let wifi = #"{"wifi":{"bssid":"02:00:00:00:00:\#(byte)"}}"#
+        XCTAssertTrue(json.contains(wifi), "the simulator's access points changed: \(wifi)")
+        json = json.replacingOccurrences(
+            of: wifi, with: #"{"ble":{"uuid":"\#(beaconUUID.uuidString.lowercased())","major":1,"minor":\#(minor)}}"#)
+    }
+    XCTAssertFalse(json.contains(#""wifi":"#))
+    return json
+}
+
+/// A walk file of the simulated office (`walk.json`, or one of `survey/`).
+func loadWalk(_ url: URL = WaymarkTests.simDir.appendingPathComponent("walk.json")) throws -> Walk {
+    let decoder = JSONDecoder()
+    decoder.keyDecodingStrategy = .convertFromSnakeCase
+    return try decoder.decode(Walk.self, from: Data(contentsOf: url))
+}
+
 final class LocationClientTests: XCTestCase {
-    func siteJson() throws -> String {
-        try String(contentsOf: WaymarkTests.simDir.appendingPathComponent("site.json"), encoding: .utf8)
-    }
+    func siteJson() throws -> String { try simSiteJson() }
 
-    /// The simulated site with its access points declared as iBeacons (see the file's comment).
-    func beaconSiteJson() throws -> String {
-        var json = try siteJson()
-        for minor in 0..<15 {
-            let byte = (minor < 16 ? "0" : "") + String(minor, radix: 16)
-            let wifi = #"{"wifi":{"bssid":"02:00:00:00:00:\#(byte)"}}"#
-            XCTAssertTrue(json.contains(wifi), "the simulator's access points changed: \(wifi)")
-            json = json.replacingOccurrences(
-                of: wifi, with: #"{"ble":{"uuid":"\#(beaconUUID.uuidString.lowercased())","major":1,"minor":\#(minor)}}"#)
-        }
-        XCTAssertFalse(json.contains(#""wifi":"#))
-        return json
-    }
+    func beaconSiteJson() throws -> String { try makeBeaconSiteJson() }
 
-    func walk() throws -> Walk {
-        let data = try Data(contentsOf: WaymarkTests.simDir.appendingPathComponent("walk.json"))
-        let decoder = JSONDecoder()
-        decoder.keyDecodingStrategy = .convertFromSnakeCase
-        return try decoder.decode(Walk.self, from: data)
-    }
+    func walk() throws -> Walk { try loadWalk() }
 
     /// Fails unless every motion sample up to each epoch's time was sent before it, and none
     /// after it; returns how many motion calls were made.
