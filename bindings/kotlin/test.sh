@@ -113,9 +113,14 @@ mkdir -p "$OUT/classes"
 python3 "$REPO/scripts/readme-snippet.py" kotlin-quickstart > "$OUT/ReadmeQuickstart.kt"
 python3 "$REPO/scripts/readme-snippet.py" android-statuses docs/android.md > "$OUT/AndroidGuideStatuses.kt"
 python3 "$REPO/scripts/readme-snippet.py" kotlin-survey docs/surveying.md > "$OUT/SurveyingGuide.kt"
+python3 "$REPO/scripts/readme-snippet.py" android-survey docs/android.md > "$OUT/AndroidGuideSurvey.kt"
 "$KOTLINC" -nowarn -jvm-target 17 -cp "$compile_cp" -d "$OUT/classes" \
     "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt "$OUT/ReadmeQuickstart.kt" \
-    "$OUT/AndroidGuideStatuses.kt" "$OUT/SurveyingGuide.kt" "${ANDROID_PLAIN[@]}"
+    "$OUT/AndroidGuideStatuses.kt" "$OUT/SurveyingGuide.kt" "$OUT/AndroidGuideSurvey.kt" "${ANDROID_PLAIN[@]}"
+# Java callers of the Android client (no unsigned type, default methods, the builder): javac
+# against the classes kotlinc made.
+step "javac (the client from Java)"
+javac -nowarn -source 17 -target 17 -cp "$OUT/classes:$compile_cp:$STDLIB" -d "$OUT/classes" "$HERE"/src/test/java/dev/waymark/*.java
 
 step "JUnit 4"
 set +e
