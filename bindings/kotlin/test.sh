@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The Kotlin test of Waymark on the JVM: builds the library and uniffi's generator, generates the
-# Kotlin bindings, exports a simulated site and walk, compiles the bindings and the JUnit 4 test
-# with kotlinc and runs it. Installs what is missing (Debian: libjna-java junit4; npm: the Kotlin
+# Kotlin bindings, exports a simulated site and walk, compiles the bindings, the Android
+# library's plain Kotlin and the JUnit 4 test with kotlinc (and a Java caller with javac) and
+# runs it. Installs what is missing (Debian: libjna-java junit4; npm: the Kotlin
 # compiler, unpacked under $TARGET/tools). Last line: exactly "N passed, N failed".
 # Usage: bash bindings/kotlin/test.sh        (from anywhere; honours CARGO_TARGET_DIR)
 #        bash bindings/kotlin/test.sh --tools-only   (installs and unpacks the tools, then stops;
@@ -129,6 +130,7 @@ java -Djna.library.path="$TARGET/debug" \
     -Dwaymark.hashedSite="$SIM/site-hashed.json" -Dwaymark.salt="$SIM/salt.hex" \
     -Dwaymark.packedSite="$SIM/site.wmsite" \
     -Dwaymark.surveyWalks="$SIM/survey" -Dwaymark.cli="$TARGET/release/waymark" \
+    -Dwaymark.android="$REPO/android" \
     -cp "$OUT/classes:$run_cp" dev.waymark.RunTests 2>&1 | tee "$OUT/junit.log"
 status=${PIPESTATUS[0]}
 set -e

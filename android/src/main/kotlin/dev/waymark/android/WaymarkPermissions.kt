@@ -1,13 +1,13 @@
 package dev.waymark.android
 
 /**
- * The runtime permissions of Android 10 to 14 as the client needs them, in plain Kotlin: which
+ * The runtime permissions of Android 8 to 14 as the client needs them, in plain Kotlin: which
  * to request, and what the granted ones allow ([PermissionCheck]), so the client's statuses
  * follow the platform's rules and the JVM test covers every combination.
  *
  * - Location: ACCESS_FINE_LOCATION with ACCESS_COARSE_LOCATION, in one request (Android 12+
- *   ignores a request for FINE alone). "Approximate" grants COARSE only, which gives no WiFi
- *   (Android 10+) or BLE scan results.
+ *   ignores a request for FINE alone). From Android 10 scan results need FINE: "Approximate"
+ *   (COARSE only) gives no WiFi or BLE scan results; before Android 10 COARSE was enough.
  * - NEARBY_WIFI_DEVICES for WiFi scans on Android 13+; BLUETOOTH_SCAN for BLE scans on 12+, and
  *   BLUETOOTH_CONNECT to ask the user to turn Bluetooth on. Below their version they do not
  *   exist and are never checked.
@@ -69,17 +69,18 @@ internal class PermissionCheck(sdkInt: Int, isGranted: (WaymarkPermission) -> Bo
     val bleAllowed: Boolean
 
     init {
-        val fine = isGranted(WaymarkPermission.ACCESS_FINE_LOCATION)
         val coarse = isGranted(WaymarkPermission.ACCESS_COARSE_LOCATION)
+        // Scan results need precise location from Android 10 (API 29); before, either will do.
+        val precise = isGranted(WaymarkPermission.ACCESS_FINE_LOCATION) || (coarse && sdkInt < 29)
         when {
-            fine -> Unit
+            precise -> Unit
             coarse -> missing += WaymarkLocationStatus.ApproximateLocationOnly
             else -> missing += WaymarkLocationStatus.PermissionMissing(WaymarkPermission.ACCESS_FINE_LOCATION)
         }
         // Only once the app has location at all: the background request comes after it.
         val background = inForeground || sdkInt < 29 || isGranted(WaymarkPermission.ACCESS_BACKGROUND_LOCATION)
-        if (fine && !background) missing += WaymarkLocationStatus.PermissionMissing(WaymarkPermission.ACCESS_BACKGROUND_LOCATION)
-        located = fine && background
+        if (precise && !background) missing += WaymarkLocationStatus.PermissionMissing(WaymarkPermission.ACCESS_BACKGROUND_LOCATION)
+        located = precise && background
 
         val nearby = sdkInt < 33 || isGranted(WaymarkPermission.NEARBY_WIFI_DEVICES)
         if (wifi && !nearby) missing += WaymarkLocationStatus.PermissionMissing(WaymarkPermission.NEARBY_WIFI_DEVICES)

@@ -68,7 +68,7 @@ class ThreadRecordingEngine(private val inner: PositioningEngine) : PositioningE
 
 /**
  * The Android client as an app runs it: on its own thread, with the app's lifecycle, Android
- * 10-14's permissions, a Flow that completes, Eddystone identities, Java callers and survey
+ * 8-14's permissions, a Flow that completes, Eddystone identities, Java callers and survey
  * mode.
  */
 class AndroidClientTest {
@@ -265,13 +265,13 @@ class AndroidClientTest {
     }
 
     @Test
-    fun everyPermissionCombinationOfAndroid10To14IsACodedStatus() {
+    fun everyPermissionCombinationOfAndroid8To14IsACodedStatus() {
         val all = WaymarkPermission.values().toList()
         // Every permission its own code, 100 to 106; approximate location 107.
         assertEquals((100..106).toList(), all.map { it.code })
         assertEquals(107, WaymarkLocationStatus.ApproximateLocationOnly.code)
         var cases = 0
-        for (sdk in 29..34) for (mask in 0 until (1 shl all.size)) for (visible in listOf(true, false))
+        for (sdk in 26..34) for (mask in 0 until (1 shl all.size)) for (visible in listOf(true, false))
             for (serviceWanted in listOf(false, true)) for (bluetoothOn in listOf(true, false)) {
                 val granted = all.filterIndexed { i, _ -> mask and (1 shl i) != 0 }.toSet()
                 val has = { p: WaymarkPermission -> p in granted }
@@ -289,9 +289,10 @@ class AndroidClientTest {
                 val client = WaymarkLocationClient.forSurvey(phone.platform)
                 client.requestLocationUpdates(WaymarkLocationRequest(), direct, RecordingCallback())
 
-                // What Android 10 to 14 allow, rule by rule (docs/android.md#permissions).
-                val fine = has(WaymarkPermission.ACCESS_FINE_LOCATION)
-                val anyLocation = fine || has(WaymarkPermission.ACCESS_COARSE_LOCATION)
+                // What Android 8 to 14 allow, rule by rule (docs/android.md#permissions).
+                // Scan results need FINE from Android 10 on; COARSE was enough before.
+                val anyLocation = has(WaymarkPermission.ACCESS_FINE_LOCATION) || has(WaymarkPermission.ACCESS_COARSE_LOCATION)
+                val fine = has(WaymarkPermission.ACCESS_FINE_LOCATION) || (sdk < 29 && anyLocation)
                 val serviceRuns = serviceWanted && (sdk < 34 || (has(WaymarkPermission.FOREGROUND_SERVICE_LOCATION) && anyLocation))
                 val inForeground = visible || serviceRuns
                 val backgroundOk = inForeground || sdk < 29 || has(WaymarkPermission.ACCESS_BACKGROUND_LOCATION)
@@ -327,7 +328,7 @@ class AndroidClientTest {
                 client.close()
                 cases++
             }
-        assertEquals(6 * 128 * 8, cases)
+        assertEquals(9 * 128 * 8, cases)
         // What to request: FINE with COARSE always; the radios' permissions from their version on.
         val names = { sdk: Int -> WaymarkPermissions.manifestNames(WaymarkPermissions.foreground(sdk)).map { it.substringAfterLast('.') } }
         assertEquals(listOf("ACCESS_FINE_LOCATION", "ACCESS_COARSE_LOCATION"), names(30))
