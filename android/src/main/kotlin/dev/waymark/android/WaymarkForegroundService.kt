@@ -38,7 +38,7 @@ class WaymarkForegroundService : Service() {
     override fun onStartCommand(intent: Intent?, flags: Int, startId: Int): Int {
         val visibility = AndroidPlatform.visibility(this)
         val notification = intent?.let { notificationOf(it) }
-        if (notification == null) {
+        if (intent == null || notification == null) {
             // Restarted by the system without its intent: nothing to show, so nothing to run.
             stopSelf(startId)
             return START_NOT_STICKY

@@ -178,7 +178,12 @@ class AndroidClientTest {
         assertEquals("every engine call on the client's thread", setOf(WORKER), engine.threads.toSet())
         assertFalse(requester in engine.threads)
         assertEquals("every callback on the app's executor", setOf("app-main"), callbackThreads.toSet())
-        assertTrue("scans pushed: ${engine.scans.get()}", engine.scans.get() >= 4)
+        // Epochs from scans and from the advance timer (a scan older than an advance the timer
+        // made meanwhile is late, and counted: LocationClientStats.wifiScansLate). One broadcast
+        // may fall in the moment WiFi is off for the revoked NEARBY_WIFI_DEVICES.
+        val stats = client.stats()
+        assertTrue("$stats", stats.wifiScansPushed + stats.wifiScansLate >= 4)
+        assertTrue("scans pushed: ${engine.scans.get()}", engine.scans.get() >= 2)
         assertTrue("positions: ${positions.get()}", positions.get() >= 4)
         assertTrue("samples: ${engine.accelerometerSamples.get()}", engine.accelerometerSamples.get() >= 250)
         assertEquals(ClientState.STOPPED, client.state)
@@ -201,7 +206,8 @@ class AndroidClientTest {
                 release.await() // the app's main thread busy, for as long as the test says
             }
         }
-        client.requestLocationUpdates(WaymarkLocationRequest(ble = false, advanceIntervalMs = 500), app, callback)
+        // Epochs from the scans alone (no advance would come between two scans 0.5 s apart).
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false, advanceIntervalMs = 5_000), app, callback)
         val failures = CopyOnWriteArrayList<Throwable>()
         val deadline = System.nanoTime() + 10 * S
         while (phone.sensors.running.size < 3 && System.nanoTime() < deadline) Thread.sleep(5)
@@ -224,6 +230,7 @@ class AndroidClientTest {
         val samplesWhileBlocked = engine.accelerometerSamples.get() - samplesBefore
         val scansWhileBlocked = engine.scans.get() - scansBefore
         assertEquals("the callback is still blocked", 1, heard.get())
+        // 200 samples emitted; all but those held in a batch (fewer than 50) went in.
         assertTrue("samples went in while the callback blocked: $samplesWhileBlocked", samplesWhileBlocked >= 150)
         assertTrue("scans went in while the callback blocked: $scansWhileBlocked", scansWhileBlocked >= 3)
         release.countDown()
