@@ -53,7 +53,9 @@ enum class WaymarkPermission(val manifestName: String, val code: Int) {
      *  together with [ACCESS_COARSE_LOCATION]: Android 12+ ignores a request for it alone. */
     ACCESS_FINE_LOCATION("android.permission.ACCESS_FINE_LOCATION", 100),
 
-    /** Approximate location: alone it gives no scan results ([WaymarkLocationStatus.ApproximateLocationOnly]). */
+    /** Approximate location: from Android 10 alone it gives no scan results. Never reported
+     *  itself: without either location permission the client reports [ACCESS_FINE_LOCATION]
+     *  (100), with this one alone [WaymarkLocationStatus.ApproximateLocationOnly] (107). */
     ACCESS_COARSE_LOCATION("android.permission.ACCESS_COARSE_LOCATION", 101),
 
     /** WiFi scans on Android 13+ (API 33). */
@@ -89,7 +91,7 @@ sealed class WaymarkLocationStatus(val code: Int) {
 
     /**
      * [permission] is not granted where it is needed; the code is the permission's
-     * ([WaymarkPermission.code], 100 to 106). Without any location permission (100) nothing
+     * ([WaymarkPermission.code]: 100, 102 to 106). Without any location permission (100) nothing
      * runs (PAUSED); without ACCESS_BACKGROUND_LOCATION (105) nothing runs while the app is in
      * the background without a foreground service; without NEARBY_WIFI_DEVICES (102) WiFi
      * stops, without BLUETOOTH_SCAN (103) BLE stops; BLUETOOTH_CONNECT (104) is reported while

@@ -178,6 +178,9 @@ class AndroidClientTest {
         assertEquals("every engine call on the client's thread", setOf(WORKER), engine.threads.toSet())
         assertFalse(requester in engine.threads)
         assertEquals("every callback on the app's executor", setOf("app-main"), callbackThreads.toSet())
+        // The scan handling (results read, scans started) and the sensors' registrations too.
+        assertEquals(setOf(WORKER), phone.wifi.threads.toSet())
+        assertEquals(setOf(WORKER), phone.sensors.threads.toSet())
         // Epochs from scans and from the advance timer (a scan older than an advance the timer
         // made meanwhile is late, and counted: LocationClientStats.wifiScansLate). One broadcast
         // may fall in the moment WiFi is off for the revoked NEARBY_WIFI_DEVICES.

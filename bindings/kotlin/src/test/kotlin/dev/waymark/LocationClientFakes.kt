@@ -78,7 +78,9 @@ class FakeScheduler(private val clock: FakeClock) : Scheduler {
 }
 
 class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values().toSet()) : MotionSensors {
-    val running = EnumMap<MotionSensor, MotionSink>(MotionSensor::class.java)
+    val running: MutableMap<MotionSensor, MotionSink> = java.util.Collections.synchronizedMap(EnumMap<MotionSensor, MotionSink>(MotionSensor::class.java))
+    /** The threads that registered or unregistered a sensor. */
+    val threads: MutableSet<String> = java.util.concurrent.ConcurrentHashMap.newKeySet()
     val registrations = ArrayList<Triple<MotionSensor, Int, Int>>()
     /** Present, but registerListener returns false. */
     val refused = HashSet<MotionSensor>()
@@ -86,6 +88,7 @@ class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values()
     override fun has(sensor: MotionSensor) = sensor in present
 
     override fun start(sensor: MotionSensor, periodUs: Int, maxReportLatencyUs: Int, sink: MotionSink): Boolean {
+        threads += Thread.currentThread().name
         if (sensor !in present || sensor in refused) return false
         registrations += Triple(sensor, periodUs, maxReportLatencyUs)
         running[sensor] = sink
@@ -93,6 +96,7 @@ class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values()
     }
 
     override fun stop(sensor: MotionSensor) {
+        threads += Thread.currentThread().name
         running.remove(sensor)
     }
 
@@ -137,19 +141,26 @@ class FakeWifi(private val clock: FakeClock) : WifiRadio {
     var pending = false
     @Volatile var results: List<WifiResult> = emptyList()
     @Volatile var sink: WifiSink? = null
+    /** The threads that started scans, read results or registered the receiver. */
+    val threads: MutableSet<String> = java.util.concurrent.ConcurrentHashMap.newKeySet()
 
     override fun isScanAvailable() = available
     override fun isScanThrottleEnabled() = throttleEnabled
 
     override fun startScan(): Boolean {
+        threads += Thread.currentThread().name
         startCalls += clock.now
         if (accept) pending = true
         return accept
     }
 
-    override fun scanResults() = results
+    override fun scanResults(): List<WifiResult> {
+        threads += Thread.currentThread().name
+        return results
+    }
 
     override fun listen(sink: WifiSink) {
+        threads += Thread.currentThread().name
         this.sink = sink
     }
 
