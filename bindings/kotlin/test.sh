@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # The Kotlin test of Waymark on the JVM: builds the library and uniffi's generator, generates the
-# Kotlin bindings, exports a simulated site and walk, compiles the bindings and the JUnit 4 test
-# with kotlinc and runs it. Installs what is missing (Debian: libjna-java junit4; npm: the Kotlin
+# Kotlin bindings, exports a simulated site and walk, compiles the bindings, the Android
+# library's plain Kotlin and the JUnit 4 test with kotlinc (and a Java caller with javac) and
+# runs it. Installs what is missing (Debian: libjna-java junit4; npm: the Kotlin
 # compiler, unpacked under $TARGET/tools). Last line: exactly "N passed, N failed".
 # Usage: bash bindings/kotlin/test.sh        (from anywhere; honours CARGO_TARGET_DIR)
 #        bash bindings/kotlin/test.sh --tools-only   (installs and unpacks the tools, then stops;
@@ -113,9 +114,14 @@ mkdir -p "$OUT/classes"
 python3 "$REPO/scripts/readme-snippet.py" kotlin-quickstart > "$OUT/ReadmeQuickstart.kt"
 python3 "$REPO/scripts/readme-snippet.py" android-statuses docs/android.md > "$OUT/AndroidGuideStatuses.kt"
 python3 "$REPO/scripts/readme-snippet.py" kotlin-survey docs/surveying.md > "$OUT/SurveyingGuide.kt"
+python3 "$REPO/scripts/readme-snippet.py" android-survey docs/android.md > "$OUT/AndroidGuideSurvey.kt"
 "$KOTLINC" -nowarn -jvm-target 17 -cp "$compile_cp" -d "$OUT/classes" \
     "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt "$OUT/ReadmeQuickstart.kt" \
-    "$OUT/AndroidGuideStatuses.kt" "$OUT/SurveyingGuide.kt" "${ANDROID_PLAIN[@]}"
+    "$OUT/AndroidGuideStatuses.kt" "$OUT/SurveyingGuide.kt" "$OUT/AndroidGuideSurvey.kt" "${ANDROID_PLAIN[@]}"
+# Java callers of the Android client (no unsigned type, default methods, the builder): javac
+# against the classes kotlinc made.
+step "javac (the client from Java)"
+javac -nowarn -source 17 -target 17 -cp "$OUT/classes:$compile_cp:$STDLIB" -d "$OUT/classes" "$HERE"/src/test/java/dev/waymark/*.java
 
 step "JUnit 4"
 set +e
@@ -124,6 +130,7 @@ java -Djna.library.path="$TARGET/debug" \
     -Dwaymark.hashedSite="$SIM/site-hashed.json" -Dwaymark.salt="$SIM/salt.hex" \
     -Dwaymark.packedSite="$SIM/site.wmsite" \
     -Dwaymark.surveyWalks="$SIM/survey" -Dwaymark.cli="$TARGET/release/waymark" \
+    -Dwaymark.android="$REPO/android" \
     -cp "$OUT/classes:$run_cp" dev.waymark.RunTests 2>&1 | tee "$OUT/junit.log"
 status=${PIPESTATUS[0]}
 set -e

@@ -1,6 +1,11 @@
+@file:JvmName("WaymarkAndroid")
+
 package dev.waymark.android
 
 import android.annotation.SuppressLint
+import android.app.Activity
+import android.app.ActivityManager
+import android.app.Application
 import android.bluetooth.BluetoothAdapter
 import android.bluetooth.BluetoothManager
 import android.bluetooth.le.ScanCallback
@@ -19,7 +24,9 @@ import android.hardware.SensorManager
 import android.location.LocationManager
 import android.net.wifi.WifiManager
 import android.os.Build
+import android.os.Bundle
 import android.os.Handler
+import android.os.HandlerThread
 import android.os.Looper
 import android.os.ParcelUuid
 import android.os.SystemClock
@@ -27,36 +34,67 @@ import dev.waymark.PositioningEngineInterface
 
 /*
  * The Android shell of WaymarkLocationClient: each port of Platform.kt over the platform call
- * it names, and nothing else. Every decision (rates, budgets, dedupe, statuses) is in the
- * plain-Kotlin client, which the JVM test covers; this file is compiled by the AAR build only.
+ * it names, and nothing else. Every decision (threads, rates, budgets, dedupe, statuses,
+ * permissions, foreground and background) is in the plain-Kotlin client, which the JVM test
+ * covers; this file is compiled by the AAR build only.
  */
 
 /**
- * A location client on this phone, on [looper]'s thread (sensor events, broadcasts and the
- * timer all run there): `WaymarkLocationClient(context, engine)`.
+ * A location client on this phone, `WaymarkAndroid.createLocationClient(context, engine)` from
+ * Java. The client owns a `HandlerThread` ("waymark-location"): sensor events, broadcasts,
+ * BLE results, the timer and every epoch run there, and it ends with `close()`. The client
+ * follows the app's activities to switch between foreground and background by itself.
  */
-fun WaymarkLocationClient(
-    context: Context,
-    engine: PositioningEngineInterface,
-    looper: Looper = Looper.getMainLooper(),
-): WaymarkLocationClient = WaymarkLocationClient(engine, AndroidPlatform.create(context.applicationContext, looper))
+@JvmName("createLocationClient")
+fun WaymarkLocationClient(context: Context, engine: PositioningEngineInterface): WaymarkLocationClient =
+    WaymarkLocationClient(engine, AndroidPlatform.create(context.applicationContext))
+
+/** A client for survey mode alone (no engine, no positions): [WaymarkLocationClient.startSurvey]. */
+@JvmName("createSurveyClient")
+fun WaymarkSurveyClient(context: Context): WaymarkLocationClient =
+    WaymarkLocationClient.forSurvey(AndroidPlatform.create(context.applicationContext))
 
 internal object AndroidPlatform {
-    fun create(context: Context, looper: Looper): Platform {
-        val handler = Handler(looper)
+    @Volatile private var visibility: AppVisibility? = null
+
+    fun create(context: Context): Platform {
+        val thread = HandlerThread("waymark-location").apply { start() }
+        val handler = Handler(thread.looper)
         return Platform(
             clock = Clock { SystemClock.elapsedRealtimeNanos() },
-            scheduler = Scheduler { delayMs, task ->
-                val posted = Runnable { task.run() } // its own instance, so only it is removed
-                handler.postDelayed(posted, delayMs)
-                Cancellable { handler.removeCallbacks(posted) }
-            },
+            scheduler = HandlerScheduler(handler, thread),
             sensors = AndroidSensors(context, handler),
             wifi = AndroidWifi(context, handler),
             ble = AndroidBle(context),
             availability = AndroidAvailability(context, handler),
             barometer = AndroidBarometer(context, handler),
+            lifecycle = visibility(context),
         )
+    }
+
+    /** The process's one [AppVisibility], fed by every activity's start and stop (on the main
+     *  thread) and by [WaymarkForegroundService]. */
+    fun visibility(context: Context): AppVisibility = visibility ?: synchronized(this) {
+        visibility ?: run {
+            val app = context.applicationContext as Application
+            // Visible now if the process is in the foreground: an activity may have started
+            // before the first client was made; its stop brings the count to the background.
+            val state = ActivityManager.RunningAppProcessInfo()
+            ActivityManager.getMyMemoryState(state)
+            val visible = state.importance <= ActivityManager.RunningAppProcessInfo.IMPORTANCE_FOREGROUND
+            val v = AppVisibility(HandlerScheduler(Handler(Looper.getMainLooper()), null), visible)
+            app.registerActivityLifecycleCallbacks(object : Application.ActivityLifecycleCallbacks {
+                override fun onActivityStarted(activity: Activity) = v.activityStarted()
+                override fun onActivityStopped(activity: Activity) = v.activityStopped()
+                override fun onActivityCreated(activity: Activity, savedInstanceState: Bundle?) = Unit
+                override fun onActivityResumed(activity: Activity) = Unit
+                override fun onActivityPaused(activity: Activity) = Unit
+                override fun onActivitySaveInstanceState(activity: Activity, outState: Bundle) = Unit
+                override fun onActivityDestroyed(activity: Activity) = Unit
+            })
+            visibility = v
+            v
+        }
     }
 
     fun register(context: Context, receiver: BroadcastReceiver, filter: IntentFilter, handler: Handler) {
@@ -65,6 +103,25 @@ internal object AndroidPlatform {
         } else {
             context.registerReceiver(receiver, filter, null, handler)
         }
+    }
+}
+
+/** [Scheduler] over a `Handler`; [thread], the client's own, ends with [quit]. */
+internal class HandlerScheduler(private val handler: Handler, private val thread: HandlerThread?) : Scheduler {
+    override fun schedule(delayMs: Long, task: Runnable): Cancellable {
+        val posted = Runnable { task.run() } // its own instance, so only it is removed
+        handler.postDelayed(posted, delayMs)
+        return Cancellable { handler.removeCallbacks(posted) }
+    }
+
+    override fun post(task: Runnable) {
+        handler.post(task)
+    }
+
+    override fun isClientThread(): Boolean = Looper.myLooper() === handler.looper
+
+    override fun quit() {
+        thread?.quitSafely()
     }
 }
 
@@ -197,7 +254,7 @@ private class AndroidAvailability(private val context: Context, private val hand
 
     override fun sdkInt() = Build.VERSION.SDK_INT
 
-    override fun isGranted(permission: Permission) =
+    override fun isGranted(permission: WaymarkPermission) =
         context.checkSelfPermission(permission.manifestName) == PackageManager.PERMISSION_GRANTED
 
     override fun isLocationEnabled() = if (Build.VERSION.SDK_INT >= 28) {

@@ -6,6 +6,20 @@ import dev.waymark.BeaconReading
 data class IBeacon(val uuid: String, val major: Int, val minor: Int, val txPowerDbm: Int)
 
 /**
+ * An Eddystone-UID frame's identity: [namespace] (10 bytes, 20 lower-case hex digits) and
+ * [instance] (6 bytes, 12 hex digits), and its calibrated power at 0 m. The identity is the
+ * beacon's own; the advertiser's MAC address is not (many beacons rotate it).
+ */
+data class EddystoneUid(val namespace: String, val instance: String, val txPowerDbm: Int) {
+    /** The identity as Waymark keys it: the 16 bytes, namespace then instance, written as a
+     *  UUID (8-4-4-4-12 hex digits: the namespace fills the first four groups, the instance
+     *  the last), with major and minor 0 and no address. */
+    val uuid: String
+        get() = "${namespace.substring(0, 8)}-${namespace.substring(8, 12)}-${namespace.substring(12, 16)}-" +
+            "${namespace.substring(16, 20)}-$instance"
+}
+
+/**
  * BLE advertisements as Waymark beacons, in plain Kotlin. An iBeacon is Apple manufacturer
  * data (company id 0x004C) holding type 0x02, length 0x15, the proximity UUID (16 bytes),
  * major and minor (big-endian) and the measured power at 1 m (signed); an Eddystone beacon
@@ -19,6 +33,10 @@ object BleAdvertisements {
     private const val IBEACON_LENGTH = 0x15
     private const val AD_MANUFACTURER_DATA = 0xFF
     private const val AD_SERVICE_DATA_16 = 0x16
+    private const val EDDYSTONE_UID_FRAME = 0x00
+
+    /** Frame type, ranging power, namespace (10) and instance (6). */
+    private const val EDDYSTONE_UID_LENGTH = 18
 
     /** The iBeacon in manufacturer data [data] (after the company id), or null if it is none. */
     fun iBeacon(companyId: Int, data: ByteArray): IBeacon? {
@@ -41,7 +59,24 @@ object BleAdvertisements {
         return found
     }
 
-    /** Whether a raw advertisement carries Eddystone service data. */
+    /** The Eddystone-UID frame in a raw advertisement, or null: service data for 0xFEAA with
+     *  frame type 0x00, the ranging power, the namespace and the instance (Google's
+     *  Eddystone-UID specification; the two reserved bytes after them are optional). */
+    fun eddystoneUid(record: ByteArray): EddystoneUid? {
+        var found: EddystoneUid? = null
+        structures(record) { type, start, end ->
+            if (found == null && type == AD_SERVICE_DATA_16 && end - start >= 2 + EDDYSTONE_UID_LENGTH &&
+                (u8(record, start) or (u8(record, start + 1) shl 8)) == EDDYSTONE_SERVICE_UUID &&
+                u8(record, start + 2) == EDDYSTONE_UID_FRAME
+            ) {
+                val hex = { from: Int, to: Int -> (from until to).joinToString("") { "%02x".format(u8(record, it)) } }
+                found = EddystoneUid(hex(start + 4, start + 14), hex(start + 14, start + 20), record[start + 3].toInt())
+            }
+        }
+        return found
+    }
+
+    /** Whether a raw advertisement carries Eddystone service data (any frame). */
     fun isEddystone(record: ByteArray): Boolean {
         var found = false
         structures(record) { type, start, end ->
@@ -54,14 +89,20 @@ object BleAdvertisements {
         return found
     }
 
-    /** The reading Waymark takes for an advertisement, without RSSI and age; null when it is
-     *  neither an iBeacon nor Eddystone (a phone, headphones: not the site's transmitters). */
+    /**
+     * The reading Waymark takes for an advertisement, without RSSI and age; null when it is
+     * neither an iBeacon nor an Eddystone-UID frame (a phone, headphones, Eddystone's URL, TLM
+     * and EID frames: none names a transmitter of the site). An iBeacon is keyed by UUID, major
+     * and minor (by [address] at the factory's major = minor = 0); an Eddystone beacon by its
+     * namespace and instance ([EddystoneUid.uuid]), never by its rotating address.
+     */
     fun reading(address: String, record: ByteArray?): BeaconReading? {
         record ?: return null
         iBeacon(record)?.let {
             return BeaconReading(uuid = it.uuid, major = it.major.toUShort(), minor = it.minor.toUShort(), rssiDbm = 0.0, address = address)
         }
-        return if (isEddystone(record)) BeaconReading(rssiDbm = 0.0, address = address) else null
+        eddystoneUid(record)?.let { return BeaconReading(uuid = it.uuid, rssiDbm = 0.0, address = null) }
+        return null
     }
 
     /** Calls [each] with every AD structure's type and data range; stops at a malformed one. */

@@ -38,12 +38,27 @@ object Conversions {
     fun scanTimeNs(resultTimestampsUs: List<Long>): Long = (resultTimestampsUs.maxOrNull() ?: 0L) * 1_000L
 
     /**
-     * What an Android `Location` takes from a position: latitude/longitude (WGS84, computed in
-     * Rust from the site file's anchor), `accuracy` the 68% radius (as Android defines it),
-     * the true bearing and its one-σ accuracy when the heading is known, and the floor's
-     * logical level when the site file gives one.
+     * The wall clock at one instant of the monotonic clock every input and position uses
+     * (`SystemClock.elapsedRealtimeNanos()`): `System.currentTimeMillis()` read with it. A
+     * position's time, ns since boot, maps to the wall clock through it; the two clocks then
+     * agree as long as nobody sets the wall clock, so an anchor is read afresh for each
+     * conversion (`toAndroidLocation` does).
+     */
+    data class WallClockAnchor(val wallTimeMs: Long, val elapsedRealtimeNs: Long) {
+        /** The wall time, ms since the Unix epoch, of [elapsedNs] on the monotonic clock. */
+        fun wallTimeMs(elapsedNs: Long): Long = wallTimeMs + Math.floorDiv(elapsedNs - elapsedRealtimeNs, 1_000_000L)
+    }
+
+    /**
+     * What an Android `Location` takes from a position: its time (`elapsedRealtimeNanos` the
+     * position's own timestamp, `time` that instant on the wall clock, through [WallClockAnchor]),
+     * latitude/longitude (WGS84, computed in Rust from the site file's anchor), `accuracy` the
+     * 68% radius (as Android defines it), the true bearing and its one-σ accuracy when the
+     * heading is known, and the floor's logical level when the site file gives one.
      */
     data class LocationFields(
+        val timeMs: Long,
+        val elapsedRealtimeNs: Long,
         val latitudeDeg: Double,
         val longitudeDeg: Double,
         val accuracyM: Double,
@@ -52,11 +67,15 @@ object Conversions {
         val floorLevel: Int?,
     )
 
-    /** The `Location` fields of a position; `null` when the site is not geo-referenced. */
-    fun locationFields(position: PositionEstimate): LocationFields? {
+    /** The `Location` fields of a position, its time on the wall clock through [clock]; `null`
+     *  when the site is not geo-referenced. */
+    fun locationFields(position: PositionEstimate, clock: WallClockAnchor): LocationFields? {
         val lat = position.latitudeDeg ?: return null
         val lon = position.longitudeDeg ?: return null
+        val elapsedNs = position.timestampNs.toLong()
         return LocationFields(
+            timeMs = clock.wallTimeMs(elapsedNs),
+            elapsedRealtimeNs = elapsedNs,
             latitudeDeg = lat,
             longitudeDeg = lon,
             accuracyM = position.accuracyM,

@@ -1,8 +1,11 @@
+@file:JvmName("WaymarkLocations")
+
 package dev.waymark.android
 
 import android.location.Location
 import android.os.Build
 import android.os.Bundle
+import android.os.SystemClock
 import dev.waymark.PositionEstimate
 
 /**
@@ -11,10 +14,14 @@ import dev.waymark.PositionEstimate
  * `accuracy` the 68% radius (as Android defines it), `bearing` and (API 26+)
  * `bearingAccuracyDegrees` when the heading is known, and the site frame's x, y, floor index,
  * floor name and floor level (`waymark.floorLevel`, when the site gives one) in the extras.
- * Every value comes from [Conversions.locationFields], which the JVM test covers.
+ * `elapsedRealtimeNanos` is the position's timestamp (the clock of every input), and `time` the
+ * same instant on the wall clock: the wall clock now, less the time elapsed since the
+ * position ([Conversions.WallClockAnchor]). Every value comes from [Conversions.locationFields],
+ * which the JVM test covers.
  */
 fun PositionEstimate.toAndroidLocation(): Location? {
-    val fields = Conversions.locationFields(this) ?: return null
+    val anchor = Conversions.WallClockAnchor(System.currentTimeMillis(), SystemClock.elapsedRealtimeNanos())
+    val fields = Conversions.locationFields(this, anchor) ?: return null
     return Location("waymark").apply {
         latitude = fields.latitudeDeg
         longitude = fields.longitudeDeg
@@ -23,8 +30,8 @@ fun PositionEstimate.toAndroidLocation(): Location? {
         if (Build.VERSION.SDK_INT >= Build.VERSION_CODES.O) {
             fields.bearingAccuracyDeg?.let { bearingAccuracyDegrees = it.toFloat() }
         }
-        elapsedRealtimeNanos = timestampNs.toLong()
-        time = System.currentTimeMillis()
+        elapsedRealtimeNanos = fields.elapsedRealtimeNs
+        time = fields.timeMs
         extras = Bundle().apply {
             putDouble("waymark.x", x)
             putDouble("waymark.y", y)

@@ -6,8 +6,9 @@ package dev.waymark.android
  * adapts them to SensorManager, WifiManager, BluetoothLeScanner, Handler and Context.
  */
 
-/** Everything the client runs on. [barometer] defaults to a phone without one. */
-class Platform(
+/** Everything the client runs on. [barometer] defaults to a phone without one, [lifecycle] to
+ *  an app that is always visible (an app that tells the client nothing). */
+class Platform @JvmOverloads constructor(
     val clock: Clock,
     val scheduler: Scheduler,
     val sensors: MotionSensors,
@@ -15,6 +16,7 @@ class Platform(
     val ble: BleScanner,
     val availability: Availability,
     val barometer: Barometer = Barometer.NONE,
+    val lifecycle: AppLifecycle = AppLifecycle.ALWAYS_VISIBLE,
 )
 
 /** The monotonic clock of every input: `SystemClock.elapsedRealtimeNanos()` on Android, the
@@ -23,9 +25,23 @@ fun interface Clock {
     fun nowNs(): Long
 }
 
-/** Runs a task later on the client's thread: a `Handler` on Android. */
-fun interface Scheduler {
+/**
+ * The client's own thread: a `HandlerThread` on Android ([ThreadScheduler] on the JVM). Every
+ * input, epoch, engine call and timer of the client runs on it, never on the thread that
+ * requested updates, so the app's main thread only enqueues.
+ */
+interface Scheduler {
+    /** Runs [task] on the client's thread after [delayMs]. */
     fun schedule(delayMs: Long, task: Runnable): Cancellable
+
+    /** Runs [task] on the client's thread as soon as it is free, after the tasks posted before. */
+    fun post(task: Runnable)
+
+    /** Whether the calling thread is the client's thread. */
+    fun isClientThread(): Boolean
+
+    /** The client closed: the thread ends after the tasks posted so far (`quitSafely`). */
+    fun quit() {}
 }
 
 /** A scheduled task or a registration, cancelled at most once. */
@@ -133,15 +149,47 @@ interface Availability {
     fun sdkInt(): Int
 
     /** `checkSelfPermission(permission) == PERMISSION_GRANTED`. */
-    fun isGranted(permission: Permission): Boolean
+    fun isGranted(permission: WaymarkPermission): Boolean
 
     /** `LocationManager.isLocationEnabled()`. */
     fun isLocationEnabled(): Boolean
 
-    /** Calls [onChange] when location, WiFi or Bluetooth is switched (broadcasts). Permission
+    /** Calls [onChange] when location, WiFi or Bluetooth is switched (broadcasts). WaymarkPermission
      *  grants have no broadcast: the client re-checks on its timer. */
     fun watch(onChange: Runnable)
 
     /** Stops watching. */
     fun unwatch()
+}
+
+/**
+ * What Android's background limits depend on: whether the app is visible (an activity
+ * started) and whether a location foreground service holds it in the foreground. The client
+ * switches between the foreground and background modes by itself as these change
+ * ([AppVisibility] is the implementation; on Android it follows the activities' lifecycle).
+ */
+interface AppLifecycle {
+    /** An activity of the app is started (visible). */
+    fun isVisible(): Boolean
+
+    /** A foreground service of type `location` runs ([WaymarkForegroundService]). */
+    fun isForegroundServiceRunning(): Boolean
+
+    /** Why the foreground service the app started does not run, while that holds; null when it
+     *  runs or was not asked for. */
+    fun foregroundServiceRefusal(): WaymarkLocationStatus?
+
+    /** Calls [onChange] on any thread when one of the above changes, until cancelled. */
+    fun watch(onChange: Runnable): Cancellable
+
+    companion object {
+        /** An app that is always visible and never runs a foreground service. */
+        @JvmField
+        val ALWAYS_VISIBLE: AppLifecycle = object : AppLifecycle {
+            override fun isVisible() = true
+            override fun isForegroundServiceRunning() = false
+            override fun foregroundServiceRefusal(): WaymarkLocationStatus? = null
+            override fun watch(onChange: Runnable) = Cancellable {}
+        }
+    }
 }

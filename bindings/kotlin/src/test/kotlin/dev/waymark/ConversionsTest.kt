@@ -40,8 +40,11 @@ class ConversionsTest {
  * Android adapter's `Location` fields are read from the position as it is.
  */
 class GeoConversionsTest {
-    private fun position(lat: Double?, lon: Double?, bearing: Double?, level: Int?) = PositionEstimate(
-        timestampNs = 1UL, x = 3.0, y = 4.0, floor = 0U, floorName = "G", floorLevel = level, floorProbability = 1.0,
+    /** The wall clock read at 5 s since boot: 2023-11-14T22:13:20Z. */
+    private val clock = Conversions.WallClockAnchor(wallTimeMs = 1_700_000_000_000L, elapsedRealtimeNs = 5_000_000_000L)
+
+    private fun position(lat: Double?, lon: Double?, bearing: Double?, level: Int?, timestampNs: ULong = 3_250_000_000UL) = PositionEstimate(
+        timestampNs = timestampNs, x = 3.0, y = 4.0, floor = 0U, floorName = "G", floorLevel = level, floorProbability = 1.0,
         latitudeDeg = lat, longitudeDeg = lon, accuracyM = 2.5, accuracy95M = 5.0,
         headingDeg = bearing?.let { 12.0 }, headingAccuracyDeg = bearing?.let { 5.0 }, bearingDeg = bearing,
         motionState = MotionState.WALKING, scenario = MotionScenario.DISTANCE_HEADING, steps = 2U,
@@ -49,19 +52,26 @@ class GeoConversionsTest {
 
     @Test
     fun locationFieldsComeFromThePositionItself() {
-        val fields = Conversions.locationFields(position(60.001, 24.002, 30.0, -1))!!
+        val fields = Conversions.locationFields(position(60.001, 24.002, 30.0, -1), clock)!!
+        // The position's own time: elapsedRealtimeNanos its timestamp, time the same instant on
+        // the wall clock (1.75 s before the anchor was read), not the time of the conversion.
+        assertEquals(3_250_000_000L, fields.elapsedRealtimeNs)
+        assertEquals(1_700_000_000_000L - 1_750L, fields.timeMs)
+        // After the anchor, and a part of a millisecond before it rounds down (to the ms it falls in).
+        assertEquals(1_700_000_002_000L, Conversions.locationFields(position(1.0, 1.0, null, null, 7_000_999_999UL), clock)!!.timeMs)
+        assertEquals(1_699_999_999_999L, Conversions.locationFields(position(1.0, 1.0, null, null, 4_999_999_999UL), clock)!!.timeMs)
         assertEquals(60.001, fields.latitudeDeg, 0.0)
         assertEquals(24.002, fields.longitudeDeg, 0.0)
         assertEquals(2.5, fields.accuracyM, 0.0)
         assertEquals(30.0, fields.bearingDeg!!, 0.0)
         assertEquals(5.0, fields.bearingAccuracyDeg!!, 0.0)
         assertEquals(-1, fields.floorLevel)
-        val still = Conversions.locationFields(position(60.0, 24.0, null, null))!!
+        val still = Conversions.locationFields(position(60.0, 24.0, null, null), clock)!!
         org.junit.Assert.assertNull(still.bearingDeg)
         org.junit.Assert.assertNull(still.bearingAccuracyDeg)
         org.junit.Assert.assertNull(still.floorLevel)
         // A site without an anchor has no Location.
-        org.junit.Assert.assertNull(Conversions.locationFields(position(null, null, 30.0, 1)))
+        org.junit.Assert.assertNull(Conversions.locationFields(position(null, null, 30.0, 1), clock))
     }
 
     @Test
@@ -76,7 +86,7 @@ class GeoConversionsTest {
         val engine = PositioningEngine(geo, EngineOptions())
         val inMetres = engine.pushFix(PositionFix(timestampNs = t0, x = 35.5, y = 11.5, accuracyM = 0.5))
         assertEquals(2, inMetres.floorLevel)
-        val here = Conversions.locationFields(inMetres)!!
+        val here = Conversions.locationFields(inMetres, Conversions.WallClockAnchor(0L, 0L))!!
         // At 60°N a degree of latitude is 111 412 m and one of longitude 55 800 m (WGS84).
         assertEquals(60.17 + inMetres.y / 111_412.0, here.latitudeDeg, 1e-6)
         assertEquals(24.94 + inMetres.x / 55_800.0, here.longitudeDeg, 1e-5)
@@ -105,7 +115,7 @@ class GeoConversionsTest {
         assertTrue(e.message!!, e.message!!.contains("not geo-referenced"))
         val local = unanchored.pushFix(PositionFix(timestampNs = t0, x = 35.5, y = 11.5, accuracyM = 0.5))
         org.junit.Assert.assertNull(local.latitudeDeg)
-        org.junit.Assert.assertNull(Conversions.locationFields(local))
+        org.junit.Assert.assertNull(Conversions.locationFields(local, Conversions.WallClockAnchor(0L, 0L)))
         engine.close()
         other.close()
         third.close()

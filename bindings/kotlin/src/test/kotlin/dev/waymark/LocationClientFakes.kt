@@ -1,17 +1,18 @@
 package dev.waymark
 
+import dev.waymark.android.AppVisibility
 import dev.waymark.android.Availability
 import dev.waymark.android.Barometer
 import dev.waymark.android.BleScanner
 import dev.waymark.android.BleSink
 import dev.waymark.android.Cancellable
 import dev.waymark.android.Clock
-import dev.waymark.android.LocationCallback
-import dev.waymark.android.LocationStatus
+import dev.waymark.android.WaymarkLocationCallback
+import dev.waymark.android.WaymarkLocationStatus
 import dev.waymark.android.MotionSensor
 import dev.waymark.android.MotionSensors
 import dev.waymark.android.MotionSink
-import dev.waymark.android.Permission
+import dev.waymark.android.WaymarkPermission
 import dev.waymark.android.Platform
 import dev.waymark.android.PressureSink
 import dev.waymark.android.Scheduler
@@ -33,7 +34,11 @@ class FakeClock : Clock {
     override fun nowNs(): Long = now
 }
 
-/** The client's Handler, and the platform's own events, in time order on one fake clock. */
+/**
+ * The client's Handler, and the platform's own events, in time order on one fake clock. The
+ * test's thread plays the client's thread: posted tasks run at once (ThreadedPhone runs the
+ * client on a thread of its own).
+ */
 class FakeScheduler(private val clock: FakeClock) : Scheduler {
     private class Task(val atNs: Long, val seq: Long, val run: Runnable) {
         var cancelled = false
@@ -43,6 +48,10 @@ class FakeScheduler(private val clock: FakeClock) : Scheduler {
     private val queue = PriorityQueue<Task>(compareBy<Task>({ it.atNs }, { it.seq }))
 
     override fun schedule(delayMs: Long, task: Runnable): Cancellable = at(clock.now + delayMs * 1_000_000L, task)
+
+    override fun post(task: Runnable) = task.run()
+
+    override fun isClientThread() = true
 
     fun at(atNs: Long, task: Runnable): Cancellable = synchronized(queue) {
         val t = Task(atNs, seq++, task)
@@ -69,7 +78,9 @@ class FakeScheduler(private val clock: FakeClock) : Scheduler {
 }
 
 class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values().toSet()) : MotionSensors {
-    val running = EnumMap<MotionSensor, MotionSink>(MotionSensor::class.java)
+    val running: MutableMap<MotionSensor, MotionSink> = java.util.Collections.synchronizedMap(EnumMap<MotionSensor, MotionSink>(MotionSensor::class.java))
+    /** The threads that registered or unregistered a sensor. */
+    val threads: MutableSet<String> = java.util.concurrent.ConcurrentHashMap.newKeySet()
     val registrations = ArrayList<Triple<MotionSensor, Int, Int>>()
     /** Present, but registerListener returns false. */
     val refused = HashSet<MotionSensor>()
@@ -77,6 +88,7 @@ class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values()
     override fun has(sensor: MotionSensor) = sensor in present
 
     override fun start(sensor: MotionSensor, periodUs: Int, maxReportLatencyUs: Int, sink: MotionSink): Boolean {
+        threads += Thread.currentThread().name
         if (sensor !in present || sensor in refused) return false
         registrations += Triple(sensor, periodUs, maxReportLatencyUs)
         running[sensor] = sink
@@ -84,6 +96,7 @@ class FakeSensors(private val present: Set<MotionSensor> = MotionSensor.values()
     }
 
     override fun stop(sensor: MotionSensor) {
+        threads += Thread.currentThread().name
         running.remove(sensor)
     }
 
@@ -128,19 +141,26 @@ class FakeWifi(private val clock: FakeClock) : WifiRadio {
     var pending = false
     @Volatile var results: List<WifiResult> = emptyList()
     @Volatile var sink: WifiSink? = null
+    /** The threads that started scans, read results or registered the receiver. */
+    val threads: MutableSet<String> = java.util.concurrent.ConcurrentHashMap.newKeySet()
 
     override fun isScanAvailable() = available
     override fun isScanThrottleEnabled() = throttleEnabled
 
     override fun startScan(): Boolean {
+        threads += Thread.currentThread().name
         startCalls += clock.now
         if (accept) pending = true
         return accept
     }
 
-    override fun scanResults() = results
+    override fun scanResults(): List<WifiResult> {
+        threads += Thread.currentThread().name
+        return results
+    }
 
     override fun listen(sink: WifiSink) {
+        threads += Thread.currentThread().name
         this.sink = sink
     }
 
@@ -181,13 +201,15 @@ class FakeBle : BleScanner {
     }
 }
 
-class FakeAvailability(var sdk: Int = 34) : Availability {
-    val granted = HashSet(Permission.values().toList())
+class FakeAvailability(@Volatile var sdk: Int = 34) : Availability {
+    val granted: MutableSet<WaymarkPermission> = java.util.concurrent.ConcurrentHashMap.newKeySet<WaymarkPermission>().apply {
+        addAll(WaymarkPermission.values())
+    }
     var locationOn = true
     var watcher: Runnable? = null
 
     override fun sdkInt() = sdk
-    override fun isGranted(permission: Permission) = permission in granted
+    override fun isGranted(permission: WaymarkPermission) = permission in granted
     override fun isLocationEnabled() = locationOn
 
     override fun watch(onChange: Runnable) {
@@ -208,7 +230,9 @@ class FakePhone(sensorsPresent: Set<MotionSensor> = MotionSensor.values().toSet(
     val ble = FakeBle()
     val availability = FakeAvailability()
     val barometer = FakeBarometer(hasBarometer)
-    val platform = Platform(clock, scheduler, sensors, wifi, ble, availability, barometer)
+    /** The app's activities and foreground service, on the same fake clock. */
+    val lifecycle = AppVisibility(scheduler, initiallyVisible = true)
+    val platform = Platform(clock, scheduler, sensors, wifi, ble, availability, barometer, lifecycle)
 
     /** Nothing of the phone runs: no sensor, no barometer, no receiver, no BLE scan. */
     val idle: Boolean get() =
@@ -255,16 +279,16 @@ class FakePhone(sensorsPresent: Set<MotionSensor> = MotionSensor.values().toSet(
 }
 
 /** Hears a client; records what and on which executor. */
-class RecordingCallback : LocationCallback {
+class RecordingCallback : WaymarkLocationCallback {
     val positions = CopyOnWriteArrayList<PositionEstimate>()
-    val statuses = CopyOnWriteArrayList<LocationStatus>()
+    val statuses = CopyOnWriteArrayList<WaymarkLocationStatus>()
     val engineStatuses = CopyOnWriteArrayList<StatusUpdate>()
 
     override fun onLocation(position: PositionEstimate) {
         positions += position
     }
 
-    override fun onStatus(status: LocationStatus) {
+    override fun onStatus(status: WaymarkLocationStatus) {
         statuses += status
     }
 

@@ -3,10 +3,10 @@ package dev.waymark
 import dev.waymark.android.BleAdvertisements
 import dev.waymark.android.ClientState
 import dev.waymark.android.IBeacon
-import dev.waymark.android.LocationRequest
-import dev.waymark.android.LocationStatus
+import dev.waymark.android.WaymarkLocationRequest
+import dev.waymark.android.WaymarkLocationStatus
 import dev.waymark.android.MotionSensor
-import dev.waymark.android.Permission
+import dev.waymark.android.WaymarkPermission
 import dev.waymark.android.WaymarkLocationClient
 import dev.waymark.android.WifiResult
 import dev.waymark.android.WifiScanBudget
@@ -83,7 +83,7 @@ class LocationClientTest {
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(ble = false), direct, callback)
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false), direct, callback)
         phone.replay(walk, passive = { true })
         client.close()
         val mine = meanError(callback.positions)
@@ -112,7 +112,7 @@ class LocationClientTest {
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(ble = false, sensorMaxLatencyMs = 200), direct, callback)
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false, sensorMaxLatencyMs = 200), direct, callback)
         assertTrue(client.usesBarometer)
         // 10 Hz, reports held up to the request's 200 ms, as the motion sensors are.
         assertEquals(listOf(100_000 to 200_000), phone.barometer.registrations)
@@ -141,7 +141,7 @@ class LocationClientTest {
 
     @Test
     fun aPhoneWithoutABarometerOrARequestForItRunsWithoutOne() {
-        for ((hasBarometer, request) in listOf(false to LocationRequest(ble = false), true to LocationRequest(ble = false, barometer = false))) {
+        for ((hasBarometer, request) in listOf(false to WaymarkLocationRequest(ble = false), true to WaymarkLocationRequest(ble = false, barometer = false))) {
             val phone = FakePhone(hasBarometer = hasBarometer)
             val engine = engine()
             val client = WaymarkLocationClient(engine, phone.platform)
@@ -163,7 +163,7 @@ class LocationClientTest {
         phone.barometer.refuse = true
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
-        client.requestLocationUpdates(LocationRequest(ble = false), direct, RecordingCallback())
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false), direct, RecordingCallback())
         phone.scheduler.runUntil(60 * S)
         assertFalse(client.usesBarometer)
         assertEquals(ClientState.RUNNING, client.state)
@@ -177,24 +177,24 @@ class LocationClientTest {
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val mine = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(ble = false), direct, mine)
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false), direct, mine)
         assertTrue(client.usesBarometer)
         phone.barometer.emit(1_000_000L, 1000f)
         // Location permission revoked: nothing runs, the held reading went to the engine first.
-        phone.availability.granted -= Permission.ACCESS_FINE_LOCATION
+        phone.availability.granted -= WaymarkPermission.ACCESS_FINE_LOCATION
         client.refreshAvailability()
         assertEquals(ClientState.PAUSED, client.state)
         assertFalse(client.usesBarometer)
         assertNull(phone.barometer.sink)
         assertEquals(1, engine.pressureReadings)
         // Granted again: registered again.
-        phone.availability.granted += Permission.ACCESS_FINE_LOCATION
+        phone.availability.granted += WaymarkPermission.ACCESS_FINE_LOCATION
         client.refreshAvailability()
         assertTrue(client.usesBarometer)
         assertEquals(2, phone.barometer.registrations.size)
         // Another caller that asks for no barometer keeps it on; removing the one that did stops it.
         val other = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(ble = false, barometer = false), direct, other)
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false, barometer = false), direct, other)
         assertTrue(client.usesBarometer)
         client.removeLocationUpdates(mine)
         assertFalse(client.usesBarometer)
@@ -227,7 +227,7 @@ class LocationClientTest {
             }
         }
         // A caller that asks for a scan every second gets what Android allows, no more.
-        val greedy = LocationRequest(ble = false, wifiScanIntervalMs = 1_000, advanceIntervalMs = 60_000)
+        val greedy = WaymarkLocationRequest(ble = false, wifiScanIntervalMs = 1_000, advanceIntervalMs = 60_000)
         client.requestLocationUpdates(greedy, direct, callback)
         run(3 * 3_600 * S)
         val foreground = phone.wifi.startCalls.toList()
@@ -268,7 +268,7 @@ class LocationClientTest {
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
         // 70 Hz: batches of 35 samples, which end between the walk's scans (1.5 s apart).
-        client.requestLocationUpdates(LocationRequest(ble = false, sensorRateHz = 70), direct, callback)
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false, sensorRateHz = 70), direct, callback)
         // Another app scans every epoch; every fourth result set is broadcast a second time (a
         // third app's receiver, the same cached list), and one scan fails (not updated).
         phone.replay(walk.take(20), passive = { true }) { k ->
@@ -305,13 +305,13 @@ class LocationClientTest {
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(ble = false, advanceIntervalMs = 2_000), direct, callback)
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false, advanceIntervalMs = 2_000), direct, callback)
         // The first scan goes through; Android refuses every later one.
         phone.replay(walk, afterEpoch = { phone.wifi.accept = false })
         val stats = client.stats()
         assertEquals(1, engine.scans.size)
         assertTrue(stats.wifiScansRefused >= 1)
-        assertTrue(callback.statuses.any { it == LocationStatus.WifiScanThrottled && it.code == 200 })
+        assertTrue(callback.statuses.any { it == WaymarkLocationStatus.WifiScanThrottled && it.code == 200 })
         // 49 s of walk, an epoch every 2 s after the one scan.
         assertTrue("advances: ${stats.advances}", stats.advances >= 20)
         assertEquals(0L, stats.advancesRejected)
@@ -330,21 +330,23 @@ class LocationClientTest {
     @Test
     fun withoutLocationPermissionNothingStartsAndGrantingResumes() {
         val phone = FakePhone()
-        phone.availability.granted -= Permission.ACCESS_FINE_LOCATION
+        phone.availability.granted -= WaymarkPermission.ACCESS_FINE_LOCATION
+        phone.availability.granted -= WaymarkPermission.ACCESS_COARSE_LOCATION
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(), direct, callback)
+        client.requestLocationUpdates(WaymarkLocationRequest(), direct, callback)
         phone.scheduler.runUntil(60 * S)
-        assertEquals(listOf<LocationStatus>(LocationStatus.PermissionMissing(Permission.ACCESS_FINE_LOCATION)), callback.statuses)
+        assertEquals(listOf<WaymarkLocationStatus>(WaymarkLocationStatus.PermissionMissing(WaymarkPermission.ACCESS_FINE_LOCATION)), callback.statuses)
         assertEquals(100, callback.statuses[0].code)
         assertEquals(ClientState.PAUSED, client.state)
         assertTrue("no sensor, radio or scan", phone.idle && phone.wifi.startCalls.isEmpty() && phone.ble.starts == 0)
         assertTrue(callback.positions.isEmpty())
         // The user grants it: the client's own check finds it within 5 s.
-        phone.availability.granted += Permission.ACCESS_FINE_LOCATION
+        phone.availability.granted += WaymarkPermission.ACCESS_FINE_LOCATION
+        phone.availability.granted += WaymarkPermission.ACCESS_COARSE_LOCATION
         phone.scheduler.runUntil(66 * S)
-        assertEquals(LocationStatus.Restored(LocationStatus.PermissionMissing(Permission.ACCESS_FINE_LOCATION)), callback.statuses.last())
+        assertEquals(WaymarkLocationStatus.Restored(WaymarkLocationStatus.PermissionMissing(WaymarkPermission.ACCESS_FINE_LOCATION)), callback.statuses.last())
         assertEquals(ClientState.RUNNING, client.state)
         assertEquals(3, phone.sensors.running.size)
         assertNotNull(phone.wifi.sink)
@@ -360,28 +362,28 @@ class LocationClientTest {
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(), direct, callback)
+        client.requestLocationUpdates(WaymarkLocationRequest(), direct, callback)
         phone.scheduler.runUntil(S)
         assertEquals(ClientState.RUNNING, client.state)
         assertTrue(callback.statuses.isEmpty())
         // BLUETOOTH_SCAN revoked: BLE stops, WiFi and the sensors go on.
-        phone.availability.granted -= Permission.BLUETOOTH_SCAN
+        phone.availability.granted -= WaymarkPermission.BLUETOOTH_SCAN
         client.refreshAvailability()
-        assertEquals(LocationStatus.PermissionMissing(Permission.BLUETOOTH_SCAN), callback.statuses.last())
+        assertEquals(WaymarkLocationStatus.PermissionMissing(WaymarkPermission.BLUETOOTH_SCAN), callback.statuses.last())
         assertEquals(ClientState.DEGRADED, client.state)
         assertNull(phone.ble.sink)
         assertNotNull(phone.wifi.sink)
         assertEquals(3, phone.sensors.running.size)
-        phone.availability.granted += Permission.BLUETOOTH_SCAN
+        phone.availability.granted += WaymarkPermission.BLUETOOTH_SCAN
         phone.scheduler.runUntil(7 * S) // found by the client's own check
-        assertEquals(LocationStatus.Restored(LocationStatus.PermissionMissing(Permission.BLUETOOTH_SCAN)), callback.statuses.last())
+        assertEquals(WaymarkLocationStatus.Restored(WaymarkLocationStatus.PermissionMissing(WaymarkPermission.BLUETOOTH_SCAN)), callback.statuses.last())
         assertNotNull(phone.ble.sink)
         assertEquals(2, phone.ble.starts)
         assertEquals(ClientState.RUNNING, client.state)
         // Location services off (a broadcast): everything stops; back on: everything resumes.
         phone.availability.locationOn = false
         phone.availability.watcher!!.run()
-        assertEquals(LocationStatus.LocationServicesOff, callback.statuses.last())
+        assertEquals(WaymarkLocationStatus.LocationServicesOff, callback.statuses.last())
         assertEquals(ClientState.PAUSED, client.state)
         assertTrue(phone.idle)
         phone.availability.locationOn = true
@@ -391,13 +393,13 @@ class LocationClientTest {
         // WiFi switched off: only WiFi stops.
         phone.wifi.available = false
         client.refreshAvailability()
-        assertEquals(LocationStatus.WifiOff, callback.statuses.last())
+        assertEquals(WaymarkLocationStatus.WifiOff, callback.statuses.last())
         assertNull(phone.wifi.sink)
         assertNotNull(phone.ble.sink)
         // A second caller hears the conditions that hold.
         val late = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(), direct, late)
-        assertEquals(listOf<LocationStatus>(LocationStatus.WifiOff), late.statuses)
+        client.requestLocationUpdates(WaymarkLocationRequest(), direct, late)
+        assertEquals(listOf<WaymarkLocationStatus>(WaymarkLocationStatus.WifiOff), late.statuses)
         client.removeLocationUpdates(late)
         client.removeLocationUpdates(callback)
         assertEquals(ClientState.IDLE, client.state)
@@ -414,20 +416,20 @@ class LocationClientTest {
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(), direct, callback)
-        val failed = callback.statuses.single() as LocationStatus.BleScanFailed
+        client.requestLocationUpdates(WaymarkLocationRequest(), direct, callback)
+        val failed = callback.statuses.single() as WaymarkLocationStatus.BleScanFailed
         assertEquals(2, failed.errorCode)
         assertEquals(140, failed.code)
         assertEquals(ClientState.DEGRADED, client.state)
         assertNull(phone.ble.sink)
         phone.scheduler.runUntil(31 * S)
-        assertEquals(LocationStatus.Restored(failed), callback.statuses.last())
+        assertEquals(WaymarkLocationStatus.Restored(failed), callback.statuses.last())
         assertNotNull(phone.ble.sink)
         assertEquals(ClientState.RUNNING, client.state)
         // 4, feature unsupported: no retry.
         phone.ble.failNextStartWith = 4
-        client.requestLocationUpdates(LocationRequest(background = true), direct, callback) // BLE restarts in low power
-        assertEquals(LocationStatus.BleScanFailed(4), callback.statuses.last())
+        client.requestLocationUpdates(WaymarkLocationRequest(background = true), direct, callback) // BLE restarts in low power
+        assertEquals(WaymarkLocationStatus.BleScanFailed(4), callback.statuses.last())
         val starts = phone.ble.starts
         phone.scheduler.runUntil(200 * S)
         assertEquals(starts, phone.ble.starts)
@@ -442,7 +444,7 @@ class LocationClientTest {
         val phone = FakePhone()
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
-        client.requestLocationUpdates(LocationRequest(wifi = false), direct, RecordingCallback())
+        client.requestLocationUpdates(WaymarkLocationRequest(wifi = false), direct, RecordingCallback())
         // An advertisement every 100 ms at -70 and -72 dBm in turn; a phone's own advertising too.
         for (i in 1..50) {
             phone.scheduler.runUntil(i * 100_000_000L)
@@ -464,7 +466,7 @@ class LocationClientTest {
         val phone2 = FakePhone()
         val engine2 = engine()
         val client2 = WaymarkLocationClient(engine2, phone2.platform)
-        client2.requestLocationUpdates(LocationRequest(), direct, RecordingCallback())
+        client2.requestLocationUpdates(WaymarkLocationRequest(), direct, RecordingCallback())
         phone2.scheduler.runUntil(500_000_000L)
         phone2.ble.sink!!.onAdvertisement("C0:00:00:00:00:01", -65, phone2.clock.now, record)
         val t = 1_000_000_000L
@@ -493,11 +495,11 @@ class LocationClientTest {
         // A truncated record: no iBeacon, no exception.
         assertNull(BleAdvertisements.iBeacon(record.copyOf(20)))
         assertNull(BleAdvertisements.iBeacon(byteArrayOf()))
-        // Eddystone: service data for 0xFEAA, known by address.
-        val eddystone = byteArrayOf(3, 3, 0xAA.toByte(), 0xFE.toByte(), 5, 0x16, 0xAA.toByte(), 0xFE.toByte(), 0x10, 0)
-        assertTrue(BleAdvertisements.isEddystone(eddystone))
+        // Eddystone URL frame (0x10): Eddystone, but it names no transmitter of the site.
+        val eddystoneUrl = byteArrayOf(3, 3, 0xAA.toByte(), 0xFE.toByte(), 5, 0x16, 0xAA.toByte(), 0xFE.toByte(), 0x10, 0)
+        assertTrue(BleAdvertisements.isEddystone(eddystoneUrl))
         assertFalse(BleAdvertisements.isEddystone(record))
-        assertEquals("C0:00:00:00:00:09", BleAdvertisements.reading("C0:00:00:00:00:09", eddystone)!!.address)
+        assertNull(BleAdvertisements.reading("C0:00:00:00:00:09", eddystoneUrl))
         assertNull(BleAdvertisements.reading("C0:00:00:00:00:09", byteArrayOf(2, 1, 6)))
     }
 
@@ -507,14 +509,14 @@ class LocationClientTest {
         val executor = Executor { queued += it }
         var inExecutor = false
         var outside = 0
-        val callback = object : dev.waymark.android.LocationCallback {
+        val callback = object : dev.waymark.android.WaymarkLocationCallback {
             val positions = ArrayList<PositionEstimate>()
             override fun onLocation(position: PositionEstimate) {
                 if (!inExecutor) outside++
                 positions += position
             }
 
-            override fun onStatus(status: LocationStatus) {
+            override fun onStatus(status: WaymarkLocationStatus) {
                 if (!inExecutor) outside++
             }
         }
@@ -522,7 +524,7 @@ class LocationClientTest {
         phone.wifi.available = false // a status too
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
-        client.requestLocationUpdates(LocationRequest(), executor, callback)
+        client.requestLocationUpdates(WaymarkLocationRequest(), executor, callback)
         phone.replay(walk.take(8), passive = { true })
         assertTrue("nothing called before the executor ran", callback.positions.isEmpty())
         assertTrue("${queued.size} queued", queued.size >= 8)
@@ -532,7 +534,7 @@ class LocationClientTest {
         assertTrue(callback.positions.size >= 3) // advances (WiFi off) or scans
         // An executor that refuses (shut down) is counted, and throws into no platform callback.
         val refusing = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(), { throw java.util.concurrent.RejectedExecutionException() }, refusing)
+        client.requestLocationUpdates(WaymarkLocationRequest(), { throw java.util.concurrent.RejectedExecutionException() }, refusing)
         client.removeLocationUpdates(callback)
         phone.scheduler.runUntil(phone.clock.now + 10 * S)
         assertTrue(client.stats().callbackFailures > 0)
@@ -547,7 +549,7 @@ class LocationClientTest {
         val client = WaymarkLocationClient(engine, phone.platform)
         val positions = ArrayList<PositionEstimate>()
         runBlocking {
-            val job = launch(Dispatchers.Unconfined) { client.locations(LocationRequest()).collect { positions += it } }
+            val job = launch(Dispatchers.Unconfined) { client.locations(WaymarkLocationRequest()).collect { positions += it } }
             assertFalse("collecting started the sensors and radios", phone.idle)
             phone.replay(walk.take(12), passive = { true })
             job.cancel()
@@ -567,8 +569,8 @@ class LocationClientTest {
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(ble = false), direct, callback)
-        assertEquals(listOf<LocationStatus>(LocationStatus.SensorMissing(MotionSensor.GYROSCOPE)), callback.statuses)
+        client.requestLocationUpdates(WaymarkLocationRequest(ble = false), direct, callback)
+        assertEquals(listOf<WaymarkLocationStatus>(WaymarkLocationStatus.SensorMissing(MotionSensor.GYROSCOPE)), callback.statuses)
         assertEquals(ClientState.DEGRADED, client.state)
         assertEquals(setOf(MotionSensor.ACCELEROMETER, MotionSensor.MAGNETOMETER), phone.sensors.running.keys)
         phone.replay(walk.take(10), passive = { true })
@@ -579,8 +581,8 @@ class LocationClientTest {
         refusing.sensors.refused += MotionSensor.MAGNETOMETER
         val heard = RecordingCallback()
         val second = WaymarkLocationClient(engine, refusing.platform)
-        second.requestLocationUpdates(LocationRequest(), direct, heard)
-        assertEquals(listOf<LocationStatus>(LocationStatus.SensorMissing(MotionSensor.MAGNETOMETER)), heard.statuses)
+        second.requestLocationUpdates(WaymarkLocationRequest(), direct, heard)
+        assertEquals(listOf<WaymarkLocationStatus>(WaymarkLocationStatus.SensorMissing(MotionSensor.MAGNETOMETER)), heard.statuses)
         assertEquals(2, refusing.sensors.running.size)
         second.close()
         engine.close()
@@ -592,7 +594,7 @@ class LocationClientTest {
         val engine = engine()
         val client = WaymarkLocationClient(engine, phone.platform)
         val callback = RecordingCallback()
-        client.requestLocationUpdates(LocationRequest(), direct, callback)
+        client.requestLocationUpdates(WaymarkLocationRequest(), direct, callback)
         val part = walk.take(20)
         val failures = java.util.concurrent.ConcurrentLinkedQueue<Throwable>()
         val record = iBeaconRecord("fda50693-a4e2-4fb1-afcf-c6eb07647825", 1, 7, -59)

@@ -1,13 +1,15 @@
 package dev.waymark.android
 
 /**
- * What a [WaymarkLocationClient] runs for one caller. The defaults suit a phone in the hand with
+ * What a [WaymarkLocationClient] runs for one caller (named apart from Play services' and
+ * `android.location`'s `LocationRequest`). From Java: `WaymarkLocationRequest.builder()
+ * .setBle(false).build()`, or `new WaymarkLocationRequest()` for the defaults. The defaults suit a phone in the hand with
  * the app in the foreground: WiFi and BLE on, the motion sensors at 100 Hz delivered as
  * measured, an epoch at least every 2 s. Requests of several callers are merged: the client
  * runs the union of radios, the fastest rates and the foreground budget if any caller is in the
  * foreground.
  */
-data class LocationRequest(
+data class WaymarkLocationRequest @JvmOverloads constructor(
     /** Scan WiFi: the client's own scans within Android's budget, and every other app's results. */
     val wifi: Boolean = true,
     /** Scan BLE for iBeacon and Eddystone beacons. */
@@ -21,8 +23,10 @@ data class LocationRequest(
     /** When no scan made an epoch for this long, ms, the client makes one from beacons heard or,
      *  without any, from motion alone (`advance`), so the position keeps moving between scans. */
     val advanceIntervalMs: Long = 2_000,
-    /** The app is in the background: WiFi scans within the background budget (one per 30 min),
-     *  BLE in low-power mode. Re-request with the same callback when the app changes sides. */
+    /** Treat the app as in the background whatever its activities: WiFi scans within the
+     *  background budget (one per 30 min) unless a location foreground service runs, BLE in
+     *  low-power mode. Not needed to follow the app: the client switches by itself when no
+     *  activity is visible ([Platform.lifecycle]). */
     val background: Boolean = false,
     /** Shortest interval between the client's own WiFi scans, ms; 0 scans as often as Android's
      *  budget allows. Other apps' results are taken whenever they come. */
@@ -48,9 +52,40 @@ data class LocationRequest(
     /** Samples per FFI call: half a second of one sensor. */
     internal val batchSize: Int get() = maxOf(1, sensorRateHz / 2)
 
-    internal companion object {
+    /** A builder, for Java callers; each setter defaults as the constructor does. */
+    class Builder {
+        private val d = WaymarkLocationRequest()
+        private var wifi = d.wifi
+        private var ble = d.ble
+        private var sensorRateHz = d.sensorRateHz
+        private var sensorMaxLatencyMs = d.sensorMaxLatencyMs
+        private var advanceIntervalMs = d.advanceIntervalMs
+        private var background = d.background
+        private var wifiScanIntervalMs = d.wifiScanIntervalMs
+        private var barometer = d.barometer
+
+        fun setWifi(wifi: Boolean) = apply { this.wifi = wifi }
+        fun setBle(ble: Boolean) = apply { this.ble = ble }
+        fun setSensorRateHz(hz: Int) = apply { sensorRateHz = hz }
+        fun setSensorMaxLatencyMs(ms: Long) = apply { sensorMaxLatencyMs = ms }
+        fun setAdvanceIntervalMs(ms: Long) = apply { advanceIntervalMs = ms }
+        fun setBackground(background: Boolean) = apply { this.background = background }
+        fun setWifiScanIntervalMs(ms: Long) = apply { wifiScanIntervalMs = ms }
+        fun setBarometer(barometer: Boolean) = apply { this.barometer = barometer }
+
+        /** The request; throws `IllegalArgumentException` as the constructor does. */
+        fun build() = WaymarkLocationRequest(
+            wifi, ble, sensorRateHz, sensorMaxLatencyMs, advanceIntervalMs, background, wifiScanIntervalMs, barometer,
+        )
+    }
+
+    companion object {
+        /** A [Builder] with the defaults. */
+        @JvmStatic
+        fun builder(): Builder = Builder()
+
         /** What the client runs for several callers at once. */
-        fun merge(requests: Collection<LocationRequest>): LocationRequest = LocationRequest(
+        internal fun merge(requests: Collection<WaymarkLocationRequest>): WaymarkLocationRequest = WaymarkLocationRequest(
             wifi = requests.any { it.wifi },
             ble = requests.any { it.ble },
             sensorRateHz = requests.maxOf { it.sensorRateHz },
