@@ -40,7 +40,7 @@ object RunTests {
             ConcurrencyTest::class.java, RobustnessTest::class.java, SiteFormatsTest::class.java,
             CallbackContractTest::class.java,
             HabitsTest::class.java, RouteTest::class.java, SurveyRecorderTest::class.java,
-            LocationClientTest::class.java,
+            LocationClientTest::class.java, GeoTest::class.java,
         )
         val result = core.run(*classes)
         // A failure in @BeforeClass fails the class without running any test: count each test.
