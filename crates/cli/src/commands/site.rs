@@ -78,7 +78,7 @@ enum SiteCommand {
         imdf: PathBuf,
         /// Floor folders whose plans (`floor_info.json` + `geojson_map.json`, the
         /// competition's) to write, a level each, named as the folder.
-        #[arg(long, num_args = 1..)]
+        #[arg(long, num_args = 1.., conflicts_with = "site")]
         plans: Vec<PathBuf>,
         /// The venue's name when exporting --plans (a site's own name otherwise).
         #[arg(long, default_value = "venue")]
