@@ -133,3 +133,33 @@ fn site1_plans_round_trip_through_imdf_and_survey_the_same() {
     assert!(status.success());
     assert_eq!(Venue::read(&from_plans).unwrap(), imported);
 }
+
+/// `waymark survey --imdf` with a floor folder no level names, or a broken archive: a non-zero
+/// exit and a message that says which, before any walk is surveyed.
+#[test]
+fn survey_refuses_an_imdf_archive_that_does_not_fit() {
+    let tiny = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tests/data/imdf-tiny");
+    let dir = tempfile::tempdir().unwrap();
+    let floor = dir.path().join("F9");
+    std::fs::create_dir(&floor).unwrap();
+    let run = |imdf: &Path| {
+        let out = Command::new(env!("CARGO_BIN_EXE_waymark"))
+            .arg("survey")
+            .arg(&floor)
+            .arg("--imdf")
+            .arg(imdf)
+            .arg("--out")
+            .arg(dir.path().join("site.json"))
+            .output()
+            .unwrap();
+        assert!(!out.status.success());
+        String::from_utf8_lossy(&out.stderr).into_owned()
+    };
+    let message = run(&tiny);
+    assert!(message.contains("no level of the venue is called \"F9\" (its levels: G, L1)"), "{message}");
+    let broken = dir.path().join("broken.zip");
+    std::fs::write(&broken, b"PK not really").unwrap();
+    let message = run(&broken);
+    assert!(message.contains("broken.zip"), "{message}");
+    assert!(!dir.path().join("site.json").exists());
+}
