@@ -301,6 +301,90 @@ static void geo_reference(const char *site_path) {
     waymark_engine_free(other);
 }
 
+/* The lat/lon layers (docs/c.md#latitude-and-longitude): site points and a route's points to
+ * latitude/longitude and back within a centimetre, geofences given as lat/lon polygons and
+ * checked (a bow tie, a NaN vertex, a site without an anchor are refused). */
+static void lat_lon_layers(const char *site_path) {
+    size_t len = 0;
+    char *json = read_file(site_path, &len);
+    char *site = json ? with_anchor(json) : NULL;
+    CHECK(site != NULL, "the simulated site's floors");
+    if (!site) { free(json); return; }
+    waymark_engine *plain = NULL, *geo = NULL;
+    CHECK(waymark_engine_new((const uint8_t *)json, len, &plain) == WAYMARK_RESULT_OK, "plain site");
+    CHECK(waymark_engine_new((const uint8_t *)site, strlen(site), &geo) == WAYMARK_RESULT_OK, "anchored site");
+    free(json);
+    free(site);
+    double lat = 0, lon = 0, x = 0, y = 0;
+    const double points[][2] = {{0, 0}, {35.5, 11.5}, {-20, 400}};
+    for (size_t k = 0; k < 3; k++) {
+        CHECK(waymark_engine_to_lat_lon(geo, 0, points[k][0], points[k][1], &lat, &lon) == WAYMARK_RESULT_OK &&
+                  waymark_engine_from_lat_lon(geo, 0, lat, lon, &x, &y) == WAYMARK_RESULT_OK &&
+                  hypot(x - points[k][0], y - points[k][1]) < 0.01,
+              "(%g, %g) came back as (%g, %g)", points[k][0], points[k][1], x, y);
+    }
+    CHECK(waymark_engine_to_lat_lon(geo, 0, 0, 100, &lat, &lon) == WAYMARK_RESULT_OK &&
+              fabs(lat - (60.17 + 100 / 111412.0)) < 1e-6 && fabs(lon - 24.94) < 1e-9,
+          "100 m north: %.7f, %.7f", lat, lon);
+    CHECK(waymark_engine_to_lat_lon(plain, 0, 1, 1, &lat, &lon) == WAYMARK_RESULT_INPUT_REJECTED, "no anchor");
+    CHECK(waymark_engine_to_lat_lon(geo, 0, NAN, 1, &lat, &lon) == WAYMARK_RESULT_INPUT_REJECTED, "NaN x");
+    CHECK(waymark_engine_to_lat_lon(geo, 9, 1, 1, &lat, &lon) == WAYMARK_RESULT_INPUT_REJECTED, "no floor 9");
+    CHECK(waymark_engine_to_lat_lon(geo, 0, 1, 1, NULL, &lon) == WAYMARK_RESULT_NULL_PARAMETER, "NULL out");
+    CHECK(waymark_engine_from_lat_lon(geo, 0, 91, 24.94, &x, &y) == WAYMARK_RESULT_INPUT_REJECTED, "lat 91");
+    CHECK(waymark_engine_from_lat_lon(plain, 0, 60.17, 24.94, &x, &y) == WAYMARK_RESULT_INPUT_REJECTED,
+          "from lat/lon without an anchor");
+
+    /* A route's legs in lat/lon, each end back within a centimetre; after the engine is gone
+     * too (the route holds its site). */
+    waymark_floor_point from = {0, 4.9, 2.0};
+    waymark_route *route = NULL;
+    CHECK(waymark_engine_route_to_zone(geo, &from, "room 10", &route) == WAYMARK_RESULT_OK && route, "route");
+    waymark_route_info info;
+    CHECK(waymark_route_get_info(route, &info) == WAYMARK_RESULT_OK && info.leg_count >= 3, "legs");
+    for (size_t k = 0; k < info.leg_count; k++) {
+        waymark_route_leg leg;
+        CHECK(waymark_route_get_leg(route, k, &leg) == WAYMARK_RESULT_OK, "leg %zu", k);
+        CHECK(waymark_route_to_lat_lon(route, &leg.end, &lat, &lon) == WAYMARK_RESULT_OK &&
+                  waymark_engine_from_lat_lon(geo, leg.end.floor, lat, lon, &x, &y) == WAYMARK_RESULT_OK &&
+                  hypot(x - leg.end.x, y - leg.end.y) < 0.01,
+              "leg %zu's end (%g, %g) came back as (%g, %g)", k, leg.end.x, leg.end.y, x, y);
+    }
+    CHECK(waymark_route_to_lat_lon(route, NULL, &lat, &lon) == WAYMARK_RESULT_NULL_PARAMETER, "NULL point");
+
+    /* The stair hall's square in lat/lon, closed as GeoJSON rings are: taken; the same as a
+     * bow tie, with a NaN vertex, or on a site without an anchor: refused. */
+    const double square[][2] = {{30, 8}, {40, 8}, {40, 15}, {30, 15}, {30, 8}};
+    double ring[10], bowtie[8];
+    for (size_t k = 0; k < 5; k++) {
+        CHECK(waymark_engine_to_lat_lon(geo, 0, square[k][0], square[k][1], &ring[2 * k], &ring[2 * k + 1]) ==
+                  WAYMARK_RESULT_OK,
+              "vertex %zu", k);
+    }
+    CHECK(waymark_engine_add_geofence_polygon_lat_lon(geo, "hall", 0, ring, 5) == WAYMARK_RESULT_OK,
+          "a lat/lon square");
+    const size_t order[4] = {0, 2, 1, 3};
+    for (size_t k = 0; k < 4; k++) {
+        bowtie[2 * k] = ring[2 * order[k]];
+        bowtie[2 * k + 1] = ring[2 * order[k] + 1];
+    }
+    CHECK(waymark_engine_add_geofence_polygon_lat_lon(geo, "bowtie", 0, bowtie, 4) == WAYMARK_RESULT_INPUT_REJECTED,
+          "a self-intersecting ring");
+    ring[3] = NAN;
+    CHECK(waymark_engine_add_geofence_polygon_lat_lon(geo, "nan", 0, ring, 5) == WAYMARK_RESULT_INPUT_REJECTED,
+          "a NaN vertex");
+    CHECK(waymark_engine_add_geofence_polygon_lat_lon(geo, "null", 0, NULL, 3) == WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL vertices");
+    CHECK(waymark_engine_add_geofence_polygon_lat_lon(plain, "plain", 0, bowtie, 4) ==
+              WAYMARK_RESULT_INPUT_REJECTED,
+          "a lat/lon geofence without an anchor");
+    bool removed = false;
+    CHECK(waymark_engine_remove_geofence(geo, "hall", &removed) == WAYMARK_RESULT_OK && removed, "hall was added");
+    waymark_engine_free(plain);
+    waymark_engine_free(geo);
+    CHECK(waymark_route_to_lat_lon(route, &info.end, &lat, &lon) == WAYMARK_RESULT_OK, "the route outlives its engine");
+    waymark_route_free(route);
+}
+
 static void address_beacons(const char *site_path) {
     size_t len = 0;
     char *json = read_file(site_path, &len);
@@ -987,6 +1071,7 @@ int main(int argc, char **argv) {
     options_status_and_stats(argv[1]);
     address_beacons(argv[1]);
     geo_reference(argv[1]);
+    lat_lon_layers(argv[1]);
     zones_and_feedback(argv[1]);
     geofences_and_zone_events(argv[1]);
     routes(argv[1]);

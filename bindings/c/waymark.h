@@ -1200,6 +1200,46 @@ waymark_result waymark_engine_new_from_path_with_salt(const char *path,
                                                       waymark_engine **out);
 
 /**
+ * The point (x, y), m, of floor `floor` of the engine's site as a WGS84 latitude and
+ * longitude, degrees, into `*latitude_deg` and `*longitude_deg` (neither may be NULL).
+ * Returns `InputRejected` for a site that is not geo-referenced (its file has no `anchor`),
+ * an unknown floor, or a NaN or infinite x or y.
+ */
+waymark_result waymark_engine_to_lat_lon(const waymark_engine *engine,
+                                         uint32_t floor,
+                                         double x,
+                                         double y,
+                                         double *latitude_deg,
+                                         double *longitude_deg);
+
+/**
+ * A WGS84 latitude and longitude, degrees, as the point of floor `floor`'s frame of the
+ * engine's site, m, into `*x` and `*y` (neither may be NULL): the inverse of
+ * `waymark_engine_to_lat_lon`. Returns `InputRejected` for a site that is not
+ * geo-referenced, an unknown floor, or a latitude or longitude out of range or not finite.
+ */
+waymark_result waymark_engine_from_lat_lon(const waymark_engine *engine,
+                                           uint32_t floor,
+                                           double latitude_deg,
+                                           double longitude_deg,
+                                           double *x,
+                                           double *y);
+
+/**
+ * Adds a polygonal geofence named `id` on `floor` from its outline in WGS84: the
+ * `vertex_count` vertices are `lat_lon[0..2 * vertex_count]` as latitude, longitude pairs,
+ * degrees (a GeoJSON-style ring may end on its first vertex). As
+ * `waymark_engine_add_geofence_polygon` once converted to the site's metres; also returns
+ * `InputRejected`, changing nothing, on a site that is not geo-referenced, for a vertex out
+ * of range, fewer than three distinct vertices, or edges that cross.
+ */
+waymark_result waymark_engine_add_geofence_polygon_lat_lon(waymark_engine *engine,
+                                                           const char *id,
+                                                           uint32_t floor,
+                                                           const double *lat_lon,
+                                                           size_t vertex_count);
+
+/**
  * Adds a circular geofence named `id` (NUL-terminated UTF-8, unique among the engine's
  * geofences) on `floor`: the points within `radius_m` of (x, y), in the site's metric frame.
  * From the next position on, entering and leaving it reach the status callback, with the
@@ -1462,6 +1502,17 @@ waymark_result waymark_route_update(waymark_route *route,
  * `NO_POSITION` for NULL `from` before the first update; the route is then unchanged.
  */
 waymark_result waymark_route_reroute(waymark_route *route, const waymark_floor_point *from);
+
+/**
+ * The point `point` of the route's site (a route leg's start or end, say) as a WGS84
+ * latitude and longitude, degrees, into `*latitude_deg` and `*longitude_deg` (neither may be
+ * NULL), as `waymark_engine_to_lat_lon` converts it: the route holds its site, so this works
+ * after the engine is freed.
+ */
+waymark_result waymark_route_to_lat_lon(const waymark_route *route,
+                                        const waymark_floor_point *point,
+                                        double *latitude_deg,
+                                        double *longitude_deg);
 
 #ifdef __cplusplus
 }  // extern "C"

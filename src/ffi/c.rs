@@ -16,6 +16,7 @@
 
 mod callbacks;
 mod create;
+mod geo;
 mod geofence;
 mod habits;
 mod log_hook;

@@ -3,6 +3,7 @@
 //! the `Handle` (`handle.rs`) the C API wraps too. A change in this module is a possible breaking change
 //! for apps (CHANGELOG, "Breaking changes").
 
+mod geo;
 mod geofence;
 mod recorder;
 mod records;
@@ -11,6 +12,7 @@ mod route;
 pub use super::error::{ErrorCode, ErrorReport, PositioningError};
 #[cfg(feature = "fault-injection")]
 pub use super::handle::{FAULT_INJECTION_HABITS_JSON, FAULT_INJECTION_TIMESTAMP_NS};
+pub use geo::{FfiGeoError, FfiLatLon, GeoPoint, ZoneOutline};
 pub use geofence::{FfiGeofence, FfiGeofenceShape, SitePoint};
 pub use recorder::*;
 pub use records::*;

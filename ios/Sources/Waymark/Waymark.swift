@@ -2139,6 +2139,51 @@ public protocol SiteProtocol: AnyObject, Sendable {
     func zoneNames()  -> [String]
     
     /**
+     * A WGS84 latitude/longitude as a point of floor `floor`'s frame, m: the inverse of
+     * `toLatLon`. Throws `NotGeoReferenced`, or `InvalidCoordinate` for an unknown floor or
+     * a latitude or longitude out of range.
+     */
+    func fromLatLon(floor: UInt32, at: LatLon) throws  -> FloorPoint
+    
+    /**
+     * A polygonal geofence from its outline in WGS84 (a GeoJSON ring may end on its first
+     * vertex), in the site's metres, to give to `PositioningEngine.addGeofence`. Checked:
+     * every vertex in range, three distinct vertices or more, no crossing edges, some place
+     * of the site inside. Throws `NotGeoReferenced`, `InvalidCoordinate` (an unknown floor,
+     * a vertex out of range) or `InvalidGeofence`.
+     */
+    func geofenceFromLatLon(id: String, floor: UInt32, outline: [LatLon]) throws  -> Geofence
+    
+    /**
+     * A geofence's outline in WGS84: a polygon's vertices, or 64 points on a circle. Throws
+     * `NotGeoReferenced`, or `InvalidCoordinate` for an unknown floor.
+     */
+    func geofenceLatLon(geofence: Geofence) throws  -> [LatLon]
+    
+    /**
+     * Whether the site has a place on the Earth (its file has an `anchor`): without one,
+     * every latitude/longitude method throws `NotGeoReferenced`.
+     */
+    func isGeoReferenced()  -> Bool
+    
+    /**
+     * A route's legs in WGS84, for drawing: one polyline per leg, each point on its own
+     * floor (a floor change goes from one floor to the next). Throws as `toLatLon`.
+     */
+    func routeLatLon(route: Route) throws  -> [[GeoPoint]]
+    
+    /**
+     * A point of the site in WGS84. Throws `NotGeoReferenced`, or `InvalidCoordinate` for
+     * an unknown floor or a NaN or infinite x or y.
+     */
+    func toLatLon(point: FloorPoint) throws  -> LatLon
+    
+    /**
+     * Every zone's outline in WGS84, in the site file's order. Throws `NotGeoReferenced`.
+     */
+    func zoneOutlines() throws  -> [ZoneOutline]
+    
+    /**
      * The shortest walkable route from `from` to `destination`, over the site's walkable
      * graph, floor changes included where the site has stairs or lifts. `from` snaps to the
      * nearest walkable place on its floor within the site's spacing. Throws `UnknownZone`,
@@ -2250,6 +2295,108 @@ open func zoneNames() -> [String]  {
     return try!  FfiConverterSequenceString.lift(try! rustCall() {
         uniffiCallStatus in
     uniffi_waymark_fn_method_site_zone_names(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * A WGS84 latitude/longitude as a point of floor `floor`'s frame, m: the inverse of
+     * `toLatLon`. Throws `NotGeoReferenced`, or `InvalidCoordinate` for an unknown floor or
+     * a latitude or longitude out of range.
+     */
+open func fromLatLon(floor: UInt32, at: LatLon)throws  -> FloorPoint  {
+    return try  FfiConverterTypeFloorPoint_lift(try rustCallWithError(FfiConverterTypeGeoError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_from_lat_lon(
+            self.uniffiCloneHandle(),
+        FfiConverterUInt32.lower(floor),
+        FfiConverterTypeLatLon_lower(at),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * A polygonal geofence from its outline in WGS84 (a GeoJSON ring may end on its first
+     * vertex), in the site's metres, to give to `PositioningEngine.addGeofence`. Checked:
+     * every vertex in range, three distinct vertices or more, no crossing edges, some place
+     * of the site inside. Throws `NotGeoReferenced`, `InvalidCoordinate` (an unknown floor,
+     * a vertex out of range) or `InvalidGeofence`.
+     */
+open func geofenceFromLatLon(id: String, floor: UInt32, outline: [LatLon])throws  -> Geofence  {
+    return try  FfiConverterTypeGeofence_lift(try rustCallWithError(FfiConverterTypeGeoError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_geofence_from_lat_lon(
+            self.uniffiCloneHandle(),
+        FfiConverterString.lower(id),
+        FfiConverterUInt32.lower(floor),
+        FfiConverterSequenceTypeLatLon.lower(outline),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * A geofence's outline in WGS84: a polygon's vertices, or 64 points on a circle. Throws
+     * `NotGeoReferenced`, or `InvalidCoordinate` for an unknown floor.
+     */
+open func geofenceLatLon(geofence: Geofence)throws  -> [LatLon]  {
+    return try  FfiConverterSequenceTypeLatLon.lift(try rustCallWithError(FfiConverterTypeGeoError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_geofence_lat_lon(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeGeofence_lower(geofence),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Whether the site has a place on the Earth (its file has an `anchor`): without one,
+     * every latitude/longitude method throws `NotGeoReferenced`.
+     */
+open func isGeoReferenced() -> Bool  {
+    return try!  FfiConverterBool.lift(try! rustCall() {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_is_geo_referenced(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * A route's legs in WGS84, for drawing: one polyline per leg, each point on its own
+     * floor (a floor change goes from one floor to the next). Throws as `toLatLon`.
+     */
+open func routeLatLon(route: Route)throws  -> [[GeoPoint]]  {
+    return try  FfiConverterSequenceSequenceTypeGeoPoint.lift(try rustCallWithError(FfiConverterTypeGeoError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_route_lat_lon(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeRoute_lower(route),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * A point of the site in WGS84. Throws `NotGeoReferenced`, or `InvalidCoordinate` for
+     * an unknown floor or a NaN or infinite x or y.
+     */
+open func toLatLon(point: FloorPoint)throws  -> LatLon  {
+    return try  FfiConverterTypeLatLon_lift(try rustCallWithError(FfiConverterTypeGeoError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_to_lat_lon(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeFloorPoint_lower(point),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Every zone's outline in WGS84, in the site file's order. Throws `NotGeoReferenced`.
+     */
+open func zoneOutlines()throws  -> [ZoneOutline]  {
+    return try  FfiConverterSequenceTypeZoneOutline.lift(try rustCallWithError(FfiConverterTypeGeoError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_site_zone_outlines(
             self.uniffiCloneHandle(),uniffiCallStatus
     )
 })
@@ -3245,6 +3392,85 @@ public func FfiConverterTypeFloorPoint_lower(_ value: FloorPoint) -> RustBuffer 
 
 
 /**
+ * A point of the site in WGS84: its floor index and latitude/longitude, degrees.
+ */
+public struct GeoPoint: Equatable, Hashable {
+    /**
+     * Floor index in the site file.
+     */
+    public var floor: UInt32
+    /**
+     * Degrees north.
+     */
+    public var latitudeDeg: Double
+    /**
+     * Degrees east.
+     */
+    public var longitudeDeg: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Floor index in the site file.
+         */floor: UInt32, 
+        /**
+         * Degrees north.
+         */latitudeDeg: Double, 
+        /**
+         * Degrees east.
+         */longitudeDeg: Double) {
+        self.floor = floor
+        self.latitudeDeg = latitudeDeg
+        self.longitudeDeg = longitudeDeg
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension GeoPoint: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGeoPoint: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> GeoPoint {
+        return
+            try GeoPoint(
+                floor: FfiConverterUInt32.read(from: &buf), 
+                latitudeDeg: FfiConverterDouble.read(from: &buf), 
+                longitudeDeg: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: GeoPoint, into buf: inout [UInt8]) {
+        FfiConverterUInt32.write(value.floor, into: &buf)
+        FfiConverterDouble.write(value.latitudeDeg, into: &buf)
+        FfiConverterDouble.write(value.longitudeDeg, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeoPoint_lift(_ buf: RustBuffer) throws -> GeoPoint {
+    return try FfiConverterTypeGeoPoint.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeoPoint_lower(_ value: GeoPoint) -> RustBuffer {
+    return FfiConverterTypeGeoPoint.lower(value)
+}
+
+
+/**
  * A region of one floor whose entries and exits the engine reports as
  * `StatusUpdate.GeofenceEntered` and `GeofenceExited` (docs/zones.md).
  */
@@ -3673,6 +3899,75 @@ public func FfiConverterTypeInputStats_lift(_ buf: RustBuffer) throws -> InputSt
 #endif
 public func FfiConverterTypeInputStats_lower(_ value: InputStats) -> RustBuffer {
     return FfiConverterTypeInputStats.lower(value)
+}
+
+
+/**
+ * A WGS84 latitude and longitude, degrees.
+ */
+public struct LatLon: Equatable, Hashable {
+    /**
+     * Degrees north.
+     */
+    public var latitudeDeg: Double
+    /**
+     * Degrees east.
+     */
+    public var longitudeDeg: Double
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * Degrees north.
+         */latitudeDeg: Double, 
+        /**
+         * Degrees east.
+         */longitudeDeg: Double) {
+        self.latitudeDeg = latitudeDeg
+        self.longitudeDeg = longitudeDeg
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension LatLon: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeLatLon: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> LatLon {
+        return
+            try LatLon(
+                latitudeDeg: FfiConverterDouble.read(from: &buf), 
+                longitudeDeg: FfiConverterDouble.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: LatLon, into buf: inout [UInt8]) {
+        FfiConverterDouble.write(value.latitudeDeg, into: &buf)
+        FfiConverterDouble.write(value.longitudeDeg, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeLatLon_lift(_ buf: RustBuffer) throws -> LatLon {
+    return try FfiConverterTypeLatLon.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeLatLon_lower(_ value: LatLon) -> RustBuffer {
+    return FfiConverterTypeLatLon.lower(value)
 }
 
 
@@ -5090,6 +5385,96 @@ public func FfiConverterTypeWifiReading_lower(_ value: WifiReading) -> RustBuffe
 
 
 /**
+ * A zone's outline in WGS84, for drawing it on a map: the convex hull of the places the
+ * engine puts someone in when it says they are in the zone.
+ */
+public struct ZoneOutline: Equatable, Hashable {
+    /**
+     * The zone's name, as in `Site.zoneNames`.
+     */
+    public var name: String
+    /**
+     * What kind of place it is.
+     */
+    public var kind: ZoneKind
+    /**
+     * The floor holding most of its places.
+     */
+    public var floor: UInt32
+    /**
+     * The outline's vertices, counter-clockwise, the last not repeating the first.
+     */
+    public var outline: [LatLon]
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The zone's name, as in `Site.zoneNames`.
+         */name: String, 
+        /**
+         * What kind of place it is.
+         */kind: ZoneKind, 
+        /**
+         * The floor holding most of its places.
+         */floor: UInt32, 
+        /**
+         * The outline's vertices, counter-clockwise, the last not repeating the first.
+         */outline: [LatLon]) {
+        self.name = name
+        self.kind = kind
+        self.floor = floor
+        self.outline = outline
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension ZoneOutline: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeZoneOutline: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> ZoneOutline {
+        return
+            try ZoneOutline(
+                name: FfiConverterString.read(from: &buf), 
+                kind: FfiConverterTypeZoneKind.read(from: &buf), 
+                floor: FfiConverterUInt32.read(from: &buf), 
+                outline: FfiConverterSequenceTypeLatLon.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: ZoneOutline, into buf: inout [UInt8]) {
+        FfiConverterString.write(value.name, into: &buf)
+        FfiConverterTypeZoneKind.write(value.kind, into: &buf)
+        FfiConverterUInt32.write(value.floor, into: &buf)
+        FfiConverterSequenceTypeLatLon.write(value.outline, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeZoneOutline_lift(_ buf: RustBuffer) throws -> ZoneOutline {
+    return try FfiConverterTypeZoneOutline.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeZoneOutline_lower(_ value: ZoneOutline) -> RustBuffer {
+    return FfiConverterTypeZoneOutline.lower(value)
+}
+
+
+/**
  * A zone of the site and how likely the phone is to be in it.
  */
 public struct ZoneProbability: Equatable, Hashable {
@@ -5369,6 +5754,133 @@ public func FfiConverterTypeErrorCode_lower(_ value: ErrorCode) -> RustBuffer {
     return FfiConverterTypeErrorCode.lower(value)
 }
 
+
+
+/**
+ * Why a conversion between the site's metres and WGS84 failed.
+ */
+public 
+enum GeoError: Swift.Error, Equatable, Hashable, Foundation.LocalizedError {
+
+    
+    
+    /**
+     * The site file has no `anchor`: it has no place on the Earth.
+     */
+    case NotGeoReferenced
+    /**
+     * A latitude, longitude or metre value is NaN, infinite or out of range, or a floor
+     * index the site does not have.
+     */
+    case InvalidCoordinate(
+        /**
+         * Which and why.
+         */reason: String
+    )
+    /**
+     * A geofence outline that is not a simple polygon (fewer than three distinct vertices,
+     * crossing edges, no area), or that holds no place of the site.
+     */
+    case InvalidGeofence(
+        /**
+         * What is wrong.
+         */reason: String
+    )
+    /**
+     * A bug in Waymark; nothing changed.
+     */
+    case Internal(
+        /**
+         * What happened.
+         */reason: String
+    )
+
+    
+
+    
+
+    
+    public var errorDescription: String? {
+        String(reflecting: self)
+    }
+    
+}
+
+#if compiler(>=6)
+extension GeoError: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeGeoError: FfiConverterRustBuffer {
+    typealias SwiftType = GeoError
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> GeoError {
+        let variant: Int32 = try readInt(&buf)
+        switch variant {
+
+        
+
+        
+        case 1: return .NotGeoReferenced
+        case 2: return .InvalidCoordinate(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 3: return .InvalidGeofence(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+        case 4: return .Internal(
+            reason: try FfiConverterString.read(from: &buf)
+            )
+
+         default: throw UniffiInternalError.unexpectedEnumCase
+        }
+    }
+
+    public static func write(_ value: GeoError, into buf: inout [UInt8]) {
+        switch value {
+
+        
+
+        
+        
+        case .NotGeoReferenced:
+            writeInt(&buf, Int32(1))
+        
+        
+        case let .InvalidCoordinate(reason):
+            writeInt(&buf, Int32(2))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case let .InvalidGeofence(reason):
+            writeInt(&buf, Int32(3))
+            FfiConverterString.write(reason, into: &buf)
+            
+        
+        case let .Internal(reason):
+            writeInt(&buf, Int32(4))
+            FfiConverterString.write(reason, into: &buf)
+            
+        }
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeoError_lift(_ buf: RustBuffer) throws -> GeoError {
+    return try FfiConverterTypeGeoError.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeGeoError_lower(_ value: GeoError) -> RustBuffer {
+    return FfiConverterTypeGeoError.lower(value)
+}
 
 
 /**
@@ -7119,6 +7631,31 @@ fileprivate struct FfiConverterSequenceTypeFloorPoint: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceTypeGeoPoint: FfiConverterRustBuffer {
+    typealias SwiftType = [GeoPoint]
+
+    public static func write(_ value: [GeoPoint], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeGeoPoint.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [GeoPoint] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [GeoPoint]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeGeoPoint.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceTypeGeofence: FfiConverterRustBuffer {
     typealias SwiftType = [Geofence]
 
@@ -7136,6 +7673,31 @@ fileprivate struct FfiConverterSequenceTypeGeofence: FfiConverterRustBuffer {
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
             seq.append(try FfiConverterTypeGeofence.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceTypeLatLon: FfiConverterRustBuffer {
+    typealias SwiftType = [LatLon]
+
+    public static func write(_ value: [LatLon], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeLatLon.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [LatLon] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [LatLon]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeLatLon.read(from: &buf))
         }
         return seq
     }
@@ -7294,6 +7856,31 @@ fileprivate struct FfiConverterSequenceTypeWifiReading: FfiConverterRustBuffer {
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterSequenceTypeZoneOutline: FfiConverterRustBuffer {
+    typealias SwiftType = [ZoneOutline]
+
+    public static func write(_ value: [ZoneOutline], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterTypeZoneOutline.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [ZoneOutline] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [ZoneOutline]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterTypeZoneOutline.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterSequenceTypeZoneProbability: FfiConverterRustBuffer {
     typealias SwiftType = [ZoneProbability]
 
@@ -7311,6 +7898,31 @@ fileprivate struct FfiConverterSequenceTypeZoneProbability: FfiConverterRustBuff
         seq.reserveCapacity(Int(len))
         for _ in 0 ..< len {
             seq.append(try FfiConverterTypeZoneProbability.read(from: &buf))
+        }
+        return seq
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+fileprivate struct FfiConverterSequenceSequenceTypeGeoPoint: FfiConverterRustBuffer {
+    typealias SwiftType = [[GeoPoint]]
+
+    public static func write(_ value: [[GeoPoint]], into buf: inout [UInt8]) {
+        let len = Int32(value.count)
+        writeInt(&buf, len)
+        for item in value {
+            FfiConverterSequenceTypeGeoPoint.write(item, into: &buf)
+        }
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> [[GeoPoint]] {
+        let len: Int32 = try readInt(&buf)
+        var seq = [[GeoPoint]]()
+        seq.reserveCapacity(Int(len))
+        for _ in 0 ..< len {
+            seq.append(try FfiConverterSequenceTypeGeoPoint.read(from: &buf))
         }
         return seq
     }
@@ -7535,6 +8147,27 @@ private let initializationResult: InitializationResult = {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_site_zone_names() != 29126) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_from_lat_lon() != 30616) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_geofence_from_lat_lon() != 37500) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_geofence_lat_lon() != 13565) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_is_geo_referenced() != 27995) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_route_lat_lon() != 6245) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_to_lat_lon() != 17504) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_site_zone_outlines() != 48895) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_site_route() != 32857) {

@@ -361,3 +361,24 @@ pub extern "C" fn waymark_route_reroute(
         }
     })
 }
+
+/// The point `point` of the route's site (a route leg's start or end, say) as a WGS84
+/// latitude and longitude, degrees, into `*latitude_deg` and `*longitude_deg` (neither may be
+/// NULL), as `waymark_engine_to_lat_lon` converts it: the route holds its site, so this works
+/// after the engine is freed.
+#[no_mangle]
+pub extern "C" fn waymark_route_to_lat_lon(
+    route: *const waymark_route,
+    point: *const waymark_floor_point,
+    latitude_deg: *mut f64,
+    longitude_deg: *mut f64,
+) -> waymark_result {
+    with_route(route, |route| {
+        // SAFETY: a non-NULL `point` points to one initialised waymark_floor_point (the
+        // header's contract).
+        let Some(p) = (unsafe { point.as_ref() }) else {
+            return fail(waymark_result::NullParameter, "point must not be NULL");
+        };
+        super::geo::site_to_lat_lon(&route.site, p.floor, p.x, p.y, latitude_deg, longitude_deg)
+    })
+}

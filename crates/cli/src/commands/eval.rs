@@ -76,6 +76,10 @@ pub struct EvalArgs {
     /// Lag of the fixed-lag estimate, epochs.
     #[arg(long)]
     fixed_lag: Option<usize>,
+    /// The venue's plan as IMDF (a folder or `.zip`, docs/imdf.md) in place of the floor
+    /// folders' `floor_info.json` + `geojson_map.json`, as `waymark survey --imdf` takes it.
+    #[arg(long, conflicts_with = "no_plan")]
+    imdf: Option<PathBuf>,
     /// Ignore the floor plans' walls (the walkable graph then comes from the walks alone).
     #[arg(long)]
     no_plan: bool,
@@ -97,10 +101,15 @@ pub struct EvalArgs {
 
 pub fn eval(args: &EvalArgs) -> ExitCode {
     let started = Instant::now();
-    let floors = match calibrate::load_building(&args.floors, &args.split, args.max_walks) {
+    let mut floors = match calibrate::load_building(&args.floors, &args.split, args.max_walks) {
         Ok(f) => f,
         Err(e) => return fail("eval", e),
     };
+    if let Some(path) = &args.imdf {
+        if let Err(e) = waymark_survey::io::imdf::plans_from_imdf(path, &mut floors) {
+            return fail("eval", e);
+        }
+    }
     let floors: Vec<FloorData> = floors
         .into_iter()
         .map(|f| if args.no_plan { FloorData { plan: None, ..f } } else { f })

@@ -12,6 +12,12 @@ pub struct SurveyArgs {
     /// walk in them is a survey walk.
     #[arg(required = true)]
     floors: Vec<PathBuf>,
+    /// The venue's plan as IMDF 1.0.0 (a folder or `.zip` of its GeoJSON files, docs/imdf.md)
+    /// in place of each floor folder's `floor_info.json` + `geojson_map.json`: each floor takes
+    /// the level whose short name (or name) is the folder's, framed by the folder's
+    /// `floor_info.json` when it has one (its walks are measured in it).
+    #[arg(long)]
+    imdf: Option<PathBuf>,
     /// Where to write the site file.
     #[arg(long)]
     out: PathBuf,
@@ -34,10 +40,15 @@ pub struct SurveyArgs {
 
 pub fn survey(args: &SurveyArgs) -> ExitCode {
     // Every walk surveys.
-    let floors = match calibrate::load_building(&args.floors, &WalkSplit::All, None) {
+    let mut floors = match calibrate::load_building(&args.floors, &WalkSplit::All, None) {
         Ok(f) => f,
         Err(e) => return fail("survey", e),
     };
+    if let Some(path) = &args.imdf {
+        if let Err(e) = waymark_survey::io::imdf::plans_from_imdf(path, &mut floors) {
+            return fail("survey", e);
+        }
+    }
     // A coverage map needs WGS84, which only plans for every floor give: say so before the
     // calibration's minutes, not after.
     if args.coverage_out.is_some() {

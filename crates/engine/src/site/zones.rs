@@ -126,6 +126,36 @@ impl Site {
         self.zones.iter().position(|z| z.name == name)
     }
 
+    /// An outline of zone `zone` for a map: its floor (the one holding most of its states) and
+    /// the convex hull, in that floor's frame, m, counter-clockwise and not closed, of the
+    /// squares of side [`spacing_m`](Self::spacing_m) around its states there: the area the
+    /// engine places someone in when it says they are in the zone. `None` for an unknown
+    /// index.
+    pub fn zone_outline(&self, zone: usize) -> Option<(usize, Vec<[f64; 2]>)> {
+        use geo::ConvexHull;
+        let states = &self.zones.get(zone)?.states;
+        let mut per_floor = vec![0usize; self.floors.len()];
+        for &i in states {
+            per_floor[self.states[i as usize].floor] += 1;
+        }
+        let floor = (0..per_floor.len()).max_by_key(|&f| (per_floor[f], std::cmp::Reverse(f)))?;
+        let half = self.spacing_m.max(0.1) / 2.0;
+        let corners: Vec<geo::Point<f64>> = states
+            .iter()
+            .map(|&i| &self.states[i as usize])
+            .filter(|s| s.floor == floor)
+            .flat_map(|s| {
+                let (x, y) = (s.position.x, s.position.y);
+                [(-half, -half), (half, -half), (half, half), (-half, half)]
+                    .map(|(dx, dy)| geo::Point::new(x + dx, y + dy))
+            })
+            .collect();
+        let hull = geo::MultiPoint::from(corners).convex_hull();
+        let mut ring: Vec<[f64; 2]> = hull.exterior().coords().map(|c| [c.x, c.y]).collect();
+        ring.pop();
+        Some((floor, ring))
+    }
+
     /// The site with `zones` in place of its own, their states given by index. Checked as a
     /// site file's zones are: non-empty unique names, at least one state each, indices in
     /// range, no state in two zones.
@@ -187,6 +217,22 @@ mod tests {
 
     fn zone(name: &str, states: &[u32]) -> Zone {
         Zone { name: name.into(), kind: ZoneKind::Room, states: states.to_vec() }
+    }
+
+    #[test]
+    fn a_zone_outline_covers_its_states_cells_and_no_other_state() {
+        // States 3 m apart on a line: spacing 3, so cells 1.5 m either side.
+        let site = line(5).with_zones(vec![zone("a", &[1, 2]), zone("b", &[4])]).unwrap();
+        let (floor, ring) = site.zone_outline(0).unwrap();
+        assert_eq!(floor, 0);
+        let xs: Vec<f64> = ring.iter().map(|p| p[0]).collect();
+        let ys: Vec<f64> = ring.iter().map(|p| p[1]).collect();
+        let min = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
+        let max = |v: &[f64]| v.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        assert_eq!((min(&xs), max(&xs), min(&ys), max(&ys)), (1.5, 7.5, -1.5, 1.5));
+        assert_eq!(ring.len(), 4, "a rectangle, not closed: {ring:?}");
+        assert_eq!(site.zone_outline(1).unwrap().1.len(), 4);
+        assert_eq!(site.zone_outline(2), None);
     }
 
     #[test]

@@ -175,7 +175,7 @@ impl PreparedSurvey<'_> {
     }
 }
 
-/// Zones from a floor plan's named polygons: each state (its smallest named polygon, index)
+/// Zones from a floor plan's named polygons, of their rooms' kinds: each state (its smallest named polygon, index)
 /// joins that polygon. A zone is called `floor/name`, with ` #k` after the name when the
 /// plan has several polygons of that name (k counts them in plan order), so names are unique
 /// in the site. Polygons holding no state make no zone.
@@ -201,7 +201,7 @@ fn plan_zones(
             } else {
                 format!("{floor}/{name}")
             };
-            Zone { name, kind: ZoneKind::Room, states }
+            Zone { name, kind: plan.room_kind(room), states }
         })
         .collect()
 }

@@ -13,9 +13,7 @@ use nalgebra::Point2;
 use serde::Serialize;
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 use waymark_engine::radio::{FitOptions, Gaussian, Reading, Scan, TransmitterId};
-use waymark_engine::site::{
-    Anchor, BuildOptions, LatLon, North, Site, SiteBuilder, SiteError, Zone, ZoneKind,
-};
+use waymark_engine::site::{Anchor, BuildOptions, LatLon, North, Site, SiteBuilder, SiteError, Zone};
 
 mod assemble;
 mod fit;

@@ -12,7 +12,7 @@
 use nalgebra::Point2;
 use serde_json::Value;
 use std::path::Path;
-use waymark_engine::site::{Anchor, LatLon};
+use waymark_engine::site::{Anchor, LatLon, ZoneKind};
 
 /// Smallest floor width or height a plan may give, m. The competition's floors are 176 to
 /// 320 m across; a plan smaller than a room is a unit mistake (the width in km, or a
@@ -100,7 +100,18 @@ pub struct FloorPlan {
     /// The floor's logical level: the outline's `floor_num` property (-1 for B1, 1 for F1);
     /// `None` when the plan has none.
     pub level: Option<i32>,
+    /// What kind of place each room is, by room index: empty for a plan that does not say
+    /// (the competition's; every room is then [`ZoneKind::Room`]), else one per room (IMDF
+    /// unit categories, [`crate::io::imdf`]).
+    pub room_kinds: Vec<ZoneKind>,
+    /// Doors, m: segments of a wall where walking through it is allowed (IMDF openings). A
+    /// line that crosses a wall within [`DOOR_REACH_M`] of a door does not cross the wall.
+    pub doors: Vec<[Point2<f64>; 2]>,
 }
+
+/// How near a wall crossing must be to a door to pass through it, m: an opening is drawn on
+/// its wall, give or take the drawing's precision, and about as wide as the doorway.
+pub const DOOR_REACH_M: f64 = 0.5;
 
 impl FloorPlan {
     /// The plan's point (x, y), m, as (longitude, latitude): the linear map of the box, as
@@ -264,6 +275,11 @@ impl FloorPlan {
         Ok(plan)
     }
 
+    /// What kind of place room `room` is ([`room_kinds`](Self::room_kinds)).
+    pub fn room_kind(&self, room: usize) -> ZoneKind {
+        self.room_kinds.get(room).copied().unwrap_or_default()
+    }
+
     /// The smallest room containing `p`, by index; `None` in the corridors.
     pub fn room_at(&self, p: Point2<f64>) -> Option<usize> {
         self.rooms
@@ -293,7 +309,34 @@ impl FloorPlan {
             .enumerate()
             .filter(|(i, _)| open.binary_search(i).is_err())
             .map(|(_, r)| &r.polygon);
-        self.outline.iter().chain(rooms).flat_map(Polygon::edges).any(|(c, d)| segments_cross(a, b, c, d))
+        self.outline
+            .iter()
+            .chain(rooms)
+            .flat_map(Polygon::edges)
+            .any(|(c, d)| segments_cross(a, b, c, d) && !self.through_a_door(a, b, c, d))
+    }
+
+    /// Whether `a`–`b` crosses the wall `c`–`d` at a door: where the lines meet is within
+    /// [`DOOR_REACH_M`] of one.
+    fn through_a_door(&self, a: Point2<f64>, b: Point2<f64>, c: Point2<f64>, d: Point2<f64>) -> bool {
+        if self.doors.is_empty() {
+            return false;
+        }
+        let (r, s) = (b - a, d - c);
+        let denominator = r.perp(&s);
+        if denominator == 0.0 {
+            return false;
+        }
+        let at = a + r * ((c - a).perp(&s) / denominator);
+        self.doors.iter().any(|[p, q]| {
+            let pq = q - p;
+            let t = if pq.norm_squared() > 0.0 {
+                ((at - p).dot(&pq) / pq.norm_squared()).clamp(0.0, 1.0)
+            } else {
+                0.0
+            };
+            (p + pq * t - at).norm() <= DOOR_REACH_M
+        })
     }
 }
 
@@ -302,7 +345,7 @@ type LonLatPolygon = Vec<Vec<[f64; 2]>>;
 
 /// A floor size of `floor_info.json`'s `map_info` (`key`), m: a number within
 /// [`MIN_FLOOR_SIZE_M`, `MAX_FLOOR_SIZE_M`].
-fn floor_size(value: &Value, key: &str) -> Result<f64, String> {
+pub(crate) fn floor_size(value: &Value, key: &str) -> Result<f64, String> {
     let size = value.as_f64().ok_or(format!("map_info.{key}: must be a number, found {value}"))?;
     if !(MIN_FLOOR_SIZE_M..=MAX_FLOOR_SIZE_M).contains(&size) {
         return Err(format!(

@@ -1,11 +1,12 @@
 //! Reading recorded data: Indoor Location Competition 2.0 walks ([`ilc`]) and their floor plans
-//! ([`floor_plan`]), and the IPIN competitions' GetSensorData logfiles ([`gsd`]). A walk
+//! ([`floor_plan`]) or a venue's IMDF archive ([`imdf`]), and the IPIN competitions' GetSensorData logfiles ([`gsd`]). A walk
 //! becomes the same calls an app makes — sensor batches, then the scan they precede — in time
 //! order, whatever order the file had.
 
 pub mod floor_plan;
 pub mod gsd;
 pub mod ilc;
+pub mod imdf;
 
 pub use floor_plan::{FloorPlan, FloorPlanError};
 pub use gsd::{GeoFix, GsdWalk};

@@ -531,6 +531,41 @@ RustBuffer uniffi_waymark_fn_method_site_floor_names(uint64_t ptr, RustCallStatu
 RustBuffer uniffi_waymark_fn_method_site_zone_names(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_FROM_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_FROM_LAT_LON
+RustBuffer uniffi_waymark_fn_method_site_from_lat_lon(uint64_t ptr, uint32_t floor, RustBuffer at, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_GEOFENCE_FROM_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_GEOFENCE_FROM_LAT_LON
+RustBuffer uniffi_waymark_fn_method_site_geofence_from_lat_lon(uint64_t ptr, RustBuffer id, uint32_t floor, RustBuffer outline, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_GEOFENCE_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_GEOFENCE_LAT_LON
+RustBuffer uniffi_waymark_fn_method_site_geofence_lat_lon(uint64_t ptr, RustBuffer geofence, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_IS_GEO_REFERENCED
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_IS_GEO_REFERENCED
+int8_t uniffi_waymark_fn_method_site_is_geo_referenced(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ROUTE_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ROUTE_LAT_LON
+RustBuffer uniffi_waymark_fn_method_site_route_lat_lon(uint64_t ptr, RustBuffer route, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_TO_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_TO_LAT_LON
+RustBuffer uniffi_waymark_fn_method_site_to_lat_lon(uint64_t ptr, RustBuffer point, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ZONE_OUTLINES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ZONE_OUTLINES
+RustBuffer uniffi_waymark_fn_method_site_zone_outlines(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ROUTE
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_SITE_ROUTE
 RustBuffer uniffi_waymark_fn_method_site_route(uint64_t ptr, RustBuffer from, RustBuffer destination, RustCallStatus *_Nonnull out_status
@@ -1113,6 +1148,48 @@ uint16_t uniffi_waymark_checksum_method_site_floor_names(void
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ZONE_NAMES
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ZONE_NAMES
 uint16_t uniffi_waymark_checksum_method_site_zone_names(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_FROM_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_FROM_LAT_LON
+uint16_t uniffi_waymark_checksum_method_site_from_lat_lon(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_GEOFENCE_FROM_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_GEOFENCE_FROM_LAT_LON
+uint16_t uniffi_waymark_checksum_method_site_geofence_from_lat_lon(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_GEOFENCE_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_GEOFENCE_LAT_LON
+uint16_t uniffi_waymark_checksum_method_site_geofence_lat_lon(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_IS_GEO_REFERENCED
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_IS_GEO_REFERENCED
+uint16_t uniffi_waymark_checksum_method_site_is_geo_referenced(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ROUTE_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ROUTE_LAT_LON
+uint16_t uniffi_waymark_checksum_method_site_route_lat_lon(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_TO_LAT_LON
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_TO_LAT_LON
+uint16_t uniffi_waymark_checksum_method_site_to_lat_lon(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ZONE_OUTLINES
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_SITE_ZONE_OUTLINES
+uint16_t uniffi_waymark_checksum_method_site_zone_outlines(void
     
 );
 #endif

@@ -41,7 +41,7 @@ object RunTests {
             CallbackContractTest::class.java,
             HabitsTest::class.java, RouteTest::class.java, SurveyRecorderTest::class.java,
             LocationClientTest::class.java, AndroidClientTest::class.java, SurveyModeTest::class.java,
-            AndroidPackagingTest::class.java,
+            AndroidPackagingTest::class.java, GeoTest::class.java,
         )
         val result = core.run(*classes)
         // A failure in @BeforeClass fails the class without running any test: count each test.
