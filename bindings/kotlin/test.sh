@@ -115,9 +115,11 @@ python3 "$REPO/scripts/readme-snippet.py" kotlin-quickstart > "$OUT/ReadmeQuicks
 python3 "$REPO/scripts/readme-snippet.py" android-statuses docs/android.md > "$OUT/AndroidGuideStatuses.kt"
 python3 "$REPO/scripts/readme-snippet.py" kotlin-survey docs/surveying.md > "$OUT/SurveyingGuide.kt"
 python3 "$REPO/scripts/readme-snippet.py" android-survey docs/android.md > "$OUT/AndroidGuideSurvey.kt"
+python3 "$REPO/scripts/readme-snippet.py" building-map-kotlin docs/your-building.md > "$OUT/BuildingGuideMap.kt"
 "$KOTLINC" -nowarn -jvm-target 17 -cp "$compile_cp" -d "$OUT/classes" \
     "$GENERATED" "$HERE"/src/test/kotlin/dev/waymark/*.kt "$OUT/ReadmeQuickstart.kt" \
-    "$OUT/AndroidGuideStatuses.kt" "$OUT/SurveyingGuide.kt" "$OUT/AndroidGuideSurvey.kt" "${ANDROID_PLAIN[@]}"
+    "$OUT/AndroidGuideStatuses.kt" "$OUT/SurveyingGuide.kt" "$OUT/AndroidGuideSurvey.kt" "$OUT/BuildingGuideMap.kt" \
+    "${ANDROID_PLAIN[@]}"
 # Java callers of the Android client (no unsigned type, default methods, the builder): javac
 # against the classes kotlinc made.
 step "javac (the client from Java)"

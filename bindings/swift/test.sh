@@ -79,12 +79,12 @@ if (( stale )); then
     exit 1
 fi
 
-# --- 4. The README's Swift quickstart and the Swift snippets of docs/ios.md and
-# docs/surveying.md (every block between `<!-- snippet: NAME -->` and `<!-- /snippet -->`),
+# --- 4. The README's Swift quickstart and the Swift snippets of docs/ios.md,
+# docs/surveying.md and docs/your-building.md (every block between `<!-- snippet: NAME -->` and `<!-- /snippet -->`),
 # compiled into the test target (not committed).
 {
     python3 "$REPO/scripts/readme-snippet.py" swift-quickstart
-    python3 - "$REPO/docs/ios.md" "$REPO/docs/surveying.md" <<'PY'
+    python3 - "$REPO/docs/ios.md" "$REPO/docs/surveying.md" "$REPO/docs/your-building.md" <<'PY'
 import re, sys
 for path in sys.argv[1:]:
     guide = open(path).read()

@@ -80,3 +80,28 @@ fn main() -> ExitCode {
         Command::Route(args) => route::route(&args),
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every `waymark` command in a shell block of the guide `docs/your-building.md`, as the
+    /// guide writes it: the commands a venue team copies must be ones the binary takes. The
+    /// guide writes no quotes, so splitting on whitespace is the shell's own split.
+    #[test]
+    fn guide_commands_parse() {
+        let guide = include_str!("../../../docs/your-building.md");
+        let mut commands = 0;
+        for block in guide.split("```sh\n").skip(1) {
+            let block = block.split("```").next().unwrap_or_default();
+            for line in block.lines().filter(|l| l.starts_with("waymark ")) {
+                assert!(!line.contains(['"', '\'', '\\']), "quoting in a guide command: {line}");
+                if let Err(e) = Cli::try_parse_from(line.split_whitespace()) {
+                    panic!("docs/your-building.md: `{line}` is not a waymark command:\n{e}");
+                }
+                commands += 1;
+            }
+        }
+        assert!(commands >= 4, "the guide's shell blocks hold {commands} waymark commands");
+    }
+}
