@@ -12,15 +12,15 @@ use waymark_survey::calibrate::{survey_inputs, FloorData};
 use waymark_survey::io::FloorPlan;
 use waymark_survey::{survey, SurveyOptions};
 
-const FLOORS: [&str; 5] = ["B1", "F1", "F2", "F3", "F4"];
+use waymark_eval::data::SITE1_FLOORS as FLOORS;
 
 /// Walk files read per floor: enough for a map around a few test walks, quick to survey.
 const WALKS_PER_FLOOR: usize = 10;
 
-/// `floor` of site1 unpacked under `target/`, or `None` (with a message) without the data.
-fn floor_dir(floor: &str) -> Option<PathBuf> {
+/// Site1's floors unpacked under `target/`, or `None` (with a message) without the data.
+fn floor_dirs() -> Option<Vec<PathBuf>> {
     // The workspace root, two levels above this crate.
-    waymark_eval::data::site1_floor(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."), floor)
+    waymark_eval::data::site1_floors(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."))
 }
 
 /// Each floor's `floor_num` and the corners of its plan's longitude/latitude box, read from the
@@ -62,9 +62,7 @@ fn plan_distance(plan: &FloorPlan, a: [f64; 2], b: [f64; 2]) -> f64 {
 
 #[test]
 fn site1_is_geo_referenced_and_replays_with_lat_lon() {
-    let Some(dirs) =
-        waymark_eval::data::or_skip(FLOORS.iter().map(|f| floor_dir(f)).collect::<Option<Vec<_>>>())
-    else {
+    let Some(dirs) = waymark_eval::data::or_skip(floor_dirs()) else {
         return;
     };
     let floors: Vec<FloorData> =

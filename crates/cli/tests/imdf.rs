@@ -11,13 +11,15 @@ use waymark_survey::io::imdf::{plans_from_imdf, Venue, WriteOptions};
 use waymark_survey::io::FloorPlan;
 use waymark_survey::{survey, SurveyOptions};
 
-const FLOORS: [&str; 5] = ["B1", "F1", "F2", "F3", "F4"];
+use waymark_eval::data::SITE1_FLOORS as FLOORS;
 
 /// Walk files read per floor: enough for a map, quick to survey.
 const WALKS_PER_FLOOR: usize = 6;
 
-fn floor_dir(floor: &str) -> Option<PathBuf> {
-    waymark_eval::data::site1_floor(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."), floor)
+/// Site1's floors unpacked under `target/`, or `None` (with a message) without the data.
+fn floor_dirs() -> Option<Vec<PathBuf>> {
+    // The workspace root, two levels above this crate.
+    waymark_eval::data::site1_floors(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../.."))
 }
 
 fn options() -> WriteOptions {
@@ -56,9 +58,7 @@ fn assert_same_plan(floor: &str, imdf: &FloorPlan, geojson: &FloorPlan) {
 
 #[test]
 fn site1_plans_round_trip_through_imdf_and_survey_the_same() {
-    let Some(dirs) =
-        waymark_eval::data::or_skip(FLOORS.iter().map(|f| floor_dir(f)).collect::<Option<Vec<_>>>())
-    else {
+    let Some(dirs) = waymark_eval::data::or_skip(floor_dirs()) else {
         return;
     };
     let floors: Vec<FloorData> =

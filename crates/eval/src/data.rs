@@ -6,6 +6,15 @@
 
 use std::path::{Path, PathBuf};
 
+/// The floors of the Indoor Location Competition 2.0's site 1 the evaluation uses, as one
+/// site (`docs/testing.md#real-data`).
+pub const SITE1_FLOORS: [&str; 5] = ["B1", "F1", "F2", "F3", "F4"];
+
+/// Every floor of [`SITE1_FLOORS`] as [`site1_floor`] finds it, or `None` when one is missing.
+pub fn site1_floors(workspace: &Path) -> Option<Vec<PathBuf>> {
+    SITE1_FLOORS.iter().map(|floor| site1_floor(workspace, floor)).collect()
+}
+
 /// `floor` of site 1 (`B1`, `F1` ... `F4`) unpacked under `<workspace>/target/ilc/site1/`, or
 /// `None`, saying why on stderr, when the data is not there or cannot be unpacked.
 pub fn site1_floor(workspace: &Path, floor: &str) -> Option<PathBuf> {

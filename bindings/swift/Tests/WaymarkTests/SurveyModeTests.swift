@@ -116,13 +116,7 @@ final class SurveyModeTests: XCTestCase {
             XCTAssertEqual(h.engine.calls, [], "the engine was never given to the manager")
         }
 
-        let site = dir.appendingPathComponent("site.json")
-        let process = Process()
-        process.executableURL = URL(fileURLWithPath: cli)
-        process.arguments = ["survey", dir.appendingPathComponent("F1").path, "--out", site.path, "--name", "office"]
-        try process.run()
-        process.waitUntilExit()
-        XCTAssertEqual(process.terminationStatus, 0, "waymark survey")
+        let site = try surveySite(cli: cli, walksIn: dir)
 
         let surveyedJson = try String(contentsOf: site, encoding: .utf8)
         XCTAssertTrue(surveyedJson.contains(#""ble""#), "the surveyed site knows the beacons")

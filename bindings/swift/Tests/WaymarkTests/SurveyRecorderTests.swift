@@ -65,13 +65,7 @@ final class SurveyRecorderTests: XCTestCase {
             XCTAssertTrue(summary.files[0].hasSuffix("F1/path_data_files/\(name)-1.txt"), summary.files[0])
         }
 
-        let site = dir.appendingPathComponent("site.json")
-        let process = Process()
-        process.executableURL = URL(fileURLWithPath: cli)
-        process.arguments = ["survey", dir.appendingPathComponent("F1").path, "--out", site.path, "--name", "office"]
-        try process.run()
-        process.waitUntilExit()
-        XCTAssertEqual(process.terminationStatus, 0, "waymark survey")
+        let site = try surveySite(cli: cli, walksIn: dir)
 
         let walk = try load(WaymarkTests.simDir.appendingPathComponent("walk.json"))
         let surveyed = try meanError(
@@ -116,4 +110,17 @@ final class SurveyRecorderTests: XCTestCase {
             guard case SurveyError.NoWaypoints = $0 else { return XCTFail("\($0)") }
         }
     }
+}
+
+/// `waymark survey` (the binary at `cli`) on the walks recorded under `dir/F1`: the site file it
+/// wrote, `dir/site.json`. Shared by the tests that record a survey and position on it.
+func surveySite(cli: String, walksIn dir: URL) throws -> URL {
+    let site = dir.appendingPathComponent("site.json")
+    let process = Process()
+    process.executableURL = URL(fileURLWithPath: cli)
+    process.arguments = ["survey", dir.appendingPathComponent("F1").path, "--out", site.path, "--name", "office"]
+    try process.run()
+    process.waitUntilExit()
+    XCTAssertEqual(process.terminationStatus, 0, "waymark survey")
+    return site
 }

@@ -78,9 +78,7 @@ impl Row {
     }
 }
 
-/// The floors of the Indoor Location Competition 2.0's site 1 the evaluation uses, as one
-/// site (`docs/testing.md#real-data`).
-pub const SITE1_FLOORS: [&str; 5] = ["B1", "F1", "F2", "F3", "F4"];
+pub use crate::data::SITE1_FLOORS;
 
 /// Site 1's five floors ([`SITE1_FLOORS`]), split as `waymark eval` splits them (file i of a
 /// floor is a test walk when i % 5 == 4).

@@ -10,7 +10,6 @@ import java.io.File
 import java.nio.file.Files
 import java.util.concurrent.ExecutionException
 import java.util.concurrent.Executor
-import kotlin.math.hypot
 import kotlin.math.roundToInt
 import org.junit.Assert.assertEquals
 import org.junit.Assert.assertFalse
@@ -28,28 +27,8 @@ import org.junit.Test
  */
 class SurveyModeTest {
     private val surveyWalks = File(System.getProperty("waymark.surveyWalks"))
-    private val cli = System.getProperty("waymark.cli")
     private val siteJson = File(System.getProperty("waymark.site")).readText()
-    private val walk = Walk.load(System.getProperty("waymark.walk"))
     private val direct = Executor { it.run() }
-
-    private fun meanError(engine: PositioningEngine): Double {
-        val errors = ArrayList<Double>()
-        engine.use {
-            for (epoch in walk) {
-                it.pushAccelerometer(epoch.accelerometer)
-                it.pushGyroscope(epoch.gyroscope)
-                it.pushMagnetometer(epoch.magnetometer)
-                try {
-                    val p = it.pushScan(epoch.scan())
-                    errors.add(hypot(p.x - epoch.truthX, p.y - epoch.truthY))
-                } catch (e: PositioningException.InputRejected) {
-                }
-            }
-        }
-        assertTrue("${errors.size} positions", errors.size > 20)
-        return errors.average()
-    }
 
     /**
      * Walks [survey] through [phone]: its motion from the sensors, each epoch's WiFi results
@@ -117,15 +96,7 @@ class SurveyModeTest {
                 client.close()
                 recorder.close()
             }
-            val site = File(dir, "site.json")
-            val process = ProcessBuilder(cli, "survey", File(dir, "F1").path, "--out", site.path, "--name", "office")
-                .redirectErrorStream(true).start()
-            val output = process.inputStream.bufferedReader().readText()
-            assertEquals(output, 0, process.waitFor())
-            val surveyed = meanError(PositioningEngine(site.readText(), EngineOptions()))
-            val demo = meanError(PositioningEngine(siteJson, EngineOptions()))
-            println("survey mode: mean error %.2f m on its site, %.2f m on the office's".format(surveyed, demo))
-            assertTrue("$surveyed m against $demo m", surveyed <= 1.5 * demo)
+            SurveyRoundTrip.check(dir, "survey mode")
         } finally {
             dir.deleteRecursively()
         }

@@ -2,7 +2,6 @@ package dev.waymark
 
 import java.io.File
 import java.nio.file.Files
-import kotlin.math.hypot
 import org.junit.Assert.assertEquals
 import org.junit.Assert.assertTrue
 import org.junit.Assert.fail
@@ -16,27 +15,6 @@ import org.junit.Test
  */
 class SurveyRecorderTest {
     private val surveyWalks = File(System.getProperty("waymark.surveyWalks"))
-    private val cli = System.getProperty("waymark.cli")
-    private val siteJson = File(System.getProperty("waymark.site")).readText()
-    private val walk = Walk.load(System.getProperty("waymark.walk"))
-
-    private fun meanError(engine: PositioningEngine): Double {
-        val errors = ArrayList<Double>()
-        engine.use {
-            for (epoch in walk) {
-                it.pushAccelerometer(epoch.accelerometer)
-                it.pushGyroscope(epoch.gyroscope)
-                it.pushMagnetometer(epoch.magnetometer)
-                try {
-                    val p = it.pushScan(epoch.scan())
-                    errors.add(hypot(p.x - epoch.truthX, p.y - epoch.truthY))
-                } catch (e: PositioningException.InputRejected) {
-                }
-            }
-        }
-        assertTrue("${errors.size} positions", errors.size > 20)
-        return errors.average()
-    }
 
     @Test
     fun aRecordedSurveyPositionsTheTestWalkLikeTheDemo() {
@@ -68,16 +46,7 @@ class SurveyRecorderTest {
                 assertTrue(summary.files[0], summary.files[0].endsWith("F1/path_data_files/${survey.name}-1.txt"))
                 recorder.close()
             }
-            val site = File(dir, "site.json")
-            val process = ProcessBuilder(cli, "survey", File(dir, "F1").path, "--out", site.path, "--name", "office")
-                .redirectErrorStream(true).start()
-            val output = process.inputStream.bufferedReader().readText()
-            assertEquals(output, 0, process.waitFor())
-
-            val surveyed = meanError(PositioningEngine(site.readText(), EngineOptions()))
-            val demo = meanError(PositioningEngine(siteJson, EngineOptions()))
-            println("recorded survey: mean error %.2f m on its site, %.2f m on the office's".format(surveyed, demo))
-            assertTrue("$surveyed m against $demo m", surveyed <= 1.5 * demo)
+            SurveyRoundTrip.check(dir, "recorded survey")
         } finally {
             dir.deleteRecursively()
         }
