@@ -105,7 +105,11 @@ class AppVisibility @JvmOverloads constructor(
     }
 
     companion object {
-        /** How long after the last activity stopped the app counts as in the background, ms. */
+        /**
+         * How long after the last activity stopped the app counts as in the background, ms:
+         * AndroidX's `ProcessLifecycleOwner` delay (its `TIMEOUT_MS`), long enough that an
+         * activity destroyed and recreated by a configuration change (a rotation) sends nothing.
+         */
         const val STOP_DELAY_MS = 700L
     }
 }

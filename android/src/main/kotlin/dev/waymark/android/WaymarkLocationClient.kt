@@ -808,7 +808,11 @@ class WaymarkLocationClient private constructor(
     }
 
     companion object {
-        /** How long [close] waits for the client's thread to stop, ms. */
+        /**
+         * How long [close] waits for the client's thread to stop, ms: Android's "application not
+         * responding" limit for a blocked main thread, so a close on the main thread never
+         * outlasts it.
+         */
         const val CLOSE_TIMEOUT_MS = 5_000L
 
         /** A client without an engine, for survey mode alone ([startSurvey]): it records, and
