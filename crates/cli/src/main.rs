@@ -7,7 +7,8 @@ mod shared;
 
 use clap::{Parser, Subcommand};
 use commands::{
-    bench, benchmark, demo, eval, hmm, replay, results, route, sim_export, simulate, site, survey, view,
+    bench, benchmark, demo, eval, evidence, hmm, replay, results, route, sim_export, simulate, site, survey,
+    view,
 };
 use std::process::ExitCode;
 
@@ -60,6 +61,9 @@ enum Command {
     /// The shortest walkable route on a site (or the demo's office) from a point to a point
     /// or a zone, as legs with turns; `--json` for one JSON object.
     Route(route::RouteArgs),
+    /// Map evidence from walks without labels (docs/evidence.md): merge evidence files of a
+    /// site (`evidence merge`), summarise one (`evidence show`).
+    Evidence(evidence::EvidenceArgs),
 }
 
 fn main() -> ExitCode {
@@ -78,6 +82,7 @@ fn main() -> ExitCode {
         Command::Hmm(args) => hmm::hmm(&args),
         Command::View(args) => view::view(&args),
         Command::Route(args) => route::route(&args),
+        Command::Evidence(args) => evidence::evidence(&args),
     }
 }
 

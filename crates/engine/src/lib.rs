@@ -22,6 +22,7 @@ mod history;
 // The building blocks under the engine, public for Rust apps and for the tools that build site
 // files: the site model and its file formats, radio fingerprints, the motion pipeline, the HMM,
 // habit models, routes on the walkable graph and the survey recorder.
+pub mod evidence;
 pub mod geofence;
 pub mod habits;
 pub mod hmm;

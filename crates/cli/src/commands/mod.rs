@@ -4,6 +4,7 @@ pub mod bench;
 pub mod benchmark;
 pub mod demo;
 pub mod eval;
+pub mod evidence;
 pub mod hmm;
 pub mod replay;
 pub mod results;

@@ -75,7 +75,7 @@ impl Default for FitOptions {
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CensoredFit {
     /// The estimate, or `None` when every sample was clipped (nothing to fit: Hoang §3 then
-    /// uses a mean far below c, see [`unheard_model`]).
+    /// uses a mean far below c, the unheard model).
     pub gaussian: Option<Gaussian>,
     /// EM steps taken (the accelerated EM's extrapolated steps included).
     pub iterations: usize,
@@ -269,22 +269,87 @@ pub fn fit_censored(samples: &[f64], options: &FitOptions) -> CensoredFit {
     let observed = samples.iter().copied().filter(|&s| s > clip);
     let (obs_mean, obs_var, n_obs) = mean_variance(observed.clone());
     let N = samples.len();
-    let n_clipped = N - n_obs;
-    if n_obs == 0 {
+    // Start from the fit that puts clipped samples at c: biased, but close, and always finite.
+    let (start_mean, start_var, _) = mean_variance(samples.iter().map(|&s| s.max(clip)));
+    fit_censored_moments(
+        &CensoredMoments {
+            samples: N as f64,
+            heard: n_obs as f64,
+            heard_mean: obs_mean,
+            heard_var: obs_var,
+            start_mean,
+            start_var,
+        },
+        options,
+    )
+}
+
+/// What the censored EM needs of a transmitter's samples, possibly weighted (a weight is a
+/// share of a sample: unlabelled evidence weighs each scan by where the phone probably was).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CensoredMoments {
+    /// The samples' total weight N, clipped ones included.
+    pub samples: f64,
+    /// The weight of the samples heard above the clip level.
+    pub heard: f64,
+    /// Their weighted mean, dBm.
+    pub heard_mean: f64,
+    /// Their weighted population variance, dB².
+    pub heard_var: f64,
+    /// The weighted mean of all samples with the clipped ones at the clip level, dBm: where the
+    /// EM starts.
+    pub start_mean: f64,
+    /// Their weighted population variance, dB².
+    pub start_var: f64,
+}
+
+impl CensoredMoments {
+    /// The moments of weighted samples given by their sums above the clip level: total weight
+    /// `samples`, and of the heard ones their weight, Σ w·(r - c) and Σ w·(r - c)² (a clipped
+    /// sample, taken at c, adds nothing to either sum).
+    pub fn from_sums_above_clip(samples: f64, heard: f64, sum: f64, sum_squares: f64, clip_dbm: f64) -> Self {
+        let (heard_above, start_above) = (sum / heard, sum / samples);
+        CensoredMoments {
+            samples,
+            heard,
+            heard_mean: clip_dbm + heard_above,
+            heard_var: (sum_squares / heard - heard_above * heard_above).max(0.0),
+            start_mean: clip_dbm + start_above,
+            start_var: (sum_squares / samples - start_above * start_above).max(0.0),
+        }
+    }
+}
+
+/// The censored EM of [`RssiModel::fit`] (Hoang eqs. 6-7) from the samples' moments: the same
+/// steps, for weighted samples too.
+#[allow(non_snake_case)]
+pub fn fit_censored_moments(moments: &CensoredMoments, options: &FitOptions) -> CensoredFit {
+    let clip = options.clip_dbm;
+    let CensoredMoments {
+        samples: Nf,
+        heard: n_obs_f,
+        heard_mean: obs_mean,
+        heard_var: obs_var,
+        start_mean,
+        start_var,
+    } = *moments;
+    let n_clipped_f = Nf - n_obs_f;
+    let usable = n_obs_f > 0.0 && Nf.is_finite() && obs_mean.is_finite() && obs_var.is_finite();
+    if !usable {
         return CensoredFit { gaussian: None, iterations: 0, converged: true };
     }
     let min_var = options.min_std_db * options.min_std_db;
     // The M-step's variance projected onto [min, max]: for fixed μ the likelihood is unimodal
     // in σ², so the projection is the constrained maximum and the EM stays monotone.
     let max_var = (options.max_std_db * options.max_std_db).max(min_var);
-    if n_clipped == 0 {
+    // Nothing clipped (N is finite and at least the heard weight here).
+    if n_clipped_f <= 0.0 {
         return CensoredFit {
             gaussian: Gaussian::new(obs_mean, obs_var.clamp(min_var, max_var).sqrt()),
             iterations: 0,
             converged: true,
         };
     }
-    let (Nf, n_obs_f, n_clipped_f) = (N as f64, n_obs as f64, n_clipped as f64);
     let sum_obs = obs_mean * n_obs_f;
     // One EM step, (μ, σ²) → (μ, σ²).
     let em = |mu: f64, var: f64| -> (f64, f64) {
@@ -308,8 +373,6 @@ pub fn fit_censored(samples: &[f64], options: &FitOptions) -> CensoredFit {
     };
     // How far one EM step moved, dB: μ and σ.
     let moved = |a: (f64, f64), b: (f64, f64)| (b.0 - a.0).abs().max((b.1.sqrt() - a.1.sqrt()).abs());
-    // Start from the fit that puts clipped samples at c: biased, but close, and always finite.
-    let (start_mean, start_var, _) = mean_variance(samples.iter().map(|&s| s.max(clip)));
     let mut theta = (start_mean, start_var.clamp(min_var, max_var));
     let mut steps = 0;
     let done = |theta: (f64, f64), steps: usize, converged: bool| CensoredFit {

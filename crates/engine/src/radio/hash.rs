@@ -96,12 +96,7 @@ impl Salt {
 
     /// The hashed form of `id`; an id that is already hashed is returned as it is.
     pub fn hash(&self, id: &TransmitterId) -> TransmitterId {
-        let message = match id {
-            TransmitterId::Wifi { bssid } => format!("wifi:{bssid}"),
-            TransmitterId::Ble { uuid, major, minor } => format!("ble:{uuid}:{major}:{minor}"),
-            TransmitterId::BleAddress { mac } => format!("ble_address:{mac}"),
-            TransmitterId::HashedWifi { .. } | TransmitterId::HashedBle { .. } => return id.clone(),
-        };
+        let Some(message) = canonical_id(id) else { return id.clone() };
         let hash = self.mac128(message.as_bytes());
         match id {
             TransmitterId::Wifi { .. } => TransmitterId::HashedWifi { hash },
@@ -123,6 +118,17 @@ impl Salt {
         let mut mac = self.keyed.clone();
         mac.update(SALT_CHECK_LABEL);
         mac.verify_truncated_left(&expected).is_ok()
+    }
+}
+
+/// The canonical text of a raw id that its hash is taken of (the module's list); `None` for an
+/// id that is already hashed.
+pub(crate) fn canonical_id(id: &TransmitterId) -> Option<String> {
+    match id {
+        TransmitterId::Wifi { bssid } => Some(format!("wifi:{bssid}")),
+        TransmitterId::Ble { uuid, major, minor } => Some(format!("ble:{uuid}:{major}:{minor}")),
+        TransmitterId::BleAddress { mac } => Some(format!("ble_address:{mac}")),
+        TransmitterId::HashedWifi { .. } | TransmitterId::HashedBle { .. } => None,
     }
 }
 
@@ -180,7 +186,7 @@ fn hex_encode(bytes: &[u8]) -> String {
     text
 }
 
-fn hex_decode(text: &str) -> Option<Vec<u8>> {
+pub(crate) fn hex_decode(text: &str) -> Option<Vec<u8>> {
     let digits = text.as_bytes();
     if !digits.len().is_multiple_of(2) {
         return None;

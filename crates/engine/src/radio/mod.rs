@@ -11,8 +11,10 @@ pub use check::MAX_RSSI_DBM;
 pub(crate) use check::{check_readings, ScanError};
 pub(crate) use gaussian::ln_std_normal_pdf;
 pub(crate) use gaussian::unheard_model;
-pub use gaussian::{FitOptions, Gaussian, LnCdfTable, RssiModel};
-pub(crate) use hash::HASH_HEX_DIGITS;
+pub use gaussian::{
+    fit_censored_moments, CensoredFit, CensoredMoments, FitOptions, Gaussian, LnCdfTable, RssiModel,
+};
+pub(crate) use hash::{canonical_id, hex_decode, HASH_HEX_DIGITS};
 pub use hash::{Salt, ScanHasher, ID_HASH_SCHEME, ID_HASH_VERSION};
 pub(crate) use map::quantise;
 pub(crate) use map::LEVEL_STEP_DB;
