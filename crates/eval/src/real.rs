@@ -200,6 +200,10 @@ pub struct EvalReport {
     /// a foreground app (`--throttle`), on the same site.
     #[serde(skip_serializing_if = "Option::is_none")]
     pub throttled: Option<BTreeMap<String, ConfigurationReport>>,
+    /// With the survey walks F left out given back without labels (`--unlabelled-rest`):
+    /// each round of refitting the map with their evidence (docs/evidence.md#refitting).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub evidence_rounds: Option<Vec<waymark_survey::calibrate::EvidenceRound>>,
 }
 
 /// The configurations run with habits learned from the survey walks ([`survey_habits`]).

@@ -39,6 +39,17 @@ pub struct EvalArgs {
     /// not change.
     #[arg(long, default_value_t = 1.0, value_parser = calibrate::parse_survey_fraction)]
     survey_fraction: f64,
+    /// Give the survey walks that --survey-fraction leaves out back as walks without labels
+    /// (no waypoints, no floor): their map evidence refits the site (docs/evidence.md).
+    #[arg(long)]
+    unlabelled_rest: bool,
+    /// With --unlabelled-rest: rounds of anchoring the unlabelled walks where the site is sure
+    /// of them and surveying them with the labelled ones.
+    #[arg(long, default_value_t = 1)]
+    anchor_rounds: usize,
+    /// With --unlabelled-rest: rounds of refitting with every scan's soft label after those.
+    #[arg(long, default_value_t = 0)]
+    evidence_rounds: usize,
     /// γ of Hoang eq. 14; default: calibrated by the survey.
     #[arg(long)]
     gamma: Option<f64>,
@@ -110,10 +121,24 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             return fail("eval", e);
         }
     }
+    let floors: Vec<FloorData> =
+        floors.into_iter().map(|f| if args.no_plan { FloorData { plan: None, ..f } } else { f }).collect();
+    if args.unlabelled_rest && args.survey_fraction >= 1.0 {
+        return fail(
+            "eval",
+            "--unlabelled-rest gives back the walks --survey-fraction leaves out: give it one below 1",
+        );
+    }
+    // The survey walks left out, without their labels, when they are given back.
+    let mut unlabelled: Vec<Trace> = Vec::new();
     let floors: Vec<FloorData> = floors
         .into_iter()
-        .map(|f| if args.no_plan { FloorData { plan: None, ..f } } else { f })
         .map(|mut f| {
+            if args.unlabelled_rest {
+                let keep = calibrate::survey_subset(f.survey.len(), args.survey_fraction);
+                let dropped = f.survey.iter().enumerate().filter(|(i, _)| keep.binary_search(i).is_err());
+                unlabelled.extend(dropped.map(|(_, w)| Trace { waypoints: Vec::new(), ..w.clone() }));
+            }
             f.keep_survey_fraction(args.survey_fraction);
             f
         })
@@ -171,11 +196,26 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         calibrate::calibration_steps(&floors, &options.calibration) as u64,
         "calibrating (leave one walk out)",
     );
-    let (site, survey, calibration) =
-        match calibrate::survey_calibrated(&floors, &options.calibration, &|| bar.inc(1)) {
-            Ok(s) => s,
-            Err(e) => return fail("eval", e),
-        };
+    let surveyed = if args.unlabelled_rest {
+        calibrate::survey_with_unlabelled(
+            &floors,
+            &unlabelled,
+            &options.calibration,
+            calibrate::UnlabelledOptions {
+                anchor_rounds: args.anchor_rounds,
+                evidence_rounds: args.evidence_rounds,
+            },
+            &|| bar.inc(1),
+        )
+        .map(|(site, survey, calibration, rounds)| (site, survey, calibration, Some(rounds)))
+    } else {
+        calibrate::survey_calibrated(&floors, &options.calibration, &|| bar.inc(1))
+            .map(|(a, b, c)| (a, b, c, None))
+    };
+    let (site, survey, calibration, evidence_rounds) = match surveyed {
+        Ok(s) => s,
+        Err(e) => return fail("eval", e),
+    };
     bar.finish_and_clear();
     let options = options.surveyed_with(&calibration);
     let surveyed_s = started.elapsed().as_secs_f64();
@@ -238,6 +278,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         seconds: started.elapsed().as_secs_f64(),
         habits,
         throttled,
+        evidence_rounds,
     };
     if args.json {
         println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());

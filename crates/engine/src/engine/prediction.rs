@@ -161,6 +161,28 @@ impl Engine {
         self.smoother.smooth(lag, self.filter.posterior(), out, |model, f| parts.with(model, |t| f(t)))
     }
 
+    /// The posterior of each epoch the fixed-lag smoother holds, smoothed by all the epochs
+    /// after it, newest first: the latest epoch's filtered posterior, then up to
+    /// `fixed_lag_epochs` epochs back (fewer after a restart, a bridged gap or feedback, as for
+    /// [`fixed_lag_position`](Self::fixed_lag_position)), in one backward sweep.
+    /// `each(timestamp, γ)` gets the states kept (all but those below 10⁻⁶ of the mass shared
+    /// evenly) and their probabilities, which sum to 1. What map evidence weighs a walk's
+    /// scans by (docs/evidence.md#from-a-walk).
+    pub fn smoothed_posteriors(&self, mut each: impl FnMut(u64, &[(u32, f64)])) {
+        let Some(latest) = self.last_epoch_ns else { return };
+        let posterior = self.filter.posterior();
+        let kept: Vec<(u32, f64)> = crate::hmm::kept(posterior).collect();
+        let total: f64 = kept.iter().map(|(_, p)| p).sum();
+        if !(total > 0.0 && total.is_finite()) {
+            return;
+        }
+        let kept: Vec<(u32, f64)> = kept.into_iter().map(|(i, p)| (i, p / total)).collect();
+        each(latest, &kept);
+        let parts = self.transition_parts();
+        let _ =
+            self.smoother.sweep(self.smoother.len(), posterior, |model, f| parts.with(model, |t| f(t)), each);
+    }
+
     /// Hoang eq. 14's γ for an epoch at `timestamp_ns` with `motion`, of the floor the engine
     /// is on: that of an epoch with the movement vector's likelihood when its transition has
     /// one, else the γ of the epoch's scenario when the site has one (the distance-only

@@ -16,6 +16,7 @@ pub use motion::azimuth;
 pub(crate) use motion::HipeRegion;
 pub(crate) use motion::MovementVectorTransition;
 pub(crate) use motion::RegionsTransition;
+pub(crate) use smoother::kept;
 pub(crate) use smoother::FixedLagSmoother;
 pub use smoother::STEP_BYTES_PER_STATE;
 pub use transition::{predict, RowBounds, Transition, UniformReach};

@@ -52,7 +52,8 @@ pub struct FixedLagSmoother<M> {
     pending: Option<Step<M>>,
 }
 
-fn kept(posterior: &[f64]) -> impl Iterator<Item = (u32, f64)> + '_ {
+/// The states of `posterior` the smoother keeps (at least `CUT_MASS / N`), with their mass.
+pub(crate) fn kept(posterior: &[f64]) -> impl Iterator<Item = (u32, f64)> + '_ {
     let cut = CUT_MASS / posterior.len().max(1) as f64;
     posterior.iter().enumerate().filter(move |(_, &p)| p >= cut).map(|(i, &p)| (i as u32, p))
 }
@@ -141,9 +142,31 @@ impl<M: Clone> FixedLagSmoother<M> {
         out: &mut Vec<f64>,
         with_transition: impl Fn(&M, &mut dyn FnMut(&dyn Transition)),
     ) -> Option<u64> {
+        let (timestamp_ns, gamma) = self.sweep(lag, posterior, with_transition, |_, _| {})?;
+        out.clear();
+        out.resize(posterior.len(), 0.0);
+        for (i, g) in gamma {
+            *out.get_mut(i as usize)? = g;
+        }
+        Some(timestamp_ns)
+    }
+
+    /// The smoothed posterior of each of the `lag` epochs before the current one, newest
+    /// first: `each(timestamp, γ)` with γ the states kept and their probabilities, which sum
+    /// to one. One backward sweep gives them all, where [`smooth`](Self::smooth) at each lag
+    /// would sweep again. Returns the oldest: its time and γ. `None` when `lag` is 0, fewer than
+    /// `lag` steps are held or no state keeps any mass (after the epochs given until then).
+    pub fn sweep(
+        &self,
+        lag: usize,
+        posterior: &[f64],
+        with_transition: impl Fn(&M, &mut dyn FnMut(&dyn Transition)),
+        mut each: impl FnMut(u64, &[(u32, f64)]),
+    ) -> Option<(u64, Vec<(u32, f64)>)> {
         if lag == 0 || lag > self.steps.len() {
             return None;
         }
+        let mut timestamp_ns = 0;
         let n = posterior.len();
         let mut gamma: Vec<(u32, f64)> = kept(posterior).collect();
         let mut ratio = vec![0.0; n];
@@ -161,13 +184,10 @@ impl<M: Clone> FixedLagSmoother<M> {
                 *g /= sum;
             }
             gamma = next;
+            timestamp_ns = step.timestamp_ns;
+            each(timestamp_ns, &gamma);
         }
-        out.clear();
-        out.resize(n, 0.0);
-        for (i, g) in gamma {
-            *out.get_mut(i as usize)? = g;
-        }
-        self.steps.iter().rev().nth(lag - 1).map(|s| s.timestamp_ns)
+        Some((timestamp_ns, gamma))
     }
 }
 
@@ -328,6 +348,37 @@ mod tests {
             smoother.smooth(lag, filter.posterior(), &mut out.clone(), |&stay, f| f(&Ring { n: 4, stay }))
         };
         assert_eq!((none(0), none(last + 1)), (None, None));
+    }
+
+    #[test]
+    fn one_sweep_gives_every_epochs_marginal() {
+        let (emissions, stays) = (emissions(), [0.5, 0.1, 0.9, 0.4, 0.6]);
+        let last = emissions.len() - 1;
+        let (filter, smoother) = run(&stays, &emissions, last);
+        let mut seen = Vec::new();
+        let oldest = smoother.sweep(
+            last,
+            filter.posterior(),
+            |&stay, f| f(&Ring { n: 4, stay }),
+            |t, gamma| {
+                seen.push((t, gamma.to_vec()));
+            },
+        );
+        assert_eq!(oldest.map(|o| o.0), Some(0));
+        // Newest first: epoch last - 1 down to 0, each the marginal given every emission.
+        assert_eq!(seen.len(), last);
+        for (k, (t, gamma)) in seen.iter().enumerate() {
+            let at = last - 1 - k;
+            assert_eq!(*t, 10 * at as u64);
+            let expected = by_every_path(4, &stays, &emissions, at);
+            let mut dense = [0.0; 4];
+            for &(i, g) in gamma {
+                dense[i as usize] = g;
+            }
+            for (got, want) in dense.iter().zip(&expected) {
+                assert_relative_eq!(got, want, max_relative = 1e-6);
+            }
+        }
     }
 
     #[test]

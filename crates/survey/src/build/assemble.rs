@@ -58,6 +58,12 @@ impl PreparedSurvey<'_> {
             gaps.sort_by(f64::total_cmp);
             report.scan_interval_median_s = gaps.get(gaps.len() / 2).copied().unwrap_or(f64::NAN);
             report.scan_interval_p99_s = gaps.get(gaps.len() * 99 / 100).copied().unwrap_or(f64::NAN);
+            // A state's room: its candidate cell's, or where a cell only evidence fitted (an
+            // unsurveyed state refitted, `PreparedSurvey::refit`) lies on the plan.
+            let room_of = |c: &Cell| match floor.cells.get(c) {
+                Some(candidate) => candidate.room,
+                None => floor.plan.and(floor.plan_cells.get(c)).and_then(|p| p.room),
+            };
             let mut ids_of: BTreeMap<Cell, u32> = BTreeMap::new();
             for (&c, cell_fit) in &fits.floors[f] {
                 let id = builder.fitted_state(index, centre(c), cell_fit.scans);
@@ -68,7 +74,7 @@ impl PreparedSurvey<'_> {
             // Walkable space around the map that no walk covered: unsurveyed states.
             let margin = (options.unsurveyed_margin_m / s).floor() as i64;
             let mut rooms_of: BTreeMap<Cell, Option<usize>> =
-                ids_of.keys().map(|c| (*c, floor.cells[c].room)).collect();
+                ids_of.keys().map(|c| (*c, room_of(c))).collect();
             if margin > 0 {
                 let mut extra: BTreeSet<Cell> = BTreeSet::new();
                 for &c in ids_of.keys() {
@@ -78,7 +84,9 @@ impl PreparedSurvey<'_> {
                     // Where the cell lies on the plan, as the survey looked it up: a state's
                     // cell is a candidate, so its margin is there.
                     let on_plan = floor.plan.and(floor.plan_cells.get(&c));
-                    if on_plan.is_some_and(|p| !p.on_floor) {
+                    // Off the plan, or beyond the cells it was looked up for (the margin of
+                    // a state only evidence fitted): not added.
+                    if on_plan.is_some_and(|p| !p.on_floor) || (floor.plan.is_some() && on_plan.is_none()) {
                         continue;
                     }
                     let room = on_plan.and_then(|p| p.room);

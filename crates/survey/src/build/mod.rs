@@ -19,10 +19,12 @@ mod assemble;
 mod fit;
 mod prepare;
 mod radios;
+mod refit;
 #[cfg(test)]
 mod tests;
 
 pub use prepare::{PreparedSurvey, SurveyFits};
+pub use refit::MIN_EVIDENCE_SCANS;
 
 /// How a site is built from survey walks.
 #[derive(Clone, Debug, PartialEq)]

@@ -329,3 +329,66 @@ fn plans_geo_reference_the_site() {
     let boxless = FloorPlan { lon_lat_box: None, ..b1.clone() };
     assert!(geo_reference(&[Some(&boxless)]).0.is_none());
 }
+
+/// Map evidence refits the labelled fingerprints (docs/evidence.md#refitting): none changes
+/// nothing; evidence at a surveyed state pulls its fit by its weight against the labelled
+/// scans'; an unsurveyed state with enough evidence gets fingerprints of its own; evidence of
+/// another site is refused.
+#[test]
+fn evidence_refits_the_labelled_fingerprints() {
+    use waymark_engine::evidence::{Evidence, TransmitterKey};
+    let walks = [walk("a", (0.0, 1.0), (20.0, 1.0), 20)];
+    let floors = [SurveyFloor { name: "F1".into(), plan: None, walks: walks.iter().collect(), geo: None }];
+    let options = SurveyOptions::default();
+    let prepared = PreparedSurvey::new("test", &floors, North::default(), &options).unwrap();
+    let fits = prepared.fit(&|_, _| true, None, 1);
+    let (site, _) = prepared.assemble(&fits).unwrap();
+    let none = Evidence::new(&site);
+    let (same, _) = prepared.assemble(&prepared.refit(&fits, &site, &none).unwrap()).unwrap();
+    assert_eq!(same.to_json(), site.to_json());
+    let ap1 = TransmitterKey::of(&TransmitterId::wifi("aa:bb:cc:dd:ee:01").unwrap());
+    let at = |site: &Site, x: f64, y: f64| site.states().iter().position(|s| s.position == Point2::new(x, y));
+    let model = |site: &Site, state: usize| {
+        site.radio().fingerprints().find(|f| f.0 == state as u32 && f.1 == 0).map(|(_, _, g)| g)
+    };
+    let s10 = at(&site, 10.0, 0.0).unwrap();
+    let before = model(&site, s10).unwrap();
+    // As many scans of evidence at x = 10 as the labelled scans the state pools, 10 dB stronger.
+    let labelled = site.states()[s10].training_scans;
+    let mut e = Evidence::new(&site);
+    for _ in 0..labelled {
+        e.add_scan(&[(s10 as u32, 1.0)], &[(ap1, before.mean_dbm + 10.0)], [true, false]).unwrap();
+    }
+    let (refitted, _) = prepared.assemble(&prepared.refit(&fits, &site, &e).unwrap()).unwrap();
+    let after = model(&refitted, at(&refitted, 10.0, 0.0).unwrap()).unwrap();
+    assert!((after.mean_dbm - (before.mean_dbm + 5.0)).abs() < 1.0, "{before:?} → {after:?}");
+    // An unsurveyed state beyond the walk's end, with two scans of evidence: fingerprinted.
+    let beyond = site
+        .states()
+        .iter()
+        .position(|s| s.kind == StateKind::Unsurveyed && s.position.x > 21.0)
+        .expect("an unsurveyed state past x = 21 m");
+    assert!(model(&site, beyond).is_none());
+    let mut e = Evidence::new(&site);
+    for _ in 0..2 {
+        e.add_scan(&[(beyond as u32, 1.0)], &[(ap1, -75.0)], [true, false]).unwrap();
+    }
+    let (refitted, _) = prepared.assemble(&prepared.refit(&fits, &site, &e).unwrap()).unwrap();
+    let p = site.states()[beyond].position;
+    let now = at(&refitted, p.x, p.y).unwrap();
+    assert_eq!(refitted.states()[now].kind, StateKind::Surveyed);
+    assert!(
+        model(&refitted, now).is_some_and(|g| (g.mean_dbm + 75.0).abs() < 0.5),
+        "{:?}",
+        model(&refitted, now)
+    );
+    // Evidence of another site.
+    let (other, _) = survey(
+        "other",
+        &[SurveyFloor { walks: vec![&walks[0], &walks[0]], ..floors[0].clone() }],
+        North::default(),
+        &SurveyOptions { spacing_m: 1.0, coverage_m: 1.0, ..options.clone() },
+    )
+    .unwrap();
+    assert!(prepared.refit(&fits, &site, &Evidence::new(&other)).is_err());
+}

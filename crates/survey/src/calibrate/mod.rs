@@ -9,6 +9,7 @@ mod held_out;
 mod radius;
 mod report;
 mod shipped;
+mod unlabelled;
 
 pub use floors::{
     is_gsd_building, load_building, load_gsd_building, parse_survey_fraction, survey_inputs, survey_subset,
@@ -20,6 +21,9 @@ pub use radius::{RadiusPoint, FINGERPRINT_RADIUS_FOLDS, FINGERPRINT_RADIUS_GRID}
 pub use report::{
     coverage_geojson, CalibrationReport, Coverage, CoveragePoint, FloorCalibrationReport,
     FloorReliabilityReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport, SparseScansReport,
+};
+pub use unlabelled::{
+    anchored_walk, survey_with_unlabelled, walk_evidence, EvidenceRound, UnlabelledOptions, ANCHOR_FLOOR_MASS,
 };
 
 use crate::io::Trace;
@@ -58,6 +62,9 @@ pub enum CalibrationError {
     /// The walks give nothing to survey.
     #[error("{0}")]
     Empty(String),
+    /// Walks without labels could not be made map evidence, or it could not refit the map.
+    #[error("map evidence: {0}")]
+    Evidence(String),
 }
 
 /// How a site is surveyed and calibrated, and its walks replayed.

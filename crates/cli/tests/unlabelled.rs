@@ -1,0 +1,51 @@
+//! `waymark eval --survey-fraction F --unlabelled-rest` on a few of site1's F1 walks
+//! (docs/evidence.md#refitting): the survey walks F leaves out come back without waypoints,
+//! are anchored where the labelled site is sure of them and surveyed with the labelled walks,
+//! and, with --evidence-rounds, their soft evidence refits the fingerprints. How much it helps
+//! is measured by `waymark eval` on whole floors (docs/evidence.md#measured), not here. Skips,
+//! saying so, when the data is not there (docs/testing.md#real-data).
+
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+
+fn eval(floor: &Path, extra: &[&str]) -> Value {
+    let mut args = vec!["eval", floor.to_str().unwrap(), "--max-walks", "15", "--survey-fraction", "0.5"];
+    args.extend_from_slice(&["--configurations", "forward-auto", "--threads", "2", "--json"]);
+    args.extend_from_slice(extra);
+    let out = Command::new(env!("CARGO_BIN_EXE_waymark")).args(&args).output().unwrap();
+    assert!(out.status.success(), "waymark {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+#[test]
+fn unlabelled_walks_are_anchored_and_give_evidence() {
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let Some(floor) = waymark_eval::data::or_skip(waymark_eval::data::site1_floor(&workspace, "F1")) else {
+        return;
+    };
+    // 15 walks: 12 survey walks, 6 kept with their waypoints and 6 given back without.
+    let labelled = eval(&floor, &[]);
+    assert!(labelled.get("evidence_rounds").is_none());
+    let report = eval(&floor, &["--unlabelled-rest", "--evidence-rounds", "1"]);
+    let rounds = report["evidence_rounds"].as_array().unwrap();
+    assert_eq!(rounds.len(), 2, "one round of anchoring, one of soft evidence: {rounds:?}");
+    let anchored = rounds[0]["walks"].as_u64().unwrap();
+    assert!((1..=6).contains(&anchored), "{rounds:?}");
+    // Anchored walks add states where the labelled ones did not go.
+    assert!(rounds[0]["site_states"].as_u64().unwrap() >= labelled["states"].as_u64().unwrap());
+    // Every unlabelled walk gives soft evidence.
+    assert_eq!(rounds[1]["walks"], 6);
+    assert!(rounds[1]["entries"].as_u64().unwrap() > 0 && rounds[1]["bytes"].as_u64().unwrap() > 0);
+    assert_eq!(
+        report["configurations"]["forward-auto"]["pooled"]["epochs"],
+        labelled["configurations"]["forward-auto"]["pooled"]["epochs"]
+    );
+    // The flag gives back what --survey-fraction leaves out: without a fraction below 1, refused.
+    let out = Command::new(env!("CARGO_BIN_EXE_waymark"))
+        .args(["eval", floor.to_str().unwrap(), "--max-walks", "5", "--unlabelled-rest", "--json"])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stderr).contains("--survey-fraction"));
+}

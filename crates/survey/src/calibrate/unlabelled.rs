@@ -1,0 +1,278 @@
+//! Walks without labels refit the map (docs/evidence.md#from-a-walk): each walk replayed through
+//! the engine gives its epochs the posterior smoothed by the whole walk; where that is sure, the
+//! walk is anchored and surveyed like a labelled one, and every scan's posterior is a soft
+//! label, map evidence that refits the labelled fingerprints. Repeated, this is EM on the
+//! emissions (El Gemayel et al.'s Baum-Welch, eqs. 10-13, with Hoang's censored fit as the
+//! M-step).
+
+use super::{
+    survey_calibrated, survey_inputs, CalibrationError, CalibrationOptions, CalibrationReport, FloorData,
+};
+use crate::io::ilc::Event;
+use crate::io::Trace;
+use crate::replay::replay;
+use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
+use serde::Serialize;
+use std::collections::HashMap;
+use std::sync::Arc;
+use waymark_engine::evidence::{Evidence, TransmitterKey};
+use waymark_engine::radio::{ScanHasher, TransmitterId};
+use waymark_engine::site::Site;
+use waymark_engine::{Engine, EngineConfig};
+
+/// Epochs a walk's smoother keeps: every epoch of a walk of hours at a scan a second, so that
+/// each scan's posterior is smoothed by the whole walk after it.
+const WALK_EPOCHS: usize = 1 << 16;
+
+/// A scan's readings by transmitter key, and the radios (WiFi, BLE) it listened with.
+type KeyedScan = (Vec<(TransmitterKey, f64)>, [bool; 2]);
+
+/// What one round of refitting gathered and changed.
+#[derive(Clone, Debug, Default, PartialEq, Serialize)]
+pub struct EvidenceRound {
+    /// Walks anchored (a round of anchoring) or that gave soft evidence.
+    pub walks: u64,
+    /// States the soft evidence's scans weigh on (0 in a round of anchoring).
+    pub states: usize,
+    /// (state, transmitter) entries heard.
+    pub entries: usize,
+    /// Bytes of the round's merged evidence.
+    pub bytes: usize,
+    /// States of the refitted site, and of them those with fingerprints.
+    pub site_states: usize,
+}
+
+/// The engine as `options` ship it after replaying `trace` on `site`, its smoother holding
+/// every epoch of the walk ([`Engine::smoothed_posteriors`] then reaches back to the start, or
+/// to the filter's last restart). `Err` when the engine refuses the configuration.
+fn replayed(site: &Arc<Site>, trace: &Trace, options: &CalibrationOptions) -> Result<Engine, String> {
+    let config = EngineConfig {
+        track: false,
+        fixed_lag_epochs: WALK_EPOCHS,
+        track_window_epochs: WALK_EPOCHS + 1,
+        ..options.engine.clone()
+    };
+    let mut engine = Engine::new(Arc::clone(site), config).map_err(|e| e.to_string())?;
+    replay(&mut engine, trace, &options.calibration_replay());
+    Ok(engine)
+}
+
+/// The map evidence of one walk on `site`: the walk replayed through the engine as `options`
+/// ship it, and each scan weighed by its posterior smoothed by the rest of the walk
+/// ([`Engine::smoothed_posteriors`]). The walk's waypoints and floor are not read. `Err` when
+/// the engine refuses the configuration.
+pub fn walk_evidence(
+    site: &Arc<Site>,
+    trace: &Trace,
+    options: &CalibrationOptions,
+) -> Result<Evidence, String> {
+    let replay_options = options.calibration_replay();
+    // Each scan's readings by transmitter key, as the engine hashes them on a salted site.
+    let mut hasher = options.engine.site_salt.clone().map(ScanHasher::new);
+    let mut scans: HashMap<u64, KeyedScan> = HashMap::new();
+    for event in trace.events(&replay_options.events) {
+        let Event::Scan(scan) = event else { continue };
+        let scan = match &mut hasher {
+            Some(hasher) => hasher.hash_scan(&scan).clone(),
+            None => scan,
+        };
+        let mut radios = [false; 2];
+        let readings = scan
+            .readings
+            .iter()
+            .map(|r| {
+                let ble =
+                    !matches!(r.transmitter, TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. });
+                radios[usize::from(ble)] = true;
+                (TransmitterKey::of(&r.transmitter), r.rssi_dbm)
+            })
+            .collect();
+        scans.insert(scan.timestamp_ns, (readings, radios));
+    }
+    let engine = replayed(site, trace, options)?;
+    let mut evidence = Evidence::new(site);
+    let mut refused = None;
+    engine.smoothed_posteriors(|timestamp_ns, posterior| {
+        if let Some((readings, radios)) = scans.get(&timestamp_ns) {
+            if let Err(e) = evidence.add_scan(posterior, readings, *radios) {
+                refused = Some(e);
+            }
+        }
+    });
+    if let Some(e) = refused {
+        return Err(e.to_string());
+    }
+    evidence.add_walk();
+    Ok(evidence)
+}
+
+/// Where a walk without labels was at each epoch its posterior is sure of: the walk with
+/// those places as its waypoints, and the floor most of them are on. An epoch is sure when its
+/// posterior, smoothed by the whole walk, holds `floor_mass` or more on one floor and spreads
+/// no more than `spread_m` (the mass-weighted RMS distance from its mean there); the survey
+/// then places the scans between two such epochs as it places them between a surveyor's taps
+/// (by time, `Trace::position_at`), which is how a walk reaches states the site lacks (Zee,
+/// Rai et al. 2012, places crowdsourced scans by the walker's motion between anchors). `None`
+/// with fewer than two sure epochs on that floor.
+pub fn anchored_walk(
+    site: &Arc<Site>,
+    trace: &Trace,
+    options: &CalibrationOptions,
+    spread_m: f64,
+    floor_mass: f64,
+) -> Result<Option<(usize, Trace)>, String> {
+    let engine = replayed(site, trace, options)?;
+    let states = site.states();
+    let mut anchors: Vec<(u64, usize, f64, f64)> = Vec::new();
+    engine.smoothed_posteriors(|timestamp_ns, posterior| {
+        let mut by_floor = vec![0.0; site.floors().len()];
+        for &(i, p) in posterior {
+            by_floor[states[i as usize].floor] += p;
+        }
+        let Some((floor, &mass)) = by_floor.iter().enumerate().max_by(|a, b| a.1.total_cmp(b.1)) else {
+            return;
+        };
+        if mass < floor_mass {
+            return;
+        }
+        let on = || posterior.iter().filter(|(i, _)| states[*i as usize].floor == floor);
+        let (mut x, mut y) = (0.0, 0.0);
+        for &(i, p) in on() {
+            x += p * states[i as usize].position.x;
+            y += p * states[i as usize].position.y;
+        }
+        (x, y) = (x / mass, y / mass);
+        let spread2: f64 = on()
+            .map(|&(i, p)| {
+                let d = states[i as usize].position - nalgebra::Point2::new(x, y);
+                p * d.norm_squared()
+            })
+            .sum::<f64>()
+            / mass;
+        if spread2.sqrt() <= spread_m {
+            anchors.push((timestamp_ns, floor, x, y));
+        }
+    });
+    anchors.sort_by_key(|a| a.0);
+    let mut count = vec![0usize; site.floors().len()];
+    for a in &anchors {
+        count[a.1] += 1;
+    }
+    let Some((floor, &n)) = count.iter().enumerate().max_by_key(|c| *c.1) else { return Ok(None) };
+    if n < 2 {
+        return Ok(None);
+    }
+    let waypoints = anchors
+        .iter()
+        .filter(|a| a.1 == floor)
+        .map(|&(timestamp_ns, _, x, y)| crate::io::Waypoint { timestamp_ns, x, y, floor: None })
+        .collect();
+    Ok(Some((floor, Trace { waypoints, ..trace.clone() })))
+}
+
+/// An anchor's floor mass: the posterior holds at least this on one floor. An anchor on the
+/// wrong floor writes one floor's radio into another's fingerprints, the worst a walk can add;
+/// 0.99 lets at most one in a hundred of the epochs it admits be wrong where the posterior's
+/// floor mass is calibrated (docs/accuracy.md#floor-probability).
+pub const ANCHOR_FLOOR_MASS: f64 = 0.99;
+
+/// How walks without labels refit the site ([`survey_with_unlabelled`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct UnlabelledOptions {
+    /// Rounds of anchoring: each walk anchored where the site of the round before is sure of it
+    /// ([`anchored_walk`]) and surveyed with the labelled walks.
+    pub anchor_rounds: usize,
+    /// Rounds of refitting with every scan's soft label after those ([`walk_evidence`],
+    /// [`PreparedSurvey::refit`]).
+    pub evidence_rounds: usize,
+}
+
+impl Default for UnlabelledOptions {
+    /// One round of anchoring, none of soft evidence (docs/evidence.md#measured).
+    fn default() -> Self {
+        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0 }
+    }
+}
+
+/// The site calibrated from `floors`' survey walks, then refitted with `unlabelled` walks
+/// (docs/evidence.md#refitting): first each walk is anchored where the site of the round before
+/// is sure of it, the anchors within half the calibrated fingerprint radius (so that a scan an
+/// anchor places stays within the radius of the cells its true position trains) and
+/// [`ANCHOR_FLOOR_MASS`], and the anchored walks are surveyed with the labelled ones; then the
+/// labelled survey's fits are refitted with the soft evidence of every walk. The calibration
+/// (γ, radius factors, radio fit floor) stays the labelled survey's. Returns the site, the
+/// labelled survey's reports and each round's.
+pub fn survey_with_unlabelled(
+    floors: &[FloorData],
+    unlabelled: &[Trace],
+    options: &CalibrationOptions,
+    rounds: UnlabelledOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(Site, SurveyReport, CalibrationReport, Vec<EvidenceRound>), CalibrationError> {
+    let (labelled, survey, report) = survey_calibrated(floors, options, progress)?;
+    let survey_options =
+        SurveyOptions { fingerprint_radius_m: report.fingerprint_radius_m, ..options.survey.clone() };
+    let weights: Vec<[Option<f64>; 2]> =
+        labelled.floors().iter().map(|f| [f.rssi_weight, f.rssi_weight_without_movement]).collect();
+    let calibration = *labelled.calibration();
+    let finish = |site: Site| -> Result<Site, CalibrationError> {
+        Ok(site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?)
+    };
+    let mut site = Arc::new(labelled);
+    let mut history = Vec::new();
+    let mut surveyed: Vec<FloorData> = floors.to_vec();
+    let spread_m = report.fingerprint_radius_m / 2.0;
+    for _ in 0..rounds.anchor_rounds {
+        let anchored: Vec<Result<Option<(usize, Trace)>, String>> =
+            super::parallel_map_by_cost(unlabelled, options.threads, super::replay_cost, |trace| {
+                anchored_walk(&site, trace, options, spread_m, ANCHOR_FLOOR_MASS)
+            });
+        surveyed = floors.to_vec();
+        let mut added = 0;
+        for walk in anchored {
+            if let Some((floor, trace)) = walk.map_err(CalibrationError::Evidence)? {
+                surveyed[floor].survey.push(trace);
+                added += 1;
+            }
+        }
+        let inputs = survey_inputs(&surveyed);
+        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &survey_options)?;
+        let (next, _) = prepared.assemble(&prepared.fit(&|_, _| true, None, options.threads))?;
+        let next = finish(next)?;
+        history.push(EvidenceRound {
+            walks: added as u64,
+            site_states: next.states().len(),
+            ..EvidenceRound::default()
+        });
+        site = Arc::new(next);
+    }
+    if rounds.evidence_rounds > 0 {
+        let inputs = survey_inputs(&surveyed);
+        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &survey_options)?;
+        let fits = prepared.fit(&|_, _| true, None, options.threads);
+        for _ in 0..rounds.evidence_rounds {
+            let walks: Vec<Result<Evidence, String>> =
+                super::parallel_map_by_cost(unlabelled, options.threads, super::replay_cost, |trace| {
+                    walk_evidence(&site, trace, options)
+                });
+            let mut evidence = Evidence::new(&site);
+            for walk in walks {
+                let walk = walk.map_err(CalibrationError::Evidence)?;
+                evidence.merge(&walk).map_err(|e| CalibrationError::Evidence(e.to_string()))?;
+            }
+            let refitted = prepared.refit(&fits, &site, &evidence).map_err(CalibrationError::Evidence)?;
+            let (next, _) = prepared.assemble(&refitted)?;
+            let next = finish(next)?;
+            history.push(EvidenceRound {
+                walks: evidence.walks(),
+                states: evidence.states_scanned(),
+                entries: evidence.heard_entries(),
+                bytes: evidence.to_bytes().len(),
+                site_states: next.states().len(),
+            });
+            site = Arc::new(next);
+        }
+    }
+    let site = Arc::try_unwrap(site).unwrap_or_else(|shared| (*shared).clone());
+    Ok((site, survey, report, history))
+}
