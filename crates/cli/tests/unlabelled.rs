@@ -49,3 +49,48 @@ fn unlabelled_walks_are_anchored_and_give_evidence() {
     assert!(!out.status.success());
     assert!(String::from_utf8_lossy(&out.stderr).contains("--survey-fraction"));
 }
+
+#[test]
+fn waymark_survey_takes_walks_without_labels() {
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let Some(floor) = waymark_eval::data::or_skip(waymark_eval::data::site1_floor(&workspace, "F1")) else {
+        return;
+    };
+    // A floor folder of F1's plan and first 8 walks; the next 4 walks without labels.
+    let dir = tempfile::tempdir().unwrap();
+    let small = dir.path().join("F1");
+    std::fs::create_dir_all(small.join("path_data_files")).unwrap();
+    for plan in ["floor_info.json", "geojson_map.json"] {
+        std::fs::copy(floor.join(plan), small.join(plan)).unwrap();
+    }
+    let mut walks: Vec<_> =
+        std::fs::read_dir(floor.join("path_data_files")).unwrap().map(|e| e.unwrap().path()).collect();
+    walks.sort();
+    for walk in &walks[..8] {
+        std::fs::copy(walk, small.join("path_data_files").join(walk.file_name().unwrap())).unwrap();
+    }
+    let survey = |out: &str, unlabelled: &[std::path::PathBuf]| {
+        let mut args: Vec<String> = vec!["survey".into(), small.to_string_lossy().into(), "--out".into()];
+        args.push(dir.path().join(out).to_string_lossy().into());
+        if !unlabelled.is_empty() {
+            args.push("--unlabelled".into());
+            args.extend(unlabelled.iter().map(|p| p.to_string_lossy().into_owned()));
+        }
+        let out = Command::new(env!("CARGO_BIN_EXE_waymark")).args(&args).output().unwrap();
+        assert!(out.status.success(), "waymark {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8(out.stdout).unwrap()
+    };
+    survey("labelled.json", &[]);
+    let printed = survey("with.json", &walks[8..12]);
+    assert!(printed.contains("of 4 walks without labels anchored"), "{printed}");
+    let load = |name: &str| waymark_engine::Site::load(dir.path().join(name)).unwrap();
+    assert!(load("with.json").states().len() >= load("labelled.json").states().len());
+    // A walk that cannot be read fails the survey and writes nothing.
+    let out = Command::new(env!("CARGO_BIN_EXE_waymark"))
+        .args(["survey", small.to_str().unwrap(), "--out", dir.path().join("bad.json").to_str().unwrap()])
+        .args(["--unlabelled", dir.path().join("missing.txt").to_str().unwrap()])
+        .output()
+        .unwrap();
+    assert!(!out.status.success());
+    assert!(!dir.path().join("bad.json").exists());
+}

@@ -4,6 +4,7 @@ use crate::shared::{fail, print_calibration, progress_bar, write_site, SaltArgs}
 use std::path::PathBuf;
 use std::process::ExitCode;
 use waymark_survey::calibrate::{self, CalibrationOptions, WalkSplit};
+use waymark_survey::io::Trace;
 
 #[derive(clap::Args)]
 pub struct SurveyArgs {
@@ -34,6 +35,11 @@ pub struct SurveyArgs {
     /// fails at once without.
     #[arg(long)]
     coverage_out: Option<PathBuf>,
+    /// Walks without labels (walk files in the floors' format, their waypoints not read): each
+    /// anchored where the site surveyed from the floors is sure of it and surveyed with those
+    /// walks (docs/evidence.md#refitting).
+    #[arg(long, num_args = 1..)]
+    unlabelled: Vec<PathBuf>,
     #[command(flatten)]
     salt: SaltArgs,
 }
@@ -77,11 +83,32 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         calibrate::calibration_steps(&floors, &options) as u64,
         "calibrating (leave one walk out)",
     );
-    let (site, report, calibration) = match calibrate::survey_calibrated(&floors, &options, &|| bar.inc(1)) {
+    let mut unlabelled = Vec::with_capacity(args.unlabelled.len());
+    for path in &args.unlabelled {
+        match Trace::read(path) {
+            Ok(trace) => unlabelled.push(Trace { waypoints: Vec::new(), ..trace }),
+            Err(e) => return fail("survey", e),
+        }
+    }
+    let surveyed = if unlabelled.is_empty() {
+        calibrate::survey_calibrated(&floors, &options, &|| bar.inc(1)).map(|(a, b, c)| (a, b, c, Vec::new()))
+    } else {
+        let rounds = calibrate::UnlabelledOptions::default();
+        calibrate::survey_with_unlabelled(&floors, &unlabelled, &options, rounds, &|| bar.inc(1))
+    };
+    let (site, report, calibration, rounds) = match surveyed {
         Ok(s) => s,
         Err(e) => return fail("survey", e),
     };
     bar.finish_and_clear();
+    for round in &rounds {
+        println!(
+            "{} of {} walks without labels anchored and surveyed: {} states",
+            round.walks,
+            unlabelled.len(),
+            round.site_states
+        );
+    }
     let site = site.with_name(&args.name);
     let site = match args.salt.salt() {
         Err(e) => return fail("survey", e),
