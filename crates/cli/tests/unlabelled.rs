@@ -94,3 +94,33 @@ fn waymark_survey_takes_walks_without_labels() {
     assert!(!out.status.success());
     assert!(!dir.path().join("bad.json").exists());
 }
+
+#[test]
+fn one_phones_walks_are_given_without_labels_on_the_museum() {
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).join("../..");
+    let Some(museum) = waymark_eval::data::or_skip(waymark_eval::data::ipin2023_t3(&workspace)) else {
+        return;
+    };
+    // Trials 01-03: the SM-A520F's repetitions 1-2 survey; the SM-G930F's repetition 3 is
+    // given without labels (or with them), its repetition 4 is scored.
+    let run = |extra: &[&str]| {
+        let mut args =
+            vec!["eval", museum.to_str().unwrap(), "--split", "phone:SM-A520F", "--max-walks", "12"];
+        args.extend_from_slice(&["--configurations", "forward-auto", "--threads", "2", "--json"]);
+        args.extend_from_slice(extra);
+        let out = Command::new(env!("CARGO_BIN_EXE_waymark")).args(&args).output().unwrap();
+        assert!(out.status.success(), "waymark {args:?}: {}", String::from_utf8_lossy(&out.stderr));
+        serde_json::from_slice::<Value>(&out.stdout).unwrap()
+    };
+    let unlabelled = run(&["--test-as-unlabelled", "3"]);
+    assert_eq!(unlabelled["test_walks"], 3);
+    let anchored = unlabelled["evidence_rounds"][0]["walks"].as_u64().unwrap();
+    assert!(anchored <= 3, "{anchored}");
+    let labelled = run(&["--test-as-labelled", "3"]);
+    assert_eq!(labelled["test_walks"], 3);
+    assert!(labelled.get("evidence_rounds").is_none());
+    let walks = |r: &Value| {
+        r["survey"]["floors"].as_array().unwrap().iter().map(|f| f["walks"].as_u64().unwrap()).sum::<u64>()
+    };
+    assert_eq!(walks(&labelled), walks(&unlabelled) + 3);
+}

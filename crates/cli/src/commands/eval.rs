@@ -43,6 +43,16 @@ pub struct EvalArgs {
     /// (no waypoints, no floor): their map evidence refits the site (docs/evidence.md).
     #[arg(long)]
     unlabelled_rest: bool,
+    /// Test walks of these repetitions (`_repetitionRR` in a competition file's name,
+    /// comma-separated) are not scored but given to the survey without labels, as
+    /// --unlabelled-rest gives the walks --survey-fraction leaves out: one phone's walks
+    /// labelled and the other's not, scored on the other's remaining walks.
+    #[arg(long, value_delimiter = ',')]
+    test_as_unlabelled: Vec<u32>,
+    /// Test walks of these repetitions are not scored but surveyed, with their labels: the
+    /// baseline of --test-as-unlabelled on the same test walks.
+    #[arg(long, value_delimiter = ',', conflicts_with = "test_as_unlabelled")]
+    test_as_labelled: Vec<u32>,
     /// With --unlabelled-rest: rounds of anchoring the unlabelled walks where the site is sure
     /// of them and surveying them with the labelled ones.
     #[arg(long, default_value_t = 1)]
@@ -140,9 +150,23 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
                 unlabelled.extend(dropped.map(|(_, w)| Trace { waypoints: Vec::new(), ..w.clone() }));
             }
             f.keep_survey_fraction(args.survey_fraction);
+            // Test walks of the repetitions asked for move to the survey, with or without labels.
+            let chosen =
+                |reps: &[u32], t: &Trace| calibrate::repetition(&t.name).is_some_and(|r| reps.contains(&r));
+            let tests = std::mem::take(&mut f.test);
+            for trace in tests {
+                if chosen(&args.test_as_unlabelled, &trace) {
+                    unlabelled.push(Trace { waypoints: Vec::new(), ..trace });
+                } else if chosen(&args.test_as_labelled, &trace) {
+                    f.survey.push(trace);
+                } else {
+                    f.test.push(trace);
+                }
+            }
             f
         })
         .collect();
+    let unlabelled_given = args.unlabelled_rest || !args.test_as_unlabelled.is_empty();
     let mut options = EvalOptions { configurations: args.configurations.clone(), ..EvalOptions::default() };
     if let Some(unknown) = options.configurations.iter().find(|c| !CONFIGURATIONS.contains(&c.as_str())) {
         return fail(
@@ -196,7 +220,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         calibrate::calibration_steps(&floors, &options.calibration) as u64,
         "calibrating (leave one walk out)",
     );
-    let surveyed = if args.unlabelled_rest {
+    let surveyed = if unlabelled_given {
         calibrate::survey_with_unlabelled(
             &floors,
             &unlabelled,

@@ -131,7 +131,7 @@ impl WalkSplit {
 }
 
 /// The repetition number in a competition file name (`..._repetition03` → 3).
-fn repetition(name: &str) -> Option<u32> {
+pub fn repetition(name: &str) -> Option<u32> {
     let (_, rest) = name.rsplit_once("repetition")?;
     let digits: String = rest.chars().take_while(char::is_ascii_digit).collect();
     digits.parse().ok()

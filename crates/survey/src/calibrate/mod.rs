@@ -12,8 +12,8 @@ mod shipped;
 mod unlabelled;
 
 pub use floors::{
-    is_gsd_building, load_building, load_gsd_building, parse_survey_fraction, survey_inputs, survey_subset,
-    FloorData, WalkSplit,
+    is_gsd_building, load_building, load_gsd_building, parse_survey_fraction, repetition, survey_inputs,
+    survey_subset, FloorData, WalkSplit,
 };
 pub use gamma::{ESTIMATE_STATES_GRID, GAMMA_GRID};
 pub use held_out::MIN_SCENARIO_EPOCHS;
