@@ -1,30 +1,26 @@
 //! `waymark evidence` (docs/evidence.md): files merged in any order give the same bytes, the
-//! summary counts what they hold, and a damaged file, evidence of another site or an output
-//! that cannot be written fail with a message and leave no partial output.
+//! summary counts what they hold, and a damaged file, evidence of another site (the office at
+//! another clip level) or an output that cannot be written fail with a message and leave no
+//! partial output.
 
-use nalgebra::Point2;
 use std::path::Path;
 use std::process::{Command, Output};
 use waymark_engine::evidence::{Evidence, EvidenceError, TransmitterKey};
-use waymark_engine::site::{BuildOptions, SiteBuilder};
 use waymark_engine::{Site, TransmitterId};
+use waymark_sim::{Office, OfficeConfig};
 
 fn waymark(args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_waymark")).args(args).output().unwrap()
 }
 
-/// A corridor of `n` states 1 m apart.
-fn corridor(n: u32) -> Site {
-    let mut b = SiteBuilder::new("corridor");
-    let f = b.floor("G", 0.0);
-    let ids: Vec<u32> = (0..n).map(|x| b.state(f, Point2::new(f64::from(x), 0.0), vec![])).collect();
-    for w in ids.windows(2) {
-        b.edge(w[0], w[1], None);
-    }
-    b.build(BuildOptions::default()).unwrap()
+/// The simulated office (81 states), with few training scans; `clip_dbm` sets its clip level,
+/// part of what evidence is of.
+fn office(clip_dbm: f64) -> Site {
+    Office::generate(&OfficeConfig { training_scans: 10, clip_dbm, ..OfficeConfig::default() }).site
 }
 
-/// One walk's evidence: scans along the corridor from `start`, hearing three access points.
+/// One walk's evidence: ten scans at states `start`, `start + 1`, ... of the office, each
+/// hearing three access points.
 fn walk(site: &Site, start: u32) -> Evidence {
     let mut e = Evidence::new(site);
     let ap = |n: u8| TransmitterKey::of(&TransmitterId::wifi(&format!("02:00:00:00:00:{n:02x}")).unwrap());
@@ -46,7 +42,7 @@ fn write(dir: &Path, name: &str, e: &Evidence) -> String {
 #[test]
 fn merged_in_any_order_the_bytes_are_the_same() {
     let dir = tempfile::tempdir().unwrap();
-    let site = corridor(30);
+    let site = office(-100.0);
     let files: Vec<String> =
         [0, 5, 12].iter().map(|&s| write(dir.path(), &format!("walk{s}.wmev"), &walk(&site, s))).collect();
     let out = |name: &str| dir.path().join(name).to_string_lossy().into_owned();
@@ -66,7 +62,7 @@ fn merged_in_any_order_the_bytes_are_the_same() {
     assert!(show.status.success());
     let summary: serde_json::Value = serde_json::from_slice(&show.stdout).unwrap();
     assert_eq!(summary["walks"], 3);
-    assert_eq!(summary["site_states"], 30);
+    assert_eq!(summary["site_states"], 81);
     assert_eq!(summary["transmitters"], 4);
     // Scans at states 0-10, 5-15 and 12-22: 23 states.
     assert_eq!(summary["states"], 23);
@@ -75,7 +71,7 @@ fn merged_in_any_order_the_bytes_are_the_same() {
 #[test]
 fn bad_inputs_fail_and_leave_no_output() {
     let dir = tempfile::tempdir().unwrap();
-    let (a, b) = (corridor(30), corridor(31));
+    let (a, b) = (office(-100.0), office(-95.0));
     let good = write(dir.path(), "good.wmev", &walk(&a, 0));
     let other = write(dir.path(), "other.wmev", &walk(&b, 0));
     let out = dir.path().join("out.wmev");

@@ -235,9 +235,7 @@ final class BackgroundManagerTests: XCTestCase {
         let walk = try walk()
         for (i, epoch) in walk.epochs.prefix(6).enumerated() {
             if i == 3 { lifecycle.move(to: .background) }
-            h.motion.emit(Harness.readings(epoch))
-            h.clock.set(epoch.timestampNs)
-            h.ranger.send(.ranged(Harness.beacons(epoch), uuid: beaconUUID))
+            h.deliver(epoch)
         }
         h.settle()
         XCTAssertEqual(h.engine.epochTimes, walk.epochs.prefix(6).map(\.timestampNs), "scans in the background too")
@@ -314,9 +312,7 @@ final class BackgroundManagerTests: XCTestCase {
         XCTAssertEqual(h.ranger.ranging, [beaconUUID])
         XCTAssertTrue(background.current.updatesLocation)
         for epoch in walk.epochs.prefix(3) {
-            h.motion.emit(Harness.readings(epoch))
-            h.clock.set(epoch.timestampNs)
-            h.ranger.send(.ranged(Harness.beacons(epoch), uuid: beaconUUID))
+            h.deliver(epoch)
         }
         h.settle()
         XCTAssertEqual(h.delegate.positions.count, 3 - Int(h.manager.rejectedScanCount))

@@ -306,6 +306,14 @@ final class Harness {
         delegateQueue.sync {}
     }
 
+    /// One epoch of the walk as the phone gives it: its inertial samples, the clock at the
+    /// epoch, then its scan as ranged beacons.
+    func deliver(_ epoch: Walk.Epoch) {
+        motion.emit(Harness.readings(epoch))
+        clock.set(epoch.timestampNs)
+        ranger.send(.ranged(Harness.beacons(epoch), uuid: beaconUUID))
+    }
+
     /// The walk's inertial rows of one epoch as CoreMotion readings (g, rad/s, µT; seconds),
     /// in time order.
     static func readings(_ epoch: Walk.Epoch) -> [WaymarkMotionReading] {
@@ -666,9 +674,7 @@ final class LocationClientTests: XCTestCase {
                 next += 1_000_000_000
             }
             h.altimeter.emit(readings)
-            h.motion.emit(Harness.readings(epoch))
-            h.clock.set(epoch.timestampNs)
-            h.ranger.send(.ranged(Harness.beacons(epoch), uuid: beaconUUID))
+            h.deliver(epoch)
             h.scheduler.fire()
         }
         h.settle()
@@ -765,9 +771,7 @@ final class LocationClientTests: XCTestCase {
         XCTAssertEqual(h.ranger.ranging, [beaconUUID])
         XCTAssertTrue(h.motion.running)
         for epoch in walk.epochs.prefix(3) {
-            h.motion.emit(Harness.readings(epoch))
-            h.clock.set(epoch.timestampNs)
-            h.ranger.send(.ranged(Harness.beacons(epoch), uuid: beaconUUID))
+            h.deliver(epoch)
         }
         wait(for: [received], timeout: 10)
         XCTAssertEqual(got.value, walk.epochs.prefix(3).map(\.timestampNs))

@@ -40,9 +40,7 @@ final class SurveyModeTests: XCTestCase {
         let h = try Harness(siteJson: siteJson)
         h.manager.start()
         for epoch in walk.epochs {
-            h.motion.emit(Harness.readings(epoch))
-            h.clock.set(epoch.timestampNs)
-            h.ranger.send(.ranged(Harness.beacons(epoch), uuid: beaconUUID))
+            h.deliver(epoch)
             h.scheduler.fire()
         }
         h.settle()
@@ -87,13 +85,10 @@ final class SurveyModeTests: XCTestCase {
         let cli = try XCTUnwrap(ProcessInfo.processInfo.environment["WAYMARK_CLI"], "test.sh sets WAYMARK_CLI")
         let dir = FileManager.default.temporaryDirectory.appendingPathComponent("waymark-survey-mode-\(UUID().uuidString)")
         defer { try? FileManager.default.removeItem(at: dir) }
-        let surveyDir = WaymarkTests.simDir.appendingPathComponent("survey")
-        let files = try FileManager.default.contentsOfDirectory(atPath: surveyDir.path)
-            .filter { $0.hasSuffix(".json") }.sorted()
-        XCTAssertEqual(files.count, 12)
-        for file in files {
-            let walk = try loadWalk(surveyDir.appendingPathComponent(file))
-            let name = String(file.dropLast(".json".count))
+        let walks = try WaymarkTests.surveyWalks()
+        XCTAssertEqual(walks.count, 12)
+        for (file, name) in walks {
+            let walk = try loadWalk(file)
             // A survey app: the client with no site yet (no engine), and a recorder.
             let h = try Harness(siteJson: try simSiteJson(), withEngine: false)
             try h.manager.startSurvey(

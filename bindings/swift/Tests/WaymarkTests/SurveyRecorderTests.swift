@@ -32,14 +32,11 @@ final class SurveyRecorderTests: XCTestCase {
         let cli = try XCTUnwrap(ProcessInfo.processInfo.environment["WAYMARK_CLI"], "test.sh sets WAYMARK_CLI")
         let dir = FileManager.default.temporaryDirectory.appendingPathComponent("waymark-survey-\(UUID().uuidString)")
         defer { try? FileManager.default.removeItem(at: dir) }
-        let surveyDir = WaymarkTests.simDir.appendingPathComponent("survey")
-        let files = try FileManager.default.contentsOfDirectory(atPath: surveyDir.path)
-            .filter { $0.hasSuffix(".json") }.sorted()
-        XCTAssertEqual(files.count, 12)
-        for file in files {
-            let survey = try load(surveyDir.appendingPathComponent(file))
+        let walks = try WaymarkTests.surveyWalks()
+        XCTAssertEqual(walks.count, 12)
+        for (file, name) in walks {
+            let survey = try load(file)
             let taps = try XCTUnwrap(survey.waypoints)
-            let name = String(file.dropLast(".json".count))
             let recorder = try SurveyRecorder(
                 directory: dir.path, options: SurveyOptions(walkName: name, siteId: "office", device: "Swift Test"))
             var tap = 0

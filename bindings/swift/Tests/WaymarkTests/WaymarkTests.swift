@@ -101,6 +101,14 @@ final class WaymarkTests: XCTestCase {
             .appendingPathComponent("../../../../target/sim-export").standardized
     }()
 
+    /// The simulated office's exported survey walks (`survey/*.json`) by name: each file and
+    /// the walk's name, the file's stem.
+    static func surveyWalks() throws -> [(file: URL, name: String)] {
+        let dir = simDir.appendingPathComponent("survey")
+        return try FileManager.default.contentsOfDirectory(atPath: dir.path).filter { $0.hasSuffix(".json") }.sorted()
+            .map { (dir.appendingPathComponent($0), String($0.dropLast(".json".count))) }
+    }
+
     func siteJson() throws -> String {
         try String(contentsOf: Self.simDir.appendingPathComponent("site.json"), encoding: .utf8)
     }

@@ -7,7 +7,6 @@ import dev.waymark.android.WaymarkLocationRequest
 import dev.waymark.android.WaymarkLocationStatus
 import dev.waymark.android.WifiResult
 import java.io.File
-import java.nio.file.Files
 import java.util.concurrent.ExecutionException
 import java.util.concurrent.Executor
 import kotlin.math.roundToInt
@@ -66,9 +65,8 @@ class SurveyModeTest {
 
     @Test
     fun aSurveyAppIsTheClientPlusATapButton() {
-        val dir = Files.createTempDirectory("waymark-survey-mode").toFile()
-        try {
-            val walks = surveyWalks.listFiles { f -> f.name.endsWith(".json") }!!.sortedBy { it.name }
+        SurveyRoundTrip.inTempDir("waymark-survey-mode") { dir ->
+            val walks = SurveyRoundTrip.walkFiles(surveyWalks)
             assertEquals(12, walks.size)
             for (file in walks) {
                 val survey = Walk.loadSurvey(file)
@@ -97,16 +95,13 @@ class SurveyModeTest {
                 recorder.close()
             }
             SurveyRoundTrip.check(dir, "survey mode")
-        } finally {
-            dir.deleteRecursively()
         }
     }
 
     @Test
     fun surveyModeBesideTrackingTapsThatFailAndCloseFinishing() {
-        val dir = Files.createTempDirectory("waymark-survey-mode").toFile()
-        try {
-            val survey = Walk.loadSurvey(surveyWalks.listFiles { f -> f.name.endsWith(".json") }!!.minByOrNull { it.name }!!)
+        SurveyRoundTrip.inTempDir("waymark-survey-mode") { dir ->
+            val survey = Walk.loadSurvey(SurveyRoundTrip.walkFiles(surveyWalks).first())
             val phone = FakePhone()
             val engine = RecordingEngine(PositioningEngine(siteJson, EngineOptions()))
             val client = WaymarkLocationClient(engine, phone.platform)
@@ -147,15 +142,12 @@ class SurveyModeTest {
             }
             recorder.close()
             engine.close()
-        } finally {
-            dir.deleteRecursively()
         }
     }
 
     @Test
     fun aStorageFailureIsAConditionAndTheRecordingResumes() {
-        val dir = Files.createTempDirectory("waymark-survey-mode").toFile()
-        try {
+        SurveyRoundTrip.inTempDir("waymark-survey-mode") { dir ->
             val phone = FakePhone()
             val client = WaymarkLocationClient.forSurvey(phone.platform)
             // A recorder whose storage fails for three calls, as a full disk would.
@@ -201,8 +193,6 @@ class SurveyModeTest {
             assertNull(client.stats().lastRejection)
             client.close()
             inner.close()
-        } finally {
-            dir.deleteRecursively()
         }
     }
 }

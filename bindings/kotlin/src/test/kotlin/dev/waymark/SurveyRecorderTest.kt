@@ -1,7 +1,6 @@
 package dev.waymark
 
 import java.io.File
-import java.nio.file.Files
 import org.junit.Assert.assertEquals
 import org.junit.Assert.assertTrue
 import org.junit.Assert.fail
@@ -18,9 +17,8 @@ class SurveyRecorderTest {
 
     @Test
     fun aRecordedSurveyPositionsTheTestWalkLikeTheDemo() {
-        val dir = Files.createTempDirectory("waymark-survey").toFile()
-        try {
-            val walks = surveyWalks.listFiles { f -> f.name.endsWith(".json") }!!.sortedBy { it.name }
+        SurveyRoundTrip.inTempDir("waymark-survey") { dir ->
+            val walks = SurveyRoundTrip.walkFiles(surveyWalks)
             assertEquals(12, walks.size)
             for (file in walks) {
                 val survey = Walk.loadSurvey(file)
@@ -47,15 +45,12 @@ class SurveyRecorderTest {
                 recorder.close()
             }
             SurveyRoundTrip.check(dir, "recorded survey")
-        } finally {
-            dir.deleteRecursively()
         }
     }
 
     @Test
     fun badInputIsRefusedWithTypedErrorsAndNothingIsLost() {
-        val dir = Files.createTempDirectory("waymark-survey").toFile()
-        try {
+        SurveyRoundTrip.inTempDir("waymark-survey") { dir ->
             try {
                 SurveyRecorder(dir.path, SurveyOptions("no/slashes"))
                 fail("a walk name that is not a file name")
@@ -101,8 +96,6 @@ class SurveyRecorderTest {
             } catch (e: SurveyException.NoWaypoints) {
             }
             empty.close()
-        } finally {
-            dir.deleteRecursively()
         }
     }
 }

@@ -15,6 +15,19 @@ object SurveyRoundTrip {
     private val siteJson by lazy { File(System.getProperty("waymark.site")).readText() }
     private val walk by lazy { Walk.load(System.getProperty("waymark.walk")) }
 
+    /** Runs `body` with a new temporary folder named from `prefix`, deleted afterwards. */
+    fun <T> inTempDir(prefix: String, body: (File) -> T): T {
+        val dir = java.nio.file.Files.createTempDirectory(prefix).toFile()
+        try {
+            return body(dir)
+        } finally {
+            dir.deleteRecursively()
+        }
+    }
+
+    /** The exported walks (`*.json`) in `dir`, by name. */
+    fun walkFiles(dir: File): List<File> = dir.listFiles { f -> f.name.endsWith(".json") }!!.sortedBy { it.name }
+
     /** The engine's mean error over the test walk's scans; closes it. */
     fun meanError(engine: PositioningEngine): Double {
         val errors = ArrayList<Double>()
