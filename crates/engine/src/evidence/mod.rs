@@ -51,7 +51,7 @@ pub struct TransmitterKey {
 impl TransmitterKey {
     /// The key of `id`: its own hash when it is hashed, else the SHA-256 of its canonical text.
     pub fn of(id: &TransmitterId) -> TransmitterKey {
-        let ble = !matches!(id, TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. });
+        let ble = id.is_ble();
         let mut hash = [0u8; 16];
         match id {
             TransmitterId::HashedWifi { hash: digits } | TransmitterId::HashedBle { hash: digits } => {

@@ -136,6 +136,12 @@ impl TransmitterId {
         Ok(TransmitterId::Ble { uuid, major, minor })
     }
 
+    /// Whether this is a BLE transmitter rather than a WiFi access point: the radio a scan
+    /// listened with, which the likelihood and map evidence treat apart.
+    pub fn is_ble(&self) -> bool {
+        !matches!(self, TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. })
+    }
+
     /// Whether this is a salted hash rather than a raw id.
     pub fn is_hashed(&self) -> bool {
         matches!(self, TransmitterId::HashedWifi { .. } | TransmitterId::HashedBle { .. })

@@ -51,12 +51,7 @@ impl PreparedSurvey<'_> {
         let fit = build.stored_fit();
         let index: HashMap<TransmitterKey, u32> =
             self.transmitters.iter().enumerate().map(|(t, id)| (TransmitterKey::of(id), t as u32)).collect();
-        let ble = |t: u32| {
-            !matches!(
-                self.transmitters[t as usize],
-                TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. }
-            )
-        };
+        let ble = |t: u32| self.transmitters[t as usize].is_ble();
         let s = self.options.spacing_m;
         let cell = |p: Point2<f64>| ((p.x / s).round() as i64, (p.y / s).round() as i64);
         let reach = (self.options.fingerprint_radius_m / s).floor() as i64;

@@ -16,7 +16,7 @@ use serde::Serialize;
 use std::collections::HashMap;
 use std::sync::Arc;
 use waymark_engine::evidence::{Evidence, TransmitterKey};
-use waymark_engine::radio::{ScanHasher, TransmitterId};
+use waymark_engine::radio::ScanHasher;
 use waymark_engine::site::Site;
 use waymark_engine::{Engine, EngineConfig};
 
@@ -38,7 +38,7 @@ pub struct EvidenceRound {
     pub entries: usize,
     /// Bytes of the round's merged evidence.
     pub bytes: usize,
-    /// States of the refitted site, and of them those with fingerprints.
+    /// States of the refitted site.
     pub site_states: usize,
 }
 
@@ -81,8 +81,7 @@ pub fn walk_evidence(
             .readings
             .iter()
             .map(|r| {
-                let ble =
-                    !matches!(r.transmitter, TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. });
+                let ble = r.transmitter.is_ble();
                 radios[usize::from(ble)] = true;
                 (TransmitterKey::of(&r.transmitter), r.rssi_dbm)
             })

@@ -439,10 +439,7 @@ impl Trace {
 impl Trace {
     /// A recorder's scans as pushed, less the kinds of reading `options` leaves out.
     fn grouped(&self, options: &EventOptions) -> Vec<Scan> {
-        let keep = |r: &Reading| match r.transmitter {
-            TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. } => options.wifi,
-            _ => options.beacons,
-        };
+        let keep = |r: &Reading| if r.transmitter.is_ble() { options.beacons } else { options.wifi };
         self.wifi_scans
             .iter()
             .map(|s| Scan {

@@ -176,10 +176,7 @@ pub struct RadioMap {
 /// Index of a transmitter's radio in [`RadioMap`]'s per-kind tables: a WiFi scan says nothing
 /// about beacons, and a beacon scan nothing about access points.
 fn kind(id: &TransmitterId) -> u8 {
-    match id {
-        TransmitterId::Wifi { .. } | TransmitterId::HashedWifi { .. } => 0,
-        TransmitterId::Ble { .. } | TransmitterId::BleAddress { .. } | TransmitterId::HashedBle { .. } => 1,
-    }
+    u8::from(id.is_ble())
 }
 
 impl RadioMap {
