@@ -37,7 +37,8 @@ pub use config::{
     DEFAULT_ESTIMATE_STATES,
 };
 pub use engine::{
-    Engine, Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent, TrackPoint, MAX_RSSI_DBM,
+    Engine, Epoch, InputStats, Position, ScanTiming, SessionEvidence, SharedEmissions, StatusEvent,
+    TrackPoint, MAX_RSSI_DBM,
 };
 #[cfg(feature = "fault-injection")]
 pub use engine::{EngineSnapshot, FAULT_INJECTION_MID_EPOCH_NS};

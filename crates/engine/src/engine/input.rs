@@ -58,6 +58,9 @@ impl Engine {
         motion: Option<&MotionUpdate>,
     ) -> Result<Epoch, InputError> {
         let result = self.scan_epoch(scan, motion);
+        if result.is_ok() {
+            self.keep_scan_for_evidence(scan);
+        }
         if let Err(e) = &result {
             let counter = match e {
                 InputError::TimeAhead { .. } => &mut self.stats.timestamps_ahead,
@@ -280,7 +283,7 @@ impl Engine {
     /// earlier feedback at the same epoch wins: the posterior restarts on its states.
     pub(super) fn pin_latest(&mut self, latest: Position, states: &[u32]) -> Epoch {
         // Feedback is an observation without a step: the smoother's history ends here.
-        self.smoother.clear();
+        self.clear_smoother();
         if self.filter.step(None, &self.ln_emission).is_err() {
             self.restart();
         }

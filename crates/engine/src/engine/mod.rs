@@ -7,6 +7,7 @@
 
 mod calibration;
 mod epoch;
+mod evidence;
 mod input;
 mod prediction;
 mod presence;
@@ -24,6 +25,7 @@ use crate::site::{FloorReliability, ReachTable, Site, SparseScans};
 use std::sync::Arc;
 
 pub use crate::radio::MAX_RSSI_DBM;
+pub use evidence::SessionEvidence;
 #[cfg(feature = "fault-injection")]
 pub use types::EngineSnapshot;
 pub use types::{Epoch, InputStats, Position, ScanTiming, SharedEmissions, StatusEvent, TrackPoint};
@@ -117,6 +119,8 @@ pub struct Engine {
     /// Scan likelihoods shared with the other engines of an evaluation on this site
     /// ([`Engine::share_emissions`]); `None` in an app.
     shared_emissions: Option<Arc<SharedEmissions>>,
+    /// Map evidence being gathered from this session ([`Engine::start_evidence`]).
+    gathering: Option<evidence::Gathering>,
 }
 
 /// Motion-only epochs the filter has not stepped over yet: they came sooner than
@@ -213,6 +217,7 @@ impl Engine {
             floor_anchor: None,
             levels,
             shared_emissions: None,
+            gathering: None,
             config,
             undo: Undo::default(),
         })
@@ -230,6 +235,56 @@ impl Engine {
         }
         self.shared_emissions = Some(shared);
         Ok(())
+    }
+
+    /// Loads `site` in place of the session's own, a site refitted from evidence
+    /// (docs/evidence.md#loading-a-refitted-site): the session goes on with the new radio map
+    /// and calibration. A site with the same states (floors and positions, in order) and zones
+    /// carries over everything the session knows: the posterior, the fixed-lag steps, the
+    /// track, the history, the habits and the zone presence. Another site starts the estimate
+    /// afresh and keeps what is not of the site's states: the motion tracker, the phone's RSSI
+    /// offset, the barometer, the counters and the app's geofences (placed again on the new
+    /// states; one that holds none of them is dropped). Returns the evidence gathered on the
+    /// old site and not yet taken, which is of that site; gathering, if on, goes on on the
+    /// new one. Refused, changing nothing, with the errors of [`Engine::new`].
+    pub fn replace_site(&mut self, site: Arc<Site>) -> Result<Option<SessionEvidence>, Error> {
+        let mut next = Engine::new(site, self.config.clone())?;
+        let taken = self.take_evidence();
+        if self.gathering.is_some() {
+            next.start_evidence();
+        }
+        let same_states = crate::evidence::Evidence::site_key(&self.site)
+            == crate::evidence::Evidence::site_key(&next.site)
+            && self.site.zones().len() == next.site.zones().len();
+        if same_states {
+            next.set_habits(std::mem::replace(&mut self.habits, HabitModel::new(&self.site)));
+            std::mem::swap(&mut next.filter, &mut self.filter);
+            std::mem::swap(&mut next.viterbi, &mut self.viterbi);
+            std::mem::swap(&mut next.smoother, &mut self.smoother);
+            std::mem::swap(&mut next.history, &mut self.history);
+            std::mem::swap(&mut next.presence, &mut self.presence);
+            std::mem::swap(&mut next.zone_mass, &mut self.zone_mass);
+            next.last_epoch_ns = self.last_epoch_ns;
+            next.held = self.held.take();
+            next.latest = self.latest.take();
+            next.last_track = std::mem::take(&mut self.last_track);
+            next.whole_reach = self.whole_reach;
+            next.unexplained_run = self.unexplained_run;
+            next.scan_timing = self.scan_timing;
+            next.floor_anchor = self.floor_anchor.take();
+        } else {
+            for fence in self.geofences() {
+                if let Err(e) = next.add_geofence(fence.clone()) {
+                    log::debug!("geofence {} dropped with the old site: {e}", fence.id);
+                }
+            }
+        }
+        std::mem::swap(&mut next.tracker, &mut self.tracker);
+        next.device_offset = self.device_offset;
+        std::mem::swap(&mut next.barometer, &mut self.barometer);
+        std::mem::swap(&mut next.stats, &mut self.stats);
+        *self = next;
+        Ok(taken)
     }
 
     /// The site.
@@ -420,7 +475,7 @@ impl Engine {
     /// Replaces the habits by `model`, which must be of this site.
     pub fn set_habits(&mut self, model: HabitModel) {
         // The steps the smoother holds were taken with the old habits.
-        self.smoother.clear();
+        self.clear_smoother();
         self.habit_prior = Arc::new(HabitPrior::new(&model, &self.reach, self.site.spacing_m()));
         self.habits = model;
     }

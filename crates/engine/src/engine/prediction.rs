@@ -13,9 +13,11 @@ impl Engine {
     /// Predicts over `dt_s` (none at the first epoch) with the configured model and `motion`,
     /// and updates with `ln_emission`. Returns the log evidence.
     pub(super) fn forward(&mut self, timestamp_ns: u64, dt_s: Option<f64>, motion: &MotionUpdate) -> f64 {
+        if dt_s.is_none() {
+            self.clear_smoother();
+        }
         let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
         let Some(dt) = dt_s else {
-            self.smoother.clear();
             if let Some(viterbi) = &mut self.viterbi {
                 viterbi.step(
                     timestamp_ns,
@@ -30,6 +32,8 @@ impl Engine {
         };
         let model = self.step_model(timestamp_ns, motion, dt, hipe_region);
         if let Some(last) = self.last_epoch_ns {
+            // The scans whose epoch this step lets go take their posterior first.
+            self.settle_evidence(false);
             self.smoother.begin(last, self.filter.posterior(), model);
         }
         let parts = self.transition_parts();
@@ -222,10 +226,10 @@ impl Engine {
     /// A reach beyond the walking-distance table: several passes of the speed bound, or a
     /// restart from the uniform prior when even that is too far.
     pub(super) fn bridge_gap(&mut self, timestamp_ns: u64, speed_reach: f64) -> f64 {
+        self.clear_smoother();
         let table = prediction_table(&self.reach, self.map_reach.as_deref(), self.whole_reach);
         let table_radius = self.reach.radius_m();
         let passes = (speed_reach / table_radius).ceil().max(1.0);
-        self.smoother.clear();
         let pass = UniformReach { table, rho_m: speed_reach / passes, ratio: self.config.transition_ratio };
         if let Some(viterbi) = &mut self.viterbi {
             viterbi.step(timestamp_ns, &UniformReach { rho_m: table_radius, ..pass }, &self.ln_emission);
@@ -253,7 +257,8 @@ impl Engine {
     /// The map explains this observation nowhere the motion model allows: start again from the
     /// observation alone.
     pub(super) fn restart(&mut self) -> f64 {
-        self.smoother.clear();
+        // A failed step leaves the posterior of the epoch before: the waiting scans settle on it.
+        self.clear_smoother();
         self.stats.filter_restarts += 1;
         self.filter.reset();
         self.filter.step(None, &self.ln_emission).unwrap_or(f64::NEG_INFINITY)

@@ -76,6 +76,16 @@ impl<M: Clone> FixedLagSmoother<M> {
         self.steps.len()
     }
 
+    /// Whether the next step lets the oldest go.
+    pub fn is_full(&self) -> bool {
+        self.steps.len() >= self.capacity
+    }
+
+    /// The time of the oldest epoch held.
+    pub fn oldest_timestamp(&self) -> Option<u64> {
+        self.steps.front().map(|s| s.timestamp_ns)
+    }
+
     /// Whether no step is held.
     #[cfg(test)]
     pub fn is_empty(&self) -> bool {
