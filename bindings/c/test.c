@@ -574,6 +574,82 @@ static void replay(waymark_engine *engine, const char *walk_path, accepted_scan 
     fclose(f);
 }
 
+/* Counts the scans the engine accepted during `replay`. */
+static void counted(waymark_engine *engine, unsigned long long t, double tx, double ty, const waymark_position *p,
+                    void *context) {
+    (void)engine, (void)t, (void)tx, (void)ty, (void)p;
+    ++*(int *)context;
+}
+
+/* Map evidence from the session (taken, freed twice, stopped) and a refitted site loaded in
+ * place: the same site in its binary encoding carries the session on; a file that is not a
+ * site, or a hashed site without its salt, changes nothing. */
+static void session_evidence(const char *site_path, const char *walk_path, const char *hashed_path,
+                             const char *packed_path) {
+    waymark_engine *engine = NULL;
+    CHECK(waymark_engine_new_from_path(site_path, &engine) == WAYMARK_RESULT_OK, "site");
+    if (!engine) return;
+    waymark_evidence none = {0};
+    CHECK(waymark_engine_take_evidence(engine, &none) == WAYMARK_RESULT_OK && none.bytes == NULL && none.len == 0,
+          "nothing taken before gathering starts");
+    CHECK(waymark_engine_take_evidence(engine, NULL) == WAYMARK_RESULT_NULL_PARAMETER, "take into NULL");
+    CHECK(waymark_engine_start_evidence(engine) == WAYMARK_RESULT_OK, "start evidence");
+    int accepted = 0;
+    replay(engine, walk_path, counted, &accepted);
+    waymark_evidence taken = {0};
+    CHECK(waymark_engine_take_evidence(engine, &taken) == WAYMARK_RESULT_OK, "take evidence");
+    CHECK(taken.bytes != NULL && taken.len > 16 && memcmp(taken.bytes, "WMEV", 4) == 0, "evidence bytes (%zu)",
+          taken.len);
+    CHECK(accepted > 10 && taken.scans == (uint64_t)accepted && taken.scans_dropped == 0,
+          "every accepted scan is in the evidence: %d accepted, %llu in it, %llu dropped", accepted,
+          (unsigned long long)taken.scans, (unsigned long long)taken.scans_dropped);
+    waymark_evidence_free(&taken);
+    CHECK(taken.bytes == NULL && taken.len == 0, "freed evidence is emptied");
+    waymark_evidence_free(&taken);
+    waymark_evidence_free(NULL);
+    waymark_evidence again = {0};
+    CHECK(waymark_engine_take_evidence(engine, &again) == WAYMARK_RESULT_OK && again.bytes != NULL && again.scans == 0,
+          "gathering goes on from nothing");
+    waymark_evidence_free(&again);
+    waymark_position before, after;
+    CHECK(waymark_engine_position(engine, &before) == WAYMARK_RESULT_OK, "position");
+
+    size_t len = 0;
+    char *bytes = read_file(packed_path, &len);
+    CHECK(bytes != NULL, "read %s", packed_path);
+    waymark_evidence old = {0};
+    CHECK(waymark_engine_replace_site(engine, (const uint8_t *)bytes, len, &old) == WAYMARK_RESULT_OK,
+          "the same site, binary, in place");
+    CHECK(old.bytes != NULL && old.scans == 0, "what the old site gathered since the take");
+    waymark_evidence_free(&old);
+    CHECK(waymark_engine_position(engine, &after) == WAYMARK_RESULT_OK && after.timestamp_ns == before.timestamp_ns &&
+              after.x == before.x && after.y == before.y,
+          "the session carries on");
+    CHECK(waymark_engine_stop_evidence(engine) == WAYMARK_RESULT_OK, "stop evidence");
+    CHECK(waymark_engine_replace_site(engine, (const uint8_t *)bytes, len, NULL) == WAYMARK_RESULT_OK,
+          "replaced again, no evidence wanted");
+    free(bytes);
+
+    const char junk[] = "{\"not\": \"a site\"}";
+    CHECK(waymark_engine_replace_site(engine, (const uint8_t *)junk, sizeof junk - 1, &old) ==
+              WAYMARK_RESULT_INVALID_SITE,
+          "not a site");
+    CHECK(waymark_engine_replace_site(engine, NULL, 0, &old) == WAYMARK_RESULT_NULL_PARAMETER, "NULL site");
+    char *hashed = read_file(hashed_path, &len);
+    CHECK(hashed != NULL, "read %s", hashed_path);
+    CHECK(waymark_engine_replace_site(engine, (const uint8_t *)hashed, len, &old) == WAYMARK_RESULT_SALT_MISMATCH,
+          "a hashed site without its salt");
+    free(hashed);
+    CHECK(waymark_engine_position(engine, &after) == WAYMARK_RESULT_OK && after.timestamp_ns == before.timestamp_ns &&
+              after.x == before.x,
+          "refused sites change nothing");
+    CHECK(waymark_engine_replace_site(NULL, (const uint8_t *)junk, sizeof junk - 1, &old) ==
+              WAYMARK_RESULT_NULL_PARAMETER,
+          "NULL engine");
+    CHECK(waymark_engine_start_evidence(NULL) == WAYMARK_RESULT_NULL_PARAMETER, "start on NULL");
+    waymark_engine_free(engine);
+}
+
 /* Fixes and confirmations pushed, and positions seen, by `with_fixes`. */
 typedef struct {
     int positions, fixes, confirmations;
@@ -1083,6 +1159,7 @@ int main(int argc, char **argv) {
     binary_site(argv[5]);
     walk(argv[3], argv[2], salt, salt_len);
     salted(argv[3], salt, salt_len);
+    session_evidence(argv[1], argv[2], argv[3], argv[5]);
     printf("%d passed, %d failed\n", checks - failures, failures);
     return failures ? 1 : 0;
 }

@@ -738,6 +738,31 @@ typedef struct {
 } waymark_engine_options;
 
 /**
+ * Map evidence a session gathered: the evidence file's bytes (docs/evidence.md#file-format),
+ * ready to upload, and what went into it. Filled by `waymark_engine_take_evidence` and
+ * `waymark_engine_replace_site`; free the bytes with `waymark_evidence_free`. `bytes` is NULL
+ * and `len` 0 when there was nothing to take (the engine was not gathering).
+ */
+typedef struct {
+  /**
+   * The evidence file, `len` bytes, owned by Waymark until `waymark_evidence_free`.
+   */
+  uint8_t *bytes;
+  /**
+   * Its length in bytes.
+   */
+  size_t len;
+  /**
+   * Scans in it.
+   */
+  uint64_t scans;
+  /**
+   * Accepted scans left out of it (their posterior could not be had or added).
+   */
+  uint64_t scans_dropped;
+} waymark_evidence;
+
+/**
  * What one `waymark_engine_learn_habits` pass did.
  */
 typedef struct {
@@ -1198,6 +1223,47 @@ waymark_result waymark_engine_new_from_path_with_salt(const char *path,
                                                       const uint8_t *salt,
                                                       size_t salt_len,
                                                       waymark_engine **out);
+
+/**
+ * Starts gathering map evidence from the session's scans, for the app to upload to whoever
+ * refits the venue's site: state indices and hashed transmitter ids, no time and no track
+ * (docs/privacy.md#evidence). Discards what was being gathered.
+ */
+waymark_result waymark_engine_start_evidence(waymark_engine *engine);
+
+/**
+ * Stops gathering map evidence and discards what was gathered and not taken.
+ */
+waymark_result waymark_engine_stop_evidence(waymark_engine *engine);
+
+/**
+ * Writes into `*out` the map evidence gathered since `waymark_engine_start_evidence` or the
+ * last take, as one walk; gathering goes on from nothing. `out->bytes` is NULL when the engine
+ * is not gathering. Free it with `waymark_evidence_free`.
+ */
+waymark_result waymark_engine_take_evidence(waymark_engine *engine, waymark_evidence *out);
+
+/**
+ * Loads the site file of `len` bytes at `site_file` (binary or JSON, a site refitted from
+ * evidence, say) in place of the engine's own, with the engine's options, without ending the
+ * session: with the same states and zones the position, track and history carry on;
+ * otherwise the estimate starts afresh, keeping the motion, the phone's RSSI offset, the
+ * barometer and the geofences. `*out` (may be NULL: it is then freed) receives the evidence
+ * gathered on the old site and not taken yet (NULL bytes when there is none). A file that is
+ * not a valid site, or one the engine's options do not fit (a hashed site without its salt),
+ * returns the site's error and changes nothing.
+ */
+waymark_result waymark_engine_replace_site(waymark_engine *engine,
+                                           const uint8_t *site_file,
+                                           size_t len,
+                                           waymark_evidence *out);
+
+/**
+ * Frees the bytes of `evidence` (filled by `waymark_engine_take_evidence` or
+ * `waymark_engine_replace_site`) and sets them to NULL and 0, so that freeing it again does
+ * nothing. NULL does nothing.
+ */
+void waymark_evidence_free(waymark_evidence *evidence);
 
 /**
  * The point (x, y), m, of floor `floor` of the engine's site as a WGS84 latitude and

@@ -16,6 +16,7 @@
 
 mod callbacks;
 mod create;
+mod evidence;
 mod geo;
 mod geofence;
 mod habits;
@@ -208,8 +209,8 @@ fn epoch(
     f: impl FnOnce(&mut Engine) -> Result<Epoch, ::waymark_engine::InputError>,
 ) -> waymark_result {
     with_handle(engine, |handle| match handle.epoch(f) {
-        Ok(p) => {
-            write(out, position(&p, handle.site()));
+        Ok((p, site)) => {
+            write(out, position(&p, &site));
             waymark_result::Ok
         }
         Err(e) => fail_with(&e),
@@ -363,8 +364,8 @@ pub extern "C" fn waymark_engine_push_scan(
             }
         };
         match handle.push_scan(&Scan { timestamp_ns, readings }) {
-            Ok(p) => {
-                write(out, position(&p, handle.site()));
+            Ok((p, site)) => {
+                write(out, position(&p, &site));
                 waymark_result::Ok
             }
             Err(e) => fail_with(&e),
@@ -494,8 +495,8 @@ pub extern "C" fn waymark_engine_push_fix_lat_lon(
         };
         let fix = ::waymark_engine::PositionFix { timestamp_ns, x: p.x, y: p.y, floor, accuracy_m };
         match handle.epoch(|e| e.push_fix(&fix)) {
-            Ok(p) => {
-                write(out, position(&p, handle.site()));
+            Ok((p, site)) => {
+                write(out, position(&p, &site));
                 waymark_result::Ok
             }
             Err(e) => fail_with(&e),
@@ -521,8 +522,8 @@ pub extern "C" fn waymark_engine_confirm_zone(
             Err(code) => return code,
         };
         match handle.epoch(|e| e.confirm_zone_named(timestamp_ns, &zone)) {
-            Ok(p) => {
-                write(out, position(&p, handle.site()));
+            Ok((p, site)) => {
+                write(out, position(&p, &site));
                 waymark_result::Ok
             }
             Err(e) => fail_with(&e),
@@ -577,7 +578,8 @@ pub extern "C" fn waymark_engine_zone_name(
         return fail(waymark_result::NullParameter, "buf must not be NULL when len > 0");
     }
     with_handle(engine, |handle| {
-        let zones = handle.site().zones();
+        let site = handle.site();
+        let zones = site.zones();
         let Some(z) = zones.get(zone) else {
             return fail(
                 waymark_result::InputRejected,

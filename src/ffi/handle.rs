@@ -21,8 +21,8 @@ use waymark_engine::{Engine, EngineConfig, Epoch, Position, TransitionModel};
 /// What an epoch produced, or a call's failure, waiting for delivery to the app.
 #[derive(Clone, Debug)]
 pub(crate) enum Event {
-    /// A new position.
-    Position(Position),
+    /// A new position, of an engine on that site (a site replaced later does not change it).
+    Position(Position, Arc<Site>),
     /// Something about the session changed.
     Status(AppStatus),
     /// A call failed (it also returned the error).
@@ -32,8 +32,8 @@ pub(crate) enum Event {
 /// How an FFI calls its app's listeners. Called with no lock of the handle held, never from
 /// two threads at once; a panic inside is caught and logged.
 pub(crate) trait Listeners: Send + Sync {
-    /// Hands `event`, of an engine on `site`, to every listener.
-    fn deliver(&self, event: &Event, site: &Site);
+    /// Hands `event` to every listener.
+    fn deliver(&self, event: &Event);
 }
 
 /// The engine options both FFIs offer, before they become an [`EngineConfig`].
@@ -108,7 +108,9 @@ pub(crate) struct Handle<L> {
     /// Set when a call that the engine cannot undo panicked: the engine may be half-changed,
     /// so every later call fails.
     broken: AtomicBool,
-    site: Arc<Site>,
+    /// The engine's site, for the calls that need it without the engine's lock; replaced
+    /// under that lock with the engine's ([`Handle::replace_site`]).
+    site: Mutex<Arc<Site>>,
     events: Arc<Delivery<Event>>,
     listeners: L,
 }
@@ -119,12 +121,27 @@ impl<L: Listeners> Handle<L> {
         let config = options.config(&site)?;
         let engine = Engine::new(Arc::clone(&site), config)?;
         let events = Arc::new(Delivery::new());
+        let site = Mutex::new(site);
         Ok(Self { engine: Mutex::new(engine), broken: AtomicBool::new(false), site, events, listeners })
     }
 
     /// The engine's site.
-    pub(crate) fn site(&self) -> &Arc<Site> {
-        &self.site
+    pub(crate) fn site(&self) -> Arc<Site> {
+        Arc::clone(&lock(&self.site))
+    }
+
+    /// Loads `site` in place of the engine's ([`Engine::replace_site`]): the evidence gathered
+    /// on the old site and not yet taken.
+    pub(crate) fn replace_site(
+        &self,
+        site: Arc<Site>,
+    ) -> Result<Option<waymark_engine::SessionEvidence>, PositioningError> {
+        // Not undoable: a panic half-way through would leave a half-replaced session.
+        self.call(|engine| {
+            let taken = engine.replace_site(Arc::clone(&site))?;
+            *lock(&self.site) = site;
+            Ok(taken)
+        })
     }
 
     /// The app's listeners.
@@ -197,13 +214,13 @@ impl<L: Listeners> Handle<L> {
         result
     }
 
-    /// An epoch made by `f`: its position, or the input error mapped to `InputRejected`. What
-    /// the epoch produced is staged for the listeners in the order it happened: status
-    /// changes, track revisions, then the position.
+    /// An epoch made by `f`: its position and the site it is on, or the input error mapped to
+    /// `InputRejected`. What the epoch produced is staged for the listeners in the order it
+    /// happened: status changes, track revisions, then the position.
     pub(crate) fn epoch(
         &self,
         f: impl FnOnce(&mut Engine) -> Result<Epoch, waymark_engine::InputError>,
-    ) -> Result<Position, PositioningError> {
+    ) -> Result<(Position, Arc<Site>), PositioningError> {
         let events = Arc::clone(&self.events);
         self.call_undoable(|engine| {
             let Epoch { position, status, revised_track } = f(engine)?;
@@ -214,8 +231,9 @@ impl<L: Listeners> Handle<L> {
             if !revised_track.is_empty() {
                 events.stage(Event::Status(AppStatus::track_revised(&revised_track)));
             }
-            events.stage(Event::Position(position.clone()));
-            Ok(position)
+            let site = Arc::clone(engine.site());
+            events.stage(Event::Position(position.clone(), Arc::clone(&site)));
+            Ok((position, site))
         })
     }
 
@@ -238,7 +256,7 @@ impl<L: Listeners> Handle<L> {
 
     /// A scan: one epoch. A scan that hears no transmitter of the site is rejected, and the
     /// listeners also hear `NoSiteCoverage`.
-    pub(crate) fn push_scan(&self, scan: &Scan) -> Result<Position, PositioningError> {
+    pub(crate) fn push_scan(&self, scan: &Scan) -> Result<(Position, Arc<Site>), PositioningError> {
         let events = Arc::clone(&self.events);
         self.epoch(|engine| {
             #[cfg(feature = "fault-injection")]
@@ -300,7 +318,7 @@ impl<L: Listeners> Handle<L> {
     /// skipped; the others still hear the event.
     fn deliver(&self) {
         self.events.deliver(|event| {
-            deliver_to_app("a listener", || self.listeners.deliver(&event, &self.site));
+            deliver_to_app("a listener", || self.listeners.deliver(&event));
         });
     }
 }
@@ -337,7 +355,7 @@ mod tests {
     struct Deaf;
 
     impl Listeners for Deaf {
-        fn deliver(&self, _: &Event, _: &Site) {}
+        fn deliver(&self, _: &Event) {}
     }
 
     /// What a log sink saw: each record the test's thread logged, and whether the engine's

@@ -58,7 +58,7 @@ struct Subscribers {
 impl Listeners for Subscribers {
     /// A listener subscribed during an event hears the events after it; one cancelled during
     /// an event hears nothing more.
-    fn deliver(&self, event: &Event, site: &Site) {
+    fn deliver(&self, event: &Event) {
         let listeners = lock(&self.list).clone();
         for (id, listener) in &listeners {
             // Cancelled by a callback earlier in this event.
@@ -66,7 +66,7 @@ impl Listeners for Subscribers {
                 continue;
             }
             deliver_to_app("a position listener", || match event {
-                Event::Position(p) => listener.on_position(estimate(p, site)),
+                Event::Position(p, site) => listener.on_position(estimate(p, site)),
                 Event::Status(s) => listener.on_status(s.into()),
                 Event::Error(e) => listener.on_error(e.report()),
             });
@@ -167,8 +167,8 @@ impl PositioningEngine {
         &self,
         f: impl FnOnce(&mut engine::Engine) -> Result<engine::Epoch, waymark_engine::InputError>,
     ) -> Result<PositionEstimate, PositioningError> {
-        let position = self.handle.epoch(f)?;
-        Ok(estimate(&position, self.handle.site()))
+        let (position, site) = self.handle.epoch(f)?;
+        Ok(estimate(&position, &site))
     }
 
     /// The core engine's state and the last position in FFI form, for tests that check a
@@ -177,7 +177,7 @@ impl PositioningEngine {
     #[cfg(feature = "fault-injection")]
     pub fn snapshot(&self) -> (engine::EngineSnapshot, Option<PositionEstimate>) {
         let engine = self.handle.lock_engine();
-        (engine.snapshot(), engine.position().map(|p| estimate(p, self.handle.site())))
+        (engine.snapshot(), engine.position().map(|p| estimate(p, engine.site())))
     }
 }
 
@@ -249,8 +249,8 @@ impl PositioningEngine {
     /// nothing.
     pub fn push_scan(&self, scan: RadioScan) -> Result<PositionEstimate, PositioningError> {
         let core = scan.to_core().map_err(|reason| self.reject(reason))?;
-        let position = self.handle.push_scan(&core)?;
-        Ok(estimate(&position, self.handle.site()))
+        let (position, site) = self.handle.push_scan(&core)?;
+        Ok(estimate(&position, &site))
     }
 
     /// An epoch without radio, from the motion since the last one: call it on a timer when
@@ -268,7 +268,7 @@ impl PositioningEngine {
     /// site for its accuracy; and for a latitude/longitude on a site that is not
     /// geo-referenced, or without its floor on a site whose floors have different frames.
     pub fn push_fix(&self, fix: FfiPositionFix) -> Result<PositionEstimate, PositioningError> {
-        let core = fix.to_core(self.handle.site()).map_err(|reason| self.reject(reason))?;
+        let core = fix.to_core(&self.handle.site()).map_err(|reason| self.reject(reason))?;
         self.epoch(|engine| engine.push_fix(&core))
     }
 
@@ -327,8 +327,8 @@ impl PositioningEngine {
     /// now (before the first epoch, its share of the site's states: the prior is uniform).
     /// Empty for a site without zones.
     pub fn zone_posterior(&self) -> Result<Vec<ZoneProbability>, PositioningError> {
-        let site = Arc::clone(self.handle.site());
-        let posterior = self.handle.read(|e| e.zone_posterior())?;
+        // Both under one lock: a site replaced in between would name other zones.
+        let (site, posterior) = self.handle.read(|e| (Arc::clone(e.site()), e.zone_posterior()))?;
         Ok(site
             .zones()
             .iter()
@@ -371,6 +371,44 @@ impl PositioningEngine {
         self.handle.import_habits(&json.0)
     }
 
+    /// Starts gathering map evidence from this session's scans, for the app to upload to
+    /// whoever refits the venue's site (docs/evidence.md#from-a-session): state indices and
+    /// hashed transmitter ids, no time and no track (docs/privacy.md#evidence). Discards
+    /// what was being gathered.
+    pub fn start_evidence(&self) -> Result<(), PositioningError> {
+        self.handle.call_undoable(|e| {
+            e.start_evidence();
+            Ok(())
+        })
+    }
+
+    /// Stops gathering map evidence and discards what was gathered and not taken.
+    pub fn stop_evidence(&self) -> Result<(), PositioningError> {
+        self.handle.call_undoable(|e| {
+            e.stop_evidence();
+            Ok(())
+        })
+    }
+
+    /// The map evidence gathered since `startEvidence` or the last take, as one walk, its
+    /// bytes ready to upload (`waymark evidence merge` reads them); gathering goes on from
+    /// nothing. `null` / `nil` when the engine is not gathering.
+    pub fn take_evidence(&self) -> Result<Option<FfiSessionEvidence>, PositioningError> {
+        let taken = self.handle.call(|e| Ok(e.take_evidence()))?;
+        Ok(taken.map(FfiSessionEvidence::from))
+    }
+
+    /// Loads `site` (a site refitted from evidence, say) in place of the engine's own without
+    /// ending the session (docs/evidence.md#loading-a-refitted-site): with the same states
+    /// and zones the position, track and history carry on; otherwise the estimate starts
+    /// afresh, keeping the motion, the phone's RSSI offset, the barometer and the geofences.
+    /// Returns the evidence gathered on the old site and not taken yet. Throws as
+    /// `withSite` does for a site the options do not fit, changing nothing.
+    pub fn replace_site(&self, site: Arc<FfiSite>) -> Result<Option<FfiSessionEvidence>, PositioningError> {
+        let taken = self.handle.replace_site(Arc::clone(&site.inner))?;
+        Ok(taken.map(FfiSessionEvidence::from))
+    }
+
     /// Forgets every learned habit and the fix error (when the user asks, or signs out).
     pub fn clear_habits(&self) -> Result<(), PositioningError> {
         self.handle.call(|e| {
@@ -392,8 +430,7 @@ impl PositioningEngine {
 
     /// The latest position, if any.
     pub fn position(&self) -> Result<Option<PositionEstimate>, PositioningError> {
-        let site = self.handle.site();
-        self.handle.read(|e| e.position().map(|p| estimate(p, site)))
+        self.handle.read(|e| e.position().map(|p| estimate(p, e.site())))
     }
 
     /// The most likely recent track, oldest first.

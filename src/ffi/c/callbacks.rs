@@ -40,12 +40,12 @@ impl<T> Callback<T> {
 
 impl Listeners for Callbacks {
     /// Reads the callback afresh for each event.
-    fn deliver(&self, event: &Event, site: &Site) {
+    fn deliver(&self, event: &Event) {
         let _calling = lock(&self.calling);
         match event {
             // Each callback is copied out before it is called: the lock must be free so the
             // callback can replace itself (a guard in the `if let` would live through the call).
-            Event::Position(p) => {
+            Event::Position(p, site) => {
                 let callback = *lock(&self.position);
                 if let Some(callback) = callback {
                     callback.call(&position(p, site));

@@ -57,7 +57,7 @@ pub extern "C" fn waymark_engine_to_lat_lon(
     latitude_deg: *mut f64,
     longitude_deg: *mut f64,
 ) -> waymark_result {
-    with_handle(engine, |handle| site_to_lat_lon(handle.site(), floor, x, y, latitude_deg, longitude_deg))
+    with_handle(engine, |handle| site_to_lat_lon(&handle.site(), floor, x, y, latitude_deg, longitude_deg))
 }
 
 /// A WGS84 latitude and longitude, degrees, as the point of floor `floor`'s frame of the
@@ -122,7 +122,7 @@ pub extern "C" fn waymark_engine_add_geofence_polygon_lat_lon(
             Ok(id) => id,
             Err(code) => return code,
         };
-        let fence = match Geofence::from_lat_lon(handle.site(), id, floor as usize, &vertices) {
+        let fence = match Geofence::from_lat_lon(&handle.site(), id, floor as usize, &vertices) {
             Ok(fence) => fence,
             Err(e) => return fail_with(&PositioningError::from(e)),
         };

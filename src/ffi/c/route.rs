@@ -156,7 +156,7 @@ fn plan(
                 Err(e) => return super::fail_with(&e),
             },
         };
-        let site = Arc::clone(handle.site());
+        let site = handle.site();
         match Route::plan_from(&site, &from, accuracy_m, &to) {
             Ok(route) => {
                 let tracker = Mutex::new(RouteTracker::new(route));

@@ -733,3 +733,22 @@ pub(crate) fn pressure_samples(batch: &[PressureReading]) -> Vec<waymark_engine:
 pub(crate) fn samples(batch: &[MotionSample]) -> Vec<SensorSample> {
     batch.iter().map(|s| SensorSample { timestamp_ns: s.timestamp_ns, x: s.x, y: s.y, z: s.z }).collect()
 }
+
+/// Map evidence a session gathered (`PositioningEngine.takeEvidence`,
+/// docs/evidence.md#from-a-session).
+#[derive(Clone, Debug, PartialEq, uniffi::Record)]
+#[uniffi(name = "SessionEvidence")]
+pub struct FfiSessionEvidence {
+    /// The evidence file's bytes (docs/evidence.md#file-format), to upload as they are.
+    pub bytes: Vec<u8>,
+    /// Scans in it.
+    pub scans: u64,
+    /// Accepted scans left out of it (their posterior could not be had or added).
+    pub scans_dropped: u64,
+}
+
+impl From<waymark_engine::SessionEvidence> for FfiSessionEvidence {
+    fn from(taken: waymark_engine::SessionEvidence) -> Self {
+        Self { bytes: taken.evidence.to_bytes(), scans: taken.scans, scans_dropped: taken.scans_dropped }
+    }
+}

@@ -262,7 +262,7 @@ impl PositioningEngine {
     pub fn navigate_to(&self, destination: FfiDestination) -> Result<Arc<FfiRouteTracker>, FfiRouteError> {
         guarded(|| {
             let tracker = self.tracker_to(&destination)?;
-            Ok(Arc::new(FfiRouteTracker { site: Arc::clone(self.handle.site()), inner: Mutex::new(tracker) }))
+            Ok(Arc::new(FfiRouteTracker { site: self.handle.site(), inner: Mutex::new(tracker) }))
         })
     }
 }
@@ -275,7 +275,8 @@ impl PositioningEngine {
             .map_err(|e| FfiRouteError::Internal { reason: e.to_string() })?
             .ok_or(FfiRouteError::NoPosition)?;
         let from = core::FloorPoint::new(position.floor, position.x, position.y);
-        let route = core::Route::plan_from(self.handle.site(), &from, position.accuracy_m, &destination(to))?;
+        let route =
+            core::Route::plan_from(&self.handle.site(), &from, position.accuracy_m, &destination(to))?;
         let mut tracker = RouteTracker::new(route);
         tracker.update(&from, position.accuracy_m)?;
         Ok(tracker)

@@ -457,6 +457,43 @@ final class WaymarkTests: XCTestCase {
         }
     }
 
+    // Map evidence from the session, and a refitted site loaded in place: the same site in its
+    // binary encoding carries the session on exactly; a hashed site without its salt changes
+    // nothing.
+    func testTheSessionGivesEvidenceAndTakesARefittedSiteInPlace() throws {
+        let engine = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let reference = try PositioningEngine(siteJson: try siteJson(), options: EngineOptions())
+        let refitted = try Site.fromBytes(site: try Data(contentsOf: Self.simDir.appendingPathComponent("site.wmsite")))
+        XCTAssertNil(try engine.takeEvidence(), "nothing gathered unless asked")
+        try engine.startEvidence()
+        let epochs = try walk().epochs
+        var accepted = 0
+        for (k, epoch) in epochs.enumerated() {
+            if k == epochs.count / 2 {
+                let before = try XCTUnwrap(try engine.takeEvidence())
+                XCTAssertEqual(before.scans, UInt64(accepted))
+                XCTAssertEqual(before.scansDropped, 0)
+                XCTAssertEqual(String(decoding: before.bytes.prefix(4), as: UTF8.self), "WMEV")
+                XCTAssertEqual(try engine.replaceSite(site: refitted)?.scans, 0)
+                XCTAssertEqual(try engine.position(), try reference.position())
+                accepted = 0
+            }
+            try pushIMU(epoch, to: [engine, reference])
+            let expected = try? reference.pushScan(scan: epoch.scan)
+            XCTAssertEqual(try? engine.pushScan(scan: epoch.scan), expected, "epoch \(k)")
+            accepted += expected == nil ? 0 : 1
+        }
+        XCTAssertGreaterThan(accepted, 5)
+        XCTAssertEqual(try engine.takeEvidence()?.scans, UInt64(accepted))
+        try engine.stopEvidence()
+        XCTAssertNil(try engine.takeEvidence())
+        let hashed = try Site.fromBytes(site: try Data(contentsOf: Self.simDir.appendingPathComponent("site-hashed.json")))
+        XCTAssertThrowsError(try engine.replaceSite(site: hashed)) {
+            guard case PositioningError.SaltMismatch = $0 else { return XCTFail("expected SaltMismatch, got \($0)") }
+        }
+        XCTAssertEqual(try engine.position(), try reference.position())
+    }
+
     // A BLE beacon known by its advertiser address only (Eddystone, or an iBeacon left at
     // major = minor = 0). The site is the simulated one with its first access point turned
     // into such a beacon.

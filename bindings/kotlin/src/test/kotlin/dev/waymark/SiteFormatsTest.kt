@@ -63,4 +63,46 @@ class SiteFormatsTest {
             assertTrue(e.reason, e.reason.isNotEmpty())
         }
     }
+
+    @Test
+    fun theSessionGivesEvidenceAndTakesARefittedSiteInPlace() {
+        val walk = Walk.load(setting("waymark.walk"))
+        val json = File(setting("waymark.site")).readText()
+        val refitted = Site.fromBytes(File(setting("waymark.packedSite")).readBytes())
+        val half = walk.size / 2
+        PositioningEngine(json, EngineOptions()).use { engine ->
+            PositioningEngine(json, EngineOptions()).use { reference ->
+                assertEquals("nothing gathered unless asked", null, engine.takeEvidence())
+                engine.startEvidence()
+                var accepted = 0
+                walk.forEachIndexed { k, epoch ->
+                    if (k == half) {
+                        val before = engine.takeEvidence()!!
+                        assertEquals(accepted.toULong(), before.scans)
+                        assertEquals(0UL, before.scansDropped)
+                        assertEquals("WMEV", String(before.bytes.copyOfRange(0, 4)))
+                        // The same states: the session carries on as if nothing had been replaced.
+                        assertEquals(0UL, engine.replaceSite(refitted)!!.scans)
+                        assertEquals(reference.position(), engine.position())
+                        accepted = 0
+                    }
+                    val p = WaymarkTest.pushEpoch(engine, epoch)
+                    assertEquals("epoch $k", WaymarkTest.pushEpoch(reference, epoch), p)
+                    if (p != null) accepted++
+                }
+                assertTrue("accepted scans", accepted > 5)
+                assertEquals(accepted.toULong(), engine.takeEvidence()!!.scans)
+                engine.stopEvidence()
+                assertEquals(null, engine.takeEvidence())
+                try {
+                    engine.replaceSite(Site.fromBytes(File(setting("waymark.hashedSite")).readBytes()))
+                    fail("a hashed site without its salt was taken")
+                } catch (e: PositioningException) {
+                    assertTrue(e.toString(), e is PositioningException.SaltMismatch)
+                }
+                assertEquals(reference.position(), engine.position())
+            }
+        }
+        refitted.close()
+    }
 }
