@@ -37,7 +37,7 @@ enum Command {
     Replay(replay::ReplayArgs),
     /// Survey on the survey walks of the given floors, replay the test walks through every
     /// configuration, and print the errors (split: file i is a test walk when i % 5 == 4).
-    Eval(eval::EvalArgs),
+    Eval(Box<eval::EvalArgs>),
     /// The accuracy benchmark over buildings: every row (a building and a split of its walks)
     /// evaluated as `eval` does, a table per row and the mean over buildings; with
     /// `--baseline`, whether a change is kept (docs/benchmark.md).

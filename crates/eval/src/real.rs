@@ -232,6 +232,8 @@ pub struct WalkResult {
     /// what a resampling over walks draws from
     /// ([`bootstrap_se`](crate::benchmark::bootstrap_se)).
     pub scored: BTreeMap<String, Vec<Scored>>,
+    /// Per configuration key, the points this walk adds to [`ConfigurationReport::waypoints`].
+    pub scored_waypoints: BTreeMap<String, Vec<Scored>>,
 }
 
 /// Builds the site from the survey walks of `floors` (one multi-floor site).
@@ -390,18 +392,35 @@ pub fn evaluate_on(
     let cost = |&(_, trace): &(usize, &Trace)| replay_cost(trace);
     let mut results: Vec<WalkResult> =
         parallel_map_by_cost(&jobs, options.calibration.threads, cost, run_walk);
+    for (result, &(f, trace)) in results.iter_mut().zip(&jobs) {
+        for key in CONFIGURATIONS.iter().filter(|k| wanted(k)) {
+            let Some(estimates) = result.estimates.get(*key) else { continue };
+            let (epochs, waypoints) = score_scans(trace, f, estimates, zone_truth.as_ref());
+            result.scored.insert(key.to_string(), epochs);
+            result.scored_waypoints.insert(key.to_string(), waypoints);
+        }
+    }
+    Ok((pooled_reports(floors, &results), results))
+}
+
+/// Each configuration's figures over the scored points of `results` (walks of `floors`), in
+/// the walks' order: all of them, per floor, and at the waypoints.
+pub fn pooled_reports(floors: &[FloorData], results: &[WalkResult]) -> BTreeMap<String, ConfigurationReport> {
     let mut reports = BTreeMap::new();
-    for key in CONFIGURATIONS.iter().filter(|k| wanted(k)) {
+    for key in CONFIGURATIONS {
         let mut pooled = Vec::new();
         let mut at_waypoints = Vec::new();
         let mut per_floor: BTreeMap<String, Vec<Scored>> = BTreeMap::new();
-        for (result, &(f, trace)) in results.iter_mut().zip(&jobs) {
-            let Some(estimates) = result.estimates.get(*key) else { continue };
-            let (epochs, waypoints) = score_scans(trace, f, estimates, zone_truth.as_ref());
-            per_floor.entry(floors[f].name.clone()).or_default().extend_from_slice(&epochs);
-            pooled.extend_from_slice(&epochs);
-            result.scored.insert(key.to_string(), epochs);
-            at_waypoints.extend(waypoints);
+        let mut any = false;
+        for result in results {
+            let Some(epochs) = result.scored.get(key) else { continue };
+            any = true;
+            per_floor.entry(floors[result.floor].name.clone()).or_default().extend_from_slice(epochs);
+            pooled.extend_from_slice(epochs);
+            at_waypoints.extend_from_slice(result.scored_waypoints.get(key).map_or(&[][..], Vec::as_slice));
+        }
+        if !any {
+            continue;
         }
         reports.insert(
             key.to_string(),
@@ -412,7 +431,94 @@ pub fn evaluate_on(
             },
         );
     }
-    Ok((reports, results))
+    reports
+}
+
+/// What one fold of the crowd protocol surveyed ([`evaluate_crowd`]).
+#[derive(Clone, Debug, Serialize)]
+pub struct CrowdFold {
+    /// Test walks scored in this fold.
+    pub test_walks: usize,
+    /// The other folds' test walks given without labels.
+    pub unlabelled_walks: usize,
+    /// States of the fold's refitted site.
+    pub states: usize,
+    /// What each round of refitting gathered and changed.
+    pub evidence_rounds: Vec<waymark_survey::calibrate::EvidenceRound>,
+}
+
+/// What the crowd protocol measured ([`evaluate_crowd`]).
+pub struct CrowdReport {
+    /// Per configuration key, pooled over every fold's walks.
+    pub configurations: BTreeMap<String, ConfigurationReport>,
+    /// Every test walk, fold after fold.
+    pub walks: Vec<WalkResult>,
+    /// Each fold's survey.
+    pub folds: Vec<CrowdFold>,
+}
+
+/// Fold `fold` of `folds` of the crowd protocol: `floors` with only the fold's test walks (walk
+/// i of all floors' test walks, in order, when i mod `folds` = `fold`), and every other test
+/// walk without its waypoints.
+pub fn crowd_fold(floors: &[FloorData], folds: usize, fold: usize) -> (Vec<FloorData>, Vec<Trace>) {
+    let mut index = 0;
+    let mut unlabelled = Vec::new();
+    let fold_floors = (floors.iter())
+        .map(|floor| {
+            let mut test = Vec::new();
+            for trace in &floor.test {
+                if index % folds == fold {
+                    test.push(trace.clone());
+                } else {
+                    unlabelled.push(Trace { waypoints: Vec::new(), ..trace.clone() });
+                }
+                index += 1;
+            }
+            FloorData { test, ..floor.clone() }
+        })
+        .collect();
+    (fold_floors, unlabelled)
+}
+
+/// The crowd protocol (docs/evidence.md#the-crowd-protocol): the test walks in `folds` folds
+/// (walk i of all floors' test walks, in order, in fold i mod `folds`), each fold's walks
+/// scored on the site surveyed from the labelled survey walks and refitted with every other
+/// fold's test walks given without waypoints and without their floor
+/// ([`survey_with_unlabelled`](waymark_survey::calibrate::survey_with_unlabelled) with
+/// `rounds`): the map a venue's visitors would have refitted, scored on walks it never saw.
+pub fn evaluate_crowd(
+    floors: &[FloorData],
+    options: &EvalOptions,
+    folds: usize,
+    rounds: waymark_survey::calibrate::UnlabelledOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<CrowdReport, EvalError> {
+    if folds < 2 {
+        return Err(EvalError::Empty(format!("the crowd protocol needs at least 2 folds, not {folds}")));
+    }
+    let mut results = Vec::new();
+    let mut reports = Vec::new();
+    for fold in 0..folds {
+        let (fold_floors, unlabelled) = crowd_fold(floors, folds, fold);
+        let (site, _, calibration, evidence_rounds) = waymark_survey::calibrate::survey_with_unlabelled(
+            &fold_floors,
+            &unlabelled,
+            &options.calibration,
+            rounds,
+            progress,
+        )?;
+        let states = site.states().len();
+        let (_, walks) =
+            evaluate_on(&Arc::new(site), &fold_floors, &options.surveyed_with(&calibration), progress)?;
+        reports.push(CrowdFold {
+            test_walks: walks.len(),
+            unlabelled_walks: unlabelled.len(),
+            states,
+            evidence_rounds,
+        });
+        results.extend(walks);
+    }
+    Ok(CrowdReport { configurations: pooled_reports(floors, &results), walks: results, folds: reports })
 }
 
 /// Radius confirmed around a survey walk's waypoint, in grid spacings: √2/2 reaches the
@@ -609,6 +715,49 @@ pub fn survey_habits(
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// Every test walk is scored in exactly one fold and given without labels in every other;
+    /// the survey walks stay labelled in every fold.
+    #[test]
+    fn each_test_walk_is_scored_once_and_unlabelled_in_the_other_folds() {
+        let walk = |name: String| Trace {
+            name,
+            waypoints: vec![waymark_survey::io::ilc::Waypoint {
+                timestamp_ns: 1,
+                x: 0.0,
+                y: 0.0,
+                floor: None,
+            }],
+            ..Trace::default()
+        };
+        let floors: Vec<FloorData> = [("B1", 4), ("F1", 3)]
+            .iter()
+            .map(|&(name, tests)| FloorData {
+                name: name.into(),
+                dir: name.into(),
+                plan: None,
+                survey: vec![walk(format!("{name}-survey"))],
+                test: (0..tests).map(|i| walk(format!("{name}-test{i}"))).collect(),
+                geo: None,
+            })
+            .collect();
+        for folds in [2, 3, 7] {
+            let mut scored: Vec<String> = Vec::new();
+            for fold in 0..folds {
+                let (fold_floors, unlabelled) = crowd_fold(&floors, folds, fold);
+                let tests: Vec<&Trace> = fold_floors.iter().flat_map(|f| &f.test).collect();
+                assert_eq!(tests.len() + unlabelled.len(), 7);
+                assert!(unlabelled.iter().all(|t| t.waypoints.is_empty()));
+                assert!(tests.iter().all(|t| !unlabelled.iter().any(|u| u.name == t.name)));
+                assert!(fold_floors.iter().all(|f| f.survey.len() == 1 && !f.survey[0].waypoints.is_empty()));
+                scored.extend(tests.iter().map(|t| t.name.clone()));
+            }
+            scored.sort();
+            let mut all: Vec<String> = floors.iter().flat_map(|f| &f.test).map(|t| t.name.clone()).collect();
+            all.sort();
+            assert_eq!(scored, all, "{folds} folds");
+        }
+    }
 
     /// HIPE's single-scan MLE answers with a state that has a fingerprint: a scan barely heard
     /// is explained best by an unsurveyed state (which heard nothing), but that would be a

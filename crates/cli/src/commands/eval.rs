@@ -53,6 +53,11 @@ pub struct EvalArgs {
     /// baseline of --test-as-unlabelled on the same test walks.
     #[arg(long, value_delimiter = ',', conflicts_with = "test_as_unlabelled")]
     test_as_labelled: Vec<u32>,
+    /// The crowd protocol (docs/evidence.md#the-crowd-protocol): the test walks in K folds,
+    /// each fold scored on the site refitted with the other folds' test walks given without
+    /// labels (no waypoints, no floor).
+    #[arg(long, conflicts_with_all = ["unlabelled_rest", "test_as_unlabelled", "test_as_labelled"])]
+    crowd_folds: Option<usize>,
     /// With --unlabelled-rest: rounds of anchoring the unlabelled walks where the site is sure
     /// of them and surveying them with the labelled ones.
     #[arg(long, default_value_t = 1)]
@@ -215,6 +220,9 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         options.calibration.engine.habits.strength = Some(k);
     }
     let loaded_s = started.elapsed().as_secs_f64();
+    if let Some(folds) = args.crowd_folds {
+        return crowd(args, &floors, &options, folds, started);
+    }
     let bar = progress_bar(
         args.json,
         calibrate::calibration_steps(&floors, &options.calibration) as u64,
@@ -336,6 +344,53 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
         }
         if let Some(h) = &report.habits {
             print_habits(&report.configurations, h);
+        }
+    }
+    ExitCode::SUCCESS
+}
+
+/// `--crowd-folds`: every fold surveyed, refitted with the other folds' test walks and
+/// scored, the figures pooled.
+fn crowd(
+    args: &EvalArgs,
+    floors: &[FloorData],
+    options: &EvalOptions,
+    folds: usize,
+    started: Instant,
+) -> ExitCode {
+    let rounds = calibrate::UnlabelledOptions {
+        anchor_rounds: args.anchor_rounds,
+        evidence_rounds: args.evidence_rounds,
+    };
+    let steps = calibrate::calibration_steps(floors, &options.calibration) as u64;
+    let walks: usize = floors.iter().map(|f| f.test.len()).sum();
+    let bar =
+        progress_bar(args.json, folds as u64 * steps + walks as u64, "crowd folds: survey, refit, replay");
+    let evaluation::CrowdReport { configurations, folds: fold_reports, .. } =
+        match evaluation::evaluate_crowd(floors, options, folds, rounds, &|| bar.inc(1)) {
+            Ok(r) => r,
+            Err(e) => return fail("eval", e),
+        };
+    bar.finish_and_clear();
+    let seconds = started.elapsed().as_secs_f64();
+    if args.json {
+        let report = serde_json::json!({
+            "configurations": configurations,
+            "crowd_folds": folds,
+            "folds": fold_reports,
+            "test_walks": walks,
+            "survey_fraction": args.survey_fraction,
+            "seconds": seconds,
+        });
+        println!("{}", serde_json::to_string_pretty(&report).unwrap_or_default());
+    } else {
+        println!("{} floors, {walks} test walks in {folds} folds, each scored on a site refitted with the other folds' walks without labels; {seconds:.1} s", floors.len());
+        print_configurations(&configurations);
+        for (k, fold) in fold_reports.iter().enumerate() {
+            println!(
+                "fold {k}: {} walks scored, {} given without labels, {} states",
+                fold.test_walks, fold.unlabelled_walks, fold.states
+            );
         }
     }
     ExitCode::SUCCESS
