@@ -447,6 +447,63 @@ pub struct CrowdFold {
     pub evidence_rounds: Vec<waymark_survey::calibrate::EvidenceRound>,
 }
 
+/// Which walks a survey is given without labels, besides its labelled survey walks
+/// (docs/evidence.md#refitting).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct WithoutLabels<'a> {
+    /// The survey walks the survey fraction leaves out, given back without labels.
+    pub rest: bool,
+    /// Test walks of these repetitions (`_repetitionRR` in a competition file's name): not
+    /// scored, given without labels.
+    pub test_unlabelled: &'a [u32],
+    /// Test walks of these repetitions: not scored, surveyed with their labels (the baseline of
+    /// `test_unlabelled` on the same test walks).
+    pub test_labelled: &'a [u32],
+}
+
+impl WithoutLabels<'_> {
+    /// Whether any walk is given without labels.
+    pub fn any(&self) -> bool {
+        self.rest || !self.test_unlabelled.is_empty()
+    }
+}
+
+/// `floors` with `fraction` of each floor's survey walks kept
+/// ([`FloorData::keep_survey_fraction`]) and the test walks `given` names moved out, and the
+/// walks given without labels (waypoints removed): the split `waymark eval --survey-fraction
+/// --unlabelled-rest --test-as-unlabelled --test-as-labelled` and the benchmark's rows make.
+pub fn split_without_labels(
+    floors: Vec<FloorData>,
+    fraction: f64,
+    given: WithoutLabels,
+) -> (Vec<FloorData>, Vec<Trace>) {
+    let mut unlabelled: Vec<Trace> = Vec::new();
+    let floors = (floors.into_iter())
+        .map(|mut f| {
+            if given.rest {
+                let keep = waymark_survey::calibrate::survey_subset(f.survey.len(), fraction);
+                let dropped = f.survey.iter().enumerate().filter(|(i, _)| keep.binary_search(i).is_err());
+                unlabelled.extend(dropped.map(|(_, w)| Trace { waypoints: Vec::new(), ..w.clone() }));
+            }
+            f.keep_survey_fraction(fraction);
+            let chosen = |reps: &[u32], t: &Trace| {
+                waymark_survey::calibrate::repetition(&t.name).is_some_and(|r| reps.contains(&r))
+            };
+            for trace in std::mem::take(&mut f.test) {
+                if chosen(given.test_unlabelled, &trace) {
+                    unlabelled.push(Trace { waypoints: Vec::new(), ..trace });
+                } else if chosen(given.test_labelled, &trace) {
+                    f.survey.push(trace);
+                } else {
+                    f.test.push(trace);
+                }
+            }
+            f
+        })
+        .collect();
+    (floors, unlabelled)
+}
+
 /// What the crowd protocol measured ([`evaluate_crowd`]).
 pub struct CrowdReport {
     /// Per configuration key, pooled over every fold's walks.

@@ -6,7 +6,8 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Instant;
 use waymark_eval::benchmark::{
-    compare, evaluate_row, BenchmarkReport, Comparison, DataSource, LoadError, RowReport, Verdict, ROWS,
+    compare, evaluate_row, BenchmarkReport, Comparison, DataSource, LoadError, RowReport, Verdict,
+    LEARNING_ROWS, ROWS,
 };
 use waymark_eval::real::{EvalOptions, CONFIGURATIONS};
 use waymark_survey::calibrate::calibration_steps;
@@ -19,7 +20,12 @@ pub struct BenchmarkArgs {
     /// Also write the JSON to FILE.
     #[arg(long, value_name = "FILE")]
     out: Option<PathBuf>,
-    /// Only these rows (comma-separated `building/split`, as `ilc20-site1/F=1`); default all.
+    /// Also the rows of a map learned from use, after the others and not in the mean over
+    /// buildings (docs/evidence.md#measured).
+    #[arg(long)]
+    learning: bool,
+    /// Only these rows (comma-separated `building/split`, as `ilc20-site1/F=1`); default all
+    /// (with --learning, the learning rows too).
     #[arg(long, value_delimiter = ',')]
     rows: Vec<String>,
     /// Only these configurations (comma-separated keys); default all.
@@ -52,7 +58,7 @@ pub fn benchmark(args: &BenchmarkArgs) -> ExitCode {
     if let Some(unknown) = args.configurations.iter().find(|c| !CONFIGURATIONS.contains(&c.as_str())) {
         return fail(format!("unknown configuration `{unknown}`; known: {}", CONFIGURATIONS.join(", ")));
     }
-    let known: Vec<String> = ROWS.iter().map(|r| r.name()).collect();
+    let known: Vec<String> = ROWS.iter().chain(&LEARNING_ROWS).map(|r| r.name()).collect();
     if let Some(unknown) = args.rows.iter().find(|r| !known.contains(r)) {
         return fail(format!("unknown row `{unknown}`; known: {}", known.join(", ")));
     }
@@ -115,13 +121,17 @@ fn run(args: &BenchmarkArgs) -> Result<BenchmarkReport, String> {
     if let Some(t) = args.threads {
         options.calibration.threads = t;
     }
-    let rows: Vec<_> =
-        ROWS.iter().filter(|r| args.rows.is_empty() || args.rows.contains(&r.name())).collect();
+    let rows: Vec<_> = (ROWS.iter().chain(&LEARNING_ROWS))
+        .filter(|r| match args.rows.is_empty() {
+            true => !r.learning() || args.learning,
+            false => args.rows.contains(&r.name()),
+        })
+        .collect();
     let mut reports = Vec::new();
     for (i, row) in rows.iter().enumerate() {
         let started = Instant::now();
         eprintln!("row {}/{}: {}", i + 1, rows.len(), row.name());
-        let floors = match row.floors(&source) {
+        let (floors, unlabelled) = match row.floors(&source) {
             Ok(f) => f,
             Err(LoadError::Absent(reason)) => {
                 eprintln!("  skipped: {reason}");
@@ -138,7 +148,7 @@ fn run(args: &BenchmarkArgs) -> Result<BenchmarkReport, String> {
             "  calibrating, then replaying the test walks",
         );
         let tick = || bar.inc(1);
-        let report = evaluate_row(row, &floors, &options, started, &tick, &tick)
+        let report = evaluate_row(row, &floors, &unlabelled, &options, started, &tick, &tick)
             .map_err(|e| format!("{}: {e}", row.name()))?;
         bar.finish_and_clear();
         eprintln!("  {} test walks in {:.0} s", report.test_walks, report.seconds);
@@ -157,8 +167,9 @@ fn print_row(row: &RowReport) {
         return;
     }
     println!(
-        "\n{}: {} test walks, survey fraction {}, {:.0} s",
+        "\n{}{}: {} test walks, survey fraction {}, {:.0} s",
         row.name(),
+        if row.learning { " (learned from use, not in the mean)" } else { "" },
         row.test_walks,
         row.survey_fraction,
         row.seconds

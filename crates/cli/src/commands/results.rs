@@ -537,6 +537,7 @@ mod tests {
             building: "ilc20-site1".into(),
             split: split.into(),
             survey_fraction,
+            learning: false,
             skipped: None,
             test_walks: 7,
             seconds: 61.0,

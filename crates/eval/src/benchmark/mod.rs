@@ -5,7 +5,9 @@
 //! walk-bootstrap standard error of its mean; the mean over buildings; and the rule a change to
 //! the engine is judged by against a baseline run ([`compare`]).
 
-use crate::real::{evaluate_on, EvalError, EvalOptions, WalkResult};
+use crate::real::{
+    evaluate_crowd, evaluate_on, split_without_labels, EvalError, EvalOptions, WalkResult, WithoutLabels,
+};
 use rand::rngs::ChaCha8Rng;
 use rand::{RngExt, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -15,8 +17,10 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Instant;
 use waymark_survey::calibrate::{
-    load_gsd_building, survey_calibrated, CalibrationError, FloorData, WalkSplit,
+    load_gsd_building, survey_calibrated, survey_with_unlabelled, CalibrationError, FloorData,
+    UnlabelledOptions, WalkSplit,
 };
+use waymark_survey::io::Trace;
 use waymark_survey::scoring::{Metrics, Scored};
 
 mod compare;
@@ -60,6 +64,38 @@ pub struct Row {
     pub survey_fraction: f64,
     /// Reads the row's floors.
     pub load: Loader,
+    /// What the survey is given besides its labelled walks.
+    pub protocol: Protocol,
+}
+
+/// How a row's site is made from its walks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Protocol {
+    /// From the labelled survey walks alone: the rows every accuracy change is judged on.
+    Labelled,
+    /// The labelled survey walks and the walks [`WithoutLabels`] names (a map learned from
+    /// use, docs/evidence.md); a row of [`LEARNING_ROWS`].
+    WithoutLabels {
+        /// The survey walks the fraction leaves out, given back without labels.
+        rest: bool,
+        /// Test walks of these repetitions given without labels.
+        test_unlabelled: &'static [u32],
+        /// Test walks of these repetitions surveyed with labels.
+        test_labelled: &'static [u32],
+    },
+    /// The crowd protocol with this many folds ([`evaluate_crowd`]); a row of [`LEARNING_ROWS`].
+    Crowd(usize),
+}
+
+impl Protocol {
+    fn without_labels(&self) -> WithoutLabels<'static> {
+        match *self {
+            Protocol::WithoutLabels { rest, test_unlabelled, test_labelled } => {
+                WithoutLabels { rest, test_unlabelled, test_labelled }
+            }
+            Protocol::Labelled | Protocol::Crowd(_) => WithoutLabels::default(),
+        }
+    }
 }
 
 impl Row {
@@ -68,13 +104,16 @@ impl Row {
         format!("{}/{}", self.building, self.split)
     }
 
-    /// The row's floors, its survey fraction applied.
-    pub fn floors(&self, source: &DataSource) -> Result<Vec<FloorData>, LoadError> {
-        let mut floors = (self.load)(source)?;
-        for floor in &mut floors {
-            floor.keep_survey_fraction(self.survey_fraction);
-        }
-        Ok(floors)
+    /// The row's floors, its survey fraction applied, and the walks its protocol gives the
+    /// survey without labels ([`split_without_labels`]).
+    pub fn floors(&self, source: &DataSource) -> Result<(Vec<FloorData>, Vec<Trace>), LoadError> {
+        let floors = (self.load)(source)?;
+        Ok(split_without_labels(floors, self.survey_fraction, self.protocol.without_labels()))
+    }
+
+    /// Whether the row is one of [`LEARNING_ROWS`]: not in the mean over buildings.
+    pub fn learning(&self) -> bool {
+        self.protocol != Protocol::Labelled
     }
 }
 
@@ -120,11 +159,90 @@ pub fn ipin2023_t3_both(source: &DataSource) -> Result<Vec<FloorData>, LoadError
 /// their survey walks and from half of them, and the museum surveyed with each phone and tested
 /// with the other, and with both phones on both sides (`docs/benchmark.md#rows`).
 pub const ROWS: [Row; 5] = [
-    Row { building: "ilc20-site1", split: "F=1", survey_fraction: 1.0, load: ilc20_site1 },
-    Row { building: "ilc20-site1", split: "F=0.5", survey_fraction: 0.5, load: ilc20_site1 },
-    Row { building: "ipin2023-t3", split: "A520F-surveys", survey_fraction: 1.0, load: ipin2023_t3_a520f },
-    Row { building: "ipin2023-t3", split: "G930F-surveys", survey_fraction: 1.0, load: ipin2023_t3_g930f },
-    Row { building: "ipin2023-t3", split: "both-phones", survey_fraction: 1.0, load: ipin2023_t3_both },
+    Row {
+        building: "ilc20-site1",
+        split: "F=1",
+        survey_fraction: 1.0,
+        load: ilc20_site1,
+        protocol: LABELLED,
+    },
+    Row {
+        building: "ilc20-site1",
+        split: "F=0.5",
+        survey_fraction: 0.5,
+        load: ilc20_site1,
+        protocol: LABELLED,
+    },
+    Row {
+        building: "ipin2023-t3",
+        split: "A520F-surveys",
+        survey_fraction: 1.0,
+        load: ipin2023_t3_a520f,
+        protocol: LABELLED,
+    },
+    Row {
+        building: "ipin2023-t3",
+        split: "G930F-surveys",
+        survey_fraction: 1.0,
+        load: ipin2023_t3_g930f,
+        protocol: LABELLED,
+    },
+    Row {
+        building: "ipin2023-t3",
+        split: "both-phones",
+        survey_fraction: 1.0,
+        load: ipin2023_t3_both,
+        protocol: LABELLED,
+    },
+];
+
+const LABELLED: Protocol = Protocol::Labelled;
+
+/// The survey walks the fraction leaves out, given back without labels.
+const REST_UNLABELLED: Protocol =
+    Protocol::WithoutLabels { rest: true, test_unlabelled: &[], test_labelled: &[] };
+
+/// The rows of a map learned from use (`waymark benchmark --learning`, docs/evidence.md#measured),
+/// after [`ROWS`] and not in the mean over buildings: the five floors with the survey walks
+/// F = 0.5 and 0.25 leave out given back without labels, and with the crowd protocol at F = 1;
+/// the museum surveyed with the SM-A520F and the SM-G930F's repetition 3 given without labels,
+/// and with labels (the baseline on the same test walks: the G930F's other walks).
+pub const LEARNING_ROWS: [Row; 5] = [
+    Row {
+        building: "ilc20-site1",
+        split: "F=0.5+rest-unlabelled",
+        survey_fraction: 0.5,
+        load: ilc20_site1,
+        protocol: REST_UNLABELLED,
+    },
+    Row {
+        building: "ilc20-site1",
+        split: "F=0.25+rest-unlabelled",
+        survey_fraction: 0.25,
+        load: ilc20_site1,
+        protocol: REST_UNLABELLED,
+    },
+    Row {
+        building: "ilc20-site1",
+        split: "F=1-crowd-2",
+        survey_fraction: 1.0,
+        load: ilc20_site1,
+        protocol: Protocol::Crowd(2),
+    },
+    Row {
+        building: "ipin2023-t3",
+        split: "A520F-surveys+G930F-rep3-unlabelled",
+        survey_fraction: 1.0,
+        load: ipin2023_t3_a520f,
+        protocol: Protocol::WithoutLabels { rest: false, test_unlabelled: &[3], test_labelled: &[] },
+    },
+    Row {
+        building: "ipin2023-t3",
+        split: "A520F-surveys+G930F-rep3-labelled",
+        survey_fraction: 1.0,
+        load: ipin2023_t3_a520f,
+        protocol: Protocol::WithoutLabels { rest: false, test_unlabelled: &[], test_labelled: &[3] },
+    },
 ];
 
 /// Resamples of the walk bootstrap. An SE needs a few hundred (Efron & Tibshirani, *An
@@ -212,6 +330,9 @@ pub struct RowReport {
     pub split: String,
     /// [`Row::survey_fraction`].
     pub survey_fraction: f64,
+    /// A row of a map learned from use ([`LEARNING_ROWS`]): not in the mean over buildings.
+    #[serde(default, skip_serializing_if = "std::ops::Not::not")]
+    pub learning: bool,
     /// Why the row was not evaluated (its data is absent); absent when it was.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub skipped: Option<String>,
@@ -263,6 +384,7 @@ impl RowReport {
             building: row.building.into(),
             split: row.split.into(),
             survey_fraction: row.survey_fraction,
+            learning: row.learning(),
             skipped: Some(reason),
             test_walks: 0,
             seconds: 0.0,
@@ -282,17 +404,36 @@ impl RowReport {
 /// the survey made the site with. `calibrating` ticks once per calibration step
 /// ([`calibration_steps`](waymark_survey::calibrate::calibration_steps)), `replaying` once per
 /// test walk. `started` is when the row began (its reading counts in [`RowReport::seconds`]).
+#[allow(clippy::too_many_arguments)]
 pub fn evaluate_row(
     row: &Row,
     floors: &[FloorData],
+    unlabelled: &[Trace],
     options: &EvalOptions,
     started: Instant,
     calibrating: &(dyn Fn() + Sync),
     replaying: &(dyn Fn() + Sync),
 ) -> Result<RowReport, EvalError> {
-    let (site, _, calibration) = survey_calibrated(floors, &options.calibration, calibrating)?;
-    let options = options.surveyed_with(&calibration);
-    let (configurations, walks) = evaluate_on(&Arc::new(site), floors, &options, replaying)?;
+    let (configurations, walks) = match row.protocol {
+        Protocol::Crowd(folds) => {
+            let crowd = evaluate_crowd(floors, options, folds, UnlabelledOptions::default(), calibrating)?;
+            (crowd.configurations, crowd.walks)
+        }
+        Protocol::WithoutLabels { .. } if !unlabelled.is_empty() => {
+            let (site, _, calibration, _) = survey_with_unlabelled(
+                floors,
+                unlabelled,
+                &options.calibration,
+                UnlabelledOptions::default(),
+                calibrating,
+            )?;
+            evaluate_on(&Arc::new(site), floors, &options.surveyed_with(&calibration), replaying)?
+        }
+        _ => {
+            let (site, _, calibration) = survey_calibrated(floors, &options.calibration, calibrating)?;
+            evaluate_on(&Arc::new(site), floors, &options.surveyed_with(&calibration), replaying)?
+        }
+    };
     let configurations = configurations
         .iter()
         .map(|(key, report)| {
@@ -305,6 +446,7 @@ pub fn evaluate_row(
         building: row.building.into(),
         split: row.split.into(),
         survey_fraction: row.survey_fraction,
+        learning: row.learning(),
         skipped: None,
         test_walks: walks.len(),
         seconds: started.elapsed().as_secs_f64(),
@@ -356,7 +498,7 @@ impl MeanFigures {
 /// The evaluated rows of `rows` (not skipped) by building, in name order.
 fn by_building(rows: &[RowReport]) -> BTreeMap<&str, Vec<&RowReport>> {
     let mut buildings: BTreeMap<&str, Vec<&RowReport>> = BTreeMap::new();
-    for row in rows.iter().filter(|r| r.skipped.is_none()) {
+    for row in rows.iter().filter(|r| r.skipped.is_none() && !r.learning) {
         buildings.entry(&row.building).or_default().push(row);
     }
     buildings
@@ -440,6 +582,7 @@ mod tests {
             building: building.into(),
             split: split.into(),
             survey_fraction: 1.0,
+            learning: false,
             skipped: None,
             test_walks: 10,
             seconds: 1.0,
@@ -648,10 +791,23 @@ mod tests {
     /// Row names are unique, and every survey fraction is one `--survey-fraction` accepts.
     #[test]
     fn the_rows_are_named_uniquely_with_valid_fractions() {
-        let mut names: Vec<String> = ROWS.iter().map(Row::name).collect();
+        let all: Vec<&Row> = ROWS.iter().chain(&LEARNING_ROWS).collect();
+        let mut names: Vec<String> = all.iter().map(|r| r.name()).collect();
         names.sort();
         names.dedup();
-        assert_eq!(names.len(), ROWS.len());
-        assert!(ROWS.iter().all(|r| r.survey_fraction > 0.0 && r.survey_fraction <= 1.0));
+        assert_eq!(names.len(), all.len());
+        assert!(all.iter().all(|r| r.survey_fraction > 0.0 && r.survey_fraction <= 1.0));
+        assert!(ROWS.iter().all(|r| !r.learning()) && LEARNING_ROWS.iter().all(Row::learning));
+    }
+
+    /// A row of a map learned from use is reported and never counts in the mean over buildings.
+    #[test]
+    fn learning_rows_stay_out_of_the_mean() {
+        let labelled = vec![row("a", "F=1", &[("forward-auto", 4.0, 0.1)])];
+        let mut learned = row("a", "F=0.5+rest-unlabelled", &[("forward-auto", 9.0, 0.1)]);
+        learned.learning = true;
+        let with = [labelled.clone(), vec![learned]].concat();
+        assert_eq!(building_mean(&with), building_mean(&labelled));
+        assert_eq!(building_mean(&with).0["forward-auto"].mean_m, 4.0);
     }
 }
