@@ -1334,10 +1334,40 @@ public protocol PositioningEngineProtocol: AnyObject, Sendable {
     func removeGeofence(id: String) throws  -> Bool
     
     /**
+     * Loads `site` (a site refitted from evidence, say) in place of the engine's own without
+     * ending the session (docs/evidence.md#loading-a-refitted-site): with the same states
+     * and zones the position, track and history carry on; otherwise the estimate starts
+     * afresh, keeping the motion, the phone's RSSI offset, the barometer and the geofences.
+     * Returns the evidence gathered on the old site and not taken yet. Throws as
+     * `withSite` does for a site the options do not fit, changing nothing.
+     */
+    func replaceSite(site: Site) throws  -> SessionEvidence?
+    
+    /**
+     * Starts gathering map evidence from this session's scans, for the app to upload to
+     * whoever refits the venue's site (docs/evidence.md#from-a-session): state indices and
+     * hashed transmitter ids, no time and no track (docs/privacy.md#evidence). Discards
+     * what was being gathered.
+     */
+    func startEvidence() throws 
+    
+    /**
+     * Stops gathering map evidence and discards what was gathered and not taken.
+     */
+    func stopEvidence() throws 
+    
+    /**
      * Calls `listener` with every position and status change until the returned subscription
      * is cancelled or dropped. Listeners run with no lock held, never two calls at once.
      */
     func subscribe(listener: PositionListener)  -> Subscription
+    
+    /**
+     * The map evidence gathered since `startEvidence` or the last take, as one walk, its
+     * bytes ready to upload (`waymark evidence merge` reads them); gathering goes on from
+     * nothing. `null` / `nil` when the engine is not gathering.
+     */
+    func takeEvidence() throws  -> SessionEvidence?
     
     /**
      * The most likely recent track, oldest first.
@@ -1798,6 +1828,49 @@ open func removeGeofence(id: String)throws  -> Bool  {
 }
     
     /**
+     * Loads `site` (a site refitted from evidence, say) in place of the engine's own without
+     * ending the session (docs/evidence.md#loading-a-refitted-site): with the same states
+     * and zones the position, track and history carry on; otherwise the estimate starts
+     * afresh, keeping the motion, the phone's RSSI offset, the barometer and the geofences.
+     * Returns the evidence gathered on the old site and not taken yet. Throws as
+     * `withSite` does for a site the options do not fit, changing nothing.
+     */
+open func replaceSite(site: Site)throws  -> SessionEvidence?  {
+    return try  FfiConverterOptionTypeSessionEvidence.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_replace_site(
+            self.uniffiCloneHandle(),
+        FfiConverterTypeSite_lower(site),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * Starts gathering map evidence from this session's scans, for the app to upload to
+     * whoever refits the venue's site (docs/evidence.md#from-a-session): state indices and
+     * hashed transmitter ids, no time and no track (docs/privacy.md#evidence). Discards
+     * what was being gathered.
+     */
+open func startEvidence()throws   {try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_start_evidence(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+    /**
+     * Stops gathering map evidence and discards what was gathered and not taken.
+     */
+open func stopEvidence()throws   {try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_stop_evidence(
+            self.uniffiCloneHandle(),uniffiCallStatus
+    )
+}
+}
+    
+    /**
      * Calls `listener` with every position and status change until the returned subscription
      * is cancelled or dropped. Listeners run with no lock held, never two calls at once.
      */
@@ -1807,6 +1880,20 @@ open func subscribe(listener: PositionListener) -> Subscription  {
     uniffi_waymark_fn_method_positioningengine_subscribe(
             self.uniffiCloneHandle(),
         FfiConverterTypePositionListener_lower(listener),uniffiCallStatus
+    )
+})
+}
+    
+    /**
+     * The map evidence gathered since `startEvidence` or the last take, as one walk, its
+     * bytes ready to upload (`waymark evidence merge` reads them); gathering goes on from
+     * nothing. `null` / `nil` when the engine is not gathering.
+     */
+open func takeEvidence()throws  -> SessionEvidence?  {
+    return try  FfiConverterOptionTypeSessionEvidence.lift(try rustCallWithError(FfiConverterTypePositioningError_lift) {
+        uniffiCallStatus in
+    uniffi_waymark_fn_method_positioningengine_take_evidence(
+            self.uniffiCloneHandle(),uniffiCallStatus
     )
 })
 }
@@ -4949,6 +5036,86 @@ public func FfiConverterTypeRouteProgress_lower(_ value: RouteProgress) -> RustB
 
 
 /**
+ * Map evidence a session gathered (`PositioningEngine.takeEvidence`,
+ * docs/evidence.md#from-a-session).
+ */
+public struct SessionEvidence: Equatable, Hashable {
+    /**
+     * The evidence file's bytes (docs/evidence.md#file-format), to upload as they are.
+     */
+    public var bytes: Data
+    /**
+     * Scans in it.
+     */
+    public var scans: UInt64
+    /**
+     * Accepted scans left out of it (their posterior could not be had or added).
+     */
+    public var scansDropped: UInt64
+
+    // Default memberwise initializers are never public by default, so we
+    // declare one manually.
+    public init(
+        /**
+         * The evidence file's bytes (docs/evidence.md#file-format), to upload as they are.
+         */bytes: Data, 
+        /**
+         * Scans in it.
+         */scans: UInt64, 
+        /**
+         * Accepted scans left out of it (their posterior could not be had or added).
+         */scansDropped: UInt64) {
+        self.bytes = bytes
+        self.scans = scans
+        self.scansDropped = scansDropped
+    }
+
+    
+
+    
+}
+
+#if compiler(>=6)
+extension SessionEvidence: Sendable {}
+#endif
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public struct FfiConverterTypeSessionEvidence: FfiConverterRustBuffer {
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SessionEvidence {
+        return
+            try SessionEvidence(
+                bytes: FfiConverterData.read(from: &buf), 
+                scans: FfiConverterUInt64.read(from: &buf), 
+                scansDropped: FfiConverterUInt64.read(from: &buf)
+        )
+    }
+
+    public static func write(_ value: SessionEvidence, into buf: inout [UInt8]) {
+        FfiConverterData.write(value.bytes, into: &buf)
+        FfiConverterUInt64.write(value.scans, into: &buf)
+        FfiConverterUInt64.write(value.scansDropped, into: &buf)
+    }
+}
+
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSessionEvidence_lift(_ buf: RustBuffer) throws -> SessionEvidence {
+    return try FfiConverterTypeSessionEvidence.lift(buf)
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
+public func FfiConverterTypeSessionEvidence_lower(_ value: SessionEvidence) -> RustBuffer {
+    return FfiConverterTypeSessionEvidence.lower(value)
+}
+
+
+/**
  * A point of the site's metric frame, m.
  */
 public struct SitePoint: Equatable, Hashable {
@@ -7460,6 +7627,30 @@ fileprivate struct FfiConverterOptionTypePositionEstimate: FfiConverterRustBuffe
 #if swift(>=5.8)
 @_documentation(visibility: private)
 #endif
+fileprivate struct FfiConverterOptionTypeSessionEvidence: FfiConverterRustBuffer {
+    typealias SwiftType = SessionEvidence?
+
+    public static func write(_ value: SwiftType, into buf: inout [UInt8]) {
+        guard let value = value else {
+            writeInt(&buf, Int8(0))
+            return
+        }
+        writeInt(&buf, Int8(1))
+        FfiConverterTypeSessionEvidence.write(value, into: &buf)
+    }
+
+    public static func read(from buf: inout (data: Data, offset: Data.Index)) throws -> SwiftType {
+        switch try readInt(&buf) as Int8 {
+        case 0: return nil
+        case 1: return try FfiConverterTypeSessionEvidence.read(from: &buf)
+        default: throw UniffiInternalError.unexpectedOptionalTag
+        }
+    }
+}
+
+#if swift(>=5.8)
+@_documentation(visibility: private)
+#endif
 fileprivate struct FfiConverterOptionTypeTrackPoint: FfiConverterRustBuffer {
     typealias SwiftType = TrackPoint?
 
@@ -8128,7 +8319,19 @@ private let initializationResult: InitializationResult = {
     if (uniffi_waymark_checksum_method_positioningengine_remove_geofence() != 35993) {
         return InitializationResult.apiChecksumMismatch
     }
+    if (uniffi_waymark_checksum_method_positioningengine_replace_site() != 60588) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_start_evidence() != 49882) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_stop_evidence() != 26952) {
+        return InitializationResult.apiChecksumMismatch
+    }
     if (uniffi_waymark_checksum_method_positioningengine_subscribe() != 5158) {
+        return InitializationResult.apiChecksumMismatch
+    }
+    if (uniffi_waymark_checksum_method_positioningengine_take_evidence() != 58424) {
         return InitializationResult.apiChecksumMismatch
     }
     if (uniffi_waymark_checksum_method_positioningengine_track() != 55593) {

@@ -476,9 +476,29 @@ RustBuffer uniffi_waymark_fn_method_positioningengine_push_scan(uint64_t ptr, Ru
 int8_t uniffi_waymark_fn_method_positioningengine_remove_geofence(uint64_t ptr, RustBuffer id, RustCallStatus *_Nonnull out_status
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_REPLACE_SITE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_REPLACE_SITE
+RustBuffer uniffi_waymark_fn_method_positioningengine_replace_site(uint64_t ptr, uint64_t site, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_START_EVIDENCE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_START_EVIDENCE
+void uniffi_waymark_fn_method_positioningengine_start_evidence(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_STOP_EVIDENCE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_STOP_EVIDENCE
+void uniffi_waymark_fn_method_positioningengine_stop_evidence(uint64_t ptr, RustCallStatus *_Nonnull out_status
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_SUBSCRIBE
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_SUBSCRIBE
 uint64_t uniffi_waymark_fn_method_positioningengine_subscribe(uint64_t ptr, uint64_t listener, RustCallStatus *_Nonnull out_status
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_TAKE_EVIDENCE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_TAKE_EVIDENCE
+RustBuffer uniffi_waymark_fn_method_positioningengine_take_evidence(uint64_t ptr, RustCallStatus *_Nonnull out_status
 );
 #endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_FN_METHOD_POSITIONINGENGINE_TRACK
@@ -1109,9 +1129,33 @@ uint16_t uniffi_waymark_checksum_method_positioningengine_remove_geofence(void
     
 );
 #endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_REPLACE_SITE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_REPLACE_SITE
+uint16_t uniffi_waymark_checksum_method_positioningengine_replace_site(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_START_EVIDENCE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_START_EVIDENCE
+uint16_t uniffi_waymark_checksum_method_positioningengine_start_evidence(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_STOP_EVIDENCE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_STOP_EVIDENCE
+uint16_t uniffi_waymark_checksum_method_positioningengine_stop_evidence(void
+    
+);
+#endif
 #ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_SUBSCRIBE
 #define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_SUBSCRIBE
 uint16_t uniffi_waymark_checksum_method_positioningengine_subscribe(void
+    
+);
+#endif
+#ifndef UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_TAKE_EVIDENCE
+#define UNIFFI_FFIDEF_UNIFFI_WAYMARK_CHECKSUM_METHOD_POSITIONINGENGINE_TAKE_EVIDENCE
+uint16_t uniffi_waymark_checksum_method_positioningengine_take_evidence(void
     
 );
 #endif
