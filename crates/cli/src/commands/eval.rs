@@ -144,34 +144,15 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             "--unlabelled-rest gives back the walks --survey-fraction leaves out: give it one below 1",
         );
     }
-    // The survey walks left out, without their labels, when they are given back.
-    let mut unlabelled: Vec<Trace> = Vec::new();
-    let floors: Vec<FloorData> = floors
-        .into_iter()
-        .map(|mut f| {
-            if args.unlabelled_rest {
-                let keep = calibrate::survey_subset(f.survey.len(), args.survey_fraction);
-                let dropped = f.survey.iter().enumerate().filter(|(i, _)| keep.binary_search(i).is_err());
-                unlabelled.extend(dropped.map(|(_, w)| Trace { waypoints: Vec::new(), ..w.clone() }));
-            }
-            f.keep_survey_fraction(args.survey_fraction);
-            // Test walks of the repetitions asked for move to the survey, with or without labels.
-            let chosen =
-                |reps: &[u32], t: &Trace| calibrate::repetition(&t.name).is_some_and(|r| reps.contains(&r));
-            let tests = std::mem::take(&mut f.test);
-            for trace in tests {
-                if chosen(&args.test_as_unlabelled, &trace) {
-                    unlabelled.push(Trace { waypoints: Vec::new(), ..trace });
-                } else if chosen(&args.test_as_labelled, &trace) {
-                    f.survey.push(trace);
-                } else {
-                    f.test.push(trace);
-                }
-            }
-            f
-        })
-        .collect();
-    let unlabelled_given = args.unlabelled_rest || !args.test_as_unlabelled.is_empty();
+    // The walks given without their labels: the survey walks left out, when they are given
+    // back, and the test walks of the repetitions asked for.
+    let given = evaluation::WithoutLabels {
+        rest: args.unlabelled_rest,
+        test_unlabelled: &args.test_as_unlabelled,
+        test_labelled: &args.test_as_labelled,
+    };
+    let (floors, unlabelled) = evaluation::split_without_labels(floors, args.survey_fraction, given);
+    let unlabelled_given = given.any();
     let mut options = EvalOptions { configurations: args.configurations.clone(), ..EvalOptions::default() };
     if let Some(unknown) = options.configurations.iter().find(|c| !CONFIGURATIONS.contains(&c.as_str())) {
         return fail(
