@@ -23,7 +23,8 @@ pub use report::{
     FloorReliabilityReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport, SparseScansReport,
 };
 pub use unlabelled::{
-    anchored_walk, survey_with_unlabelled, walk_evidence, EvidenceRound, UnlabelledOptions, ANCHOR_FLOOR_MASS,
+    anchored_walk, survey_with_evidence, survey_with_unlabelled, walk_evidence, EvidenceRound, UnlabelledOptions,
+    ANCHOR_FLOOR_MASS,
 };
 
 use crate::io::Trace;

@@ -11,13 +11,13 @@ use super::{
 use crate::io::ilc::Event;
 use crate::io::Trace;
 use crate::replay::replay;
-use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
+use crate::{PreparedSurvey, SurveyFits, SurveyOptions, SurveyReport};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::sync::Arc;
 use waymark_engine::evidence::{Evidence, TransmitterKey};
 use waymark_engine::radio::ScanHasher;
-use waymark_engine::site::Site;
+use waymark_engine::site::{Calibration, Site};
 use waymark_engine::{Engine, EngineConfig};
 
 /// Epochs a walk's smoother keeps: every epoch of a walk of hours at a scan a second, so that
@@ -209,14 +209,7 @@ pub fn survey_with_unlabelled(
     progress: &(dyn Fn() + Sync),
 ) -> Result<(Site, SurveyReport, CalibrationReport, Vec<EvidenceRound>), CalibrationError> {
     let (labelled, survey, report) = survey_calibrated(floors, options, progress)?;
-    let survey_options =
-        SurveyOptions { fingerprint_radius_m: report.fingerprint_radius_m, ..options.survey.clone() };
-    let weights: Vec<[Option<f64>; 2]> =
-        labelled.floors().iter().map(|f| [f.rssi_weight, f.rssi_weight_without_movement]).collect();
-    let calibration = *labelled.calibration();
-    let finish = |site: Site| -> Result<Site, CalibrationError> {
-        Ok(site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?)
-    };
+    let refit = Refit::of(&labelled, &report, options);
     let mut site = Arc::new(labelled);
     let mut history = Vec::new();
     let mut surveyed: Vec<FloorData> = floors.to_vec();
@@ -235,9 +228,9 @@ pub fn survey_with_unlabelled(
             }
         }
         let inputs = survey_inputs(&surveyed);
-        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &survey_options)?;
+        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &refit.survey_options)?;
         let (next, _) = prepared.assemble(&prepared.fit(&|_, _| true, None, options.threads))?;
-        let next = finish(next)?;
+        let next = refit.finish(next)?;
         history.push(EvidenceRound {
             walks: added as u64,
             site_states: next.states().len(),
@@ -247,7 +240,7 @@ pub fn survey_with_unlabelled(
     }
     if rounds.evidence_rounds > 0 {
         let inputs = survey_inputs(&surveyed);
-        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &survey_options)?;
+        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &refit.survey_options)?;
         let fits = prepared.fit(&|_, _| true, None, options.threads);
         for _ in 0..rounds.evidence_rounds {
             let walks: Vec<Result<Evidence, String>> =
@@ -259,19 +252,80 @@ pub fn survey_with_unlabelled(
                 let walk = walk.map_err(CalibrationError::Evidence)?;
                 evidence.merge(&walk).map_err(|e| CalibrationError::Evidence(e.to_string()))?;
             }
-            let refitted = prepared.refit(&fits, &site, &evidence).map_err(CalibrationError::Evidence)?;
-            let (next, _) = prepared.assemble(&refitted)?;
-            let next = finish(next)?;
-            history.push(EvidenceRound {
-                walks: evidence.walks(),
-                states: evidence.states_scanned(),
-                entries: evidence.heard_entries(),
-                bytes: evidence.to_bytes().len(),
-                site_states: next.states().len(),
-            });
+            let (next, round) = refit.round(&prepared, &fits, &site, &evidence)?;
+            history.push(round);
             site = Arc::new(next);
         }
     }
     let site = Arc::try_unwrap(site).unwrap_or_else(|shared| (*shared).clone());
     Ok((site, survey, report, history))
+}
+
+/// The site calibrated from `floors`' survey walks and refitted once with `evidence` gathered
+/// on it ([`walk_evidence`] per walk, merged): the distributed form of
+/// [`survey_with_unlabelled`] with no round of anchoring and one of soft evidence, which gives
+/// the same site when `evidence` is the merge of its walks' evidence (docs/evidence.md#at-scale).
+/// `Err` when the evidence is of another site. Returns the site, the labelled survey's reports
+/// and the round's.
+pub fn survey_with_evidence(
+    floors: &[FloorData],
+    evidence: &Evidence,
+    options: &CalibrationOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(Site, SurveyReport, CalibrationReport, EvidenceRound), CalibrationError> {
+    let (labelled, survey, report) = survey_calibrated(floors, options, progress)?;
+    let refit = Refit::of(&labelled, &report, options);
+    let inputs = survey_inputs(floors);
+    let prepared = PreparedSurvey::new("eval", &inputs, labelled.north(), &refit.survey_options)?;
+    let fits = prepared.fit(&|_, _| true, None, options.threads);
+    let (site, round) = refit.round(&prepared, &fits, &labelled, evidence)?;
+    Ok((site, survey, report, round))
+}
+
+/// What every site refitted from a labelled survey keeps of it: the survey at its calibrated
+/// fingerprint radius, and its calibration (γ, radius factors, radio fit floor) and floors' γ.
+struct Refit {
+    survey_options: SurveyOptions,
+    weights: Vec<[Option<f64>; 2]>,
+    calibration: Calibration,
+}
+
+impl Refit {
+    fn of(labelled: &Site, report: &CalibrationReport, options: &CalibrationOptions) -> Refit {
+        Refit {
+            survey_options: SurveyOptions {
+                fingerprint_radius_m: report.fingerprint_radius_m,
+                ..options.survey.clone()
+            },
+            weights: labelled.floors().iter().map(|f| [f.rssi_weight, f.rssi_weight_without_movement]).collect(),
+            calibration: *labelled.calibration(),
+        }
+    }
+
+    /// `site` with the labelled survey's calibration.
+    fn finish(&self, site: Site) -> Result<Site, CalibrationError> {
+        Ok(site.with_calibration(self.calibration)?.with_floor_rssi_weights(&self.weights)?)
+    }
+
+    /// One round of soft evidence: `fits` refitted with `evidence` gathered on `site`
+    /// ([`PreparedSurvey::refit`]), assembled and calibrated, and what the round gathered.
+    fn round(
+        &self,
+        prepared: &PreparedSurvey,
+        fits: &SurveyFits,
+        site: &Site,
+        evidence: &Evidence,
+    ) -> Result<(Site, EvidenceRound), CalibrationError> {
+        let refitted = prepared.refit(fits, site, evidence).map_err(CalibrationError::Evidence)?;
+        let (next, _) = prepared.assemble(&refitted)?;
+        let next = self.finish(next)?;
+        let round = EvidenceRound {
+            walks: evidence.walks(),
+            states: evidence.states_scanned(),
+            entries: evidence.heard_entries(),
+            bytes: evidence.to_bytes().len(),
+            site_states: next.states().len(),
+        };
+        Ok((next, round))
+    }
 }
