@@ -60,6 +60,10 @@ pub struct EvalArgs {
     /// With --unlabelled-rest: rounds of refitting with every scan's soft label after those.
     #[arg(long, default_value_t = 0)]
     evidence_rounds: usize,
+    /// With --evidence-rounds: the share of each scan's posterior its evidence keeps, most
+    /// probable states first (default: the survey's).
+    #[arg(long)]
+    evidence_mass: Option<f64>,
     /// γ of Hoang eq. 14; default: calibrated by the survey.
     #[arg(long)]
     gamma: Option<f64>,
@@ -210,6 +214,12 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     }
     if let Some(t) = args.threads {
         options.calibration.threads = t;
+    }
+    if let Some(q) = args.evidence_mass {
+        if !(q > 0.0 && q <= 1.0) {
+            return fail("eval", format!("--evidence-mass {q}: give a share above 0 and at most 1"));
+        }
+        options.calibration.evidence_mass = q;
     }
     if let Some(k) = args.habit_strength {
         options.calibration.engine.habits.strength = Some(k);

@@ -24,7 +24,7 @@ pub use report::{
 };
 pub use unlabelled::{
     anchored_walk, survey_with_evidence, survey_with_unlabelled, walk_evidence, EvidenceRound, UnlabelledOptions,
-    ANCHOR_FLOOR_MASS,
+    ANCHOR_FLOOR_MASS, EVIDENCE_POSTERIOR_MASS,
 };
 
 use crate::io::Trace;
@@ -85,6 +85,9 @@ pub struct CalibrationOptions {
     /// Whether the calibration chooses the fingerprint radius ([`FINGERPRINT_RADIUS_GRID`]);
     /// off: `survey.fingerprint_radius_m` as given.
     pub calibrate_fingerprint_radius: bool,
+    /// The share of each scan's posterior that map evidence keeps, its most probable states
+    /// first ([`walk_evidence`], [`EVIDENCE_POSTERIOR_MASS`]); 1 keeps all of it.
+    pub evidence_mass: f64,
 }
 
 impl Default for CalibrationOptions {
@@ -96,6 +99,7 @@ impl Default for CalibrationOptions {
             north: North::default(),
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             calibrate_fingerprint_radius: true,
+            evidence_mass: EVIDENCE_POSTERIOR_MASS,
         }
     }
 }

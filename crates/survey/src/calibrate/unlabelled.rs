@@ -59,8 +59,9 @@ fn replayed(site: &Arc<Site>, trace: &Trace, options: &CalibrationOptions) -> Re
 
 /// The map evidence of one walk on `site`: the walk replayed through the engine as `options`
 /// ship it, and each scan weighed by its posterior smoothed by the rest of the walk
-/// ([`Engine::smoothed_posteriors`]). The walk's waypoints and floor are not read. `Err` when
-/// the engine refuses the configuration.
+/// ([`Engine::smoothed_posteriors`]), its most probable states up to `options.evidence_mass`
+/// of it. The walk's waypoints and floor are not read. `Err` when the engine refuses the
+/// configuration.
 pub fn walk_evidence(
     site: &Arc<Site>,
     trace: &Trace,
@@ -91,9 +92,11 @@ pub fn walk_evidence(
     let engine = replayed(site, trace, options)?;
     let mut evidence = Evidence::new(site);
     let mut refused = None;
+    let mut kept = Vec::new();
     engine.smoothed_posteriors(|timestamp_ns, posterior| {
         if let Some((readings, radios)) = scans.get(&timestamp_ns) {
-            if let Err(e) = evidence.add_scan(posterior, readings, *radios) {
+            most_probable(posterior, options.evidence_mass, &mut kept);
+            if let Err(e) = evidence.add_scan(&kept, readings, *radios) {
                 refused = Some(e);
             }
         }
@@ -103,6 +106,36 @@ pub fn walk_evidence(
     }
     evidence.add_walk();
     Ok(evidence)
+}
+
+/// The share of a scan's posterior its map evidence keeps, its most probable states first:
+/// chosen on held-out survey walks (research/evidence-at-scale.md), as the least share whose
+/// evidence refits the site as well as the whole posterior does; the states it drops each
+/// add the scan's readings to their own fingerprints, at a weight too small to move them,
+/// and most of the evidence's bytes.
+pub const EVIDENCE_POSTERIOR_MASS: f64 = 0.9;
+
+/// `posterior`'s most probable states, fewest first whose probabilities sum to `mass` (all
+/// of them from 1 on), into `kept`: by probability, ties by state, so that the same posterior
+/// keeps the same states on every machine. Their probabilities are kept as they are, so a
+/// vague scan weighs less than a sure one.
+fn most_probable(posterior: &[(u32, f64)], mass: f64, kept: &mut Vec<(u32, f64)>) {
+    kept.clear();
+    kept.extend_from_slice(posterior);
+    if mass >= 1.0 {
+        return;
+    }
+    kept.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    let mut total = 0.0;
+    let mut keep = 0;
+    for &(_, p) in kept.iter() {
+        if total >= mass {
+            break;
+        }
+        total += p;
+        keep += 1;
+    }
+    kept.truncate(keep);
 }
 
 /// Where a walk without labels was at each epoch its posterior is sure of: the walk with
