@@ -64,6 +64,10 @@ pub struct EvalArgs {
     /// probable states first (default: the survey's).
     #[arg(long)]
     evidence_mass: Option<f64>,
+    /// With --evidence-rounds: the most states of each scan's posterior its evidence keeps,
+    /// most probable first, 0 for all (default: the survey's).
+    #[arg(long)]
+    evidence_states: Option<usize>,
     /// γ of Hoang eq. 14; default: calibrated by the survey.
     #[arg(long)]
     gamma: Option<f64>,
@@ -220,6 +224,9 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             return fail("eval", format!("--evidence-mass {q}: give a share above 0 and at most 1"));
         }
         options.calibration.evidence_mass = q;
+    }
+    if let Some(k) = args.evidence_states {
+        options.calibration.evidence_states = k;
     }
     if let Some(k) = args.habit_strength {
         options.calibration.engine.habits.strength = Some(k);

@@ -13,7 +13,7 @@ use crate::io::Trace;
 use crate::replay::replay;
 use crate::{PreparedSurvey, SurveyFits, SurveyOptions, SurveyReport};
 use serde::Serialize;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use waymark_engine::evidence::{Evidence, TransmitterKey};
 use waymark_engine::radio::ScanHasher;
@@ -60,7 +60,7 @@ fn replayed(site: &Arc<Site>, trace: &Trace, options: &CalibrationOptions) -> Re
 /// The map evidence of one walk on `site`: the walk replayed through the engine as `options`
 /// ship it, and each scan weighed by its posterior smoothed by the rest of the walk
 /// ([`Engine::smoothed_posteriors`]), its most probable states up to `options.evidence_mass`
-/// of it. The walk's waypoints and floor are not read. `Err` when the engine refuses the
+/// of it and `options.evidence_states` of them. The walk's waypoints and floor are not read. `Err` when the engine refuses the
 /// configuration.
 pub fn walk_evidence(
     site: &Arc<Site>,
@@ -70,6 +70,9 @@ pub fn walk_evidence(
     let replay_options = options.calibration_replay();
     // Each scan's readings by transmitter key, as the engine hashes them on a salted site.
     let mut hasher = options.engine.site_salt.clone().map(ScanHasher::new);
+    // Evidence of a transmitter the site does not hold refits nothing (`PreparedSurvey::refit`
+    // leaves it out): it is not written, though the scan still counts for its radio.
+    let held: HashSet<TransmitterKey> = site.radio().transmitters().iter().map(TransmitterKey::of).collect();
     let mut scans: HashMap<u64, KeyedScan> = HashMap::new();
     for event in trace.events(&replay_options.events) {
         let Event::Scan(scan) = event else { continue };
@@ -81,10 +84,11 @@ pub fn walk_evidence(
         let readings = scan
             .readings
             .iter()
-            .map(|r| {
+            .filter_map(|r| {
                 let ble = r.transmitter.is_ble();
                 radios[usize::from(ble)] = true;
-                (TransmitterKey::of(&r.transmitter), r.rssi_dbm)
+                let key = TransmitterKey::of(&r.transmitter);
+                held.contains(&key).then_some((key, r.rssi_dbm))
             })
             .collect();
         scans.insert(scan.timestamp_ns, (readings, radios));
@@ -95,7 +99,7 @@ pub fn walk_evidence(
     let mut kept = Vec::new();
     engine.smoothed_posteriors(|timestamp_ns, posterior| {
         if let Some((readings, radios)) = scans.get(&timestamp_ns) {
-            most_probable(posterior, options.evidence_mass, &mut kept);
+            most_probable(posterior, options.evidence_mass, options.evidence_states, &mut kept);
             if let Err(e) = evidence.add_scan(&kept, readings, *radios) {
                 refused = Some(e);
             }
@@ -108,27 +112,28 @@ pub fn walk_evidence(
     Ok(evidence)
 }
 
-/// The share of a scan's posterior its map evidence keeps, its most probable states first:
-/// chosen on held-out survey walks (research/evidence-at-scale.md), as the least share whose
-/// evidence refits the site as well as the whole posterior does; the states it drops each
-/// add the scan's readings to their own fingerprints, at a weight too small to move them,
-/// and most of the evidence's bytes.
-pub const EVIDENCE_POSTERIOR_MASS: f64 = 0.9;
+/// The most states of a scan's posterior its map evidence keeps, most probable first: one, its
+/// mode. Chosen on held-out survey walks (docs/evidence.md#at-scale): of the whole posterior,
+/// its most probable 90% or 50%, and its 4, 2 or 1 most probable states, the mode refitted
+/// the site of least held-out error, in the fewest bytes. The state keeps its probability, so
+/// a vague scan, whose mode holds little of it, weighs little.
+pub const EVIDENCE_STATES_PER_SCAN: usize = 1;
 
-/// `posterior`'s most probable states, fewest first whose probabilities sum to `mass` (all
-/// of them from 1 on), into `kept`: by probability, ties by state, so that the same posterior
-/// keeps the same states on every machine. Their probabilities are kept as they are, so a
-/// vague scan weighs less than a sure one.
-fn most_probable(posterior: &[(u32, f64)], mass: f64, kept: &mut Vec<(u32, f64)>) {
+/// `posterior`'s most probable states into `kept`: the fewest whose probabilities sum to
+/// `mass` (all of them from 1 on), at most `states` of them (0: no limit). By probability,
+/// ties by state, so that the same posterior keeps the same states on every machine. Their
+/// probabilities are kept as they are.
+fn most_probable(posterior: &[(u32, f64)], mass: f64, states: usize, kept: &mut Vec<(u32, f64)>) {
     kept.clear();
     kept.extend_from_slice(posterior);
-    if mass >= 1.0 {
+    if mass >= 1.0 && (states == 0 || states >= posterior.len()) {
         return;
     }
     kept.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    let limit = if states == 0 { kept.len() } else { states };
     let mut total = 0.0;
     let mut keep = 0;
-    for &(_, p) in kept.iter() {
+    for &(_, p) in kept.iter().take(limit) {
         if total >= mass {
             break;
         }
