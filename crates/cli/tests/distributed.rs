@@ -72,7 +72,14 @@ fn evidence_collected_per_walk_and_merged_refits_as_the_survey_does() {
     }
     ok(&["evidence", "merge", "--out", text(&at("pair.wmev")), text(&files[2]), text(&files[0])]);
     ok(&["evidence", "merge", "--out", text(&at("merged.wmev")), text(&at("pair.wmev")), text(&files[1])]);
-    let printed = ok(&["survey", text(&small), "--evidence", text(&at("merged.wmev")), "--out", text(&at("many.json"))]);
+    let printed = ok(&[
+        "survey",
+        text(&small),
+        "--evidence",
+        text(&at("merged.wmev")),
+        "--out",
+        text(&at("many.json")),
+    ]);
     assert!(printed.contains("map evidence of 3 walks"), "{printed}");
     let (one, many) = (std::fs::read(at("one.json")).unwrap(), std::fs::read(at("many.json")).unwrap());
     assert!(one == many, "the merged evidence's site differs from the survey's own");
@@ -80,10 +87,27 @@ fn evidence_collected_per_walk_and_merged_refits_as_the_survey_does() {
     assert_ne!(one, std::fs::read(&site0).unwrap());
 
     // One --out takes one walk; a walk that cannot be read writes nothing.
-    let out = waymark(&["evidence", "collect", "--site", text(&site0), "--out", text(&at("two.wmev")), unlabelled[0], unlabelled[1]]);
+    let out = waymark(&[
+        "evidence",
+        "collect",
+        "--site",
+        text(&site0),
+        "--out",
+        text(&at("two.wmev")),
+        unlabelled[0],
+        unlabelled[1],
+    ]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--out-dir"));
     let missing = at("missing.txt");
-    let out = waymark(&["evidence", "collect", "--site", text(&site0), "--out", text(&at("bad.wmev")), text(&missing)]);
+    let out = waymark(&[
+        "evidence",
+        "collect",
+        "--site",
+        text(&site0),
+        "--out",
+        text(&at("bad.wmev")),
+        text(&missing),
+    ]);
     assert!(!out.status.success());
     assert!(!at("bad.wmev").exists());
     // Evidence that is not an evidence file fails the survey before its calibration.

@@ -69,7 +69,9 @@ pub fn evidence(args: &EvidenceArgs) -> ExitCode {
     let result = match &args.command {
         EvidenceCommand::Collect { site, out, out_dir, unsurveyed_margin_m, threads, json, walks } => {
             match (out, out_dir) {
-                (Some(out), _) => collect(site, Destination::File(out), *unsurveyed_margin_m, *threads, *json, walks),
+                (Some(out), _) => {
+                    collect(site, Destination::File(out), *unsurveyed_margin_m, *threads, *json, walks)
+                }
                 (None, Some(dir)) => {
                     collect(site, Destination::Folder(dir), *unsurveyed_margin_m, *threads, *json, walks)
                 }
@@ -112,7 +114,10 @@ fn collect(
     let outs: Vec<PathBuf> = match to {
         Destination::File(out) if walks.len() == 1 => vec![out.to_path_buf()],
         Destination::File(_) => {
-            return Err(format!("--out takes one walk's evidence, {} walks given: use --out-dir", walks.len()))
+            return Err(format!(
+                "--out takes one walk's evidence, {} walks given: use --out-dir",
+                walks.len()
+            ))
         }
         Destination::Folder(dir) => {
             std::fs::create_dir_all(dir).map_err(|e| format!("cannot make {}: {e}", dir.display()))?;
@@ -125,7 +130,10 @@ fn collect(
                 .collect();
             let mut seen = std::collections::HashSet::new();
             if let Some(twice) = outs.iter().find(|o| !seen.insert(*o)) {
-                return Err(format!("two walks would write {}: give walk files of other names", twice.display()));
+                return Err(format!(
+                    "two walks would write {}: give walk files of other names",
+                    twice.display()
+                ));
             }
             outs
         }

@@ -4,8 +4,8 @@ use super::evidence::read_evidence;
 use crate::shared::{fail, print_calibration, progress_bar, write_site, SaltArgs};
 use std::path::PathBuf;
 use std::process::ExitCode;
-use waymark_survey::calibrate::{self, CalibrationOptions, WalkSplit};
 use waymark_engine::evidence::Evidence;
+use waymark_survey::calibrate::{self, CalibrationOptions, WalkSplit};
 use waymark_survey::io::Trace;
 
 #[derive(clap::Args)]

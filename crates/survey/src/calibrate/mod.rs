@@ -23,8 +23,8 @@ pub use report::{
     FloorReliabilityReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport, SparseScansReport,
 };
 pub use unlabelled::{
-    anchored_walk, survey_with_evidence, survey_with_unlabelled, walk_evidence, EvidenceRound, UnlabelledOptions,
-    ANCHOR_FLOOR_MASS, EVIDENCE_STATES_PER_SCAN,
+    anchored_walk, survey_with_evidence, survey_with_unlabelled, walk_evidence, EvidenceRound,
+    UnlabelledOptions, ANCHOR_FLOOR_MASS, EVIDENCE_STATES_PER_SCAN,
 };
 
 use crate::io::Trace;

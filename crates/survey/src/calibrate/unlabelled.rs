@@ -335,7 +335,11 @@ impl Refit {
                 fingerprint_radius_m: report.fingerprint_radius_m,
                 ..options.survey.clone()
             },
-            weights: labelled.floors().iter().map(|f| [f.rssi_weight, f.rssi_weight_without_movement]).collect(),
+            weights: labelled
+                .floors()
+                .iter()
+                .map(|f| [f.rssi_weight, f.rssi_weight_without_movement])
+                .collect(),
             calibration: *labelled.calibration(),
         }
     }
