@@ -19,6 +19,8 @@ struct Cli {
     command: Command,
 }
 
+// One command is parsed once per run: the size of its largest arguments (eval's) costs nothing.
+#[allow(clippy::large_enum_variant)]
 #[derive(Subcommand)]
 enum Command {
     /// Track random walks through a simulated office from raw accelerometer, gyroscope and
