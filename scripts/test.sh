@@ -97,6 +97,11 @@ tools_ready() {
 }
 cargo run --release -p waymark-cli --locked --quiet -- demo --json --walks 20
 
+# Map evidence made walk by walk on a Dask cluster and merged refits a site byte for byte as
+# one machine does (docs/evidence.md#at-scale); F1's walks, unpacked by the Rust tests above.
+step "Map evidence on a Dask LocalCluster (scripts/distributed/test.sh)"
+run bash scripts/distributed/test.sh "$target/release/waymark"
+
 # docs/results.md is generated from the committed JSON in docs/results/; a page that differs
 # from what the JSON makes fails here, with the command that regenerates it.
 step "docs/results.md is what docs/results/*.json makes (waymark results --check)"

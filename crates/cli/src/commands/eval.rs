@@ -65,6 +65,14 @@ pub struct EvalArgs {
     /// With --unlabelled-rest: rounds of refitting with every scan's soft label after those.
     #[arg(long, default_value_t = 0)]
     evidence_rounds: usize,
+    /// With --evidence-rounds: the share of each scan's posterior its evidence keeps, most
+    /// probable states first (default: the survey's).
+    #[arg(long)]
+    evidence_mass: Option<f64>,
+    /// With --evidence-rounds: the most states of each scan's posterior its evidence keeps,
+    /// most probable first, 0 for all (default: the survey's).
+    #[arg(long)]
+    evidence_states: Option<usize>,
     /// γ of Hoang eq. 14; default: calibrated by the survey.
     #[arg(long)]
     gamma: Option<f64>,
@@ -196,6 +204,15 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     }
     if let Some(t) = args.threads {
         options.calibration.threads = t;
+    }
+    if let Some(q) = args.evidence_mass {
+        if !(q > 0.0 && q <= 1.0) {
+            return fail("eval", format!("--evidence-mass {q}: give a share above 0 and at most 1"));
+        }
+        options.calibration.evidence_mass = q;
+    }
+    if let Some(k) = args.evidence_states {
+        options.calibration.evidence_states = k;
     }
     if let Some(k) = args.habit_strength {
         options.calibration.engine.habits.strength = Some(k);

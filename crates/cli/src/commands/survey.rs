@@ -1,8 +1,10 @@
 //! `waymark survey`: a site file from recorded survey walks, calibrated on them.
 
+use super::evidence::read_evidence;
 use crate::shared::{fail, print_calibration, progress_bar, write_site, SaltArgs};
 use std::path::PathBuf;
 use std::process::ExitCode;
+use waymark_engine::evidence::Evidence;
 use waymark_survey::calibrate::{self, CalibrationOptions, WalkSplit};
 use waymark_survey::io::Trace;
 
@@ -40,6 +42,19 @@ pub struct SurveyArgs {
     /// walks (docs/evidence.md#refitting).
     #[arg(long, num_args = 1..)]
     unlabelled: Vec<PathBuf>,
+    /// With --unlabelled: rounds of anchoring the walks where the site is sure of them and
+    /// surveying them with the labelled ones.
+    #[arg(long, default_value_t = 1, requires = "unlabelled")]
+    anchor_rounds: usize,
+    /// With --unlabelled: rounds of refitting with every scan's soft label after those.
+    #[arg(long, default_value_t = 0, requires = "unlabelled")]
+    evidence_rounds: usize,
+    /// Map evidence files (`waymark evidence collect --site` of this survey's site without
+    /// them): merged, they refit the labelled survey once, as `--unlabelled` with
+    /// `--anchor-rounds 0 --evidence-rounds 1` refits it with their walks
+    /// (docs/evidence.md#at-scale).
+    #[arg(long, num_args = 1.., conflicts_with = "unlabelled")]
+    evidence: Vec<PathBuf>,
     #[command(flatten)]
     salt: SaltArgs,
 }
@@ -76,8 +91,7 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
             );
         }
     }
-    let mut options = CalibrationOptions::default();
-    options.survey.unsurveyed_margin_m = args.unsurveyed_margin_m;
+    let options = calibration_options(args.unsurveyed_margin_m);
     let bar = progress_bar(
         false,
         calibrate::calibration_steps(&floors, &options) as u64,
@@ -90,10 +104,32 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
             Err(e) => return fail("survey", e),
         }
     }
-    let surveyed = if unlabelled.is_empty() {
+    // The evidence files, merged: read before the calibration's minutes, so a bad file fails at once.
+    let mut evidence: Option<Evidence> = None;
+    for path in &args.evidence {
+        let read = match read_evidence(path) {
+            Ok(e) => e,
+            Err(e) => return fail("survey", e),
+        };
+        match &mut evidence {
+            None => evidence = Some(read),
+            Some(merged) => {
+                if let Err(e) = merged.merge(&read) {
+                    return fail("survey", format!("{}: {e}", path.display()));
+                }
+            }
+        }
+    }
+    let surveyed = if let Some(evidence) = &evidence {
+        calibrate::survey_with_evidence(&floors, evidence, &options, &|| bar.inc(1))
+            .map(|(a, b, c, round)| (a, b, c, vec![round]))
+    } else if unlabelled.is_empty() {
         calibrate::survey_calibrated(&floors, &options, &|| bar.inc(1)).map(|(a, b, c)| (a, b, c, Vec::new()))
     } else {
-        let rounds = calibrate::UnlabelledOptions::default();
+        let rounds = calibrate::UnlabelledOptions {
+            anchor_rounds: args.anchor_rounds,
+            evidence_rounds: args.evidence_rounds,
+        };
         calibrate::survey_with_unlabelled(&floors, &unlabelled, &options, rounds, &|| bar.inc(1))
     };
     let (site, report, calibration, rounds) = match surveyed {
@@ -101,13 +137,20 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         Err(e) => return fail("survey", e),
     };
     bar.finish_and_clear();
-    for round in &rounds {
-        println!(
-            "{} of {} walks without labels anchored and surveyed: {} states",
-            round.walks,
-            unlabelled.len(),
-            round.site_states
-        );
+    for (k, round) in rounds.iter().enumerate() {
+        if evidence.is_none() && k < args.anchor_rounds {
+            println!(
+                "{} of {} walks without labels anchored and surveyed: {} states",
+                round.walks,
+                unlabelled.len(),
+                round.site_states
+            );
+        } else {
+            println!(
+                "map evidence of {} walks at {} states ({} entries, {} bytes) refitted the site: {} states",
+                round.walks, round.states, round.entries, round.bytes, round.site_states
+            );
+        }
     }
     let site = site.with_name(&args.name);
     let site = match args.salt.salt() {
@@ -173,4 +216,12 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         args.out.display()
     );
     ExitCode::SUCCESS
+}
+
+/// The calibration, engine and replay options `waymark survey` surveys with: what `waymark
+/// evidence collect` must replay walks with for its evidence to be the survey's own.
+pub fn calibration_options(unsurveyed_margin_m: f64) -> CalibrationOptions {
+    let mut options = CalibrationOptions::default();
+    options.survey.unsurveyed_margin_m = unsurveyed_margin_m;
+    options
 }

@@ -23,7 +23,8 @@ pub use report::{
     FloorReliabilityReport, GammaPoint, MotionSummary, OffMapBand, OffMapReport, SparseScansReport,
 };
 pub use unlabelled::{
-    anchored_walk, survey_with_unlabelled, walk_evidence, EvidenceRound, UnlabelledOptions, ANCHOR_FLOOR_MASS,
+    anchored_walk, survey_with_evidence, survey_with_unlabelled, walk_evidence, EvidenceRound,
+    UnlabelledOptions, ANCHOR_FLOOR_MASS, EVIDENCE_STATES_PER_SCAN,
 };
 
 use crate::io::Trace;
@@ -84,6 +85,12 @@ pub struct CalibrationOptions {
     /// Whether the calibration chooses the fingerprint radius ([`FINGERPRINT_RADIUS_GRID`]);
     /// off: `survey.fingerprint_radius_m` as given.
     pub calibrate_fingerprint_radius: bool,
+    /// The share of each scan's posterior that map evidence keeps, its most probable states
+    /// first ([`walk_evidence`]); 1 keeps all of it.
+    pub evidence_mass: f64,
+    /// The most states of each scan's posterior that map evidence keeps, most probable first
+    /// ([`walk_evidence`], [`EVIDENCE_STATES_PER_SCAN`]); 0 keeps every state.
+    pub evidence_states: usize,
 }
 
 impl Default for CalibrationOptions {
@@ -95,6 +102,8 @@ impl Default for CalibrationOptions {
             north: North::default(),
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
             calibrate_fingerprint_radius: true,
+            evidence_mass: 1.0,
+            evidence_states: EVIDENCE_STATES_PER_SCAN,
         }
     }
 }

@@ -11,13 +11,13 @@ use super::{
 use crate::io::ilc::Event;
 use crate::io::Trace;
 use crate::replay::replay;
-use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
+use crate::{PreparedSurvey, SurveyFits, SurveyOptions, SurveyReport};
 use serde::Serialize;
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
 use waymark_engine::evidence::{Evidence, TransmitterKey};
 use waymark_engine::radio::ScanHasher;
-use waymark_engine::site::Site;
+use waymark_engine::site::{Calibration, Site};
 use waymark_engine::{Engine, EngineConfig};
 
 /// Epochs a walk's smoother keeps: every epoch of a walk of hours at a scan a second, so that
@@ -59,8 +59,9 @@ fn replayed(site: &Arc<Site>, trace: &Trace, options: &CalibrationOptions) -> Re
 
 /// The map evidence of one walk on `site`: the walk replayed through the engine as `options`
 /// ship it, and each scan weighed by its posterior smoothed by the rest of the walk
-/// ([`Engine::smoothed_posteriors`]). The walk's waypoints and floor are not read. `Err` when
-/// the engine refuses the configuration.
+/// ([`Engine::smoothed_posteriors`]), its most probable states up to `options.evidence_mass`
+/// of it and `options.evidence_states` of them. The walk's waypoints and floor are not read. `Err` when the engine refuses the
+/// configuration.
 pub fn walk_evidence(
     site: &Arc<Site>,
     trace: &Trace,
@@ -69,6 +70,9 @@ pub fn walk_evidence(
     let replay_options = options.calibration_replay();
     // Each scan's readings by transmitter key, as the engine hashes them on a salted site.
     let mut hasher = options.engine.site_salt.clone().map(ScanHasher::new);
+    // Evidence of a transmitter the site does not hold refits nothing (`PreparedSurvey::refit`
+    // leaves it out): it is not written, though the scan still counts for its radio.
+    let held: HashSet<TransmitterKey> = site.radio().transmitters().iter().map(TransmitterKey::of).collect();
     let mut scans: HashMap<u64, KeyedScan> = HashMap::new();
     for event in trace.events(&replay_options.events) {
         let Event::Scan(scan) = event else { continue };
@@ -80,10 +84,11 @@ pub fn walk_evidence(
         let readings = scan
             .readings
             .iter()
-            .map(|r| {
+            .filter_map(|r| {
                 let ble = r.transmitter.is_ble();
                 radios[usize::from(ble)] = true;
-                (TransmitterKey::of(&r.transmitter), r.rssi_dbm)
+                let key = TransmitterKey::of(&r.transmitter);
+                held.contains(&key).then_some((key, r.rssi_dbm))
             })
             .collect();
         scans.insert(scan.timestamp_ns, (readings, radios));
@@ -91,9 +96,11 @@ pub fn walk_evidence(
     let engine = replayed(site, trace, options)?;
     let mut evidence = Evidence::new(site);
     let mut refused = None;
+    let mut kept = Vec::new();
     engine.smoothed_posteriors(|timestamp_ns, posterior| {
         if let Some((readings, radios)) = scans.get(&timestamp_ns) {
-            if let Err(e) = evidence.add_scan(posterior, readings, *radios) {
+            most_probable(posterior, options.evidence_mass, options.evidence_states, &mut kept);
+            if let Err(e) = evidence.add_scan(&kept, readings, *radios) {
                 refused = Some(e);
             }
         }
@@ -103,6 +110,37 @@ pub fn walk_evidence(
     }
     evidence.add_walk();
     Ok(evidence)
+}
+
+/// The most states of a scan's posterior its map evidence keeps, most probable first: one, its
+/// mode. Chosen on held-out survey walks (docs/evidence.md#at-scale): of the whole posterior,
+/// its most probable 90% or 50%, and its 4, 2 or 1 most probable states, the mode refitted
+/// the site of least held-out error, in the fewest bytes. The state keeps its probability, so
+/// a vague scan, whose mode holds little of it, weighs little.
+pub const EVIDENCE_STATES_PER_SCAN: usize = 1;
+
+/// `posterior`'s most probable states into `kept`: the fewest whose probabilities sum to
+/// `mass` (all of them from 1 on), at most `states` of them (0: no limit). By probability,
+/// ties by state, so that the same posterior keeps the same states on every machine. Their
+/// probabilities are kept as they are.
+fn most_probable(posterior: &[(u32, f64)], mass: f64, states: usize, kept: &mut Vec<(u32, f64)>) {
+    kept.clear();
+    kept.extend_from_slice(posterior);
+    if mass >= 1.0 && (states == 0 || states >= posterior.len()) {
+        return;
+    }
+    kept.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    let limit = if states == 0 { kept.len() } else { states };
+    let mut total = 0.0;
+    let mut keep = 0;
+    for &(_, p) in kept.iter().take(limit) {
+        if total >= mass {
+            break;
+        }
+        total += p;
+        keep += 1;
+    }
+    kept.truncate(keep);
 }
 
 /// Where a walk without labels was at each epoch its posterior is sure of: the walk with
@@ -209,14 +247,7 @@ pub fn survey_with_unlabelled(
     progress: &(dyn Fn() + Sync),
 ) -> Result<(Site, SurveyReport, CalibrationReport, Vec<EvidenceRound>), CalibrationError> {
     let (labelled, survey, report) = survey_calibrated(floors, options, progress)?;
-    let survey_options =
-        SurveyOptions { fingerprint_radius_m: report.fingerprint_radius_m, ..options.survey.clone() };
-    let weights: Vec<[Option<f64>; 2]> =
-        labelled.floors().iter().map(|f| [f.rssi_weight, f.rssi_weight_without_movement]).collect();
-    let calibration = *labelled.calibration();
-    let finish = |site: Site| -> Result<Site, CalibrationError> {
-        Ok(site.with_calibration(calibration)?.with_floor_rssi_weights(&weights)?)
-    };
+    let refit = Refit::of(&labelled, &report, options);
     let mut site = Arc::new(labelled);
     let mut history = Vec::new();
     let mut surveyed: Vec<FloorData> = floors.to_vec();
@@ -235,9 +266,9 @@ pub fn survey_with_unlabelled(
             }
         }
         let inputs = survey_inputs(&surveyed);
-        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &survey_options)?;
+        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &refit.survey_options)?;
         let (next, _) = prepared.assemble(&prepared.fit(&|_, _| true, None, options.threads))?;
-        let next = finish(next)?;
+        let next = refit.finish(next)?;
         history.push(EvidenceRound {
             walks: added as u64,
             site_states: next.states().len(),
@@ -247,7 +278,7 @@ pub fn survey_with_unlabelled(
     }
     if rounds.evidence_rounds > 0 {
         let inputs = survey_inputs(&surveyed);
-        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &survey_options)?;
+        let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &refit.survey_options)?;
         let fits = prepared.fit(&|_, _| true, None, options.threads);
         for _ in 0..rounds.evidence_rounds {
             let walks: Vec<Result<Evidence, String>> =
@@ -259,19 +290,109 @@ pub fn survey_with_unlabelled(
                 let walk = walk.map_err(CalibrationError::Evidence)?;
                 evidence.merge(&walk).map_err(|e| CalibrationError::Evidence(e.to_string()))?;
             }
-            let refitted = prepared.refit(&fits, &site, &evidence).map_err(CalibrationError::Evidence)?;
-            let (next, _) = prepared.assemble(&refitted)?;
-            let next = finish(next)?;
-            history.push(EvidenceRound {
-                walks: evidence.walks(),
-                states: evidence.states_scanned(),
-                entries: evidence.heard_entries(),
-                bytes: evidence.to_bytes().len(),
-                site_states: next.states().len(),
-            });
+            let (next, round) = refit.round(&prepared, &fits, &site, &evidence)?;
+            history.push(round);
             site = Arc::new(next);
         }
     }
     let site = Arc::try_unwrap(site).unwrap_or_else(|shared| (*shared).clone());
     Ok((site, survey, report, history))
+}
+
+/// The site calibrated from `floors`' survey walks and refitted once with `evidence` gathered
+/// on it ([`walk_evidence`] per walk, merged): the distributed form of
+/// [`survey_with_unlabelled`] with no round of anchoring and one of soft evidence, which gives
+/// the same site when `evidence` is the merge of its walks' evidence (docs/evidence.md#at-scale).
+/// `Err` when the evidence is of another site. Returns the site, the labelled survey's reports
+/// and the round's.
+pub fn survey_with_evidence(
+    floors: &[FloorData],
+    evidence: &Evidence,
+    options: &CalibrationOptions,
+    progress: &(dyn Fn() + Sync),
+) -> Result<(Site, SurveyReport, CalibrationReport, EvidenceRound), CalibrationError> {
+    let (labelled, survey, report) = survey_calibrated(floors, options, progress)?;
+    let refit = Refit::of(&labelled, &report, options);
+    let inputs = survey_inputs(floors);
+    let prepared = PreparedSurvey::new("eval", &inputs, labelled.north(), &refit.survey_options)?;
+    let fits = prepared.fit(&|_, _| true, None, options.threads);
+    let (site, round) = refit.round(&prepared, &fits, &labelled, evidence)?;
+    Ok((site, survey, report, round))
+}
+
+/// What every site refitted from a labelled survey keeps of it: the survey at its calibrated
+/// fingerprint radius, and its calibration (γ, radius factors, radio fit floor) and floors' γ.
+struct Refit {
+    survey_options: SurveyOptions,
+    weights: Vec<[Option<f64>; 2]>,
+    calibration: Calibration,
+}
+
+impl Refit {
+    fn of(labelled: &Site, report: &CalibrationReport, options: &CalibrationOptions) -> Refit {
+        Refit {
+            survey_options: SurveyOptions {
+                fingerprint_radius_m: report.fingerprint_radius_m,
+                ..options.survey.clone()
+            },
+            weights: labelled
+                .floors()
+                .iter()
+                .map(|f| [f.rssi_weight, f.rssi_weight_without_movement])
+                .collect(),
+            calibration: *labelled.calibration(),
+        }
+    }
+
+    /// `site` with the labelled survey's calibration.
+    fn finish(&self, site: Site) -> Result<Site, CalibrationError> {
+        Ok(site.with_calibration(self.calibration)?.with_floor_rssi_weights(&self.weights)?)
+    }
+
+    /// One round of soft evidence: `fits` refitted with `evidence` gathered on `site`
+    /// ([`PreparedSurvey::refit`]), assembled and calibrated, and what the round gathered.
+    fn round(
+        &self,
+        prepared: &PreparedSurvey,
+        fits: &SurveyFits,
+        site: &Site,
+        evidence: &Evidence,
+    ) -> Result<(Site, EvidenceRound), CalibrationError> {
+        let refitted = prepared.refit(fits, site, evidence).map_err(CalibrationError::Evidence)?;
+        let (next, _) = prepared.assemble(&refitted)?;
+        let next = self.finish(next)?;
+        let round = EvidenceRound {
+            walks: evidence.walks(),
+            states: evidence.states_scanned(),
+            entries: evidence.heard_entries(),
+            bytes: evidence.to_bytes().len(),
+            site_states: next.states().len(),
+        };
+        Ok((next, round))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::most_probable;
+
+    #[test]
+    fn a_scan_keeps_its_most_probable_states_at_their_probabilities() {
+        let posterior = [(7, 0.1), (3, 0.4), (9, 0.2), (1, 0.2), (4, 0.1)];
+        let mut kept = Vec::new();
+        // The mode alone, at its probability.
+        most_probable(&posterior, 1.0, 1, &mut kept);
+        assert_eq!(kept, [(3, 0.4)]);
+        // Two states: a tie at 0.2 goes to the lower state, on every machine.
+        most_probable(&posterior, 1.0, 2, &mut kept);
+        assert_eq!(kept, [(3, 0.4), (1, 0.2)]);
+        // The fewest holding 70% of the mass, however many states that takes.
+        most_probable(&posterior, 0.7, 0, &mut kept);
+        assert_eq!(kept, [(3, 0.4), (1, 0.2), (9, 0.2)]);
+        // No limit: the posterior as it is.
+        most_probable(&posterior, 1.0, 0, &mut kept);
+        assert_eq!(kept, posterior);
+        most_probable(&[], 1.0, 1, &mut kept);
+        assert!(kept.is_empty());
+    }
 }
