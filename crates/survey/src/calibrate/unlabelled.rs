@@ -11,7 +11,7 @@ use super::{
 use crate::io::ilc::Event;
 use crate::io::Trace;
 use crate::replay::replay;
-use crate::{PreparedSurvey, SurveyOptions, SurveyReport};
+use crate::{PreparedSurvey, SurveyOptions, SurveyReport, REPLACE_RULE};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -40,6 +40,10 @@ pub struct EvidenceRound {
     pub bytes: usize,
     /// States of the refitted site.
     pub site_states: usize,
+    /// What the anchored walks replaced of the labelled fingerprints they contradict
+    /// ([`UnlabelledOptions::replace_contradicted`]; zero when off, and in a round of soft
+    /// evidence).
+    pub replaced: crate::Replaced,
 }
 
 /// The engine as `options` ship it after replaying `trace` on `site`, its smoother holding
@@ -184,12 +188,16 @@ pub struct UnlabelledOptions {
     /// Rounds of refitting with every scan's soft label after those ([`walk_evidence`],
     /// [`PreparedSurvey::refit`]).
     pub evidence_rounds: usize,
+    /// Whether the anchored walks replace the labelled fingerprints they contradict
+    /// ([`PreparedSurvey::replace_contradicted`] by [`REPLACE_RULE`]): the radio changed after
+    /// the survey.
+    pub replace_contradicted: bool,
 }
 
 impl Default for UnlabelledOptions {
     /// One round of anchoring, none of soft evidence (docs/evidence.md#measured).
     fn default() -> Self {
-        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0 }
+        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0, replace_contradicted: false }
     }
 }
 
@@ -236,11 +244,20 @@ pub fn survey_with_unlabelled(
         }
         let inputs = survey_inputs(&surveyed);
         let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &survey_options)?;
-        let (next, _) = prepared.assemble(&prepared.fit(&|_, _| true, None, options.threads))?;
+        let fits = prepared.fit(&|_, _| true, None, options.threads);
+        // The anchored walks follow each floor's labelled ones (`surveyed` above).
+        let newer = |f: usize, w: usize| w >= floors[f].survey.len();
+        let (fits, replaced) = if rounds.replace_contradicted {
+            prepared.replace_contradicted(&fits, &newer, &REPLACE_RULE)
+        } else {
+            (fits, crate::Replaced::default())
+        };
+        let (next, _) = prepared.assemble(&fits)?;
         let next = finish(next)?;
         history.push(EvidenceRound {
             walks: added as u64,
             site_states: next.states().len(),
+            replaced,
             ..EvidenceRound::default()
         });
         site = Arc::new(next);
@@ -268,6 +285,7 @@ pub fn survey_with_unlabelled(
                 entries: evidence.heard_entries(),
                 bytes: evidence.to_bytes().len(),
                 site_states: next.states().len(),
+                replaced: crate::Replaced::default(),
             });
             site = Arc::new(next);
         }
