@@ -18,7 +18,7 @@ use waymark_survey::calibrate::{
 };
 use waymark_survey::io::{Trace, Waypoint};
 use waymark_survey::scoring::Metrics;
-use waymark_survey::Replaced;
+use waymark_survey::{ReplaceRule, Replaced, REPLACE_RULE};
 
 /// Why the experiment could not run.
 #[derive(Debug, thiserror::Error)]
@@ -59,6 +59,10 @@ pub struct DriftExperiment {
     pub first_seed: u64,
     /// Seeds, each a new office, drift and set of walks.
     pub seeds: u64,
+    /// Rounds of anchoring (`UnlabelledOptions::anchor_rounds`).
+    pub anchor_rounds: usize,
+    /// The rule of `refit-replace`.
+    pub rule: ReplaceRule,
     /// Worker threads.
     #[serde(skip)]
     pub threads: usize,
@@ -74,6 +78,8 @@ impl Default for DriftExperiment {
             walk_length_m: 150.0,
             first_seed: 0,
             seeds: 5,
+            anchor_rounds: UnlabelledOptions::default().anchor_rounds,
+            rule: REPLACE_RULE,
             threads: std::thread::available_parallelism().map_or(1, |n| n.get()),
         }
     }
@@ -236,7 +242,11 @@ pub fn run_seed(x: &DriftExperiment, seed: u64) -> Result<DriftRun, DriftExperim
     let mut anchored = 0;
     let mut replaced = Replaced::default();
     for (arm, replace_contradicted) in [("refit", false), ("refit-replace", true)] {
-        let rounds = UnlabelledOptions { replace_contradicted, ..UnlabelledOptions::default() };
+        let rounds = UnlabelledOptions {
+            replace: replace_contradicted.then_some(x.rule),
+            anchor_rounds: x.anchor_rounds,
+            ..UnlabelledOptions::default()
+        };
         let (site, _, calibration, history) =
             survey_with_unlabelled(&stale_floors, &unlabelled, &options.calibration, rounds, &|| ())?;
         anchored = history.iter().map(|r| r.walks).max().unwrap_or(0);

@@ -232,7 +232,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             calibrate::UnlabelledOptions {
                 anchor_rounds: args.anchor_rounds,
                 evidence_rounds: args.evidence_rounds,
-                replace_contradicted: args.replace_contradicted,
+                replace: args.replace_contradicted.then_some(waymark_survey::REPLACE_RULE),
             },
             &|| bar.inc(1),
         )

@@ -166,7 +166,15 @@ pub fn simulate(args: &SimulateArgs) -> ExitCode {
 
 fn drift(args: &SimulateArgs) -> ExitCode {
     use waymark_eval::drift::{self, DriftExperiment, ARMS};
-    let defaults = DriftExperiment::default();
+    let mut defaults = DriftExperiment::default();
+    // Exploration only (not documented): the rule's and the rounds' alternatives.
+    if let Ok(v) = std::env::var("WAYMARK_DRIFT_EXPLORE") {
+        let v: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
+        if let [z, spreads, min, p, rounds] = v[..] {
+            defaults.rule = waymark_survey::ReplaceRule { z, spreads, min_newer_scans: min as usize, vanished_p: p };
+            defaults.anchor_rounds = rounds as usize;
+        }
+    }
     let config = DriftExperiment {
         share: args.share,
         unlabelled_walks: args.unlabelled_walks,

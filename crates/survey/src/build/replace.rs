@@ -18,6 +18,10 @@ pub struct ReplaceRule {
     pub spreads: f64,
     /// ... with at least this many newer scans at the state.
     pub min_newer_scans: usize,
+    /// A transmitter the labelled scans heard in a share p of theirs and none of the n newer
+    /// scans heard is dropped from every state when (1 - p)ⁿ, the chance of that silence were
+    /// it still there and the newer walks went where the labelled ones did, is below this.
+    pub vanished_p: f64,
 }
 
 /// z = 3.29: a two-sided test at α = 0.001. A site has some 10⁴-10⁶ (state, transmitter)
@@ -29,7 +33,8 @@ pub struct ReplaceRule {
 /// is trained by about two walking seconds of scans either side (the fingerprint radius), so
 /// five is one pass of a walker at a scan a second. The rule's effect is measured on the
 /// simulated drift and the real floors in docs/evidence.md#drift.
-pub const REPLACE_RULE: ReplaceRule = ReplaceRule { z: 3.29, spreads: 2.0, min_newer_scans: 5 };
+/// The silence of a vanished transmitter is judged at the same α = 0.001.
+pub const REPLACE_RULE: ReplaceRule = ReplaceRule { z: 3.29, spreads: 2.0, min_newer_scans: 5, vanished_p: 0.001 };
 
 /// What [`PreparedSurvey::replace_contradicted`] changed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -40,6 +45,8 @@ pub struct Replaced {
     pub replaced: usize,
     /// Of those, pairs the newer scans never hear: the transmitter is dropped there.
     pub dropped: usize,
+    /// Transmitters dropped from every state: the newer scans never hear them anywhere.
+    pub vanished: usize,
 }
 
 /// Mean and variance (population) of `v`.
@@ -86,6 +93,43 @@ impl PreparedSurvey<'_> {
         let fit = build.stored_fit();
         let mut out = fits.clone();
         let mut counts = Replaced::default();
+        // Transmitters the newer walks never hear, against how often the labelled ones did.
+        let (mut old_scans, mut new_scans) = (0usize, 0usize);
+        let mut old_heard: BTreeMap<u32, usize> = BTreeMap::new();
+        let mut new_heard: BTreeSet<u32> = BTreeSet::new();
+        for (f, floor) in self.floors.iter().enumerate() {
+            for (w, walk) in floor.walks.iter().enumerate().filter(|(w, _)| fits.kept[f][*w]) {
+                let recent = newer(f, w);
+                for scan in &walk.scans {
+                    if recent {
+                        new_scans += 1;
+                        new_heard.extend(scan.iter().filter(|r| r.1 > clip).map(|r| r.0));
+                    } else {
+                        old_scans += 1;
+                        let mut heard: Vec<u32> = scan.iter().filter(|r| r.1 > clip).map(|r| r.0).collect();
+                        heard.sort_unstable();
+                        heard.dedup();
+                        for t in heard {
+                            *old_heard.entry(t).or_default() += 1;
+                        }
+                    }
+                }
+            }
+        }
+        let vanished: BTreeSet<u32> = old_heard
+            .iter()
+            .filter(|(t, &n)| {
+                let p = n as f64 / old_scans.max(1) as f64;
+                !new_heard.contains(t) && (1.0 - p).powf(new_scans as f64) < rule.vanished_p
+            })
+            .map(|(&t, _)| t)
+            .collect();
+        counts.vanished = vanished.len();
+        if !vanished.is_empty() {
+            for cell_fit in out.floors.iter_mut().flat_map(|f| f.values_mut()) {
+                cell_fit.models.retain(|m| !vanished.contains(&m.0));
+            }
+        }
         for (f, floor) in self.floors.iter().enumerate() {
             for (c, cell_fit) in out.floors[f].iter_mut() {
                 let Some(candidate) = floor.cells.get(c) else { continue };

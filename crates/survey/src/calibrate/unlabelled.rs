@@ -11,7 +11,9 @@ use super::{
 use crate::io::ilc::Event;
 use crate::io::Trace;
 use crate::replay::replay;
-use crate::{PreparedSurvey, SurveyOptions, SurveyReport, REPLACE_RULE};
+use crate::{PreparedSurvey, ReplaceRule, SurveyOptions, SurveyReport};
+#[cfg(doc)]
+use crate::REPLACE_RULE;
 use serde::Serialize;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -41,7 +43,7 @@ pub struct EvidenceRound {
     /// States of the refitted site.
     pub site_states: usize,
     /// What the anchored walks replaced of the labelled fingerprints they contradict
-    /// ([`UnlabelledOptions::replace_contradicted`]; zero when off, and in a round of soft
+    /// ([`UnlabelledOptions::replace`]; zero when off, and in a round of soft
     /// evidence).
     pub replaced: crate::Replaced,
 }
@@ -180,7 +182,7 @@ pub fn anchored_walk(
 pub const ANCHOR_FLOOR_MASS: f64 = 0.99;
 
 /// How walks without labels refit the site ([`survey_with_unlabelled`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UnlabelledOptions {
     /// Rounds of anchoring: each walk anchored where the site of the round before is sure of it
     /// ([`anchored_walk`]) and surveyed with the labelled walks.
@@ -188,16 +190,16 @@ pub struct UnlabelledOptions {
     /// Rounds of refitting with every scan's soft label after those ([`walk_evidence`],
     /// [`PreparedSurvey::refit`]).
     pub evidence_rounds: usize,
-    /// Whether the anchored walks replace the labelled fingerprints they contradict
-    /// ([`PreparedSurvey::replace_contradicted`] by [`REPLACE_RULE`]): the radio changed after
-    /// the survey.
-    pub replace_contradicted: bool,
+    /// The rule by which the anchored walks replace the labelled fingerprints they contradict
+    /// ([`PreparedSurvey::replace_contradicted`], shipped as [`REPLACE_RULE`]): the radio
+    /// changed after the survey. `None`: they only pool with them.
+    pub replace: Option<ReplaceRule>,
 }
 
 impl Default for UnlabelledOptions {
     /// One round of anchoring, none of soft evidence (docs/evidence.md#measured).
     fn default() -> Self {
-        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0, replace_contradicted: false }
+        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0, replace: None }
     }
 }
 
@@ -247,10 +249,9 @@ pub fn survey_with_unlabelled(
         let fits = prepared.fit(&|_, _| true, None, options.threads);
         // The anchored walks follow each floor's labelled ones (`surveyed` above).
         let newer = |f: usize, w: usize| w >= floors[f].survey.len();
-        let (fits, replaced) = if rounds.replace_contradicted {
-            prepared.replace_contradicted(&fits, &newer, &REPLACE_RULE)
-        } else {
-            (fits, crate::Replaced::default())
+        let (fits, replaced) = match &rounds.replace {
+            Some(rule) => prepared.replace_contradicted(&fits, &newer, rule),
+            None => (fits, crate::Replaced::default()),
         };
         let (next, _) = prepared.assemble(&fits)?;
         let next = finish(next)?;
