@@ -13,8 +13,8 @@ use waymark_engine::site::Site;
 use waymark_sim::drift::{Drift, DriftError};
 use waymark_sim::{imu, Office, OfficeConfig, Walk};
 use waymark_survey::calibrate::{
-    survey_calibrated, survey_with_unlabelled, CalibrationOptions, CalibrationReport, FloorData,
-    UnlabelledOptions,
+    anchored_walk, survey_calibrated, survey_with_unlabelled, CalibrationOptions, CalibrationReport, FloorData,
+    UnlabelledOptions, ANCHOR_FLOOR_MASS,
 };
 use waymark_survey::io::{Trace, Waypoint};
 use waymark_survey::scoring::Metrics;
@@ -99,6 +99,8 @@ pub struct DriftRun {
     pub arms: BTreeMap<String, Metrics>,
     /// Walks without labels anchored (of [`DriftExperiment::unlabelled_walks`]).
     pub anchored: u64,
+    /// Mean distance of the first round's anchors from the truth, m.
+    pub anchor_error_m: f64,
     /// What the rule replaced in `refit-replace`.
     pub replaced: Replaced,
 }
@@ -189,25 +191,58 @@ pub fn walk_trace(walk: &Walk, name: String, seed: u64, labelled: bool) -> Trace
     }
 }
 
-/// `count` walks of `office` of kind `kind`.
-fn walks(office: &Office, x: &DriftExperiment, seed: u64, kind: u64, count: usize, labelled: bool) -> Vec<Trace> {
+/// `count` walks of `office` of kind `kind`, and the simulated walks behind them.
+fn walks(
+    office: &Office,
+    x: &DriftExperiment,
+    seed: u64,
+    kind: u64,
+    count: usize,
+    labelled: bool,
+) -> (Vec<Trace>, Vec<Walk>) {
     (0..count as u64)
         .map(|k| {
             let s = walk_seed(seed, kind, k);
-            walk_trace(&office.walk(s, x.walk_length_m), format!("sim{seed}-{kind}-{k}"), s, labelled)
+            let walk = office.walk(s, x.walk_length_m);
+            (walk_trace(&walk, format!("sim{seed}-{kind}-{k}"), s, labelled), walk)
         })
-        .collect()
+        .unzip()
+}
+
+/// The mean distance, m, of the anchors the stale `site` gives the walks without labels
+/// ([`anchored_walk`], as the first round of [`survey_with_unlabelled`] places them) from
+/// where the walker really was then.
+fn anchor_error_m(
+    site: &Arc<Site>,
+    traces: &[Trace],
+    truth: &[Walk],
+    options: &CalibrationOptions,
+    calibration: &CalibrationReport,
+) -> Result<f64, DriftExperimentError> {
+    let options = options.surveyed_with(calibration);
+    let (mut sum, mut n) = (0.0, 0usize);
+    for (trace, walk) in traces.iter().zip(truth) {
+        let anchored =
+            anchored_walk(site, trace, &options, calibration.fingerprint_radius_m / 2.0, ANCHOR_FLOOR_MASS)
+                .map_err(|e| DriftExperimentError::Empty(format!("anchoring: {e}")))?;
+        for w in anchored.iter().flat_map(|(_, t)| &t.waypoints) {
+            let p = walk.trajectory.pose_at(w.timestamp_ns).position;
+            sum += ((p.x - w.x).powi(2) + (p.y - w.y).powi(2)).sqrt();
+            n += 1;
+        }
+    }
+    Ok(if n > 0 { sum / n as f64 } else { f64::NAN })
 }
 
 /// Forward-auto on the floor's test walks on `site`.
 fn score(
-    site: Site,
+    site: impl Into<Arc<Site>>,
     floors: &[FloorData],
     options: &EvalOptions,
     calibration: &CalibrationReport,
 ) -> Result<Metrics, EvalError> {
     let options = options.surveyed_with(calibration);
-    let (reports, _) = evaluate_on(&Arc::new(site), floors, &options, &|| ())?;
+    let (reports, _) = evaluate_on(&site.into(), floors, &options, &|| ())?;
     reports
         .get("forward-auto")
         .map(|r| r.pooled.clone())
@@ -218,10 +253,10 @@ fn score(
 pub fn run_seed(x: &DriftExperiment, seed: u64) -> Result<DriftRun, DriftExperimentError> {
     let office = Office::generate(&OfficeConfig { seed, ..OfficeConfig::default() });
     let (drifted, drift) = office.drifted(x.share, walk_seed(seed, 0, 0))?;
-    let before = walks(&office, x, seed, 1, x.survey_walks, true);
-    let after = walks(&drifted, x, seed, 2, x.survey_walks, true);
-    let unlabelled = walks(&drifted, x, seed, 3, x.unlabelled_walks, false);
-    let test = walks(&drifted, x, seed, 4, x.test_walks, true);
+    let (before, _) = walks(&office, x, seed, 1, x.survey_walks, true);
+    let (after, _) = walks(&drifted, x, seed, 2, x.survey_walks, true);
+    let (unlabelled, unlabelled_truth) = walks(&drifted, x, seed, 3, x.unlabelled_walks, false);
+    let (test, _) = walks(&drifted, x, seed, 4, x.test_walks, true);
     let floor = |survey: Vec<Trace>| FloorData {
         name: "office".into(),
         dir: Default::default(),
@@ -238,6 +273,9 @@ pub fn run_seed(x: &DriftExperiment, seed: u64) -> Result<DriftRun, DriftExperim
     let stale_floors = [floor(before)];
     let mut arms = BTreeMap::new();
     let (site, _, calibration) = survey_calibrated(&stale_floors, &options.calibration, &|| ())?;
+    let site = Arc::new(site);
+    let anchor_error_m =
+        anchor_error_m(&site, &unlabelled, &unlabelled_truth, &options.calibration, &calibration)?;
     arms.insert("stale".to_string(), score(site, &stale_floors, &options, &calibration)?);
     let mut anchored = 0;
     let mut replaced = Replaced::default();
@@ -258,7 +296,7 @@ pub fn run_seed(x: &DriftExperiment, seed: u64) -> Result<DriftRun, DriftExperim
     let fresh_floors = [floor(after)];
     let (site, _, calibration) = survey_calibrated(&fresh_floors, &options.calibration, &|| ())?;
     arms.insert("fresh".to_string(), score(site, &fresh_floors, &options, &calibration)?);
-    Ok(DriftRun { seed, drift, arms, anchored, replaced })
+    Ok(DriftRun { seed, drift, arms, anchored, anchor_error_m, replaced })
 }
 
 /// Every seed's run, `on_run` called after each, and the summary over them.

@@ -60,10 +60,10 @@ pub struct EvalArgs {
     /// With --unlabelled-rest: rounds of refitting with every scan's soft label after those.
     #[arg(long, default_value_t = 0)]
     evidence_rounds: usize,
-    /// With --unlabelled-rest: the anchored walks replace the labelled fingerprints they
-    /// contradict beyond the labelled spread (docs/evidence.md#refitting).
+    /// With --unlabelled-rest: the anchored walks only pool with the labelled fingerprints
+    /// they contradict, instead of replacing them (docs/evidence.md#refitting).
     #[arg(long)]
-    replace_contradicted: bool,
+    keep_contradicted: bool,
     /// γ of Hoang eq. 14; default: calibrated by the survey.
     #[arg(long)]
     gamma: Option<f64>,
@@ -232,7 +232,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             calibrate::UnlabelledOptions {
                 anchor_rounds: args.anchor_rounds,
                 evidence_rounds: args.evidence_rounds,
-                replace: args.replace_contradicted.then_some(waymark_survey::REPLACE_RULE),
+                replace: (!args.keep_contradicted).then_some(waymark_survey::REPLACE_RULE),
             },
             &|| bar.inc(1),
         )

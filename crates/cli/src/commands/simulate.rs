@@ -53,6 +53,10 @@ pub struct SimulateArgs {
     /// drift: seeds, `--seed`, `--seed` + 1, ... (default 5).
     #[arg(long)]
     drift_seeds: Option<u64>,
+    /// drift: rounds of anchoring the walks without labels (`waymark eval --anchor-rounds`;
+    /// 1, as `waymark survey --unlabelled`).
+    #[arg(long, default_value_t = 1)]
+    anchor_rounds: usize,
     /// drift: worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -166,20 +170,13 @@ pub fn simulate(args: &SimulateArgs) -> ExitCode {
 
 fn drift(args: &SimulateArgs) -> ExitCode {
     use waymark_eval::drift::{self, DriftExperiment, ARMS};
-    let mut defaults = DriftExperiment::default();
-    // Exploration only (not documented): the rule's and the rounds' alternatives.
-    if let Ok(v) = std::env::var("WAYMARK_DRIFT_EXPLORE") {
-        let v: Vec<f64> = v.split(',').filter_map(|x| x.parse().ok()).collect();
-        if let [z, spreads, min, p, rounds] = v[..] {
-            defaults.rule = waymark_survey::ReplaceRule { z, spreads, min_newer_scans: min as usize, vanished_p: p };
-            defaults.anchor_rounds = rounds as usize;
-        }
-    }
+    let defaults = DriftExperiment::default();
     let config = DriftExperiment {
         share: args.share,
         unlabelled_walks: args.unlabelled_walks,
         first_seed: args.seed,
         seeds: args.drift_seeds.unwrap_or(defaults.seeds),
+        anchor_rounds: args.anchor_rounds,
         threads: args.threads.unwrap_or(defaults.threads),
         ..defaults
     };
@@ -189,12 +186,13 @@ fn drift(args: &SimulateArgs) -> ExitCode {
             let arms: Vec<String> =
                 ARMS.iter().map(|a| format!("{a} {:.2} m", r.arms[*a].mean_m)).collect();
             eprintln!(
-                "  seed {}: {} of {} access points changed, {} of {} walks anchored, {} of {} pairs replaced; {}",
+                "  seed {}: {} of {} access points changed, {} of {} walks anchored (anchors {:.2} m from the truth), {} of {} pairs replaced; {}",
                 r.seed,
                 r.drift.changed(),
                 r.drift.before,
                 r.anchored,
                 config.unlabelled_walks,
+                r.anchor_error_m,
                 r.replaced.replaced,
                 r.replaced.tested,
                 arms.join(", ")

@@ -11,9 +11,7 @@ use super::{
 use crate::io::ilc::Event;
 use crate::io::Trace;
 use crate::replay::replay;
-use crate::{PreparedSurvey, ReplaceRule, SurveyOptions, SurveyReport};
-#[cfg(doc)]
-use crate::REPLACE_RULE;
+use crate::{PreparedSurvey, ReplaceRule, SurveyOptions, SurveyReport, REPLACE_RULE};
 use serde::Serialize;
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -197,9 +195,11 @@ pub struct UnlabelledOptions {
 }
 
 impl Default for UnlabelledOptions {
-    /// One round of anchoring, none of soft evidence (docs/evidence.md#measured).
+    /// One round of anchoring, none of soft evidence (docs/evidence.md#measured), contradicted
+    /// fingerprints replaced by [`REPLACE_RULE`] (it does not hurt the real floors and follows
+    /// a radio that changed, docs/evidence.md#drift).
     fn default() -> Self {
-        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0, replace: None }
+        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0, replace: Some(REPLACE_RULE) }
     }
 }
 
