@@ -13,8 +13,8 @@ use waymark_engine::site::Site;
 use waymark_sim::drift::{Drift, DriftError};
 use waymark_sim::{imu, Office, OfficeConfig, Walk};
 use waymark_survey::calibrate::{
-    anchored_walk, survey_calibrated, survey_with_unlabelled, CalibrationOptions, CalibrationReport, FloorData,
-    UnlabelledOptions, ANCHOR_FLOOR_MASS,
+    anchored_walk, survey_calibrated, survey_with_unlabelled, CalibrationOptions, CalibrationReport,
+    FloorData, UnlabelledOptions, ANCHOR_FLOOR_MASS,
 };
 use waymark_survey::io::{Trace, Waypoint};
 use waymark_survey::scoring::Metrics;
@@ -300,9 +300,14 @@ pub fn run_seed(x: &DriftExperiment, seed: u64) -> Result<DriftRun, DriftExperim
 }
 
 /// Every seed's run, `on_run` called after each, and the summary over them.
-pub fn run(x: &DriftExperiment, mut on_run: impl FnMut(&DriftRun)) -> Result<DriftReport, DriftExperimentError> {
+pub fn run(
+    x: &DriftExperiment,
+    mut on_run: impl FnMut(&DriftRun),
+) -> Result<DriftReport, DriftExperimentError> {
     if x.seeds == 0 || x.test_walks == 0 || x.survey_walks == 0 {
-        return Err(DriftExperimentError::Empty("seeds, survey walks and test walks must be at least 1".into()));
+        return Err(DriftExperimentError::Empty(
+            "seeds, survey walks and test walks must be at least 1".into(),
+        ));
     }
     let started = std::time::Instant::now();
     let mut runs = Vec::new();
@@ -314,7 +319,9 @@ pub fn run(x: &DriftExperiment, mut on_run: impl FnMut(&DriftRun)) -> Result<Dri
     let summary = ARMS
         .iter()
         .map(|&arm| {
-            let take = |f: &dyn Fn(&Metrics) -> f64| MeanSe::of(&runs.iter().map(|r| f(&r.arms[arm])).collect::<Vec<_>>());
+            let take = |f: &dyn Fn(&Metrics) -> f64| {
+                MeanSe::of(&runs.iter().map(|r| f(&r.arms[arm])).collect::<Vec<_>>())
+            };
             let over_fresh = MeanSe::of(
                 &runs.iter().map(|r| r.arms[arm].mean_m / r.arms["fresh"].mean_m).collect::<Vec<_>>(),
             );

@@ -65,8 +65,9 @@ impl RadioField {
             let j = rng.random_range(k..n);
             order.swap(k, j);
         }
-        let place =
-            |rng: &mut ChaCha8Rng| Point2::new(rng.random_range(0.0..OFFICE_SIZE_M.0), rng.random_range(0.0..OFFICE_SIZE_M.1));
+        let place = |rng: &mut ChaCha8Rng| {
+            Point2::new(rng.random_range(0.0..OFFICE_SIZE_M.0), rng.random_range(0.0..OFFICE_SIZE_M.1))
+        };
         let mut drift = Drift {
             before: n,
             moved: order[..moved].to_vec(),
@@ -110,7 +111,11 @@ mod tests {
     /// The drift changes the share asked for, split a third each, and leaves the rest alone.
     #[test]
     fn the_drift_changes_the_share_asked_for() {
-        let office = Office::generate(&OfficeConfig { access_points: 40, training_scans: 2, ..OfficeConfig::default() });
+        let office = Office::generate(&OfficeConfig {
+            access_points: 40,
+            training_scans: 2,
+            ..OfficeConfig::default()
+        });
         for (share, changed) in [(0.0, 0), (0.3, 12), (0.5, 20), (1.0, 40)] {
             let (drifted, drift) = office.drifted(share, 7).unwrap();
             assert_eq!(drift.changed(), changed);

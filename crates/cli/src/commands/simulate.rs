@@ -183,8 +183,7 @@ fn drift(args: &SimulateArgs) -> ExitCode {
     let json = args.json;
     let result = drift::run(&config, |r| {
         if !json {
-            let arms: Vec<String> =
-                ARMS.iter().map(|a| format!("{a} {:.2} m", r.arms[*a].mean_m)).collect();
+            let arms: Vec<String> = ARMS.iter().map(|a| format!("{a} {:.2} m", r.arms[*a].mean_m)).collect();
             eprintln!(
                 "  seed {}: {} of {} access points changed, {} of {} walks anchored (anchors {:.2} m from the truth), {} of {} pairs replaced; {}",
                 r.seed,
@@ -216,9 +215,8 @@ fn drift(args: &SimulateArgs) -> ExitCode {
         }
         return ExitCode::SUCCESS;
     }
-    let [moved, vanished, appeared] = waymark_sim::drift::split(
-        report.runs.first().map_or(0, |r| r.drift.changed()),
-    );
+    let [moved, vanished, appeared] =
+        waymark_sim::drift::split(report.runs.first().map_or(0, |r| r.drift.changed()));
     println!(
         "Radio drift on the simulated office: {} seeds from {}, {:.0}% of the access points changed \
          ({moved} moved, {vanished} vanished, {appeared} new), {} labelled survey walks, {} walks without labels \

@@ -34,7 +34,8 @@ pub struct ReplaceRule {
 /// five is one pass of a walker at a scan a second. The rule's effect is measured on the
 /// simulated drift and the real floors in docs/evidence.md#drift.
 /// The silence of a vanished transmitter is judged at the same α = 0.001.
-pub const REPLACE_RULE: ReplaceRule = ReplaceRule { z: 3.29, spreads: 2.0, min_newer_scans: 5, vanished_p: 0.001 };
+pub const REPLACE_RULE: ReplaceRule =
+    ReplaceRule { z: 3.29, spreads: 2.0, min_newer_scans: 5, vanished_p: 0.001 };
 
 /// What [`PreparedSurvey::replace_contradicted`] changed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -89,7 +90,10 @@ impl PreparedSurvey<'_> {
         rule: &ReplaceRule,
     ) -> (SurveyFits, Replaced) {
         let clip = fits.clip_dbm;
-        let build = BuildOptions { fit: FitOptions { clip_dbm: clip, ..self.options.build.fit }, ..self.options.build };
+        let build = BuildOptions {
+            fit: FitOptions { clip_dbm: clip, ..self.options.build.fit },
+            ..self.options.build
+        };
         let fit = build.stored_fit();
         let mut out = fits.clone();
         let mut counts = Replaced::default();
@@ -169,7 +173,8 @@ impl PreparedSurvey<'_> {
                     counts.replaced += 1;
                     // Never heard by the newer scans: no fingerprint here (the state is one of
                     // its "not heard" states).
-                    let model = if new_columns.contains_key(&t) { build.model.fit(&recent, &fit) } else { None };
+                    let model =
+                        if new_columns.contains_key(&t) { build.model.fit(&recent, &fit) } else { None };
                     let at = cell_fit.models.binary_search_by_key(&t, |m| m.0);
                     match (model, at) {
                         (Some(g), Ok(i)) => cell_fit.models[i].1 = g,

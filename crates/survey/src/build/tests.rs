@@ -410,11 +410,19 @@ fn changed_walk(name: &str, shift_db: f64, ap2: bool) -> Trace {
 
 #[test]
 fn newer_walks_replace_a_contradicted_fingerprint_and_keep_a_confirmed_one() {
-    let walks = [walk("a", (0.0, 1.0), (20.0, 1.0), 20), changed_walk("b", 20.0, true), changed_walk("c", 0.0, false)];
+    let walks = [
+        walk("a", (0.0, 1.0), (20.0, 1.0), 20),
+        changed_walk("b", 20.0, true),
+        changed_walk("c", 0.0, false),
+    ];
     let options = SurveyOptions::default();
     let survey_of = |kept: &[usize]| {
-        let floors =
-            [SurveyFloor { name: "F1".into(), plan: None, walks: kept.iter().map(|&k| &walks[k]).collect(), geo: None }];
+        let floors = [SurveyFloor {
+            name: "F1".into(),
+            plan: None,
+            walks: kept.iter().map(|&k| &walks[k]).collect(),
+            geo: None,
+        }];
         let prepared = PreparedSurvey::new("test", &floors, North::default(), &options).unwrap();
         let fits = prepared.fit(&|_, _| true, None, 1);
         // Walk 0 is the labelled survey, the rest came after the radio changed.
