@@ -57,6 +57,10 @@ pub struct SimulateArgs {
     /// 1, as `waymark survey --unlabelled`).
     #[arg(long, default_value_t = 1)]
     anchor_rounds: usize,
+    /// drift: where the walks after the drift confirm a labelled fingerprint, keep the
+    /// labelled scans' own fit instead of pooling both (`ReplaceRule::pool_confirmed`).
+    #[arg(long)]
+    keep_confirmed: bool,
     /// drift: worker threads (default: all cores).
     #[arg(long)]
     threads: Option<usize>,
@@ -170,7 +174,8 @@ pub fn simulate(args: &SimulateArgs) -> ExitCode {
 
 fn drift(args: &SimulateArgs) -> ExitCode {
     use waymark_eval::drift::{self, DriftExperiment, ARMS};
-    let defaults = DriftExperiment::default();
+    let mut defaults = DriftExperiment::default();
+    defaults.rule.pool_confirmed = !args.keep_confirmed;
     let config = DriftExperiment {
         share: args.share,
         unlabelled_walks: args.unlabelled_walks,

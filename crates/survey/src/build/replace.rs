@@ -18,6 +18,11 @@ pub struct ReplaceRule {
     pub spreads: f64,
     /// ... with at least this many newer scans at the state.
     pub min_newer_scans: usize,
+    /// Where the newer scans do not contradict the labelled ones (or are too few to test),
+    /// whether the fit pools both (as [`PreparedSurvey::fit`] does) or keeps the labelled
+    /// scans' own: the newer walks' positions are the engine's anchors, less sure than a
+    /// surveyor's taps, so a confirmed labelled fingerprint need not take them in.
+    pub pool_confirmed: bool,
     /// A transmitter the labelled scans heard in a share p of theirs and none of the n newer
     /// scans heard is dropped from every state when (1 - p)ⁿ, the chance of that silence were
     /// it still there and the newer walks went where the labelled ones did, is below this.
@@ -35,7 +40,7 @@ pub struct ReplaceRule {
 /// simulated drift and the real floors in docs/evidence.md#drift.
 /// The silence of a vanished transmitter is judged at the same α = 0.001.
 pub const REPLACE_RULE: ReplaceRule =
-    ReplaceRule { z: 3.29, spreads: 2.0, min_newer_scans: 5, vanished_p: 0.001 };
+    ReplaceRule { z: 3.29, spreads: 2.0, min_newer_scans: 5, pool_confirmed: true, vanished_p: 0.001 };
 
 /// What [`PreparedSurvey::replace_contradicted`] changed.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Serialize)]
@@ -141,7 +146,7 @@ impl PreparedSurvey<'_> {
                     candidate.training.iter().copied().filter(|&(w, _)| fits.kept[f][w as usize]).collect();
                 let (new, old): (Vec<(u32, u32)>, Vec<(u32, u32)>) =
                     training.iter().partition(|&&(w, _)| newer(f, w as usize));
-                if new.len() < rule.min_newer_scans || old.is_empty() {
+                if old.is_empty() || new.is_empty() || (rule.pool_confirmed && new.len() < rule.min_newer_scans) {
                     continue;
                 }
                 // Per transmitter, each scan's reading clipped at the clip level, as
@@ -164,17 +169,29 @@ impl PreparedSurvey<'_> {
                 heard.sort_unstable();
                 heard.dedup();
                 for t in heard {
-                    let labelled = old_columns.get(&t).cloned().unwrap_or_else(|| never(old.len()));
-                    let recent = new_columns.get(&t).cloned().unwrap_or_else(|| never(new.len()));
-                    counts.tested += 1;
-                    if !rule.contradicts(&labelled, &recent, fit.min_std_db) {
+                    if vanished.contains(&t) {
                         continue;
                     }
-                    counts.replaced += 1;
-                    // Never heard by the newer scans: no fingerprint here (the state is one of
-                    // its "not heard" states).
-                    let model =
-                        if new_columns.contains_key(&t) { build.model.fit(&recent, &fit) } else { None };
+                    let labelled = old_columns.get(&t).cloned().unwrap_or_else(|| never(old.len()));
+                    let recent = new_columns.get(&t).cloned().unwrap_or_else(|| never(new.len()));
+                    counts.tested += usize::from(new.len() >= rule.min_newer_scans);
+                    let model = if rule.contradicts(&labelled, &recent, fit.min_std_db) {
+                        counts.replaced += 1;
+                        counts.dropped += usize::from(!new_columns.contains_key(&t));
+                        // Never heard by the newer scans: no fingerprint here (the state is
+                        // one of its "not heard" states).
+                        if new_columns.contains_key(&t) {
+                            build.model.fit(&recent, &fit)
+                        } else {
+                            None
+                        }
+                    } else if rule.pool_confirmed {
+                        continue;
+                    } else if old_columns.contains_key(&t) {
+                        build.model.fit(&labelled, &fit)
+                    } else {
+                        None
+                    };
                     let at = cell_fit.models.binary_search_by_key(&t, |m| m.0);
                     match (model, at) {
                         (Some(g), Ok(i)) => cell_fit.models[i].1 = g,
@@ -183,9 +200,6 @@ impl PreparedSurvey<'_> {
                             cell_fit.models.remove(i);
                         }
                         (None, Err(_)) => {}
-                    }
-                    if !new_columns.contains_key(&t) {
-                        counts.dropped += 1;
                     }
                 }
             }
