@@ -142,9 +142,9 @@ impl PreparedSurvey<'_> {
         for (f, floor) in self.floors.iter().enumerate() {
             for (c, cell_fit) in out.floors[f].iter_mut() {
                 let Some(candidate) = floor.cells.get(c) else { continue };
-                let training: Vec<(u32, u32)> =
+                let training: Training =
                     candidate.training.iter().copied().filter(|&(w, _)| fits.kept[f][w as usize]).collect();
-                let (new, old): (Vec<(u32, u32)>, Vec<(u32, u32)>) =
+                let (new, old): (Training, Training) =
                     training.iter().partition(|&&(w, _)| newer(f, w as usize));
                 if old.is_empty() || new.is_empty() || (rule.pool_confirmed && new.len() < rule.min_newer_scans) {
                     continue;
