@@ -64,6 +64,10 @@ pub struct EvalArgs {
     /// they contradict, instead of replacing them (docs/evidence.md#refitting).
     #[arg(long)]
     keep_contradicted: bool,
+    /// With --unlabelled-rest: where the anchored walks confirm a labelled fingerprint, keep
+    /// the labelled scans' own fit instead of pooling both (`ReplaceRule::pool_confirmed`).
+    #[arg(long, conflicts_with = "keep_contradicted")]
+    keep_confirmed: bool,
     /// γ of Hoang eq. 14; default: calibrated by the survey.
     #[arg(long)]
     gamma: Option<f64>,
@@ -232,7 +236,10 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             calibrate::UnlabelledOptions {
                 anchor_rounds: args.anchor_rounds,
                 evidence_rounds: args.evidence_rounds,
-                replace: (!args.keep_contradicted).then_some(waymark_survey::REPLACE_RULE),
+                replace: (!args.keep_contradicted).then_some(waymark_survey::ReplaceRule {
+                    pool_confirmed: !args.keep_confirmed,
+                    ..waymark_survey::REPLACE_RULE
+                }),
             },
             &|| bar.inc(1),
         )
