@@ -146,7 +146,10 @@ impl PreparedSurvey<'_> {
                     candidate.training.iter().copied().filter(|&(w, _)| fits.kept[f][w as usize]).collect();
                 let (new, old): (Training, Training) =
                     training.iter().partition(|&&(w, _)| newer(f, w as usize));
-                if old.is_empty() || new.is_empty() || (rule.pool_confirmed && new.len() < rule.min_newer_scans) {
+                if old.is_empty()
+                    || new.is_empty()
+                    || (rule.pool_confirmed && new.len() < rule.min_newer_scans)
+                {
                     continue;
                 }
                 // Per transmitter, each scan's reading clipped at the clip level, as
