@@ -11,6 +11,7 @@
 
 pub mod benchmark;
 pub mod data;
+pub mod drift;
 pub mod pdr;
 pub mod plot;
 pub mod real;

@@ -6,6 +6,7 @@
 #![deny(missing_docs)]
 #![deny(rustdoc::broken_intra_doc_links)]
 
+pub mod drift;
 pub mod imu;
 pub mod recorded;
 pub mod scale;

@@ -73,6 +73,14 @@ pub struct EvalArgs {
     /// most probable first, 0 for all (default: the survey's).
     #[arg(long)]
     evidence_states: Option<usize>,
+    /// With --unlabelled-rest: the anchored walks only pool with the labelled fingerprints
+    /// they contradict, instead of replacing them (docs/evidence.md#refitting).
+    #[arg(long)]
+    keep_contradicted: bool,
+    /// With --unlabelled-rest: where the anchored walks confirm a labelled fingerprint, keep
+    /// the labelled scans' own fit instead of pooling both (`ReplaceRule::pool_confirmed`).
+    #[arg(long, conflicts_with = "keep_contradicted")]
+    keep_confirmed: bool,
     /// γ of Hoang eq. 14; default: calibrated by the survey.
     #[arg(long)]
     gamma: Option<f64>,
@@ -231,10 +239,7 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
             &floors,
             &unlabelled,
             &options.calibration,
-            calibrate::UnlabelledOptions {
-                anchor_rounds: args.anchor_rounds,
-                evidence_rounds: args.evidence_rounds,
-            },
+            unlabelled_options(args),
             &|| bar.inc(1),
         )
         .map(|(site, survey, calibration, rounds)| (site, survey, calibration, Some(rounds)))
@@ -347,6 +352,18 @@ pub fn eval(args: &EvalArgs) -> ExitCode {
     ExitCode::SUCCESS
 }
 
+/// How the walks given without labels refit the site, as the arguments say.
+fn unlabelled_options(args: &EvalArgs) -> calibrate::UnlabelledOptions {
+    calibrate::UnlabelledOptions {
+        anchor_rounds: args.anchor_rounds,
+        evidence_rounds: args.evidence_rounds,
+        replace: (!args.keep_contradicted).then_some(waymark_survey::ReplaceRule {
+            pool_confirmed: !args.keep_confirmed,
+            ..waymark_survey::REPLACE_RULE
+        }),
+    }
+}
+
 /// `--crowd-folds`: every fold surveyed, refitted with the other folds' test walks and
 /// scored, the figures pooled.
 fn crowd(
@@ -356,10 +373,7 @@ fn crowd(
     folds: usize,
     started: Instant,
 ) -> ExitCode {
-    let rounds = calibrate::UnlabelledOptions {
-        anchor_rounds: args.anchor_rounds,
-        evidence_rounds: args.evidence_rounds,
-    };
+    let rounds = unlabelled_options(args);
     let steps = calibrate::calibration_steps(floors, &options.calibration) as u64;
     let walks: usize = floors.iter().map(|f| f.test.len()).sum();
     let bar =

@@ -44,6 +44,26 @@ pub struct SimulateArgs {
     /// baum-welch: variance of the initial mixture components, m² (El Gemayel eq. 15: 2500).
     #[arg(long)]
     initial_variance: Option<f64>,
+    /// drift: share of the access points changed after the survey (moved, vanished, new).
+    #[arg(long, default_value_t = 0.3)]
+    share: f64,
+    /// drift: walks without labels recorded on the drifted radio.
+    #[arg(long, default_value_t = 20)]
+    unlabelled_walks: usize,
+    /// drift: seeds, `--seed`, `--seed` + 1, ... (default 5).
+    #[arg(long)]
+    drift_seeds: Option<u64>,
+    /// drift: rounds of anchoring the walks without labels (`waymark eval --anchor-rounds`;
+    /// 1, as `waymark survey --unlabelled`).
+    #[arg(long, default_value_t = 1)]
+    anchor_rounds: usize,
+    /// drift: where the walks after the drift confirm a labelled fingerprint, keep the
+    /// labelled scans' own fit instead of pooling both (`ReplaceRule::pool_confirmed`).
+    #[arg(long)]
+    keep_confirmed: bool,
+    /// drift: worker threads (default: all cores).
+    #[arg(long)]
+    threads: Option<usize>,
 }
 
 #[derive(Clone, Copy, PartialEq, Eq, ValueEnum)]
@@ -59,6 +79,9 @@ enum SimExperiment {
     /// El Gemayel et al. §IV: room accuracy of the forward algorithm with true parameters and
     /// with parameters learned by Baum-Welch run after run, with user feedback (Fig. 5).
     BaumWelch,
+    /// Radio drift after the survey: the stale site, the site refitted from walks without
+    /// labels recorded after it, and a fresh survey (docs/evidence.md#drift).
+    Drift,
 }
 
 pub fn simulate(args: &SimulateArgs) -> ExitCode {
@@ -66,6 +89,7 @@ pub fn simulate(args: &SimulateArgs) -> ExitCode {
         SimExperiment::LongRun => return long_run(args),
         SimExperiment::Recovery => return recovery(args),
         SimExperiment::BaumWelch => return baum_welch(args),
+        SimExperiment::Drift => return drift(args),
         SimExperiment::Papers | SimExperiment::Motion => {}
     }
     let runs = args.runs.unwrap_or(100);
@@ -145,6 +169,88 @@ pub fn simulate(args: &SimulateArgs) -> ExitCode {
     for (name, hit) in &report.room_accuracy {
         println!("  {name:<36} {:>6.1}%", 100.0 * hit);
     }
+    ExitCode::SUCCESS
+}
+
+fn drift(args: &SimulateArgs) -> ExitCode {
+    use waymark_eval::drift::{self, DriftExperiment, ARMS};
+    let mut defaults = DriftExperiment::default();
+    defaults.rule.pool_confirmed = !args.keep_confirmed;
+    let config = DriftExperiment {
+        share: args.share,
+        unlabelled_walks: args.unlabelled_walks,
+        first_seed: args.seed,
+        seeds: args.drift_seeds.unwrap_or(defaults.seeds),
+        anchor_rounds: args.anchor_rounds,
+        threads: args.threads.unwrap_or(defaults.threads),
+        ..defaults
+    };
+    let json = args.json;
+    let result = drift::run(&config, |r| {
+        if !json {
+            let arms: Vec<String> = ARMS.iter().map(|a| format!("{a} {:.2} m", r.arms[*a].mean_m)).collect();
+            eprintln!(
+                "  seed {}: {} of {} access points changed, {} of {} walks anchored (anchors {:.2} m from the truth), {} of {} pairs replaced; {}",
+                r.seed,
+                r.drift.changed(),
+                r.drift.before,
+                r.anchored,
+                config.unlabelled_walks,
+                r.anchor_error_m,
+                r.replaced.replaced,
+                r.replaced.tested,
+                arms.join(", ")
+            );
+        }
+    });
+    let report = match result {
+        Ok(report) => report,
+        Err(e) => {
+            eprintln!("waymark simulate --experiment drift: {e}");
+            return ExitCode::FAILURE;
+        }
+    };
+    if json {
+        match serde_json::to_string(&report) {
+            Ok(text) => println!("{text}"),
+            Err(e) => {
+                eprintln!("waymark simulate --experiment drift: {e}");
+                return ExitCode::FAILURE;
+            }
+        }
+        return ExitCode::SUCCESS;
+    }
+    let [moved, vanished, appeared] =
+        waymark_sim::drift::split(report.runs.first().map_or(0, |r| r.drift.changed()));
+    println!(
+        "Radio drift on the simulated office: {} seeds from {}, {:.0}% of the access points changed \
+         ({moved} moved, {vanished} vanished, {appeared} new), {} labelled survey walks, {} walks without labels \
+         after the drift, {} test walks after it, all of {} m. Forward-auto, mean over seeds ± standard error.\n",
+        config.seeds,
+        config.first_seed,
+        100.0 * config.share,
+        config.survey_walks,
+        config.unlabelled_walks,
+        config.test_walks,
+        config.walk_length_m
+    );
+    println!(
+        "  {:<14} {:>15} {:>15} {:>13} {:>13} {:>15}",
+        "site", "mean", "p90", "68% holds", "95% holds", "÷ fresh"
+    );
+    for arm in ARMS {
+        let s = &report.summary[arm];
+        let m = |v: drift::MeanSe, unit: &str| format!("{:.2}{unit} ± {:.2}", v.mean, v.se);
+        println!(
+            "  {arm:<14} {:>15} {:>15} {:>13} {:>13} {:>15}",
+            m(s.mean_m, " m"),
+            m(s.p90_m, " m"),
+            m(s.hold_68, ""),
+            m(s.hold_95, ""),
+            m(s.over_fresh, "")
+        );
+    }
+    println!("\nWall time {:.0} s", report.seconds);
     ExitCode::SUCCESS
 }
 

@@ -129,6 +129,7 @@ pub fn survey(args: &SurveyArgs) -> ExitCode {
         let rounds = calibrate::UnlabelledOptions {
             anchor_rounds: args.anchor_rounds,
             evidence_rounds: args.evidence_rounds,
+            ..calibrate::UnlabelledOptions::default()
         };
         calibrate::survey_with_unlabelled(&floors, &unlabelled, &options, rounds, &|| bar.inc(1))
     };

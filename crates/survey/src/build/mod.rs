@@ -20,11 +20,13 @@ mod fit;
 mod prepare;
 mod radios;
 mod refit;
+mod replace;
 #[cfg(test)]
 mod tests;
 
 pub use prepare::{PreparedSurvey, SurveyFits};
 pub use refit::MIN_EVIDENCE_SCANS;
+pub use replace::{ReplaceRule, Replaced, REPLACE_RULE};
 
 /// How a site is built from survey walks.
 #[derive(Clone, Debug, PartialEq)]

@@ -392,3 +392,65 @@ fn evidence_refits_the_labelled_fingerprints() {
     .unwrap();
     assert!(prepared.refit(&fits, &site, &Evidence::new(&other)).is_err());
 }
+
+/// [`walk`] along x after the radio changed: AP 1 `shift_db` stronger, AP 2 gone unless `ap2`.
+fn changed_walk(name: &str, shift_db: f64, ap2: bool) -> Trace {
+    let mut trace = walk(name, (0.0, 1.0), (20.0, 1.0), 20);
+    let ap = |k: u8| TransmitterId::wifi(&format!("aa:bb:cc:dd:ee:{k:02x}")).unwrap();
+    for scan in &mut trace.wifi_scans {
+        scan.readings.retain(|r| ap2 || r.transmitter != ap(2));
+        for r in &mut scan.readings {
+            if r.transmitter == ap(1) {
+                r.rssi_dbm += shift_db;
+            }
+        }
+    }
+    trace
+}
+
+#[test]
+fn newer_walks_replace_a_contradicted_fingerprint_and_keep_a_confirmed_one() {
+    let walks = [
+        walk("a", (0.0, 1.0), (20.0, 1.0), 20),
+        changed_walk("b", 20.0, true),
+        changed_walk("c", 0.0, false),
+    ];
+    let options = SurveyOptions::default();
+    let survey_of = |kept: &[usize]| {
+        let floors = [SurveyFloor {
+            name: "F1".into(),
+            plan: None,
+            walks: kept.iter().map(|&k| &walks[k]).collect(),
+            geo: None,
+        }];
+        let prepared = PreparedSurvey::new("test", &floors, North::default(), &options).unwrap();
+        let fits = prepared.fit(&|_, _| true, None, 1);
+        // Walk 0 is the labelled survey, the rest came after the radio changed.
+        let (replaced, counts) = prepared.replace_contradicted(&fits, &|_, w| w > 0, &REPLACE_RULE);
+        let site = |fits: &SurveyFits| prepared.assemble(fits).unwrap().0;
+        (site(&fits), site(&replaced), counts)
+    };
+    let model = |site: &Site, ap: u32| {
+        let s10 = site.states().iter().position(|s| s.position == Point2::new(10.0, 0.0)).unwrap();
+        site.radio().fingerprints().find(|f| f.0 == s10 as u32 && f.1 == ap).map(|(_, _, g)| g)
+    };
+    // AP 1, 20 dB stronger in the newer walk: the pooled fit sits between the two, the replaced
+    // one is the newer walk's own (-60 + 20 dBm at x = 10 m). AP 2 agrees: the pooled fit stays.
+    let (pooled, replaced, counts) = survey_of(&[0, 1]);
+    let (p1, r1) = (model(&pooled, 0).unwrap(), model(&replaced, 0).unwrap());
+    assert!((p1.mean_dbm + 50.0).abs() < 3.0, "{p1:?}");
+    assert!((r1.mean_dbm + 40.0).abs() < 3.0, "{r1:?}");
+    assert_eq!(model(&pooled, 1), model(&replaced, 1));
+    assert!(counts.replaced > 0 && counts.replaced < counts.tested, "{counts:?}");
+    assert_eq!((counts.dropped, counts.vanished), (0, 0));
+    // AP 2 never heard by the newer walk: gone from every state; AP 1 agrees and stays.
+    let (pooled, replaced, counts) = survey_of(&[0, 2]);
+    assert!(model(&pooled, 1).is_some());
+    assert!(replaced.radio().fingerprints().all(|f| f.1 != 1));
+    assert_eq!(model(&pooled, 0), model(&replaced, 0));
+    assert_eq!(counts.vanished, 1);
+    // The same walk again is no contradiction.
+    let (pooled, replaced, counts) = survey_of(&[0, 0]);
+    assert_eq!(pooled.to_json(), replaced.to_json());
+    assert_eq!((counts.replaced, counts.vanished), (0, 0));
+}

@@ -11,7 +11,7 @@ use super::{
 use crate::io::ilc::Event;
 use crate::io::Trace;
 use crate::replay::replay;
-use crate::{PreparedSurvey, SurveyFits, SurveyOptions, SurveyReport};
+use crate::{PreparedSurvey, ReplaceRule, SurveyFits, SurveyOptions, SurveyReport, REPLACE_RULE};
 use serde::Serialize;
 use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
@@ -40,6 +40,10 @@ pub struct EvidenceRound {
     pub bytes: usize,
     /// States of the refitted site.
     pub site_states: usize,
+    /// What the anchored walks replaced of the labelled fingerprints they contradict
+    /// ([`UnlabelledOptions::replace`]; zero when off, and in a round of soft
+    /// evidence).
+    pub replaced: crate::Replaced,
 }
 
 /// The engine as `options` ship it after replaying `trace` on `site`, its smoother holding
@@ -214,7 +218,7 @@ pub fn anchored_walk(
 pub const ANCHOR_FLOOR_MASS: f64 = 0.99;
 
 /// How walks without labels refit the site ([`survey_with_unlabelled`]).
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq)]
 pub struct UnlabelledOptions {
     /// Rounds of anchoring: each walk anchored where the site of the round before is sure of it
     /// ([`anchored_walk`]) and surveyed with the labelled walks.
@@ -222,12 +226,18 @@ pub struct UnlabelledOptions {
     /// Rounds of refitting with every scan's soft label after those ([`walk_evidence`],
     /// [`PreparedSurvey::refit`]).
     pub evidence_rounds: usize,
+    /// The rule by which the anchored walks replace the labelled fingerprints they contradict
+    /// ([`PreparedSurvey::replace_contradicted`], shipped as [`REPLACE_RULE`]): the radio
+    /// changed after the survey. `None`: they only pool with them.
+    pub replace: Option<ReplaceRule>,
 }
 
 impl Default for UnlabelledOptions {
-    /// One round of anchoring, none of soft evidence (docs/evidence.md#measured).
+    /// One round of anchoring, none of soft evidence (docs/evidence.md#measured), contradicted
+    /// fingerprints replaced by [`REPLACE_RULE`] (it does not hurt the real floors and follows
+    /// a radio that changed, docs/evidence.md#drift).
     fn default() -> Self {
-        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0 }
+        UnlabelledOptions { anchor_rounds: 1, evidence_rounds: 0, replace: Some(REPLACE_RULE) }
     }
 }
 
@@ -267,11 +277,19 @@ pub fn survey_with_unlabelled(
         }
         let inputs = survey_inputs(&surveyed);
         let prepared = PreparedSurvey::new("eval", &inputs, site.north(), &refit.survey_options)?;
-        let (next, _) = prepared.assemble(&prepared.fit(&|_, _| true, None, options.threads))?;
+        let fits = prepared.fit(&|_, _| true, None, options.threads);
+        // The anchored walks follow each floor's labelled ones (`surveyed` above).
+        let newer = |f: usize, w: usize| w >= floors[f].survey.len();
+        let (fits, replaced) = match &rounds.replace {
+            Some(rule) => prepared.replace_contradicted(&fits, &newer, rule),
+            None => (fits, crate::Replaced::default()),
+        };
+        let (next, _) = prepared.assemble(&fits)?;
         let next = refit.finish(next)?;
         history.push(EvidenceRound {
             walks: added as u64,
             site_states: next.states().len(),
+            replaced,
             ..EvidenceRound::default()
         });
         site = Arc::new(next);
@@ -367,6 +385,7 @@ impl Refit {
             entries: evidence.heard_entries(),
             bytes: evidence.to_bytes().len(),
             site_states: next.states().len(),
+            replaced: crate::Replaced::default(),
         };
         Ok((next, round))
     }
