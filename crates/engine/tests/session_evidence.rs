@@ -3,7 +3,7 @@
 
 use std::collections::BTreeMap;
 use std::sync::Arc;
-use waymark_engine::evidence::{Evidence, TransmitterKey};
+use waymark_engine::evidence::{most_probable, Evidence, EvidenceOptions, TransmitterKey};
 use waymark_engine::geofence::{Geofence, GeofenceShape};
 use waymark_engine::radio::Scan;
 use waymark_engine::{Engine, EngineConfig};
@@ -53,11 +53,12 @@ fn keyed(scan: &Scan) -> (Vec<(TransmitterKey, f64)>, [bool; 2]) {
 fn each_scan_weighs_its_epochs_posterior_smoothed_by_the_lag() {
     let office = office(-100.0);
     let site = Arc::new(office.site.clone());
-    for lag in [0, 3, 12] {
+    let whole = EvidenceOptions { mass: 1.0, states: 0 };
+    for (lag, options) in [(0, whole), (3, whole), (12, whole), (3, EvidenceOptions::default())] {
         let config = EngineConfig { fixed_lag_epochs: lag, ..EngineConfig::default() };
         let mut gathering = Engine::new(Arc::clone(&site), config.clone()).unwrap();
         let mut reference = Engine::new(Arc::clone(&site), config).unwrap();
-        gathering.start_evidence();
+        gathering.start_evidence_with(options);
         assert!(gathering.is_gathering_evidence() && !reference.is_gathering_evidence());
         // The reference: each epoch's posterior as the last sweep that held it smoothed it,
         // the most epochs after it that the smoother ever held.
@@ -77,9 +78,11 @@ fn each_scan_weighs_its_epochs_posterior_smoothed_by_the_lag() {
             });
         }
         let mut expected = Evidence::new(&site);
+        let mut kept = Vec::new();
         for scan in &scans {
             let (readings, radios) = keyed(scan);
-            expected.add_scan(&last_seen[&scan.timestamp_ns], &readings, radios).unwrap();
+            most_probable(&last_seen[&scan.timestamp_ns], options.mass, options.states, &mut kept);
+            expected.add_scan(&kept, &readings, radios).unwrap();
         }
         expected.add_walk();
         let taken = gathering.take_evidence().unwrap();

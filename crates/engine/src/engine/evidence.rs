@@ -9,9 +9,9 @@
 //! as `walk_evidence` gives a whole walk's in the survey.
 
 use super::Engine;
-use crate::evidence::{Evidence, TransmitterKey};
+use crate::evidence::{most_probable, Evidence, EvidenceOptions, TransmitterKey};
 use crate::radio::Scan;
-use std::collections::VecDeque;
+use std::collections::{HashSet, VecDeque};
 
 /// What a session gathered for the map since it started gathering or the last
 /// [`Engine::take_evidence`].
@@ -35,6 +35,10 @@ type KeyedScan = (Vec<(TransmitterKey, f64)>, [bool; 2]);
 #[derive(Debug)]
 pub(super) struct Gathering {
     evidence: Evidence,
+    options: EvidenceOptions,
+    /// The site's transmitters: evidence of another refits nothing (`PreparedSurvey::refit`
+    /// leaves it out), so it is not written, though the scan still counts for its radio.
+    held: HashSet<TransmitterKey>,
     /// Ascending by epoch time.
     waiting: VecDeque<(u64, KeyedScan)>,
     scans: u64,
@@ -42,16 +46,29 @@ pub(super) struct Gathering {
 }
 
 impl Gathering {
-    fn new(evidence: Evidence) -> Self {
-        Self { evidence, waiting: VecDeque::new(), scans: 0, dropped: 0 }
+    fn new(site: &crate::site::Site, options: EvidenceOptions) -> Self {
+        let held = site.radio().transmitters().iter().map(TransmitterKey::of).collect();
+        Self { evidence: Evidence::new(site), options, held, waiting: VecDeque::new(), scans: 0, dropped: 0 }
+    }
+
+    /// Gathering afresh on `site`, with the same options.
+    pub(super) fn restarted(&self, site: &crate::site::Site) -> Self {
+        Self::new(site, self.options)
     }
 }
 
 impl Engine {
     /// Starts gathering map evidence from this session's scans (docs/evidence.md#from-a-session),
-    /// discarding whatever was being gathered. Nothing is gathered until this is called.
+    /// each scan's posterior kept as [`EvidenceOptions::default`] says (its mode), discarding
+    /// whatever was being gathered. Nothing is gathered until this is called.
     pub fn start_evidence(&mut self) {
-        self.gathering = Some(Gathering::new(Evidence::new(&self.site)));
+        self.start_evidence_with(EvidenceOptions::default());
+    }
+
+    /// [`start_evidence`](Self::start_evidence), keeping of each scan's posterior what `options`
+    /// say.
+    pub fn start_evidence_with(&mut self, options: EvidenceOptions) {
+        self.gathering = Some(Gathering::new(&self.site, options));
     }
 
     /// Stops gathering and discards what was gathered and not taken.
@@ -70,7 +87,7 @@ impl Engine {
     /// session is not gathering.
     pub fn take_evidence(&mut self) -> Option<SessionEvidence> {
         self.settle_evidence(true);
-        let fresh = Gathering::new(Evidence::new(&self.site));
+        let fresh = self.gathering.as_ref()?.restarted(&self.site);
         let mut taken = std::mem::replace(self.gathering.as_mut()?, fresh);
         taken.evidence.add_walk();
         Some(SessionEvidence { evidence: taken.evidence, scans: taken.scans, scans_dropped: taken.dropped })
@@ -78,11 +95,10 @@ impl Engine {
 
     /// Keeps an accepted `scan` until its epoch's smoothed posterior is known: its readings
     /// as the radio map resolves them (hashed with the site's salt, readings older than the
-    /// reading-age limit left out), transmitters the map does not know included.
+    /// reading-age limit left out), of the site's transmitters.
     pub(super) fn keep_scan_for_evidence(&mut self, scan: &Scan) {
-        if self.gathering.is_none() {
-            return;
-        }
+        let Some(gathering) = &self.gathering else { return };
+        let held = &gathering.held;
         let max_age_ns = self.config.max_reading_age_ns.or(self.site.max_reading_age_ns());
         let scan = match &mut self.id_hasher {
             Some(hasher) => hasher.hash_scan(scan),
@@ -91,10 +107,10 @@ impl Engine {
         let mut radios = [false; 2];
         let readings = (scan.readings.iter())
             .filter(|r| max_age_ns.is_none_or(|max| r.age_ns <= max))
-            .map(|r| {
-                let ble = r.transmitter.is_ble();
-                radios[usize::from(ble)] = true;
-                (TransmitterKey::of(&r.transmitter), r.rssi_dbm)
+            .filter_map(|r| {
+                radios[usize::from(r.transmitter.is_ble())] = true;
+                let key = TransmitterKey::of(&r.transmitter);
+                held.contains(&key).then_some((key, r.rssi_dbm))
             })
             .collect();
         let timestamp_ns = scan.timestamp_ns;
@@ -131,10 +147,16 @@ impl Engine {
             }
         });
         let Some(gathering) = &mut self.gathering else { return };
+        let mut kept = Vec::new();
         while gathering.waiting.front().is_some_and(|(t, _)| *t <= due) {
             let Some((timestamp_ns, (readings, radios))) = gathering.waiting.pop_front() else { break };
             let posterior = posteriors.iter().find(|(t, _)| *t == timestamp_ns).map(|(_, p)| p);
-            match posterior.map(|p| gathering.evidence.add_scan(p, &readings, radios)) {
+            let options = gathering.options;
+            let added = posterior.map(|p| {
+                most_probable(p, options.mass, options.states, &mut kept);
+                gathering.evidence.add_scan(&kept, &readings, radios)
+            });
+            match added {
                 Some(Ok(())) => gathering.scans += 1,
                 Some(Err(e)) => {
                     log::debug!("scan left out of the evidence: {e}");

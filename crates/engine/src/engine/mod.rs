@@ -250,9 +250,7 @@ impl Engine {
     pub fn replace_site(&mut self, site: Arc<Site>) -> Result<Option<SessionEvidence>, Error> {
         let mut next = Engine::new(site, self.config.clone())?;
         let taken = self.take_evidence();
-        if self.gathering.is_some() {
-            next.start_evidence();
-        }
+        next.gathering = self.gathering.as_ref().map(|g| g.restarted(&next.site));
         let same_states = crate::evidence::Evidence::site_key(&self.site)
             == crate::evidence::Evidence::site_key(&next.site)
             && self.site.zones().len() == next.site.zones().len();

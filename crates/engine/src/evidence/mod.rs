@@ -36,6 +36,54 @@ pub(crate) const WEIGHT_UNITS: f64 = 4096.0;
 /// least σ a fingerprint has (`FitOptions::min_std_db`, 1 dB).
 pub(crate) const RSSI_UNITS_PER_DB: f64 = 4.0;
 
+/// The most states of a scan's posterior its map evidence keeps, most probable first: one, its
+/// mode. Chosen on held-out survey walks (docs/evidence.md#at-scale), for a walk and a session alike: of the whole posterior,
+/// its most probable 90% or 50%, and its 4, 2 or 1 most probable states, the mode refitted
+/// the site of least held-out error, in the fewest bytes. The state keeps its probability, so
+/// a vague scan, whose mode holds little of it, weighs little.
+pub const EVIDENCE_STATES_PER_SCAN: usize = 1;
+
+/// `posterior`'s most probable states into `kept`: the fewest whose probabilities sum to
+/// `mass` (all of them from 1 on), at most `states` of them (0: no limit). By probability,
+/// ties by state, so that the same posterior keeps the same states on every machine. Their
+/// probabilities are kept as they are.
+pub fn most_probable(posterior: &[(u32, f64)], mass: f64, states: usize, kept: &mut Vec<(u32, f64)>) {
+    kept.clear();
+    kept.extend_from_slice(posterior);
+    if mass >= 1.0 && (states == 0 || states >= posterior.len()) {
+        return;
+    }
+    kept.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
+    let limit = if states == 0 { kept.len() } else { states };
+    let mut total = 0.0;
+    let mut keep = 0;
+    for &(_, p) in kept.iter().take(limit) {
+        if total >= mass {
+            break;
+        }
+        total += p;
+        keep += 1;
+    }
+    kept.truncate(keep);
+}
+
+/// Which part of each scan's posterior evidence keeps ([`most_probable`]): its most probable
+/// states up to `mass` of it and at most `states` of them.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct EvidenceOptions {
+    /// The share of the posterior kept; 1 keeps all of it.
+    pub mass: f64,
+    /// The most states kept; 0 keeps every state.
+    pub states: usize,
+}
+
+impl Default for EvidenceOptions {
+    /// The mode alone ([`EVIDENCE_STATES_PER_SCAN`]).
+    fn default() -> Self {
+        Self { mass: 1.0, states: EVIDENCE_STATES_PER_SCAN }
+    }
+}
+
 /// A transmitter as evidence knows it: its radio and a 128-bit hash of its id. On a site made
 /// with a salt this is the salted hash the site itself holds (docs/privacy.md); otherwise the
 /// first 128 bits of SHA-256 of the id's canonical text, which hides nothing from someone who

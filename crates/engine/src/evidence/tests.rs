@@ -236,3 +236,23 @@ proptest! {
         let _ = Evidence::from_bytes(&with_magic);
     }
 }
+
+#[test]
+fn a_scan_keeps_its_most_probable_states_at_their_probabilities() {
+    let posterior = [(7, 0.1), (3, 0.4), (9, 0.2), (1, 0.2), (4, 0.1)];
+    let mut kept = Vec::new();
+    // The mode alone, at its probability.
+    most_probable(&posterior, 1.0, 1, &mut kept);
+    assert_eq!(kept, [(3, 0.4)]);
+    // Two states: a tie at 0.2 goes to the lower state, on every machine.
+    most_probable(&posterior, 1.0, 2, &mut kept);
+    assert_eq!(kept, [(3, 0.4), (1, 0.2)]);
+    // The fewest holding 70% of the mass, however many states that takes.
+    most_probable(&posterior, 0.7, 0, &mut kept);
+    assert_eq!(kept, [(3, 0.4), (1, 0.2), (9, 0.2)]);
+    // No limit: the posterior as it is.
+    most_probable(&posterior, 1.0, 0, &mut kept);
+    assert_eq!(kept, posterior);
+    most_probable(&[], 1.0, 1, &mut kept);
+    assert!(kept.is_empty());
+}

@@ -24,8 +24,9 @@ pub use report::{
 };
 pub use unlabelled::{
     anchored_walk, survey_with_evidence, survey_with_unlabelled, walk_evidence, EvidenceRound,
-    UnlabelledOptions, ANCHOR_FLOOR_MASS, EVIDENCE_STATES_PER_SCAN,
+    UnlabelledOptions, ANCHOR_FLOOR_MASS,
 };
+pub use waymark_engine::evidence::EVIDENCE_STATES_PER_SCAN;
 
 use crate::io::Trace;
 use crate::replay::{replay, MotionMask, ReplayOptions};

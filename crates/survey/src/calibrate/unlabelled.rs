@@ -8,24 +8,18 @@
 use super::{
     survey_calibrated, survey_inputs, CalibrationError, CalibrationOptions, CalibrationReport, FloorData,
 };
-use crate::io::ilc::Event;
 use crate::io::Trace;
 use crate::replay::replay;
 use crate::{PreparedSurvey, ReplaceRule, SurveyFits, SurveyOptions, SurveyReport, REPLACE_RULE};
 use serde::Serialize;
-use std::collections::{HashMap, HashSet};
 use std::sync::Arc;
-use waymark_engine::evidence::{Evidence, TransmitterKey};
-use waymark_engine::radio::ScanHasher;
+use waymark_engine::evidence::{Evidence, EvidenceOptions};
 use waymark_engine::site::{Calibration, Site};
 use waymark_engine::{Engine, EngineConfig};
 
 /// Epochs a walk's smoother keeps: every epoch of a walk of hours at a scan a second, so that
 /// each scan's posterior is smoothed by the whole walk after it.
 const WALK_EPOCHS: usize = 1 << 16;
-
-/// A scan's readings by transmitter key, and the radios (WiFi, BLE) it listened with.
-type KeyedScan = (Vec<(TransmitterKey, f64)>, [bool; 2]);
 
 /// What one round of refitting gathered and changed.
 #[derive(Clone, Debug, Default, PartialEq, Serialize)]
@@ -50,101 +44,42 @@ pub struct EvidenceRound {
 /// every epoch of the walk ([`Engine::smoothed_posteriors`] then reaches back to the start, or
 /// to the filter's last restart). `Err` when the engine refuses the configuration.
 fn replayed(site: &Arc<Site>, trace: &Trace, options: &CalibrationOptions) -> Result<Engine, String> {
+    let mut engine = walk_engine(site, options)?;
+    replay(&mut engine, trace, &options.calibration_replay());
+    Ok(engine)
+}
+
+/// The engine as `options` ship it, its smoother holding every epoch of a walk.
+fn walk_engine(site: &Arc<Site>, options: &CalibrationOptions) -> Result<Engine, String> {
     let config = EngineConfig {
         track: false,
         fixed_lag_epochs: WALK_EPOCHS,
         track_window_epochs: WALK_EPOCHS + 1,
         ..options.engine.clone()
     };
-    let mut engine = Engine::new(Arc::clone(site), config).map_err(|e| e.to_string())?;
-    replay(&mut engine, trace, &options.calibration_replay());
-    Ok(engine)
+    Engine::new(Arc::clone(site), config).map_err(|e| e.to_string())
 }
 
 /// The map evidence of one walk on `site`: the walk replayed through the engine as `options`
-/// ship it, and each scan weighed by its posterior smoothed by the rest of the walk
-/// ([`Engine::smoothed_posteriors`]), its most probable states up to `options.evidence_mass`
-/// of it and `options.evidence_states` of them. The walk's waypoints and floor are not read. `Err` when the engine refuses the
-/// configuration.
+/// ship it, gathering evidence as an app's session does ([`Engine::start_evidence_with`],
+/// docs/evidence.md#from-a-session) with a smoother that holds the whole walk, so that each
+/// scan is weighed by its posterior smoothed by the rest of the walk (or by the epochs up to a
+/// restart of the filter), its most probable states up to `options.evidence_mass` of it and
+/// `options.evidence_states` of them. The walk's waypoints and floor are not read. `Err` when
+/// the engine refuses the configuration.
 pub fn walk_evidence(
     site: &Arc<Site>,
     trace: &Trace,
     options: &CalibrationOptions,
 ) -> Result<Evidence, String> {
-    let replay_options = options.calibration_replay();
-    // Each scan's readings by transmitter key, as the engine hashes them on a salted site.
-    let mut hasher = options.engine.site_salt.clone().map(ScanHasher::new);
-    // Evidence of a transmitter the site does not hold refits nothing (`PreparedSurvey::refit`
-    // leaves it out): it is not written, though the scan still counts for its radio.
-    let held: HashSet<TransmitterKey> = site.radio().transmitters().iter().map(TransmitterKey::of).collect();
-    let mut scans: HashMap<u64, KeyedScan> = HashMap::new();
-    for event in trace.events(&replay_options.events) {
-        let Event::Scan(scan) = event else { continue };
-        let scan = match &mut hasher {
-            Some(hasher) => hasher.hash_scan(&scan).clone(),
-            None => scan,
-        };
-        let mut radios = [false; 2];
-        let readings = scan
-            .readings
-            .iter()
-            .filter_map(|r| {
-                let ble = r.transmitter.is_ble();
-                radios[usize::from(ble)] = true;
-                let key = TransmitterKey::of(&r.transmitter);
-                held.contains(&key).then_some((key, r.rssi_dbm))
-            })
-            .collect();
-        scans.insert(scan.timestamp_ns, (readings, radios));
-    }
-    let engine = replayed(site, trace, options)?;
-    let mut evidence = Evidence::new(site);
-    let mut refused = None;
-    let mut kept = Vec::new();
-    engine.smoothed_posteriors(|timestamp_ns, posterior| {
-        if let Some((readings, radios)) = scans.get(&timestamp_ns) {
-            most_probable(posterior, options.evidence_mass, options.evidence_states, &mut kept);
-            if let Err(e) = evidence.add_scan(&kept, readings, *radios) {
-                refused = Some(e);
-            }
-        }
+    let mut engine = walk_engine(site, options)?;
+    engine.start_evidence_with(EvidenceOptions {
+        mass: options.evidence_mass,
+        states: options.evidence_states,
     });
-    if let Some(e) = refused {
-        return Err(e.to_string());
-    }
-    evidence.add_walk();
-    Ok(evidence)
-}
-
-/// The most states of a scan's posterior its map evidence keeps, most probable first: one, its
-/// mode. Chosen on held-out survey walks (docs/evidence.md#at-scale): of the whole posterior,
-/// its most probable 90% or 50%, and its 4, 2 or 1 most probable states, the mode refitted
-/// the site of least held-out error, in the fewest bytes. The state keeps its probability, so
-/// a vague scan, whose mode holds little of it, weighs little.
-pub const EVIDENCE_STATES_PER_SCAN: usize = 1;
-
-/// `posterior`'s most probable states into `kept`: the fewest whose probabilities sum to
-/// `mass` (all of them from 1 on), at most `states` of them (0: no limit). By probability,
-/// ties by state, so that the same posterior keeps the same states on every machine. Their
-/// probabilities are kept as they are.
-fn most_probable(posterior: &[(u32, f64)], mass: f64, states: usize, kept: &mut Vec<(u32, f64)>) {
-    kept.clear();
-    kept.extend_from_slice(posterior);
-    if mass >= 1.0 && (states == 0 || states >= posterior.len()) {
-        return;
-    }
-    kept.sort_by(|a, b| b.1.total_cmp(&a.1).then(a.0.cmp(&b.0)));
-    let limit = if states == 0 { kept.len() } else { states };
-    let mut total = 0.0;
-    let mut keep = 0;
-    for &(_, p) in kept.iter().take(limit) {
-        if total >= mass {
-            break;
-        }
-        total += p;
-        keep += 1;
-    }
-    kept.truncate(keep);
+    replay(&mut engine, trace, &options.calibration_replay());
+    let taken = engine.take_evidence().ok_or("the engine stopped gathering evidence")?;
+    Ok(taken.evidence)
 }
 
 /// Where a walk without labels was at each epoch its posterior is sure of: the walk with
@@ -388,30 +323,5 @@ impl Refit {
             replaced: crate::Replaced::default(),
         };
         Ok((next, round))
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::most_probable;
-
-    #[test]
-    fn a_scan_keeps_its_most_probable_states_at_their_probabilities() {
-        let posterior = [(7, 0.1), (3, 0.4), (9, 0.2), (1, 0.2), (4, 0.1)];
-        let mut kept = Vec::new();
-        // The mode alone, at its probability.
-        most_probable(&posterior, 1.0, 1, &mut kept);
-        assert_eq!(kept, [(3, 0.4)]);
-        // Two states: a tie at 0.2 goes to the lower state, on every machine.
-        most_probable(&posterior, 1.0, 2, &mut kept);
-        assert_eq!(kept, [(3, 0.4), (1, 0.2)]);
-        // The fewest holding 70% of the mass, however many states that takes.
-        most_probable(&posterior, 0.7, 0, &mut kept);
-        assert_eq!(kept, [(3, 0.4), (1, 0.2), (9, 0.2)]);
-        // No limit: the posterior as it is.
-        most_probable(&posterior, 1.0, 0, &mut kept);
-        assert_eq!(kept, posterior);
-        most_probable(&[], 1.0, 1, &mut kept);
-        assert!(kept.is_empty());
     }
 }
