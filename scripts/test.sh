@@ -30,7 +30,7 @@ for component in rustfmt clippy; do
     fi
 done
 # Every Debian package the steps below use, in one apt run (two at once would fight over its lock).
-packages=(chromium gcc valgrind python3 libjna-java junit4 debootstrap)
+packages=(chromium gcc valgrind python3 python3-venv libjna-java junit4 debootstrap)
 missing=()
 for pkg in "${packages[@]}"; do dpkg -s "$pkg" >/dev/null 2>&1 || missing+=("$pkg"); done
 if (( ${#missing[@]} )); then
