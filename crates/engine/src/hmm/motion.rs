@@ -124,6 +124,10 @@ impl Transition for RegionsTransition<'_> {
         }
         low
     }
+
+    fn floor_ratio(&self) -> Option<f64> {
+        Some(self.ratio)
+    }
 }
 
 /// Hoang's transition with the movement vector: uniform over the states reachable within

@@ -27,6 +27,13 @@ pub trait Transition {
     fn bounds(&self) -> Option<RowBounds<'_>> {
         None
     }
+
+    /// HIPE's K (eq. 11) when every row has its floor weight at 1/K of its explicit ones:
+    /// what [`prune_mass`] spreads rows by. `None`: a model with no such floor, whose rows are
+    /// pruned at [`PRUNE_MASS`] only.
+    fn floor_ratio(&self) -> Option<f64> {
+        self.bounds().map(|b| b.ratio)
+    }
 }
 
 /// The rows of a model whose row `i` holds `high_i · f_ij` on the states reachable within
@@ -108,13 +115,22 @@ impl<'b> LnBounds<'b> {
     }
 }
 
-/// Posterior mass below which a state's row is not expanded: its mass is spread evenly
+/// Posterior mass below which a state's row is never expanded: its mass is spread evenly
 /// instead, as the row's floor weight would spread most of it. Beam pruning as in every
-/// large-vocabulary decoder; with at most N such states the mass moved is below N · 1e-15
-/// (1e-11 at 10 000 states), far under the 1/K = 5e-6 the rows' own floor moves each epoch;
-/// a tracked posterior has mass on a few hundred states, so this is what keeps an epoch fast
-/// at building scale (docs/tuning.md#engine-speed).
+/// large-vocabulary decoder. With at most N such states the mass moved is below N · 1e-15
+/// (1e-11 at 10 000 states). Models with HIPE's floor prune more ([`prune_mass`]).
 pub const PRUNE_MASS: f64 = 1e-15;
+
+/// The mass below which [`predict`] spreads a row evenly for `transition` over `n` states:
+/// 1/(K·N) for a model whose rows keep HIPE's floor at 1/K of their explicit weights
+/// (eq. 11), so that the mass moved in one epoch is at most 1/K, the share of a state out of
+/// reach against one within it. HIPE's floor leaves about 1e-7 on every state after an epoch
+/// without a scan, and expanding those rows was most of a prediction
+/// (docs/tuning.md#engine-speed); never below [`PRUNE_MASS`].
+pub fn prune_mass(transition: &dyn Transition, n: usize) -> f64 {
+    let by_floor = transition.floor_ratio().filter(|k| *k > 0.0).map(|k| 1.0 / (k * n.max(1) as f64));
+    by_floor.map_or(PRUNE_MASS, |m| m.max(PRUNE_MASS))
+}
 
 /// A Viterbi back-pointer: a state index, stored in 16 bits on a site of at most 65 536 states
 /// ([`ViterbiWindow`](super::ViterbiWindow)) and in 32 beyond.
@@ -136,7 +152,7 @@ impl BackPointer for u32 {
     }
 }
 
-/// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least `PRUNE_MASS`.
+/// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least [`prune_mass`].
 pub fn predict(transition: &dyn Transition, prior: &[f64], out: &mut [f64], row: &mut Vec<(u32, f64)>) {
     expand::<u32>(transition, Some((prior, out)), None, row);
 }
@@ -204,7 +220,8 @@ fn expand<B: BackPointer>(
         None => (&[][..], None, None),
     };
     let n = prior.len().max(delta.len());
-    // Prediction: the mass that rows below PRUNE_MASS and every row's floor spread evenly.
+    // Prediction: the mass that rows below `prune_mass` and every row's floor spread evenly.
+    let prune = prune_mass(transition, prior.len());
     let mut shared = 0.0;
     let uniform = 1.0 / prior.len().max(1) as f64;
     let mut predicted = predicted;
@@ -238,7 +255,7 @@ fn expand<B: BackPointer>(
     for i in 0..n {
         let mass = predicted.as_ref().and_then(|_| prior.get(i).copied());
         let expand_mass = match mass {
-            Some(p) if p < PRUNE_MASS => {
+            Some(p) if p < prune => {
                 shared += p * uniform;
                 false
             }
