@@ -36,9 +36,18 @@ impl Engine {
         } else {
             &resolved.observations
         };
-        let ln_unheard = match &self.shared_emissions {
-            Some(shared) => shared.ln_likelihood(radio, observations, &mut self.ln_emission),
-            None => radio.ln_likelihood(observations, &mut self.ln_emission),
+        // The device offset is measured against where the engine believed the phone was before
+        // the scan (below); without memoised likelihoods, the walk over the fingerprints that
+        // scores the scan also takes what that needs.
+        let measures_offset = self.config.device_offset && self.latest.is_some();
+        let (ln_unheard, moments) = match &self.shared_emissions {
+            Some(shared) => (shared.ln_likelihood(radio, observations, &mut self.ln_emission), None),
+            None => {
+                let belief = measures_offset.then(|| (&resolved.observations[..], self.filter.posterior()));
+                let (ln_unheard, moments) =
+                    radio.ln_likelihood_and_moments(observations, belief, &mut self.ln_emission);
+                (ln_unheard, belief.map(|_| moments))
+            }
         };
         // The fit of the map: the best fingerprinted state against none. Unsurveyed states score
         // the "no fingerprint" baseline itself, so counting them would never let the fit fall
@@ -61,13 +70,11 @@ impl Engine {
         // The phone's offset as this scan measures it: against where the engine believed the
         // phone was before the scan, so that the scan does not confirm its own reading; not
         // from a scan the map does not explain (docs/accuracy.md#device-offset).
-        let offset_measurement = (self.config.device_offset && self.latest.is_some() && !below_floor)
-            .then(|| {
-                radio.offset_residual(
-                    &resolved.observations,
-                    self.filter.posterior(),
-                    self.device_offset.mean_db(),
-                )
+        let offset_db = self.device_offset.mean_db();
+        let offset_measurement = (measures_offset && !below_floor)
+            .then(|| match &moments {
+                Some(moments) => radio.offset_from_moments(&resolved.observations, moments, offset_db),
+                None => radio.offset_residual(&resolved.observations, self.filter.posterior(), offset_db),
             })
             .flatten();
         // Accepted from here on: the state changes.

@@ -15,7 +15,7 @@
 //! A row that lists no state the later γ holds mass on is not written when the model gives
 //! its bounds: it contributes its floor weight alone (docs/tuning.md#fixed-lag).
 
-use super::transition::Transition;
+use super::transition::{prune_mass, Transition};
 use std::collections::VecDeque;
 
 /// A state's α below `CUT_MASS / N` is not kept: the mass left out of a step is at most
@@ -221,6 +221,9 @@ fn back<M>(
             total += g / p;
         }
     }
+    // A row the prediction spread evenly (under `prune_mass`) is 1/N on every j, as the
+    // filter stepped with it.
+    let (n, prune) = (ratio.len(), prune_mass(transition, ratio.len()));
     // A row none of whose entries holds later mass is its floor weight times the total: its
     // entries need not be weighed. With the model's bounds, the reach lists the row's states
     // and gives its floor weight exactly as the row would, so the result is the same.
@@ -230,6 +233,9 @@ fn back<M>(
         .iter()
         .map(|&(i, alpha)| {
             let alpha = f64::from(alpha);
+            if alpha < prune {
+                return (i, alpha * total.max(0.0) / n as f64);
+            }
             if let Some(bounds) = &bounds {
                 let reach = bounds.table.reachable_within(i as usize, bounds.reach);
                 if reach.iter().all(|(j, _)| ratio.get(j as usize).is_none_or(|&r| r == 0.0)) {

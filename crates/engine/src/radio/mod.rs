@@ -21,7 +21,7 @@ pub(crate) use map::LEVEL_STEP_DB;
 pub(crate) use map::MAX_ABS_LEVEL_DBM;
 pub(crate) use map::MAX_STORED_STD_DB;
 pub(crate) use map::MIN_STD_DB;
-pub use map::{RadioMap, ResolvedScan};
+pub use map::{BeliefMoments, RadioMap, ResolvedScan};
 pub(crate) use offset::DeviceOffset;
 pub use offset::DEVICE_OFFSET_PRIOR_STD_DB;
 

@@ -53,7 +53,23 @@ impl RadioMap {
     /// Returns ln p(scan) for a state that models none of the transmitters (every reading from
     /// the unheard model): what the scan is worth without a fingerprint.
     pub fn ln_likelihood(&self, observations: &[(u32, f64)], out: &mut [f64]) -> f64 {
+        self.ln_likelihood_and_moments(observations, None, out).0
+    }
+
+    /// [`ln_likelihood`](Self::ln_likelihood) of `observations`, and with `belief` = (`raw`,
+    /// `weights`) the [`BeliefMoments`] of each of `raw`'s readings heard above the clip level,
+    /// as [`offset_residual`](Self::offset_residual) takes them: `raw` lists the same
+    /// transmitters in the same order, before the device offset corrected them. A transmitter
+    /// both need is walked once for both.
+    #[allow(clippy::type_complexity)]
+    pub fn ln_likelihood_and_moments(
+        &self,
+        observations: &[(u32, f64)],
+        belief: Option<(&[(u32, f64)], &[f64])>,
+        out: &mut [f64],
+    ) -> (f64, Vec<Option<BeliefMoments>>) {
         debug_assert_eq!(out.len(), self.state_count());
+        let mut moments: Vec<Option<BeliefMoments>> = vec![None; belief.map_or(0, |(raw, _)| raw.len())];
         let terms = self.scan_terms(observations);
         // As `absent_terms`, a radio at a time.
         match terms.scanned {
@@ -66,18 +82,32 @@ impl RadioMap {
             [false, true] => out.copy_from_slice(&self.all_absent[1]),
             [false, false] => out.fill(0.0),
         }
-        for &(t, rssi) in observations {
+        for (k, &(t, rssi)) in observations.iter().enumerate() {
+            // The belief's moments of this transmitter, if its raw reading was heard.
+            let weights =
+                belief.filter(|(raw, _)| raw.get(k).is_some_and(|r| r.0 == t && r.1 > self.clip_dbm));
+            let weights = weights.map(|(_, weights)| weights);
             // What hearing `rssi` changes for a state using the unheard model...
             let unheard_delta = self.unheard_delta(rssi);
             let weight = self.weights[t as usize];
             // ...and, for states that model this transmitter, the difference to their own.
             // A reading at or below the clip level is ln p(absent) for every model: no change.
             if rssi <= self.clip_dbm {
+                if let Some(weights) = weights {
+                    moments[k] = Some(self.belief_moments(t, weights));
+                }
                 continue;
             }
-            match self.model {
-                RssiModel::CensoredGaussian => self.add_censored(t, rssi, unheard_delta, weight, out),
-                RssiModel::NaiveGaussian => {
+            match (self.model, weights) {
+                (RssiModel::CensoredGaussian, None) => self.add_censored(t, rssi, unheard_delta, weight, out),
+                (RssiModel::CensoredGaussian, Some(weights)) => {
+                    moments[k] =
+                        Some(self.add_censored_and_moments(t, rssi, unheard_delta, weight, out, weights));
+                }
+                (RssiModel::NaiveGaussian, weights) => {
+                    if let Some(weights) = weights {
+                        moments[k] = Some(self.belief_moments(t, weights));
+                    }
                     for (state, mean, spread) in self.entries(t) {
                         let spread = &self.spreads[spread];
                         let mean = f64::from(mean) * LEVEL_STEP_DB;
@@ -91,8 +121,17 @@ impl RadioMap {
         for v in out.iter_mut() {
             *v += terms.shared;
         }
+        // Raw readings heard that the loop did not walk (none, unless `raw` does not list
+        // `observations`' transmitters in order).
+        if let Some((raw, weights)) = belief {
+            for (m, &(t, rssi)) in moments.iter_mut().zip(raw) {
+                if rssi > self.clip_dbm && m.is_none() {
+                    *m = Some(self.belief_moments(t, weights));
+                }
+            }
+        }
         let absent: f64 = (0..2).filter(|&k| terms.scanned[k]).map(|k| self.kind_weights[k]).sum();
-        absent * self.unheard_ln_absent + terms.shared
+        (absent * self.unheard_ln_absent + terms.shared, moments)
     }
 
     /// One scan's measurement of the phone's RSSI offset
@@ -114,39 +153,33 @@ impl RadioMap {
         weights: &[f64],
         offset_db: f64,
     ) -> Option<(f64, f64)> {
+        let moments: Vec<Option<BeliefMoments>> = observations
+            .iter()
+            .map(|&(t, rssi)| (rssi > self.clip_dbm).then(|| self.belief_moments(t, weights)))
+            .collect();
+        self.offset_from_moments(observations, &moments, offset_db)
+    }
+
+    /// [`offset_residual`](Self::offset_residual) from the belief's moments of each reading
+    /// (`None` for a reading at or below the clip level), as
+    /// [`ln_likelihood_and_moments`](Self::ln_likelihood_and_moments) gives them.
+    pub fn offset_from_moments(
+        &self,
+        observations: &[(u32, f64)],
+        moments: &[Option<BeliefMoments>],
+        offset_db: f64,
+    ) -> Option<(f64, f64)> {
         let (mut sum, mut variance, mut n) = (0.0, 0.0, 0usize);
-        for &(t, rssi) in observations {
-            if rssi <= self.clip_dbm {
-                continue;
-            }
-            // Σp, Σp·μ, Σp·μ² and Σp·σ² over the states that model the transmitter.
-            let (mut w, mut mean, mut square, mut var) = (0.0, 0.0, 0.0, 0.0);
-            // As `entries`, run by run: the nested loops compile to a tighter loop than the
-            // flattened iterator (this is as many entries as the scan's likelihood).
-            for (first, words) in self.runs(t) {
-                let mut state = first as usize;
-                for &word in words {
-                    let (step, level, spread) = self.layout.decode(word);
-                    state += step;
-                    let p = weights.get(state).copied().unwrap_or(0.0);
-                    if p > 0.0 {
-                        let inverse = self.spreads[spread].inverse;
-                        let mu = f64::from(level) * LEVEL_STEP_DB;
-                        w += p;
-                        mean += p * mu;
-                        square += p * mu * mu;
-                        var += p / (inverse * inverse);
-                    }
-                }
-            }
-            if w < 0.5 {
+        for (&(_, rssi), m) in observations.iter().zip(moments) {
+            let Some(m) = m.filter(|_| rssi > self.clip_dbm) else { continue };
+            if m.weight < 0.5 {
                 continue;
             }
             // The reading's variance given the belief: the fingerprints' own σ² and how much μ
             // varies over the believed states (the law of total variance), so that a vague
             // belief measures little.
-            let mean = mean / w;
-            let var = var / w + (square / w - mean * mean).max(0.0);
+            let mean = m.mean / m.weight;
+            let var = m.variance / m.weight + (m.square / m.weight - mean * mean).max(0.0);
             if mean + offset_db - self.clip_dbm < 2.0 * var.sqrt() {
                 continue;
             }
@@ -155,6 +188,33 @@ impl RadioMap {
             n += 1;
         }
         (n > 0).then(|| (sum / n as f64, variance / n as f64))
+    }
+
+    /// The moments of transmitter `t`'s fingerprints under `weights` (a distribution over
+    /// states), over the states that model it.
+    fn belief_moments(&self, t: u32, weights: &[f64]) -> BeliefMoments {
+        let mut m = BeliefMoments::default();
+        // As `entries`, run by run: the nested loops compile to a tighter loop than the
+        // flattened iterator (this is as many entries as the scan's likelihood).
+        for (first, words) in self.runs(t) {
+            let mut state = first as usize;
+            for &word in words {
+                let (step, field, spread) = self.layout.decode_field(word);
+                state += step;
+                m.add(
+                    weights.get(state).copied().unwrap_or(0.0),
+                    self.mean_of_field(field),
+                    &self.spreads[spread],
+                );
+            }
+        }
+        m
+    }
+
+    /// The mean, dBm, of an entry whose mean field is `field`.
+    #[inline]
+    fn mean_of_field(&self, field: u32) -> f64 {
+        f64::from(self.layout.lowest_mean + field as i32) * LEVEL_STEP_DB
     }
 
     /// Which states' fingerprints say nothing about a scan, from what
@@ -181,9 +241,37 @@ impl RadioMap {
     /// (docs/tuning.md#engine-speed).
     #[inline(never)]
     fn add_censored(&self, t: u32, rssi: f64, unheard_delta: f64, weight: f64, out: &mut [f64]) {
+        self.censored_pass::<false>(t, rssi, (unheard_delta, weight), out, &[]);
+    }
+
+    /// [`add_censored`](Self::add_censored) and, in the same walk over the entries,
+    /// [`belief_moments`](Self::belief_moments) under `weights`.
+    #[inline(never)]
+    fn add_censored_and_moments(
+        &self,
+        t: u32,
+        rssi: f64,
+        unheard_delta: f64,
+        weight: f64,
+        out: &mut [f64],
+        weights: &[f64],
+    ) -> BeliefMoments {
+        self.censored_pass::<true>(t, rssi, (unheard_delta, weight), out, weights)
+    }
+
+    #[inline(always)]
+    fn censored_pass<const MOMENTS: bool>(
+        &self,
+        t: u32,
+        rssi: f64,
+        (unheard_delta, weight): (f64, f64),
+        out: &mut [f64],
+        weights: &[f64],
+    ) -> BeliefMoments {
         let (layout, table) = (self.layout, LnCdfTable::get());
         let above_clip = rssi - self.clip_dbm;
         let shared = ln_std_normal_pdf(0.0) - unheard_delta;
+        let mut moments = BeliefMoments::default();
         for (first, words) in self.runs(t) {
             let mut state = first as usize;
             for &word in words {
@@ -193,8 +281,16 @@ impl RadioMap {
                 let w = spread.clip_at_lowest - f64::from(field) * spread.clip_per_step;
                 let z = w + above_clip * spread.inverse;
                 out[state] += weight * (shared - 0.5 * z * z - spread.ln - table.ln_cdf(w));
+                if MOMENTS {
+                    moments.add(
+                        weights.get(state).copied().unwrap_or(0.0),
+                        self.mean_of_field(field),
+                        spread,
+                    );
+                }
             }
         }
+        moments
     }
 
     /// What hearing `rssi` changes for a state that uses the unheard model.
@@ -221,6 +317,29 @@ impl RadioMap {
             [true, false] => self.all_absent[0][state],
             [false, true] => self.all_absent[1][state],
             [false, false] => 0.0,
+        }
+    }
+}
+
+/// Σp, Σp·μ, Σp·μ² and Σp·σ² over the states that model a transmitter, p a belief over
+/// states: what [`RadioMap::offset_from_moments`] needs of a reading.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct BeliefMoments {
+    weight: f64,
+    mean: f64,
+    square: f64,
+    variance: f64,
+}
+
+impl BeliefMoments {
+    /// One entry with mean `mu` and `spread`, at a state of belief `p`.
+    #[inline(always)]
+    fn add(&mut self, p: f64, mu: f64, spread: &super::Spread) {
+        if p > 0.0 {
+            self.weight += p;
+            self.mean += p * mu;
+            self.square += p * mu * mu;
+            self.variance += p * spread.variance;
         }
     }
 }

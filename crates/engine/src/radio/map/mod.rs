@@ -10,7 +10,7 @@
 use super::{Gaussian, LnCdfTable, RssiModel, TransmitterId};
 mod likelihood;
 
-pub use likelihood::ResolvedScan;
+pub use likelihood::{BeliefMoments, ResolvedScan};
 
 use hashbrown::hash_table::{Entry, HashTable};
 use std::hash::{BuildHasher, BuildHasherDefault, DefaultHasher};
@@ -103,6 +103,8 @@ struct Spread {
     steps: u16,
     /// 1/σ, 1/dB.
     inverse: f64,
+    /// σ², dB², as 1/(1/σ)².
+    variance: f64,
     /// ln σ.
     ln: f64,
     /// w = (c - μ)/σ, the clip level in σ from the mean, is `clip_at_lowest - field ·
@@ -258,6 +260,7 @@ impl RadioMap {
                 spreads.push(Spread {
                     steps: std,
                     inverse: 1.0 / sigma,
+                    variance: 1.0 / (sigma.recip() * sigma.recip()),
                     ln: sigma.ln(),
                     clip_at_lowest: 0.0,
                     clip_per_step: 0.0,

@@ -281,3 +281,33 @@ fn rejects_bad_tables() {
     );
     assert!(oob.unwrap_err().contains("out of range"));
 }
+
+#[test]
+fn the_offset_measured_with_the_likelihood_is_the_offset_measured_apart() {
+    for model in [RssiModel::CensoredGaussian, RssiModel::NaiveGaussian] {
+        let map = small_map(model);
+        let belief = [0.7, 0.3];
+        // Raw readings, and as a device offset of +3 dB corrected them: the one at -98 dBm
+        // falls to the clip level, the one at -101 dBm (not heard raw) stays below it.
+        let raw = [(0, -62.0), (1, -79.0), (2, -98.0), (1, -101.0)];
+        let corrected: Vec<(u32, f64)> = raw.iter().map(|&(t, rssi)| (t, rssi - 3.0)).collect();
+        for offset_db in [-4.0, 0.0, 3.0] {
+            let mut apart = vec![0.0; 2];
+            let unheard_apart = map.ln_likelihood(&corrected, &mut apart);
+            let mut together = vec![0.0; 2];
+            let (unheard, moments) =
+                map.ln_likelihood_and_moments(&corrected, Some((&raw[..], &belief[..])), &mut together);
+            assert_eq!((together, unheard), (apart, unheard_apart));
+            // One per raw reading, for those heard above the clip level.
+            assert_eq!(moments.iter().map(Option::is_some).collect::<Vec<_>>(), [true, true, true, false]);
+            let measured = map.offset_from_moments(&raw, &moments, offset_db);
+            assert_eq!(measured, map.offset_residual(&raw, &belief, offset_db));
+            assert!(measured.is_some());
+        }
+        // Raw readings that do not follow the corrected ones are still measured.
+        let mut out = vec![0.0; 2];
+        let (_, moments) =
+            map.ln_likelihood_and_moments(&corrected[..1], Some((&raw[..], &belief[..])), &mut out);
+        assert_eq!(map.offset_from_moments(&raw, &moments, 0.0), map.offset_residual(&raw, &belief, 0.0));
+    }
+}
