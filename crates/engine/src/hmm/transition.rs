@@ -29,8 +29,9 @@ pub trait Transition {
     }
 
     /// HIPE's K (eq. 11) when every row has its floor weight at 1/K of its explicit ones:
-    /// what [`prune_mass`] spreads rows by. `None`: a model with no such floor, whose rows are
-    /// pruned at [`PRUNE_MASS`] only.
+    /// what the prediction prunes rows by (under 1/(K·N) their mass is spread evenly,
+    /// docs/tuning.md#engine-speed). `None`: a model with no such floor, whose rows are
+    /// pruned only under 1e-15.
     fn floor_ratio(&self) -> Option<f64> {
         self.bounds().map(|b| b.ratio)
     }
@@ -152,7 +153,8 @@ impl BackPointer for u32 {
     }
 }
 
-/// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least [`prune_mass`].
+/// `out[j] = Σ_i prior[i] · a_ij`, expanding only rows with at least `prune_mass`: 1/(K·N)
+/// for a model with HIPE's K ([`Transition::floor_ratio`]), else 1e-15.
 pub fn predict(transition: &dyn Transition, prior: &[f64], out: &mut [f64], row: &mut Vec<(u32, f64)>) {
     expand::<u32>(transition, Some((prior, out)), None, row);
 }
