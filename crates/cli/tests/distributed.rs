@@ -31,17 +31,7 @@ fn evidence_collected_per_walk_and_merged_refits_as_the_survey_does() {
     // A floor folder of F1's plan and first 6 walks; the next 3 walks without labels.
     let dir = tempfile::tempdir().unwrap();
     let at = |name: &str| dir.path().join(name);
-    let small = at("F1");
-    std::fs::create_dir_all(small.join("path_data_files")).unwrap();
-    for plan in ["floor_info.json", "geojson_map.json"] {
-        std::fs::copy(floor.join(plan), small.join(plan)).unwrap();
-    }
-    let mut walks: Vec<PathBuf> =
-        std::fs::read_dir(floor.join("path_data_files")).unwrap().map(|e| e.unwrap().path()).collect();
-    walks.sort();
-    for walk in &walks[..6] {
-        std::fs::copy(walk, small.join("path_data_files").join(walk.file_name().unwrap())).unwrap();
-    }
+    let (small, walks) = waymark_eval::data::floor_with_first_walks(&floor, dir.path(), 6).unwrap();
     let unlabelled: Vec<&str> = walks[6..9].iter().map(|p| text(p)).collect();
 
     // One machine: the survey gathers the walks' evidence on its labelled site itself.
@@ -87,27 +77,16 @@ fn evidence_collected_per_walk_and_merged_refits_as_the_survey_does() {
     assert_ne!(one, std::fs::read(&site0).unwrap());
 
     // One --out takes one walk; a walk that cannot be read writes nothing.
-    let out = waymark(&[
-        "evidence",
-        "collect",
-        "--site",
-        text(&site0),
-        "--out",
-        text(&at("two.wmev")),
-        unlabelled[0],
-        unlabelled[1],
-    ]);
+    let collect_into = |out: &str, walks: &[&str]| {
+        let out = at(out);
+        let mut args = vec!["evidence", "collect", "--site", text(&site0), "--out", text(&out)];
+        args.extend(walks);
+        waymark(&args)
+    };
+    let out = collect_into("two.wmev", &unlabelled[..2]);
     assert!(!out.status.success() && String::from_utf8_lossy(&out.stderr).contains("--out-dir"));
     let missing = at("missing.txt");
-    let out = waymark(&[
-        "evidence",
-        "collect",
-        "--site",
-        text(&site0),
-        "--out",
-        text(&at("bad.wmev")),
-        text(&missing),
-    ]);
+    let out = collect_into("bad.wmev", &[text(&missing)]);
     assert!(!out.status.success());
     assert!(!at("bad.wmev").exists());
     // Evidence that is not an evidence file fails the survey before its calibration.

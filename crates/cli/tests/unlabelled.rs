@@ -58,17 +58,7 @@ fn waymark_survey_takes_walks_without_labels() {
     };
     // A floor folder of F1's plan and first 8 walks; the next 4 walks without labels.
     let dir = tempfile::tempdir().unwrap();
-    let small = dir.path().join("F1");
-    std::fs::create_dir_all(small.join("path_data_files")).unwrap();
-    for plan in ["floor_info.json", "geojson_map.json"] {
-        std::fs::copy(floor.join(plan), small.join(plan)).unwrap();
-    }
-    let mut walks: Vec<_> =
-        std::fs::read_dir(floor.join("path_data_files")).unwrap().map(|e| e.unwrap().path()).collect();
-    walks.sort();
-    for walk in &walks[..8] {
-        std::fs::copy(walk, small.join("path_data_files").join(walk.file_name().unwrap())).unwrap();
-    }
+    let (small, walks) = waymark_eval::data::floor_with_first_walks(&floor, dir.path(), 8).unwrap();
     let survey = |out: &str, unlabelled: &[std::path::PathBuf]| {
         let mut args: Vec<String> = vec!["survey".into(), small.to_string_lossy().into(), "--out".into()];
         args.push(dir.path().join(out).to_string_lossy().into());

@@ -26,6 +26,29 @@ pub fn site1_floor(workspace: &Path, floor: &str) -> Option<PathBuf> {
         .then_some(unpacked)
 }
 
+/// A floor folder in `into` named as `floor`'s, holding its plan and its first `walks` walks by
+/// name: for tests that survey a few walks. Returns the folder and every walk of `floor`,
+/// sorted by name, so that a test can give the next ones without labels.
+pub fn floor_with_first_walks(
+    floor: &Path,
+    into: &Path,
+    walks: usize,
+) -> std::io::Result<(PathBuf, Vec<PathBuf>)> {
+    let small = into.join(floor.file_name().unwrap_or_default());
+    std::fs::create_dir_all(small.join("path_data_files"))?;
+    for plan in ["floor_info.json", "geojson_map.json"] {
+        std::fs::copy(floor.join(plan), small.join(plan))?;
+    }
+    let mut all = std::fs::read_dir(floor.join("path_data_files"))?
+        .map(|entry| entry.map(|e| e.path()))
+        .collect::<std::io::Result<Vec<_>>>()?;
+    all.sort();
+    for walk in all.iter().take(walks) {
+        std::fs::copy(walk, small.join("path_data_files").join(walk.file_name().unwrap_or_default()))?;
+    }
+    Ok((small, all))
+}
+
 /// The IPIN 2023 museum's logfiles (`ipin2023-t3/`, GetSensorData) unpacked under
 /// `<workspace>/target/ipin/ipin2023-t3/`, or `None`, saying why on stderr.
 pub fn ipin2023_t3(workspace: &Path) -> Option<PathBuf> {

@@ -56,8 +56,8 @@ pub struct FitOptions {
     pub max_iterations: usize,
     /// EM stops when μ and σ both move less than this: 1e-4 dB, a hundredth of the 0.01 dB
     /// step a site file stores μ and σ in (`LEVEL_STEP_DB`), and a ten-thousandth of the 1 dBm
-    /// phones report RSSI in. Against 1e-6 dB, 1.6% of a floor's stored entries move, by at
-    /// most 0.03 dB, and a survey takes a tenth less CPU (docs/tuning.md#radio-map).
+    /// phones report RSSI in; what a tighter tolerance would change and cost is measured in
+    /// docs/tuning.md#radio-map.
     pub tolerance_db: f64,
 }
 
