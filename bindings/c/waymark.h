@@ -445,9 +445,15 @@ typedef struct {
   bool has_floor_level;
   /**
    * The floor's logical level as the building numbers it (-1 for the first basement);
-   * 0 when `has_floor_level` is false.
+   * 0 when `has_floor_level` is false. When `level_unmapped`, a level the site has no floor
+   * for, where the barometer places the phone (docs/accuracy.md#barometer).
    */
   int32_t floor_level;
+  /**
+   * Whether `floor_level` is a level the site has no floor for: x, y and the radii then
+   * stand on `floor`'s plan, the nearest the map can place the phone.
+   */
+  bool level_unmapped;
   /**
    * Latitude, degrees north (WGS84), when the site is geo-referenced (its file has an
    * `anchor`); NaN otherwise.

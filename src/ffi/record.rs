@@ -24,8 +24,12 @@ pub(crate) struct AppPosition<'a> {
     pub floor: u32,
     /// The floor's name; empty for an index the site does not have (never, from the engine).
     pub floor_name: &'a str,
-    /// The floor's logical level, when the site file gives one.
+    /// The floor's logical level, when the site file gives one; or the level the site has no
+    /// floor for where the barometer places the phone ([`Position::unmapped_level`]).
     pub floor_level: Option<i32>,
+    /// Whether `floor_level` is such a level: the position stands on `floor`'s plan, the
+    /// nearest the map can place the phone.
+    pub level_unmapped: bool,
     /// Probability that the floor is right.
     pub floor_probability: f64,
     /// WGS84 latitude, degrees north, on a geo-referenced site.
@@ -70,7 +74,8 @@ impl<'a> AppPosition<'a> {
             y: p.y,
             floor: p.floor as u32,
             floor_name: site.floors().get(p.floor).map_or("", |f| f.name.as_str()),
-            floor_level: site.floor_level(p.floor),
+            floor_level: p.unmapped_level.or(site.floor_level(p.floor)),
+            level_unmapped: p.unmapped_level.is_some(),
             floor_probability: p.floor_probability,
             latitude_deg: geo.map(|g| g.lat_deg),
             longitude_deg: geo.map(|g| g.lon_deg),

@@ -7,7 +7,7 @@ use nalgebra::Point2;
 use std::sync::Arc;
 use waymark_engine::sensors::{pressure_height_m, PressureSample};
 use waymark_engine::site::{BuildOptions, Site, SiteBuilder};
-use waymark_engine::{Engine, EngineConfig};
+use waymark_engine::{Engine, EngineConfig, Position};
 
 const SECOND: u64 = 1_000_000_000;
 
@@ -15,6 +15,11 @@ const SECOND: u64 = 1_000_000_000;
 /// x = 0. Transmitters 0-2 sound the same on both floors; transmitter 9 is 30 dB stronger on
 /// the ground floor. A scan with 9 half way between cannot tell the floors apart.
 fn twin_floors() -> Site {
+    twin_floors_at(None)
+}
+
+/// [`twin_floors`] with these levels, if any.
+fn twin_floors_at(levels: Option<[i32; 2]>) -> Site {
     let mut b = SiteBuilder::new("twin floors");
     let floors = [b.floor("G", 0.0), b.floor("1", 4.0)];
     let mut first = Vec::new();
@@ -41,6 +46,9 @@ fn twin_floors() -> Site {
         }
     }
     b.edge(first[0], first[1], Some(6.0));
+    for (floor, level) in floors.iter().zip(levels.into_iter().flatten()) {
+        b.floor_geo(*floor, Some(level), [0.0, 0.0]);
+    }
     b.build(BuildOptions::default()).unwrap()
 }
 
@@ -66,21 +74,27 @@ fn pressure(from_s: f64, to_s: f64, height: impl Fn(f64) -> f64) -> Vec<Pressure
 /// between 10 and 16 s, then 10 s more at x = 0 with scans that cannot tell the floors apart.
 /// Returns the floor of the last position and its probability.
 fn walk(config: EngineConfig, climb_m: f64) -> (usize, f64) {
-    let mut engine = Engine::new(Arc::new(twin_floors()), config).unwrap();
+    let p = walk_on(twin_floors(), config, climb_m);
+    (p.floor, p.floor_probability)
+}
+
+/// [`walk`] on `site`, returning the last position.
+fn walk_on(site: Site, config: EngineConfig, climb_m: f64) -> Position {
+    let mut engine = Engine::new(Arc::new(site), config).unwrap();
     let height = |t: f64| climb_m * ((t - 10.0) / 6.0).clamp(0.0, 1.0);
-    let mut floor = (usize::MAX, 0.0);
+    let mut last = None;
     for second in 1..=26u64 {
         let report = engine.push_pressure(&pressure((second - 1) as f64, second as f64, height));
         assert_eq!(report.accepted, 10);
         let nine = if second <= 10 { -45.0 } else { -60.0 };
         let readings = [(0u8, -40.0), (1, -64.0), (2, -88.0), (9, nine)];
         let p = engine.push_scan(&scan(second * SECOND, &readings)).unwrap().position;
-        floor = (p.floor, p.floor_probability);
         if second == 10 {
-            assert_eq!(floor.0, 0, "on the ground floor before the climb");
+            assert_eq!((p.floor, p.unmapped_level), (0, None), "on the ground floor before the climb");
         }
+        last = Some(p);
     }
-    floor
+    last.unwrap()
 }
 
 #[test]
@@ -100,6 +114,23 @@ fn less_than_a_storey_holds_the_floor_and_a_height_no_floor_explains_leaves_it_t
     // No floor is 4 m below the ground floor: a height no floor explains leaves the floor to
     // the radio, which cannot tell here, rather than pushing it up or holding it.
     assert!(p < 0.6, "{floor} {p}");
+}
+
+#[test]
+fn a_storey_climbed_to_a_level_nobody_surveyed_reports_that_level() {
+    // Levels 0 and 2 surveyed: 3 m up is level 1, whose floor the site lacks.
+    let levels = Some([0, 2]);
+    let p = walk_on(twin_floors_at(levels), EngineConfig::default(), 3.0);
+    assert_eq!(p.unmapped_level, Some(1), "{p:?}");
+    // 6 m is one tall storey or two low ones: level 2 explains it nearly as well as level 1,
+    // and the site has level 2.
+    let p = walk_on(twin_floors_at(levels), EngineConfig::default(), 6.0);
+    assert_eq!((p.floor, p.unmapped_level), (1, None), "{p:?}");
+    // Without a level between the site's, or without the barometer, never.
+    let p = walk_on(twin_floors_at(Some([0, 1])), EngineConfig::default(), 3.0);
+    assert_eq!(p.unmapped_level, None);
+    let without = EngineConfig { barometer: false, ..EngineConfig::default() };
+    assert_eq!(walk_on(twin_floors_at(levels), without, 3.0).unmapped_level, None);
 }
 
 #[test]

@@ -271,7 +271,7 @@ fn scorer(
 /// live radius of their epoch; the replay smooths the last `lag` epochs by what there is when
 /// the walk ends, and any epoch after the last smoothed one takes its state on the final track.
 pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
-    let live = live_estimates(&r.positions);
+    let live = live_estimates(site, &r.positions);
     let radius: HashMap<u64, (f64, f64)> =
         live.iter().map(|e| (e.timestamp_ns, (e.accuracy_m, e.accuracy_95_m))).collect();
     let smoothed = |points: &mut dyn Iterator<Item = &waymark_engine::TrackPoint>| -> Vec<Estimate> {
@@ -299,13 +299,27 @@ pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
     [live, lagged, viterbi]
 }
 
-/// The engine's live positions as estimates.
-pub fn live_estimates(positions: &[waymark_engine::Position]) -> Vec<Estimate> {
+/// The floor index a level has in scoring: its floor's index in `site`, else, for one of the
+/// site's unmapped levels ([`Site::unmapped_levels`]), the site's floor count plus its rank
+/// among them; any other level is past those. Ground truth ([`crate::io::GsdWalk::trace`])
+/// and reported [unmapped levels](waymark_engine::Position::unmapped_level) share it.
+pub fn scoring_levels(site_levels: &[i32]) -> Vec<Option<i32>> {
+    let between = waymark_engine::site::levels_between(site_levels);
+    site_levels.iter().chain(&between).copied().map(Some).collect()
+}
+
+/// The engine's live positions as estimates: a reported unmapped level scores as its index
+/// in [`scoring_levels`].
+pub fn live_estimates(site: &Site, positions: &[waymark_engine::Position]) -> Vec<Estimate> {
+    let levels = scoring_levels(&site.floor_levels());
     positions
         .iter()
         .map(|p| Estimate {
             timestamp_ns: p.timestamp_ns,
-            floor: p.floor,
+            floor: p
+                .unmapped_level
+                .and_then(|l| levels.iter().position(|&k| k == Some(l)))
+                .unwrap_or(p.floor),
             x: p.x,
             y: p.y,
             accuracy_m: p.accuracy_m,

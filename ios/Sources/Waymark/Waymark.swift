@@ -4175,9 +4175,16 @@ public struct PositionEstimate: Equatable, Hashable {
     public var floorName: String
     /**
      * The floor's logical level as the building numbers it (-1 for the first basement), as
-     * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
+     * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none. When
+     * `level_unmapped`, a level the site has no floor for, where the barometer places the
+     * phone (docs/accuracy.md#barometer).
      */
     public var floorLevel: Int32?
+    /**
+     * Whether `floor_level` is a level the site has no floor for: x, y and the radii then
+     * stand on `floor`'s plan, the nearest the map can place the phone.
+     */
+    public var levelUnmapped: Bool
     /**
      * Probability that the floor is right: how often it was at this posterior mass on it on
      * held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
@@ -4265,8 +4272,14 @@ public struct PositionEstimate: Equatable, Hashable {
          */floorName: String, 
         /**
          * The floor's logical level as the building numbers it (-1 for the first basement), as
-         * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
+         * Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none. When
+         * `level_unmapped`, a level the site has no floor for, where the barometer places the
+         * phone (docs/accuracy.md#barometer).
          */floorLevel: Int32? = nil, 
+        /**
+         * Whether `floor_level` is a level the site has no floor for: x, y and the radii then
+         * stand on `floor`'s plan, the nearest the map can place the phone.
+         */levelUnmapped: Bool = false, 
         /**
          * Probability that the floor is right: how often it was at this posterior mass on it on
          * held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
@@ -4325,6 +4338,7 @@ public struct PositionEstimate: Equatable, Hashable {
         self.floor = floor
         self.floorName = floorName
         self.floorLevel = floorLevel
+        self.levelUnmapped = levelUnmapped
         self.floorProbability = floorProbability
         self.latitudeDeg = latitudeDeg
         self.longitudeDeg = longitudeDeg
@@ -4363,6 +4377,7 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
                 floor: FfiConverterUInt32.read(from: &buf), 
                 floorName: FfiConverterString.read(from: &buf), 
                 floorLevel: FfiConverterOptionInt32.read(from: &buf), 
+                levelUnmapped: FfiConverterBool.read(from: &buf), 
                 floorProbability: FfiConverterDouble.read(from: &buf), 
                 latitudeDeg: FfiConverterOptionDouble.read(from: &buf), 
                 longitudeDeg: FfiConverterOptionDouble.read(from: &buf), 
@@ -4387,6 +4402,7 @@ public struct FfiConverterTypePositionEstimate: FfiConverterRustBuffer {
         FfiConverterUInt32.write(value.floor, into: &buf)
         FfiConverterString.write(value.floorName, into: &buf)
         FfiConverterOptionInt32.write(value.floorLevel, into: &buf)
+        FfiConverterBool.write(value.levelUnmapped, into: &buf)
         FfiConverterDouble.write(value.floorProbability, into: &buf)
         FfiConverterOptionDouble.write(value.latitudeDeg, into: &buf)
         FfiConverterOptionDouble.write(value.longitudeDeg, into: &buf)

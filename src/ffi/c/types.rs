@@ -237,8 +237,12 @@ pub struct waymark_position {
     /// Whether `floor_level` holds the floor's logical level (the site file gives one).
     pub has_floor_level: bool,
     /// The floor's logical level as the building numbers it (-1 for the first basement);
-    /// 0 when `has_floor_level` is false.
+    /// 0 when `has_floor_level` is false. When `level_unmapped`, a level the site has no floor
+    /// for, where the barometer places the phone (docs/accuracy.md#barometer).
     pub floor_level: i32,
+    /// Whether `floor_level` is a level the site has no floor for: x, y and the radii then
+    /// stand on `floor`'s plan, the nearest the map can place the phone.
+    pub level_unmapped: bool,
     /// Latitude, degrees north (WGS84), when the site is geo-referenced (its file has an
     /// `anchor`); NaN otherwise.
     pub latitude_deg: f64,
@@ -503,6 +507,7 @@ impl From<AppPosition<'_>> for waymark_position {
             floor_probability: p.floor_probability,
             has_floor_level: p.floor_level.is_some(),
             floor_level: p.floor_level.unwrap_or(0),
+            level_unmapped: p.level_unmapped,
             latitude_deg: p.latitude_deg.unwrap_or(nan),
             longitude_deg: p.longitude_deg.unwrap_or(nan),
             zone: p.zone.unwrap_or(-1),

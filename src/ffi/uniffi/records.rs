@@ -286,9 +286,15 @@ pub struct PositionEstimate {
     /// Floor name.
     pub floor_name: String,
     /// The floor's logical level as the building numbers it (-1 for the first basement), as
-    /// Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none.
+    /// Core Location's `CLFloor.level`; `null` / `nil` when the site file gives none. When
+    /// `level_unmapped`, a level the site has no floor for, where the barometer places the
+    /// phone (docs/accuracy.md#barometer).
     #[uniffi(default = None)]
     pub floor_level: Option<i32>,
+    /// Whether `floor_level` is a level the site has no floor for: x, y and the radii then
+    /// stand on `floor`'s plan, the nearest the map can place the phone.
+    #[uniffi(default = false)]
+    pub level_unmapped: bool,
     /// Probability that the floor is right: how often it was at this posterior mass on it on
     /// held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
     /// when the site file has no such calibration.
@@ -641,6 +647,7 @@ impl From<AppPosition<'_>> for PositionEstimate {
             floor: p.floor,
             floor_name: p.floor_name.to_owned(),
             floor_level: p.floor_level,
+            level_unmapped: p.level_unmapped,
             floor_probability: p.floor_probability,
             latitude_deg: p.latitude_deg,
             longitude_deg: p.longitude_deg,

@@ -250,6 +250,7 @@ impl Engine {
         Position {
             floor: e.floor,
             floor_probability: floor_reliability.report(e.floor_probability),
+            unmapped_level: self.unmapped_level(position.timestamp_ns, e.floor),
             zone,
             zone_probability,
             x: e.position.x,
@@ -358,6 +359,7 @@ impl Position {
             timestamp_ns,
             floor: 0,
             floor_probability: 0.0,
+            unmapped_level: None,
             zone: None,
             zone_probability: 0.0,
             x: 0.0,

@@ -114,8 +114,10 @@ pub struct Engine {
     barometer: Barometer,
     /// Where the height last settled, and on which floors ([`vertical`]).
     floor_anchor: Option<vertical::FloorAnchor>,
-    /// Each floor's level ([`Engine::floor_levels`]).
+    /// Each floor's level ([`Site::floor_levels`]).
     levels: Vec<i32>,
+    /// The levels between the site's that no floor has ([`Site::unmapped_levels`]).
+    unmapped_levels: Vec<i32>,
     /// Scan likelihoods shared with the other engines of an evaluation on this site
     /// ([`Engine::share_emissions`]); `None` in an app.
     shared_emissions: Option<Arc<SharedEmissions>>,
@@ -177,7 +179,8 @@ impl Engine {
             .filter(|(_, s)| s.kind == crate::site::StateKind::Unsurveyed)
             .map(|(i, _)| i as u32)
             .collect();
-        let levels = vertical::floor_levels(&site);
+        let levels = site.floor_levels();
+        let unmapped_levels = site.unmapped_levels();
         Ok(Self {
             tracker: MotionTracker::new(config.motion_for(&site))?,
             viterbi: config.track.then(|| ViterbiWindow::new(n, config.track_window_epochs)),
@@ -216,6 +219,7 @@ impl Engine {
             barometer: Barometer::default(),
             floor_anchor: None,
             levels,
+            unmapped_levels,
             shared_emissions: None,
             gathering: None,
             config,

@@ -22,6 +22,13 @@ pub struct Position {
     /// held-out survey walks (docs/accuracy.md#floor-probability), or the posterior's own mass
     /// when the site file has no such calibration.
     pub floor_probability: f64,
+    /// A level the site has no floor for, between two levels it has, where the barometer
+    /// places the phone (docs/accuracy.md#barometer): the height climbed since the last floor
+    /// that explained a height fits it better than `floor`'s level by a Bayes factor of 3 or
+    /// more. `None` otherwise, and always without a barometer. The position and the radii
+    /// still stand on `floor`'s plan, the nearest the map can place the phone; display the
+    /// level as the floor.
+    pub unmapped_level: Option<i32>,
     /// The most likely zone, an index into the site's zones: the zone holding the most
     /// posterior mass, or `None` when the site has no zones or more mass lies outside every
     /// zone than in any one of them.

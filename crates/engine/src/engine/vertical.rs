@@ -11,7 +11,6 @@
 
 use super::Engine;
 use crate::sensors::{BatchReport, PressureSample};
-use crate::site::Site;
 
 /// A storey is at least this high, m: the headroom building codes ask over a stair (2.0 m,
 /// e.g. the UK's Approved Document K 1.10, the US IBC 1011.3 2032 mm).
@@ -31,6 +30,13 @@ pub(crate) const CLIMB_SIGMA_M: f64 = 0.5;
 /// building's height ([`Engine::weigh_floors_by_height`]), so that a height no floor explains
 /// weighs them all alike and leaves the floor to the radio.
 pub(crate) const BAROMETER_OUTLIER_SHARE: f64 = 0.05;
+
+/// The Bayes factor by which the barometer must favour a level the site lacks over the floor
+/// the posterior gives before the engine reports that level: 3, the start of "positive"
+/// evidence on Kass & Raftery's scale (J. Am. Stat. Assoc. 90(430), 1995, §3.2). Below it the
+/// height fits the mapped floor nearly as well (5.6 m is one tall storey or two low ones) and
+/// the radio's floor stands.
+pub(crate) const UNMAPPED_LEVEL_BAYES_FACTOR: f64 = 3.0;
 
 /// Where the phone's height settled, and which floor it was on then.
 #[derive(Clone, Debug, Default)]
@@ -64,21 +70,6 @@ pub(crate) fn climb_likelihood(dh_m: f64, k: i32) -> f64 {
         / (high - low + CLIMB_SIGMA_M * (2.0 * std::f64::consts::PI).sqrt())
 }
 
-/// The level of each floor of `site`: its own, else its rank by elevation (levels step by one).
-pub(super) fn floor_levels(site: &Site) -> Vec<i32> {
-    let floors = site.floors();
-    if floors.iter().all(|f| f.level.is_some()) {
-        return floors.iter().map(|f| f.level.unwrap_or(0)).collect();
-    }
-    let mut order: Vec<usize> = (0..floors.len()).collect();
-    order.sort_by(|&a, &b| floors[a].elevation_m.total_cmp(&floors[b].elevation_m));
-    let mut levels = vec![0; floors.len()];
-    for (rank, &f) in order.iter().enumerate() {
-        levels[f] = rank as i32;
-    }
-    levels
-}
-
 impl Engine {
     /// Takes a batch of barometer readings (docs/accuracy.md#barometer). Readings that are not
     /// finite or not a pressure, not after the previous, or too far ahead of the engine's
@@ -105,23 +96,7 @@ impl Engine {
         };
         let Some(anchor) = &self.floor_anchor else { return };
         let dh = height - anchor.height_m;
-        // A wrong height: uniform over the heights a move between the site's floors can climb.
-        let span = self.levels.iter().max().zip(self.levels.iter().min()).map_or(1, |(a, b)| (a - b).max(1));
-        let outlier = BAROMETER_OUTLIER_SHARE / (2.0 * f64::from(span) * STOREY_MAX_M);
-        let weights: Vec<f64> = self
-            .levels
-            .iter()
-            .map(|&to| {
-                anchor
-                    .floors
-                    .iter()
-                    .zip(&self.levels)
-                    .map(|(p, &from)| p * climb_likelihood(dh, to - from))
-                    .sum::<f64>()
-                    * (1.0 - BAROMETER_OUTLIER_SHARE)
-                    + outlier
-            })
-            .collect();
+        let weights: Vec<f64> = self.levels.iter().map(|&to| self.level_weight(anchor, dh, to)).collect();
         let most = weights.iter().copied().fold(0.0, f64::max);
         if !(most > 0.0 && most.is_finite()) {
             return;
@@ -130,6 +105,41 @@ impl Engine {
         for (e, state) in self.ln_emission.iter_mut().zip(self.site.states()) {
             *e += ln_weight[state.floor];
         }
+    }
+
+    /// The barometer's weight of being on level `to` after climbing `dh_m` since `anchor`:
+    /// Σ_f P_anchor(f) · p(Δh | to − level_f), mixed with a wrong height uniform over the
+    /// heights a move between the site's floors can climb ([`BAROMETER_OUTLIER_SHARE`]).
+    fn level_weight(&self, anchor: &FloorAnchor, dh_m: f64, to: i32) -> f64 {
+        let span = self.levels.iter().max().zip(self.levels.iter().min()).map_or(1, |(a, b)| (a - b).max(1));
+        let outlier = BAROMETER_OUTLIER_SHARE / (2.0 * f64::from(span) * STOREY_MAX_M);
+        let explained: f64 = anchor
+            .floors
+            .iter()
+            .zip(&self.levels)
+            .map(|(p, &from)| p * climb_likelihood(dh_m, to - from))
+            .sum();
+        explained * (1.0 - BAROMETER_OUTLIER_SHARE) + outlier
+    }
+
+    /// The level the site has no floor for where the barometer places the phone, when it does
+    /// (docs/accuracy.md#barometer): the height has settled, and the height climbed since the
+    /// anchor fits one of [`Site::unmapped_levels`] better than `floor`'s level by a Bayes
+    /// factor of [`UNMAPPED_LEVEL_BAYES_FACTOR`] or more.
+    pub(super) fn unmapped_level(&self, timestamp_ns: u64, floor: usize) -> Option<i32> {
+        if !self.config.barometer || self.unmapped_levels.is_empty() || !self.barometer.settled(timestamp_ns)
+        {
+            return None;
+        }
+        let anchor = self.floor_anchor.as_ref()?;
+        let dh = self.barometer.height_at(timestamp_ns)? - anchor.height_m;
+        let here = self.level_weight(anchor, dh, *self.levels.get(floor)?);
+        self.unmapped_levels
+            .iter()
+            .map(|&level| (level, self.level_weight(anchor, dh, level)))
+            .filter(|&(_, w)| w >= UNMAPPED_LEVEL_BAYES_FACTOR * here)
+            .max_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(level, _)| level)
     }
 
     /// After the filter's step: where the height has settled, the anchor moves to it with the

@@ -149,6 +149,31 @@ impl Site {
         &self.floors
     }
 
+    /// The level of each floor, by index: its own (`floors[].level`) when every floor has one,
+    /// else its rank by elevation (levels step by one from 0). The barometer counts storeys in
+    /// these levels (docs/accuracy.md#barometer).
+    pub fn floor_levels(&self) -> Vec<i32> {
+        let floors = &self.floors;
+        if floors.iter().all(|f| f.level.is_some()) {
+            return floors.iter().map(|f| f.level.unwrap_or(0)).collect();
+        }
+        let mut order: Vec<usize> = (0..floors.len()).collect();
+        order.sort_by(|&a, &b| floors[a].elevation_m.total_cmp(&floors[b].elevation_m));
+        let mut levels = vec![0; floors.len()];
+        for (rank, &f) in order.iter().enumerate() {
+            levels[f] = rank as i32;
+        }
+        levels
+    }
+
+    /// The levels between the lowest and the highest of [`Site::floor_levels`] that no floor
+    /// has, ascending: storeys the building must have and nobody surveyed (levels 0 and −2
+    /// surveyed: −1). The engine reports one where the barometer places the phone
+    /// ([`Position::unmapped_level`](crate::Position::unmapped_level)).
+    pub fn unmapped_levels(&self) -> Vec<i32> {
+        levels_between(&self.floor_levels())
+    }
+
     /// States, by index.
     pub fn states(&self) -> &[State] {
         &self.states
@@ -408,9 +433,26 @@ fn not_a_site_file(start: &[u8]) -> Option<SiteError> {
     }
 }
 
+/// The levels between the lowest and the highest of `levels` that `levels` lacks, ascending
+/// ([`Site::unmapped_levels`]).
+pub fn levels_between(levels: &[i32]) -> Vec<i32> {
+    let (Some(&low), Some(&high)) = (levels.iter().min(), levels.iter().max()) else {
+        return Vec::new();
+    };
+    (low..=high).filter(|l| !levels.contains(l)).collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn the_levels_between_are_those_between_the_lowest_and_highest_that_are_missing() {
+        assert_eq!(levels_between(&[0, -2]), [-1]);
+        assert_eq!(levels_between(&[3, -1, 0]), [1, 2]);
+        assert!(levels_between(&[-1, 0, 1]).is_empty());
+        assert!(levels_between(&[]).is_empty());
+    }
 
     /// The reading stops at the limit, whatever the file said its size was, and after the
     /// first block when that is no site file: `/dev/zero` made `Site::load` read about 0.5 GB

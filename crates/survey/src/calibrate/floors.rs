@@ -214,7 +214,8 @@ pub fn load_gsd_building(
         })
         .collect();
     let index = |level: i32| levels.iter().position(|&l| l == level);
-    let site_levels: Vec<Option<i32>> = levels.iter().copied().map(Some).collect();
+    // Scored as the engine reports them: a level between the survey's is its own floor.
+    let site_levels = crate::scoring::scoring_levels(&levels);
     for walk in &survey {
         let trace = walk.trace(&anchor, &site_levels);
         let runs = walk.level_runs();

@@ -56,12 +56,13 @@ pub(super) struct Tag {
 
 /// The live positions of a replay of `trace` (on floor `floor`), scored and tagged.
 pub(super) fn tag(
+    site: &Site,
     trace: &Trace,
     floor: usize,
     mapped: &OnMap,
     positions: &[waymark_engine::Position],
 ) -> Vec<Tag> {
-    let scored = score(trace, floor, &live_estimates(positions)).0;
+    let scored = score(trace, floor, &live_estimates(site, positions)).0;
     // The sparse band of each position, as the engine saw it (its scans are the epochs with
     // radio evidence).
     let mut timing = ScanTiming::default();

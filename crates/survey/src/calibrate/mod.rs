@@ -401,10 +401,10 @@ pub fn survey_calibrated(
                         let r = replay(&mut engine, trace, &replay_options);
                         if run == 0 {
                             scored_by_m = (r.by_estimate_states.iter())
-                                .map(|p| score(trace, f, &live_estimates(p)).0)
+                                .map(|p| score(trace, f, &live_estimates(&site, p)).0)
                                 .collect();
                         }
-                        tag(trace, f, mapped, &r.positions)
+                        tag(&site, trace, f, mapped, &r.positions)
                     });
                     let plain = std::array::from_fn(|m| runs[m].iter().map(|t| t.scored).collect());
                     tagged.push(runs);

@@ -81,7 +81,7 @@ pub(super) fn calibrate_fingerprint_radius(
                     // Of this very site: cannot fail.
                     let _ = engine.share_emissions(Arc::clone(&shared));
                     let r = replay(&mut engine, trace, &options.calibration_replay());
-                    let scored = score_scans(trace, f, &live_estimates(&r.positions), None).0;
+                    let scored = score_scans(trace, f, &live_estimates(&site, &r.positions), None).0;
                     (scored.iter().map(Scored::penalised_m).sum::<f64>(), scored.len())
                 })
             });

@@ -53,10 +53,11 @@ impl HeldOutSite {
     ) -> Option<Vec<Tag>> {
         let site =
             self.site.clone().with_calibration(calibration).and_then(|s| s.with_floor_rssi_weights(weights));
-        let mut engine = Engine::new(Arc::new(site.ok()?), options.calibration_engine()).ok()?;
+        let site = Arc::new(site.ok()?);
+        let mut engine = Engine::new(Arc::clone(&site), options.calibration_engine()).ok()?;
         // Of a copy of this site, with its radio map: cannot fail.
         let _ = engine.share_emissions(Arc::clone(&self.shared));
-        Some(tag(trace, f, &self.mapped, &replay(&mut engine, trace, replay_options).positions))
+        Some(tag(&site, trace, f, &self.mapped, &replay(&mut engine, trace, replay_options).positions))
     }
 }
 

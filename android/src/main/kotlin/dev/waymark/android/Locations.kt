@@ -13,7 +13,8 @@ import dev.waymark.PositionEstimate
  * file is not geo-referenced (has no anchor): latitude/longitude from the position itself,
  * `accuracy` the 68% radius (as Android defines it), `bearing` and (API 26+)
  * `bearingAccuracyDegrees` when the heading is known, and the site frame's x, y, floor index,
- * floor name and floor level (`waymark.floorLevel`, when the site gives one) in the extras.
+ * floor name and floor level (`waymark.floorLevel`, when the site gives one, with
+ * `waymark.levelUnmapped` true for a level the site has no floor for) in the extras.
  * `elapsedRealtimeNanos` is the position's timestamp (the clock of every input), and `time` the
  * same instant on the wall clock: the wall clock now, less the time elapsed since the
  * position ([Conversions.WallClockAnchor]). Every value comes from [Conversions.locationFields],
@@ -38,6 +39,7 @@ fun PositionEstimate.toAndroidLocation(): Location? {
             putInt("waymark.floor", floor.toInt())
             putString("waymark.floorName", floorName)
             fields.floorLevel?.let { putInt("waymark.floorLevel", it) }
+            putBoolean("waymark.levelUnmapped", levelUnmapped)
         }
     }
 }
