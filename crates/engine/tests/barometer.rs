@@ -80,11 +80,21 @@ fn walk(config: EngineConfig, climb_m: f64) -> (usize, f64) {
 
 /// [`walk`] on `site`, returning the last position.
 fn walk_on(site: Site, config: EngineConfig, climb_m: f64) -> Position {
+    let positions = walk_heights(site, config, 26, |t| climb_m * ((t - 10.0) / 6.0).clamp(0.0, 1.0));
+    positions.last().cloned().unwrap()
+}
+
+/// [`walk`]'s scans for `seconds` on `site` at the height `height(t)`: every position.
+fn walk_heights(
+    site: Site,
+    config: EngineConfig,
+    seconds: u64,
+    height: impl Fn(f64) -> f64,
+) -> Vec<Position> {
     let mut engine = Engine::new(Arc::new(site), config).unwrap();
-    let height = |t: f64| climb_m * ((t - 10.0) / 6.0).clamp(0.0, 1.0);
-    let mut last = None;
-    for second in 1..=26u64 {
-        let report = engine.push_pressure(&pressure((second - 1) as f64, second as f64, height));
+    let mut positions = Vec::new();
+    for second in 1..=seconds {
+        let report = engine.push_pressure(&pressure((second - 1) as f64, second as f64, &height));
         assert_eq!(report.accepted, 10);
         let nine = if second <= 10 { -45.0 } else { -60.0 };
         let readings = [(0u8, -40.0), (1, -64.0), (2, -88.0), (9, nine)];
@@ -92,9 +102,9 @@ fn walk_on(site: Site, config: EngineConfig, climb_m: f64) -> Position {
         if second == 10 {
             assert_eq!((p.floor, p.unmapped_level), (0, None), "on the ground floor before the climb");
         }
-        last = Some(p);
+        positions.push(p);
     }
-    last.unwrap()
+    positions
 }
 
 #[test]
@@ -131,6 +141,19 @@ fn a_storey_climbed_to_a_level_nobody_surveyed_reports_that_level() {
     assert_eq!(p.unmapped_level, None);
     let without = EngineConfig { barometer: false, ..EngineConfig::default() };
     assert_eq!(walk_on(twin_floors_at(levels), without, 3.0).unmapped_level, None);
+}
+
+#[test]
+fn climbs_through_a_level_nobody_surveyed_count_from_the_last_floor_the_site_has() {
+    // Levels 0 and 2 surveyed, 3 m storeys: 20 s on level 1, then on to level 2. The radio
+    // cannot tell the floors apart after the ground floor, so only the barometer can say.
+    let height = |t: f64| 3.0 * ((t - 10.0) / 4.0).clamp(0.0, 1.0) + 3.0 * ((t - 34.0) / 4.0).clamp(0.0, 1.0);
+    let positions = walk_heights(twin_floors_at(Some([0, 2])), EngineConfig::default(), 50, height);
+    let on_level_one = &positions[20..33];
+    assert!(on_level_one.iter().all(|p| p.unmapped_level == Some(1)), "{on_level_one:?}");
+    // Had the anchor moved to level 2 at level 1's height, 3 m more would fit no floor.
+    let last = positions.last().unwrap();
+    assert!(last.floor == 1 && last.floor_probability > 0.9 && last.unmapped_level.is_none(), "{last:?}");
 }
 
 #[test]

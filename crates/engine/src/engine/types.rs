@@ -24,8 +24,7 @@ pub struct Position {
     pub floor_probability: f64,
     /// A level the site has no floor for, between two levels it has, where the barometer
     /// places the phone (docs/accuracy.md#barometer): the height climbed since the last floor
-    /// that explained a height fits it better than `floor`'s level by a Bayes factor of 3 or
-    /// more. `None` otherwise, and always without a barometer. The position and the radii
+    /// that explained a height fits it better than `floor`'s level by a Bayes factor above 3. `None` otherwise, and always without a barometer. The position and the radii
     /// still stand on `floor`'s plan, the nearest the map can place the phone; display the
     /// level as the floor.
     pub unmapped_level: Option<i32>,

@@ -125,8 +125,14 @@ impl Engine {
     /// The level the site has no floor for where the barometer places the phone, when it does
     /// (docs/accuracy.md#barometer): the height has settled, and the height climbed since the
     /// anchor fits one of [`Site::unmapped_levels`] better than `floor`'s level by a Bayes
-    /// factor of [`UNMAPPED_LEVEL_BAYES_FACTOR`] or more.
+    /// factor above [`UNMAPPED_LEVEL_BAYES_FACTOR`].
     pub(super) fn unmapped_level(&self, timestamp_ns: u64, floor: usize) -> Option<i32> {
+        self.unmapped_level_by(timestamp_ns, floor, UNMAPPED_LEVEL_BAYES_FACTOR)
+    }
+
+    /// The unmapped level the barometer favours over `floor`'s by a Bayes factor above
+    /// `factor`, as [`unmapped_level`](Self::unmapped_level).
+    fn unmapped_level_by(&self, timestamp_ns: u64, floor: usize, factor: f64) -> Option<i32> {
         if !self.config.barometer || self.unmapped_levels.is_empty() || !self.barometer.settled(timestamp_ns)
         {
             return None;
@@ -137,7 +143,7 @@ impl Engine {
         self.unmapped_levels
             .iter()
             .map(|&level| (level, self.level_weight(anchor, dh, level)))
-            .filter(|&(_, w)| w >= UNMAPPED_LEVEL_BAYES_FACTOR * here)
+            .filter(|&(_, w)| w > factor * here)
             .max_by(|a, b| a.1.total_cmp(&b.1))
             .map(|(level, _)| level)
     }
@@ -166,7 +172,10 @@ impl Engine {
             if dh.abs() >= STOREY_MIN_M / 2.0 {
                 let (from, to) = (most_likely(&anchor.floors), most_likely(&floors));
                 let along = (self.levels[to] - self.levels[from]).signum() == dh.signum() as i32;
-                if from == to || !along {
+                // A floor the barometer fits worse than a level the site lacks is no place
+                // to measure later climbs from: moving the anchor onto a wrong floor shifts
+                // every later height by a storey, keeping it only lets the weather drift in.
+                if from == to || !along || self.unmapped_level_by(timestamp_ns, to, 1.0).is_some() {
                     return;
                 }
             }
