@@ -33,6 +33,9 @@ pub struct EpochRecord {
     pub x: f64,
     /// Estimate y, m.
     pub y: f64,
+    /// The level the site has no floor for that the epoch reported
+    /// ([`Position::unmapped_level`](crate::Position::unmapped_level)).
+    pub unmapped_level: Option<i32>,
     /// The estimate's 68% radius, m: the spread of this epoch's observation when the epochs
     /// are learned from ([`crate::habits`]).
     pub accuracy_m: f64,
@@ -58,6 +61,12 @@ impl History {
     /// Epochs held, oldest first.
     pub fn records(&self) -> &VecDeque<EpochRecord> {
         &self.records
+    }
+
+    /// The latest epoch held at `timestamp_ns`.
+    pub fn at(&self, timestamp_ns: u64) -> Option<&EpochRecord> {
+        let after = self.records.partition_point(|r| r.timestamp_ns <= timestamp_ns);
+        after.checked_sub(1).map(|i| &self.records[i]).filter(|r| r.timestamp_ns == timestamp_ns)
     }
 
     /// Adds the newest epoch, dropping the oldest when full.
@@ -96,9 +105,22 @@ mod tests {
             floor: 0,
             x: 0.0,
             y: 0.0,
+            unmapped_level: None,
             accuracy_m: 3.0,
             allowed: None,
         }
+    }
+
+    #[test]
+    fn an_epoch_is_found_by_its_time_the_latest_of_equal_times() {
+        let mut h = History::new(3);
+        for (t, level) in [(1, None), (2, Some(-1)), (2, Some(-2)), (4, None)] {
+            h.push(EpochRecord { unmapped_level: level, ..record(t) });
+        }
+        assert_eq!(h.at(2).and_then(|r| r.unmapped_level), Some(-2));
+        assert!(h.at(1).is_none(), "dropped when full");
+        assert!(h.at(3).is_none() && h.at(5).is_none());
+        assert_eq!(h.at(4).map(|r| r.timestamp_ns), Some(4));
     }
 
     #[test]

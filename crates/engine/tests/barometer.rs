@@ -80,17 +80,18 @@ fn walk(config: EngineConfig, climb_m: f64) -> (usize, f64) {
 
 /// [`walk`] on `site`, returning the last position.
 fn walk_on(site: Site, config: EngineConfig, climb_m: f64) -> Position {
-    let positions = walk_heights(site, config, 26, |t| climb_m * ((t - 10.0) / 6.0).clamp(0.0, 1.0));
+    let (positions, _) = walk_heights(site, config, 26, |t| climb_m * ((t - 10.0) / 6.0).clamp(0.0, 1.0));
     positions.last().cloned().unwrap()
 }
 
-/// [`walk`]'s scans for `seconds` on `site` at the height `height(t)`: every position.
+/// [`walk`]'s scans for `seconds` on `site` at the height `height(t)`: every position, and the
+/// engine after them.
 fn walk_heights(
     site: Site,
     config: EngineConfig,
     seconds: u64,
     height: impl Fn(f64) -> f64,
-) -> Vec<Position> {
+) -> (Vec<Position>, Engine) {
     let mut engine = Engine::new(Arc::new(site), config).unwrap();
     let mut positions = Vec::new();
     for second in 1..=seconds {
@@ -104,7 +105,7 @@ fn walk_heights(
         }
         positions.push(p);
     }
-    positions
+    (positions, engine)
 }
 
 #[test]
@@ -148,9 +149,16 @@ fn climbs_through_a_level_nobody_surveyed_count_from_the_last_floor_the_site_has
     // Levels 0 and 2 surveyed, 3 m storeys: 20 s on level 1, then on to level 2. The radio
     // cannot tell the floors apart after the ground floor, so only the barometer can say.
     let height = |t: f64| 3.0 * ((t - 10.0) / 4.0).clamp(0.0, 1.0) + 3.0 * ((t - 34.0) / 4.0).clamp(0.0, 1.0);
-    let positions = walk_heights(twin_floors_at(Some([0, 2])), EngineConfig::default(), 50, height);
+    let (positions, engine) = walk_heights(twin_floors_at(Some([0, 2])), EngineConfig::default(), 50, height);
     let on_level_one = &positions[20..33];
     assert!(on_level_one.iter().all(|p| p.unmapped_level == Some(1)), "{on_level_one:?}");
+    // The track carries each epoch's level as the live position reported it.
+    let track = engine.track();
+    let levels: Vec<Option<i32>> = on_level_one
+        .iter()
+        .map(|p| track.iter().find(|t| t.timestamp_ns == p.timestamp_ns).unwrap().unmapped_level)
+        .collect();
+    assert!(levels.iter().all(|&l| l == Some(1)), "{levels:?}");
     // Had the anchor moved to level 2 at level 1's height, 3 m more would fit no floor.
     let last = positions.last().unwrap();
     assert!(last.floor == 1 && last.floor_probability > 0.9 && last.unmapped_level.is_none(), "{last:?}");

@@ -272,6 +272,7 @@ fn scorer(
 /// the walk ends, and any epoch after the last smoothed one takes its state on the final track.
 pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
     let live = live_estimates(site, &r.positions);
+    let levels = scoring_levels(&site.floor_levels());
     let radius: HashMap<u64, (f64, f64)> =
         live.iter().map(|e| (e.timestamp_ns, (e.accuracy_m, e.accuracy_95_m))).collect();
     let smoothed = |points: &mut dyn Iterator<Item = &waymark_engine::TrackPoint>| -> Vec<Estimate> {
@@ -280,7 +281,7 @@ pub fn decoded(site: &Site, r: &crate::replay::Replay) -> [Vec<Estimate>; 3] {
                 let (a68, a95) = radius.get(&p.timestamp_ns).copied().unwrap_or((f64::NAN, f64::NAN));
                 Estimate {
                     timestamp_ns: p.timestamp_ns,
-                    floor: p.floor,
+                    floor: scored_floor(&levels, p.floor, p.unmapped_level),
                     x: p.x,
                     y: p.y,
                     accuracy_m: a68,
@@ -308,6 +309,12 @@ pub fn scoring_levels(site_levels: &[i32]) -> Vec<Option<i32>> {
     site_levels.iter().chain(&between).copied().map(Some).collect()
 }
 
+/// The floor index an estimate on `floor` scores as, with the unmapped level it reported:
+/// that level's index in `levels` ([`scoring_levels`]).
+fn scored_floor(levels: &[Option<i32>], floor: usize, unmapped_level: Option<i32>) -> usize {
+    unmapped_level.and_then(|l| levels.iter().position(|&k| k == Some(l))).unwrap_or(floor)
+}
+
 /// The engine's live positions as estimates: a reported unmapped level scores as its index
 /// in [`scoring_levels`].
 pub fn live_estimates(site: &Site, positions: &[waymark_engine::Position]) -> Vec<Estimate> {
@@ -316,10 +323,7 @@ pub fn live_estimates(site: &Site, positions: &[waymark_engine::Position]) -> Ve
         .iter()
         .map(|p| Estimate {
             timestamp_ns: p.timestamp_ns,
-            floor: p
-                .unmapped_level
-                .and_then(|l| levels.iter().position(|&k| k == Some(l)))
-                .unwrap_or(p.floor),
+            floor: scored_floor(&levels, p.floor, p.unmapped_level),
             x: p.x,
             y: p.y,
             accuracy_m: p.accuracy_m,

@@ -156,6 +156,7 @@ impl Engine {
                 floor: p.floor,
                 x: p.x,
                 y: p.y,
+                unmapped_level: p.unmapped_level,
                 accuracy_m: p.accuracy_m,
                 allowed,
             })
@@ -209,6 +210,7 @@ impl Engine {
             floor: shown.floor,
             x: shown.x,
             y: shown.y,
+            unmapped_level: shown.unmapped_level,
             accuracy_m: shown.accuracy_m,
             allowed: None,
         };

@@ -422,12 +422,26 @@ impl Engine {
         let e =
             estimate(&self.site, &smoothed, self.estimate_states, self.config.accuracy_mass, &mut Vec::new());
         let state = (0..smoothed.len()).max_by(|&a, &b| smoothed[a].total_cmp(&smoothed[b]))? as u32;
-        Some(TrackPoint { timestamp_ns, state, floor: e.floor, x: e.position.x, y: e.position.y })
+        let unmapped_level = self.unmapped_level_at(timestamp_ns);
+        Some(TrackPoint {
+            timestamp_ns,
+            state,
+            floor: e.floor,
+            x: e.position.x,
+            y: e.position.y,
+            unmapped_level,
+        })
     }
 
     fn track_point(&self, timestamp_ns: u64, state: u32) -> TrackPoint {
         let s = &self.site.states()[state as usize];
-        TrackPoint { timestamp_ns, state, floor: s.floor, x: s.position.x, y: s.position.y }
+        let unmapped_level = self.unmapped_level_at(timestamp_ns);
+        TrackPoint { timestamp_ns, state, floor: s.floor, x: s.position.x, y: s.position.y, unmapped_level }
+    }
+
+    /// The unmapped level the epoch at `timestamp_ns` reported, as the history holds it.
+    fn unmapped_level_at(&self, timestamp_ns: u64) -> Option<i32> {
+        self.history.at(timestamp_ns).and_then(|r| r.unmapped_level)
     }
 
     /// Learns the user's habits from the [`history`](Self::history) epochs not learned from

@@ -86,6 +86,10 @@ pub struct TrackPoint {
     pub x: f64,
     /// y, m, likewise.
     pub y: f64,
+    /// The level the site has no floor for that the live position of the same epoch reported
+    /// ([`Position::unmapped_level`]): the barometer's verdict at that time, which smoothing
+    /// does not revise. `None` when the engine's history no longer holds the epoch.
+    pub unmapped_level: Option<i32>,
 }
 
 /// Something about the session changed.
