@@ -74,7 +74,7 @@ impl<'a> AppPosition<'a> {
             y: p.y,
             floor: p.floor as u32,
             floor_name: site.floors().get(p.floor).map_or("", |f| f.name.as_str()),
-            floor_level: p.unmapped_level.or(site.floor_level(p.floor)),
+            floor_level: p.level(site),
             level_unmapped: p.unmapped_level.is_some(),
             floor_probability: p.floor_probability,
             latitude_deg: geo.map(|g| g.lat_deg),

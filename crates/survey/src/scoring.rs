@@ -338,6 +338,16 @@ pub fn live_estimates(site: &Site, positions: &[waymark_engine::Position]) -> Ve
 mod tests {
     use super::*;
 
+    #[test]
+    fn a_reported_unmapped_level_scores_as_the_truth_on_that_level_does() {
+        // Levels −2 and 0 surveyed: −1 is scored as a floor of its own, after the site's.
+        let levels = scoring_levels(&[-2, 0]);
+        assert_eq!(levels, [Some(-2), Some(0), Some(-1)]);
+        assert_eq!(scored_floor(&levels, 1, Some(-1)), 2);
+        assert_eq!(scored_floor(&levels, 1, None), 1);
+        assert_eq!(scored_floor(&levels, 0, Some(5)), 0, "a level scoring does not know");
+    }
+
     fn point(floor_correct: bool, floor_probability: Option<f64>) -> Scored {
         Scored {
             error_m: 1.0,

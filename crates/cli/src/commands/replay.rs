@@ -77,7 +77,7 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
                 serde_json::json!({
                     "timestamp_ms": p.timestamp_ns / 1_000_000,
                     "floor": floor_name(p.floor),
-                    "floor_level": p.unmapped_level.or(site.floor_level(p.floor)),
+                    "floor_level": p.level(&site),
                     "x": p.x, "y": p.y,
                     "lat": geo.map(|g| g.lat_deg), "lon": geo.map(|g| g.lon_deg),
                     "accuracy_m": p.accuracy_m, "accuracy_95_m": p.accuracy_95_m,
@@ -98,7 +98,7 @@ pub fn replay(args: &ReplayArgs) -> ExitCode {
                 "{},{},{},{:.2},{:.2},{},{},{:.2},{:.2},{},{:?},{:?},{}\n",
                 p.timestamp_ns / 1_000_000,
                 floor_name(p.floor),
-                p.unmapped_level.or(site.floor_level(p.floor)).map_or(String::new(), |l| l.to_string()),
+                p.level(&site).map_or(String::new(), |l| l.to_string()),
                 p.x,
                 p.y,
                 geo.map_or(String::new(), |g| format!("{:.8}", g.lat_deg)),

@@ -24,9 +24,10 @@ pub struct Position {
     pub floor_probability: f64,
     /// A level the site has no floor for, between two levels it has, where the barometer
     /// places the phone (docs/accuracy.md#barometer): the height climbed since the last floor
-    /// that explained a height fits it better than `floor`'s level by a Bayes factor above 3. `None` otherwise, and always without a barometer. The position and the radii
-    /// still stand on `floor`'s plan, the nearest the map can place the phone; display the
-    /// level as the floor.
+    /// that explained a height fits it better than `floor`'s level by a Bayes factor above 3.
+    /// `None` otherwise, and always without a barometer. The position and the radii still
+    /// stand on `floor`'s plan, the nearest the map can place the phone; display the level
+    /// ([`Position::level`]) as the floor.
     pub unmapped_level: Option<i32>,
     /// The most likely zone, an index into the site's zones: the zone holding the most
     /// posterior mass, or `None` when the site has no zones or more mass lies outside every
@@ -70,6 +71,15 @@ pub struct Position {
     /// on, and both radii include it. The steps' length when measured, else HIPE's assumed
     /// speed (1 m/s) over the time walking or of unknown motion.
     pub beyond_radio_m: f64,
+}
+
+impl Position {
+    /// The level to show on `site`, the engine's: the [unmapped level](Self::unmapped_level)
+    /// where the barometer places the phone, else `floor`'s own level when the site file gives
+    /// one ([`Site::floor_level`]).
+    pub fn level(&self, site: &Site) -> Option<i32> {
+        self.unmapped_level.or(site.floor_level(self.floor))
+    }
 }
 
 /// One point of the smoothed track.
