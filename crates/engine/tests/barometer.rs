@@ -92,12 +92,24 @@ fn walk_heights(
     seconds: u64,
     height: impl Fn(f64) -> f64,
 ) -> (Vec<Position>, Engine) {
+    walk_heights_heard(site, config, seconds, height, |_| -60.0)
+}
+
+/// [`walk_heights`] with transmitter 9 at `nine(second)` dBm after the first 10 s (-45 dBm on
+/// the ground floor, -75 upstairs, -60 half way).
+fn walk_heights_heard(
+    site: Site,
+    config: EngineConfig,
+    seconds: u64,
+    height: impl Fn(f64) -> f64,
+    nine: impl Fn(u64) -> f64,
+) -> (Vec<Position>, Engine) {
     let mut engine = Engine::new(Arc::new(site), config).unwrap();
     let mut positions = Vec::new();
     for second in 1..=seconds {
         let report = engine.push_pressure(&pressure((second - 1) as f64, second as f64, &height));
         assert_eq!(report.accepted, 10);
-        let nine = if second <= 10 { -45.0 } else { -60.0 };
+        let nine = if second <= 10 { -45.0 } else { nine(second) };
         let readings = [(0u8, -40.0), (1, -64.0), (2, -88.0), (9, nine)];
         let p = engine.push_scan(&scan(second * SECOND, &readings)).unwrap().position;
         if second == 10 {
@@ -162,6 +174,24 @@ fn climbs_through_a_level_nobody_surveyed_count_from_the_last_floor_the_site_has
     // Had the anchor moved to level 2 at level 1's height, 3 m more would fit no floor.
     let last = positions.last().unwrap();
     assert!(last.floor == 1 && last.floor_probability > 0.9 && last.unmapped_level.is_none(), "{last:?}");
+}
+
+#[test]
+fn back_at_the_anchors_height_the_anchor_waits_for_a_posterior_still_upstairs() {
+    // Levels 0 and 2, 3 m storeys: up 6 m (two storeys, or one tall one to the level the site
+    // lacks, so the anchor stays on the ground floor), 14 s upstairs, then back down. The radio
+    // leans upstairs until the descent has settled, then cannot tell.
+    let height = |t: f64| 6.0 * ((t - 10.0) / 4.0).clamp(0.0, 1.0) - 6.0 * ((t - 28.0) / 4.0).clamp(0.0, 1.0);
+    let nine = |second: u64| if second <= 40 { -63.0 } else { -60.0 };
+    let site = twin_floors_at(Some([0, 2]));
+    // Without the device offset, which would learn the lean as the phone's and keep it.
+    let config = EngineConfig { device_offset: false, ..EngineConfig::default() };
+    let (positions, _) = walk_heights_heard(site, config, 60, height, nine);
+    assert!(positions[16..28].iter().all(|p| p.floor == 1), "upstairs: {:?}", &positions[16..28]);
+    // Had the anchor moved to the floor above at the ground floor's height, the barometer would
+    // hold the estimate upstairs from then on.
+    let last = positions.last().unwrap();
+    assert!(last.floor == 0 && last.floor_probability > 0.9, "{last:?}");
 }
 
 #[test]

@@ -31,12 +31,13 @@ pub(crate) const CLIMB_SIGMA_M: f64 = 0.5;
 /// weighs them all alike and leaves the floor to the radio.
 pub(crate) const BAROMETER_OUTLIER_SHARE: f64 = 0.05;
 
-/// The Bayes factor by which the barometer must favour a level the site lacks over the floor
-/// the posterior gives before the engine reports that level: 3, the start of "positive"
-/// evidence on Kass & Raftery's scale (J. Am. Stat. Assoc. 90(430), 1995, §3.2). Below it the
-/// height fits the mapped floor nearly as well (5.6 m is one tall storey or two low ones) and
-/// the radio's floor stands.
-pub(crate) const UNMAPPED_LEVEL_BAYES_FACTOR: f64 = 3.0;
+/// The Bayes factor by which the barometer must favour one level over another before it
+/// overrules the posterior's floor: 3, the start of "positive" evidence on Kass & Raftery's
+/// scale (J. Am. Stat. Assoc. 90(430), 1995, §3.2). The engine reports a level the site lacks
+/// only above it, and the anchor does not move onto a floor another fits better by more. Below
+/// it the height fits the posterior's floor nearly as well (5.6 m is one tall storey or two
+/// low ones) and the radio's floor stands.
+pub(crate) const LEVEL_BAYES_FACTOR: f64 = 3.0;
 
 /// Where the phone's height settled, and which floor it was on then.
 #[derive(Clone, Debug, Default)]
@@ -125,9 +126,9 @@ impl Engine {
     /// The level the site has no floor for where the barometer places the phone, when it does
     /// (docs/accuracy.md#barometer): the height has settled, and the height climbed since the
     /// anchor fits one of [`Site::unmapped_levels`] better than `floor`'s level by a Bayes
-    /// factor above [`UNMAPPED_LEVEL_BAYES_FACTOR`].
+    /// factor above [`LEVEL_BAYES_FACTOR`].
     pub(super) fn unmapped_level(&self, timestamp_ns: u64, floor: usize) -> Option<i32> {
-        self.unmapped_level_by(timestamp_ns, floor, UNMAPPED_LEVEL_BAYES_FACTOR)
+        self.unmapped_level_by(timestamp_ns, floor, LEVEL_BAYES_FACTOR)
     }
 
     /// The unmapped level the barometer favours over `floor`'s by a Bayes factor above
@@ -146,6 +147,14 @@ impl Engine {
             .filter(|&(_, w)| w > factor * here)
             .max_by(|a, b| a.1.total_cmp(&b.1))
             .map(|(level, _)| level)
+    }
+
+    /// Whether the height climbed since `anchor` fits another of the site's floors better than
+    /// floor `to` by a Bayes factor above [`LEVEL_BAYES_FACTOR`]: the posterior
+    /// reached `to` on the radio alone, against the barometer (a climb it has not followed yet).
+    fn refuted(&self, anchor: &FloorAnchor, dh_m: f64, to: usize) -> bool {
+        let here = self.level_weight(anchor, dh_m, self.levels[to]);
+        self.levels.iter().any(|&level| self.level_weight(anchor, dh_m, level) > LEVEL_BAYES_FACTOR * here)
     }
 
     /// After the filter's step: where the height has settled, the anchor moves to it with the
@@ -169,13 +178,18 @@ impl Engine {
         floors.iter_mut().for_each(|p| *p /= total);
         if let Some(anchor) = &self.floor_anchor {
             let dh = height_m - anchor.height_m;
-            if dh.abs() >= STOREY_MIN_M / 2.0 {
-                let (from, to) = (most_likely(&anchor.floors), most_likely(&floors));
+            let (from, to) = (most_likely(&anchor.floors), most_likely(&floors));
+            let climbed = dh.abs() >= STOREY_MIN_M / 2.0;
+            if climbed || from != to {
                 let along = (self.levels[to] - self.levels[from]).signum() == dh.signum() as i32;
-                // A floor the barometer fits worse than a level the site lacks is no place
-                // to measure later climbs from: moving the anchor onto a wrong floor shifts
-                // every later height by a storey, keeping it only lets the weather drift in.
-                if from == to || !along || self.unmapped_level_by(timestamp_ns, to, 1.0).is_some() {
+                // A floor the barometer refutes, or fits worse than a level the site lacks,
+                // is no place to measure later climbs from: moving the anchor onto a wrong
+                // floor shifts every later height by a storey, keeping it only lets the
+                // weather drift in. So is a floor the posterior has not yet left after a climb.
+                if (climbed && (from == to || !along))
+                    || self.refuted(anchor, dh, to)
+                    || self.unmapped_level_by(timestamp_ns, to, 1.0).is_some()
+                {
                     return;
                 }
             }
