@@ -633,6 +633,20 @@ typedef struct {
    * Floor index.
    */
   uint32_t floor;
+  /**
+   * Whether `floor_level` holds a level (the site file gives one, or `level_unmapped`).
+   */
+  bool has_floor_level;
+  /**
+   * The level to show, as `waymark_position`'s: the level the live position of the same
+   * epoch reported where the site has no floor for it, else the floor's own; 0 when
+   * `has_floor_level` is false.
+   */
+  int32_t floor_level;
+  /**
+   * Whether `floor_level` is a level the site has no floor for.
+   */
+  bool level_unmapped;
 } waymark_track_point;
 
 /**

@@ -229,7 +229,7 @@ impl<L: Listeners> Handle<L> {
                 events.stage(Event::Status(AppStatus::new(change, site)));
             }
             if !revised_track.is_empty() {
-                events.stage(Event::Status(AppStatus::track_revised(&revised_track)));
+                events.stage(Event::Status(AppStatus::track_revised(&revised_track, site)));
             }
             let site = Arc::clone(engine.site());
             events.stage(Event::Position(position.clone(), Arc::clone(&site)));

@@ -106,11 +106,24 @@ pub(crate) struct AppTrackPoint {
     pub y: f64,
     /// Floor index.
     pub floor: u32,
+    /// The level to show, as [`AppPosition::floor_level`]: the level the live position of the
+    /// same epoch reported where the site has no floor for it, else the floor's own.
+    pub floor_level: Option<i32>,
+    /// Whether `floor_level` is a level the site has no floor for.
+    pub level_unmapped: bool,
 }
 
-impl From<&TrackPoint> for AppTrackPoint {
-    fn from(p: &TrackPoint) -> Self {
-        Self { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor as u32 }
+impl AppTrackPoint {
+    /// The core's track point `p` of an engine on `site`.
+    pub(crate) fn new(p: &TrackPoint, site: &Site) -> Self {
+        Self {
+            timestamp_ns: p.timestamp_ns,
+            x: p.x,
+            y: p.y,
+            floor: p.floor as u32,
+            floor_level: p.level(site),
+            level_unmapped: p.unmapped_level.is_some(),
+        }
     }
 }
 
@@ -165,9 +178,9 @@ impl AppStatus {
         }
     }
 
-    /// The revision of the track points `points`.
-    pub(crate) fn track_revised(points: &[TrackPoint]) -> Self {
-        AppStatus::TrackRevised { points: points.iter().map(AppTrackPoint::from).collect() }
+    /// The revision of the track points `points` of an engine on `site`.
+    pub(crate) fn track_revised(points: &[TrackPoint], site: &Site) -> Self {
+        AppStatus::TrackRevised { points: points.iter().map(|p| AppTrackPoint::new(p, site)).collect() }
     }
 }
 
@@ -210,5 +223,72 @@ impl AppHabitReport {
             learned_transitions: report.learned_transitions,
             applied: model.strength().is_some(),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::ffi::c::waymark_track_point;
+    use crate::ffi::uniffi::FfiTrackPoint;
+    use nalgebra::Point2;
+    use waymark_engine::radio::{Reading, Scan, TransmitterId};
+    use waymark_engine::site::{BuildOptions, SiteBuilder};
+
+    /// Two floors at levels 0 and 2, a state each.
+    fn levels_zero_and_two() -> Site {
+        let mut b = SiteBuilder::new("levels 0 and 2");
+        let floors = [b.floor("G", 0.0), b.floor("2", 6.0)];
+        let ap = TransmitterId::wifi("02:00:00:00:00:01").unwrap();
+        for (f, &floor) in floors.iter().enumerate() {
+            let scans = (0..4)
+                .map(|n| Scan {
+                    timestamp_ns: n,
+                    readings: vec![Reading {
+                        transmitter: ap.clone(),
+                        rssi_dbm: -50.0 - 20.0 * f as f64,
+                        age_ns: 0,
+                    }],
+                })
+                .collect();
+            b.state(floor, Point2::new(0.0, 0.0), scans);
+            b.floor_geo(floor, Some(2 * f as i32), [0.0, 0.0]);
+        }
+        b.build(BuildOptions::default()).unwrap()
+    }
+
+    #[test]
+    fn track_points_carry_the_level_their_epoch_showed() {
+        let site = levels_zero_and_two();
+        let point = |floor, unmapped_level| TrackPoint {
+            timestamp_ns: 7,
+            state: 0,
+            floor,
+            x: 1.0,
+            y: 2.0,
+            unmapped_level,
+        };
+        // On floor "2" (level 2); then on the ground floor's plan with the barometer at level 1.
+        let mapped = AppTrackPoint::new(&point(1, None), &site);
+        assert_eq!((mapped.floor, mapped.floor_level, mapped.level_unmapped), (1, Some(2), false));
+        let between = AppTrackPoint::new(&point(0, Some(1)), &site);
+        assert_eq!((between.floor, between.floor_level, between.level_unmapped), (0, Some(1), true));
+        // As C and uniffi hand them on.
+        let c = waymark_track_point::from(between);
+        assert!(c.has_floor_level && c.floor_level == 1 && c.level_unmapped && c.floor == 0);
+        let u = FfiTrackPoint::from(mapped);
+        assert_eq!((u.floor_level, u.level_unmapped), (Some(2), false));
+        // A site without levels: none to show.
+        let mut plain = SiteBuilder::new("no levels");
+        let g = plain.floor("G", 0.0);
+        let ap = TransmitterId::wifi("02:00:00:00:00:01").unwrap();
+        let scans = vec![Scan {
+            timestamp_ns: 0,
+            readings: vec![Reading { transmitter: ap, rssi_dbm: -50.0, age_ns: 0 }],
+        }];
+        plain.state(g, Point2::new(0.0, 0.0), scans);
+        let plain = plain.build(BuildOptions::default()).unwrap();
+        let c = waymark_track_point::from(AppTrackPoint::new(&point(0, None), &plain));
+        assert!(!c.has_floor_level && c.floor_level == 0 && !c.level_unmapped);
     }
 }

@@ -435,12 +435,12 @@ impl PositioningEngine {
 
     /// The most likely recent track, oldest first.
     pub fn track(&self) -> Result<Vec<FfiTrackPoint>, PositioningError> {
-        self.handle.read(|e| e.track().iter().map(track_point).collect())
+        self.handle.read(|e| e.track().iter().map(|p| track_point(p, e.site())).collect())
     }
 
     /// The fixed-lag position: a few epochs old, but revised by what came after.
     pub fn fixed_lag_position(&self) -> Result<Option<FfiTrackPoint>, PositioningError> {
-        self.handle.read(|e| e.fixed_lag_position().as_ref().map(track_point))
+        self.handle.read(|e| e.fixed_lag_position().as_ref().map(|p| track_point(p, e.site())))
     }
 
     /// Calls `listener` with every position and status change until the returned subscription

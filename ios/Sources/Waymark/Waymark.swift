@@ -5417,6 +5417,16 @@ public struct TrackPoint: Equatable, Hashable {
      * Floor index.
      */
     public var floor: UInt32
+    /**
+     * The level to show, as `PositionEstimate.floor_level`: the level the live position of
+     * the same epoch reported where the site has no floor for it, else the floor's own;
+     * `None` when the site file gives no levels.
+     */
+    public var floorLevel: Int32?
+    /**
+     * Whether `floor_level` is a level the site has no floor for.
+     */
+    public var levelUnmapped: Bool
 
     // Default memberwise initializers are never public by default, so we
     // declare one manually.
@@ -5432,11 +5442,21 @@ public struct TrackPoint: Equatable, Hashable {
          */y: Double, 
         /**
          * Floor index.
-         */floor: UInt32) {
+         */floor: UInt32, 
+        /**
+         * The level to show, as `PositionEstimate.floor_level`: the level the live position of
+         * the same epoch reported where the site has no floor for it, else the floor's own;
+         * `None` when the site file gives no levels.
+         */floorLevel: Int32? = nil, 
+        /**
+         * Whether `floor_level` is a level the site has no floor for.
+         */levelUnmapped: Bool = false) {
         self.timestampNs = timestampNs
         self.x = x
         self.y = y
         self.floor = floor
+        self.floorLevel = floorLevel
+        self.levelUnmapped = levelUnmapped
     }
 
     
@@ -5458,7 +5478,9 @@ public struct FfiConverterTypeTrackPoint: FfiConverterRustBuffer {
                 timestampNs: FfiConverterUInt64.read(from: &buf), 
                 x: FfiConverterDouble.read(from: &buf), 
                 y: FfiConverterDouble.read(from: &buf), 
-                floor: FfiConverterUInt32.read(from: &buf)
+                floor: FfiConverterUInt32.read(from: &buf), 
+                floorLevel: FfiConverterOptionInt32.read(from: &buf), 
+                levelUnmapped: FfiConverterBool.read(from: &buf)
         )
     }
 
@@ -5467,6 +5489,8 @@ public struct FfiConverterTypeTrackPoint: FfiConverterRustBuffer {
         FfiConverterDouble.write(value.x, into: &buf)
         FfiConverterDouble.write(value.y, into: &buf)
         FfiConverterUInt32.write(value.floor, into: &buf)
+        FfiConverterOptionInt32.write(value.floorLevel, into: &buf)
+        FfiConverterBool.write(value.levelUnmapped, into: &buf)
     }
 }
 

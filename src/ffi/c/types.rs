@@ -288,6 +288,14 @@ pub struct waymark_track_point {
     pub y: f64,
     /// Floor index.
     pub floor: u32,
+    /// Whether `floor_level` holds a level (the site file gives one, or `level_unmapped`).
+    pub has_floor_level: bool,
+    /// The level to show, as `waymark_position`'s: the level the live position of the same
+    /// epoch reported where the site has no floor for it, else the floor's own; 0 when
+    /// `has_floor_level` is false.
+    pub floor_level: i32,
+    /// Whether `floor_level` is a level the site has no floor for.
+    pub level_unmapped: bool,
 }
 
 /// Which kind of `waymark_status` event.
@@ -549,6 +557,14 @@ pub(crate) fn scenario(s: MotionScenario) -> u32 {
 
 impl From<AppTrackPoint> for waymark_track_point {
     fn from(p: AppTrackPoint) -> Self {
-        waymark_track_point { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor }
+        waymark_track_point {
+            timestamp_ns: p.timestamp_ns,
+            x: p.x,
+            y: p.y,
+            floor: p.floor,
+            has_floor_level: p.floor_level.is_some(),
+            floor_level: p.floor_level.unwrap_or(0),
+            level_unmapped: p.level_unmapped,
+        }
     }
 }

@@ -411,6 +411,14 @@ pub struct FfiTrackPoint {
     pub y: f64,
     /// Floor index.
     pub floor: u32,
+    /// The level to show, as `PositionEstimate.floor_level`: the level the live position of
+    /// the same epoch reported where the site has no floor for it, else the floor's own;
+    /// `None` when the site file gives no levels.
+    #[uniffi(default = None)]
+    pub floor_level: Option<i32>,
+    /// Whether `floor_level` is a level the site has no floor for.
+    #[uniffi(default = false)]
+    pub level_unmapped: bool,
 }
 
 /// The learned error of external position fixes (`pushFix`): subtract the bias from a fix,
@@ -634,7 +642,14 @@ pub enum StatusUpdate {
 
 impl From<AppTrackPoint> for FfiTrackPoint {
     fn from(p: AppTrackPoint) -> Self {
-        Self { timestamp_ns: p.timestamp_ns, x: p.x, y: p.y, floor: p.floor }
+        Self {
+            timestamp_ns: p.timestamp_ns,
+            x: p.x,
+            y: p.y,
+            floor: p.floor,
+            floor_level: p.floor_level,
+            level_unmapped: p.level_unmapped,
+        }
     }
 }
 
@@ -671,9 +686,9 @@ pub(crate) fn estimate(p: &engine::Position, site: &Site) -> PositionEstimate {
     AppPosition::new(p, site).into()
 }
 
-/// The track point `p`.
-pub(crate) fn track_point(p: &engine::TrackPoint) -> FfiTrackPoint {
-    AppTrackPoint::from(p).into()
+/// The track point `p` of an engine on `site`.
+pub(crate) fn track_point(p: &engine::TrackPoint, site: &Site) -> FfiTrackPoint {
+    AppTrackPoint::new(p, site).into()
 }
 
 impl FfiPositionFix {

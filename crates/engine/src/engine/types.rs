@@ -78,8 +78,13 @@ impl Position {
     /// where the barometer places the phone, else `floor`'s own level when the site file gives
     /// one ([`Site::floor_level`]).
     pub fn level(&self, site: &Site) -> Option<i32> {
-        self.unmapped_level.or(site.floor_level(self.floor))
+        shown_level(site, self.floor, self.unmapped_level)
     }
+}
+
+/// The level an app shows for `floor` with the barometer's `unmapped` level, if any.
+fn shown_level(site: &Site, floor: usize, unmapped: Option<i32>) -> Option<i32> {
+    unmapped.or(site.floor_level(floor))
 }
 
 /// One point of the smoothed track.
@@ -100,6 +105,14 @@ pub struct TrackPoint {
     /// ([`Position::unmapped_level`]): the barometer's verdict at that time, which smoothing
     /// does not revise. `None` when the engine's history no longer holds the epoch.
     pub unmapped_level: Option<i32>,
+}
+
+impl TrackPoint {
+    /// The level to show on `site`, as [`Position::level`]: the epoch's
+    /// [unmapped level](Self::unmapped_level), else `floor`'s own level.
+    pub fn level(&self, site: &Site) -> Option<i32> {
+        shown_level(site, self.floor, self.unmapped_level)
+    }
 }
 
 /// Something about the session changed.
