@@ -150,8 +150,8 @@ impl Engine {
     }
 
     /// Whether the height climbed since `anchor` fits another of the site's floors better than
-    /// floor `to` by a Bayes factor above [`LEVEL_BAYES_FACTOR`]: the posterior
-    /// reached `to` on the radio alone, against the barometer (a climb it has not followed yet).
+    /// floor `to` by a Bayes factor above [`LEVEL_BAYES_FACTOR`]: a posterior on `to` is then
+    /// against the barometer, on the radio's word or still behind a climb.
     fn refuted(&self, anchor: &FloorAnchor, dh_m: f64, to: usize) -> bool {
         let here = self.level_weight(anchor, dh_m, self.levels[to]);
         self.levels.iter().any(|&level| self.level_weight(anchor, dh_m, level) > LEVEL_BAYES_FACTOR * here)
@@ -161,7 +161,8 @@ impl Engine {
     /// posterior's floors. After a climb of half a storey or more it moves only once the
     /// posterior has changed floor the way the phone climbed: a height no floor of the site
     /// explains (a storey nobody surveyed, a mezzanine) or one the radio refuses stays measured
-    /// from the last floor that explained one, so that the rest of the climb adds to it.
+    /// from the last floor that explained one, so that the rest of the climb adds to it. At
+    /// any height it does not move onto a floor the height [refutes](Self::refuted).
     pub(super) fn settle_floor_anchor(&mut self, timestamp_ns: u64) {
         if !self.config.barometer || self.levels.len() < 2 || !self.barometer.settled(timestamp_ns) {
             return;
