@@ -6,6 +6,7 @@ use common::scan;
 use nalgebra::Point2;
 use std::sync::Arc;
 use waymark_engine::sensors::{pressure_height_m, PressureSample};
+use waymark_engine::site::Calibration;
 use waymark_engine::site::{BuildOptions, Site, SiteBuilder};
 use waymark_engine::{Engine, EngineConfig, Position};
 
@@ -20,6 +21,11 @@ fn twin_floors() -> Site {
 
 /// [`twin_floors`] with these levels, if any.
 fn twin_floors_at(levels: Option<[i32; 2]>) -> Site {
+    twin_floors_with(levels, true)
+}
+
+/// [`twin_floors_at`], with or without the staircase.
+fn twin_floors_with(levels: Option<[i32; 2]>, stairs: bool) -> Site {
     let mut b = SiteBuilder::new("twin floors");
     let floors = [b.floor("G", 0.0), b.floor("1", 4.0)];
     let mut first = Vec::new();
@@ -45,7 +51,9 @@ fn twin_floors_at(levels: Option<[i32; 2]>) -> Site {
             previous = Some(id);
         }
     }
-    b.edge(first[0], first[1], Some(6.0));
+    if stairs {
+        b.edge(first[0], first[1], Some(6.0));
+    }
     for (floor, level) in floors.iter().zip(levels.into_iter().flatten()) {
         b.floor_geo(*floor, Some(level), [0.0, 0.0]);
     }
@@ -208,4 +216,25 @@ fn readings_that_are_no_pressure_are_dropped_and_counted() {
     assert_eq!((report.accepted, report.non_finite, report.out_of_order), (2, 2, 1));
     assert_eq!(engine.stats().pressure_dropped, 3);
     engine.push_scan(&scan(5 * SECOND, &[(0, -40.0), (9, -45.0)])).unwrap();
+}
+
+/// Where no edge joins the floors (a site built from walks), the survey's floor-change rate
+/// lets a climb move the estimate upstairs once the height says so; without it the only mass
+/// upstairs is the floor weight's, too little for the barometer to lift.
+#[test]
+fn the_surveys_floor_change_rate_moves_a_climb_upstairs_without_stairs_in_the_map() {
+    let upstairs_at = |rate: Option<f64>| {
+        let site = twin_floors_with(None, false)
+            .with_calibration(Calibration { floor_change_rate_hz: rate, ..Calibration::default() })
+            .unwrap();
+        let climb = |t: f64| 4.0 * ((t - 10.0) / 6.0).clamp(0.0, 1.0);
+        // Transmitter 9 half way: the radio cannot tell the floors apart.
+        let (positions, _) = walk_heights_heard(site, EngineConfig::default(), 40, climb, |_| -60.0);
+        positions.iter().position(|p| p.floor == 1).map(|k| k + 1)
+    };
+    // The rate of one floor change in 100 s of survey walks.
+    let (with, without) = (upstairs_at(Some(0.01)), upstairs_at(None));
+    let with = with.expect("upstairs with the rate");
+    assert!(with <= 20, "upstairs by {with} s");
+    assert!(without.is_none_or(|s| s > with), "{with} s with the rate, {without:?} without");
 }

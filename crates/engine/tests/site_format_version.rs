@@ -42,8 +42,8 @@ fn binary_with_version(binary: &[u8], version: u32) -> Vec<u8> {
 }
 
 #[test]
-fn the_current_version_is_7_and_reads_back_to_1() {
-    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 7));
+fn the_current_version_is_8_and_reads_back_to_1() {
+    assert_eq!((OLDEST_FORMAT_VERSION, FORMAT_VERSION), (1, 8));
 }
 
 /// A version-6 file loads with every transmitter a radio of its own; version 7 adds the
@@ -206,4 +206,30 @@ fn a_newer_binary_file_is_refused_as_newer_format_and_a_version_1_one_loads() {
     );
     let version_1 = binary_with_version(&binary, 1);
     assert_eq!(Site::from_bytes(&version_1).unwrap().to_json(), site.to_json());
+}
+
+/// A version-7 file loads with no floor-change rate; version 8 adds the survey's
+/// (`calibration.floor_change_rate_hz`), kept through both encodings and written only when set.
+#[test]
+fn a_version_7_file_still_loads_and_version_8_adds_the_floor_change_rate() {
+    let site = Site::from_json(with_version(VERSION_1, 7).as_bytes()).unwrap();
+    assert_eq!(site.calibration().floor_change_rate_hz, None);
+    assert!(!site.to_json().contains("floor_change_rate_hz"));
+    let calibrated = with_version(VERSION_1, 8).replacen(
+        r#""name":"#,
+        r#""calibration": {"floor_change_rate_hz": 0.00015}, "name":"#,
+        1,
+    );
+    let site = Site::from_json(calibrated.as_bytes()).unwrap();
+    assert_eq!(site.calibration().floor_change_rate_hz, Some(0.00015));
+    assert!(site.to_json().contains(r#""floor_change_rate_hz":0.00015"#), "{}", site.to_json());
+    let binary = Site::from_bytes(&site.to_binary()).unwrap();
+    assert_eq!(binary.calibration().floor_change_rate_hz, Some(0.00015));
+    for bad in ["-0.1", "2"] {
+        let refused = calibrated.replace("0.00015", bad);
+        let err = Site::from_json(refused.as_bytes()).unwrap_err().to_string();
+        assert!(err.contains("calibration.floor_change_rate_hz"), "{err}");
+    }
+    let newer = with_version(VERSION_1, 9);
+    assert!(Site::from_json(newer.as_bytes()).is_err());
 }

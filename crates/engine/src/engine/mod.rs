@@ -118,6 +118,8 @@ pub struct Engine {
     levels: Vec<i32>,
     /// The levels between the site's that no floor has ([`Site::unmapped_levels`]).
     unmapped_levels: Vec<i32>,
+    /// Where floor changes land ([`Site::landings`]): taken at the barometer's first reading.
+    landings: Option<Arc<crate::site::Landings>>,
     /// Scan likelihoods shared with the other engines of an evaluation on this site
     /// ([`Engine::share_emissions`]); `None` in an app.
     shared_emissions: Option<Arc<SharedEmissions>>,
@@ -155,7 +157,8 @@ struct Undo {
 impl Engine {
     /// A session on `site`. Takes the site's walking-distance tables ([`Site::reach_tables`]:
     /// built by the first engine at this radius, shared by the rest): all allocation happens
-    /// here.
+    /// here, but for where floor changes land ([`Site::landings`], likewise shared), taken at
+    /// the first pressure reading on a site with a floor-change rate.
     /// A site whose transmitter ids are hashed needs its salt in `config.site_salt`. A site
     /// whose tables would pass the site budget is refused
     /// ([`SiteError::OverLimit`](crate::SiteError::OverLimit),
@@ -220,6 +223,7 @@ impl Engine {
             floor_anchor: None,
             levels,
             unmapped_levels,
+            landings: None,
             shared_emissions: None,
             gathering: None,
             config,
@@ -284,6 +288,9 @@ impl Engine {
         std::mem::swap(&mut next.tracker, &mut self.tracker);
         next.device_offset = self.device_offset;
         std::mem::swap(&mut next.barometer, &mut self.barometer);
+        if self.landings.is_some() {
+            next.landings = Some(next.site.landings());
+        }
         std::mem::swap(&mut next.stats, &mut self.stats);
         *self = next;
         Ok(taken)

@@ -1,12 +1,13 @@
 //! The prediction of an epoch: the configured transition model, HIPE's regions and adaptive
 //! K, and γ (Hoang eq. 14), the weight of the radio against the motion.
 
+use super::vertical::FloorChanges;
 use super::{Engine, Position};
 use crate::config::{EngineConfig, TransitionModel};
 use crate::habits::{HabitPrior, Habitual};
 use crate::hmm::{HipeRegion, MovementVectorTransition, RegionsTransition, Transition, UniformReach};
 use crate::sensors::{MotionScenario, MotionState, MotionUpdate};
-use crate::site::{ReachTable, Site};
+use crate::site::{Landings, ReachTable, Site};
 use std::sync::Arc;
 
 impl Engine {
@@ -143,7 +144,13 @@ impl Engine {
                 }
             }
         };
-        StepModel { kind, reach_m, ratio, whole_reach: self.whole_reach }
+        StepModel {
+            kind,
+            reach_m,
+            ratio,
+            whole_reach: self.whole_reach,
+            floor_change: self.floor_change(timestamp_ns, dt_s),
+        }
     }
 
     /// What this engine's transitions are built over. It holds its own references, so the
@@ -155,6 +162,7 @@ impl Engine {
             map_reach: self.map_reach.clone(),
             habits: Arc::clone(&self.habit_prior),
             mahalanobis_cap: self.config.movement_vector.mahalanobis_cap,
+            landings: self.landings.clone(),
         }
     }
 
@@ -275,6 +283,8 @@ pub(super) struct StepModel {
     ratio: f64,
     /// Whether the epoch predicted over the whole table ([`prediction_table`]).
     whole_reach: bool,
+    /// The probability of a floor change over the epoch ([`FloorChanges`]); 0 for none.
+    floor_change: f64,
 }
 
 /// The transition model of a [`StepModel`] and what it measured.
@@ -301,6 +311,8 @@ struct TransitionParts {
     map_reach: Option<Arc<ReachTable>>,
     habits: Arc<HabitPrior>,
     mahalanobis_cap: f64,
+    /// Where floor changes land, once the barometer has spoken.
+    landings: Option<Arc<Landings>>,
 }
 
 impl TransitionParts {
@@ -335,10 +347,19 @@ impl TransitionParts {
             }
         };
         // Learned habits: a prior multiplied into the motion-based transition of each epoch.
-        if self.habits.is_empty() {
-            f(transition)
+        let habitual;
+        let transition: &dyn Transition = if self.habits.is_empty() {
+            transition
         } else {
-            f(&Habitual { inner: transition, prior: &self.habits })
+            habitual = Habitual { inner: transition, prior: &self.habits };
+            &habitual
+        };
+        // Floor changes where the barometer measures the height.
+        match &self.landings {
+            Some(landings) if model.floor_change > 0.0 => {
+                f(&FloorChanges { inner: transition, site: &self.site, landings, share: model.floor_change })
+            }
+            _ => f(transition),
         }
     }
 }

@@ -10,7 +10,9 @@
 //! anchor moves to it, with the posterior's floors.
 
 use super::Engine;
+use crate::hmm::Transition;
 use crate::sensors::{BatchReport, PressureSample};
+use crate::site::{Landings, Site};
 
 /// A storey is at least this high, m: the headroom building codes ask over a stair (2.0 m,
 /// e.g. the UK's Approved Document K 1.10, the US IBC 1011.3 2032 mm).
@@ -71,6 +73,49 @@ pub(crate) fn climb_likelihood(dh_m: f64, k: i32) -> f64 {
         / (high - low + CLIMB_SIGMA_M * (2.0 * std::f64::consts::PI).sqrt())
 }
 
+/// A transition with floor changes: each row keeps `1 − share` of its weights, and moves
+/// `share / (F − 1)` of its mass to the state of each other floor nearest the row's state
+/// ([`Landings`]). The barometer's weight then tells which floor the phone is on; without
+/// this, mass reached another floor only through the floor weight (HIPE eq. 11), many epochs
+/// of climbing too late.
+pub(super) struct FloorChanges<'a> {
+    pub(super) inner: &'a dyn Transition,
+    pub(super) site: &'a Site,
+    pub(super) landings: &'a Landings,
+    /// The probability of changing floor over the epoch.
+    pub(super) share: f64,
+}
+
+impl Transition for FloorChanges<'_> {
+    fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+        let floor = self.inner.row(i, row);
+        let floors = self.site.floors().len();
+        let own = self.site.states()[i].floor;
+        if floors < 2 {
+            return floor;
+        }
+        // The row's mass: its explicit weights and the floor weight of every state not listed.
+        let n = self.site.states().len();
+        let total: f64 = row.iter().map(|e| e.1).sum::<f64>() + floor * (n - row.len()) as f64;
+        let keep = 1.0 - self.share;
+        let moved = self.share / (floors - 1) as f64 * total;
+        row.iter_mut().for_each(|e| e.1 *= keep);
+        for g in (0..floors).filter(|&g| g != own) {
+            let j = self.landings.on(i, g);
+            match row.iter_mut().find(|e| e.0 == j) {
+                Some(e) => e.1 += moved,
+                // Listed now, so it keeps the floor weight it had unlisted.
+                None => row.push((j, moved + floor * keep)),
+            }
+        }
+        floor * keep
+    }
+
+    fn floor_ratio(&self) -> Option<f64> {
+        self.inner.floor_ratio()
+    }
+}
+
 impl Engine {
     /// Takes a batch of barometer readings (docs/accuracy.md#barometer). Readings that are not
     /// finite or not a pressure, not after the previous, or too far ahead of the engine's
@@ -80,9 +125,32 @@ impl Engine {
         let clock = self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns);
         let bound_ns = (self.config.motion.max_backlog_s * 1e9) as u64;
         let report = self.barometer.push(batch, clock, bound_ns);
+        let rate = self.site.calibration().floor_change_rate_hz;
+        if report.accepted > 0
+            && self.landings.is_none()
+            && rate.is_some()
+            && self.config.barometer
+            && self.levels.len() >= 2
+        {
+            self.landings = Some(self.site.landings());
+        }
         self.stats.timestamps_ahead += report.ahead as u64;
         self.stats.pressure_dropped += (report.non_finite + report.out_of_order) as u64;
         report
+    }
+
+    /// The probability of a floor change over `dt_s` ([`FloorChanges`]): where the barometer
+    /// measures the height now, 1 − exp(−rate · Δt) at the survey's floor-change rate
+    /// ([`Calibration::floor_change_rate_hz`](crate::site::Calibration::floor_change_rate_hz)); 0
+    /// elsewhere, and on a site without the rate.
+    pub(super) fn floor_change(&self, timestamp_ns: u64, dt_s: f64) -> f64 {
+        let rate = self.site.calibration().floor_change_rate_hz.filter(|_| self.config.site_calibration);
+        match rate {
+            Some(rate) if self.landings.is_some() && self.barometer.height_at(timestamp_ns).is_some() => {
+                1.0 - (-rate * dt_s).exp()
+            }
+            _ => 0.0,
+        }
     }
 
     /// Adds the log weight of the height climbed since the anchor to each state's emission.
@@ -207,6 +275,8 @@ fn most_likely(masses: &[f64]) -> usize {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::site::{BuildOptions, SiteBuilder};
+    use nalgebra::Point2;
 
     #[test]
     fn a_climb_of_a_storey_favours_the_floor_above_and_none_the_same() {
@@ -219,5 +289,48 @@ mod tests {
         // 5.6 m fits one tall storey or two low ones.
         let (one, two) = (climb_likelihood(-5.6, -1), climb_likelihood(-5.6, -2));
         assert!(one > 0.0 && two > 0.0 && (one / two - 2.0).abs() < 0.5, "{one} {two}");
+    }
+
+    /// Row i: half its mass on itself, the rest spread evenly over the other states.
+    struct Stay(usize);
+
+    impl Transition for Stay {
+        fn row(&self, i: usize, row: &mut Vec<(u32, f64)>) -> f64 {
+            row.push((i as u32, 0.5));
+            0.5 / (self.0 - 1) as f64
+        }
+    }
+
+    #[test]
+    fn floor_changes_move_their_share_to_the_landing_and_keep_the_rows_mass() {
+        let mut b = SiteBuilder::new("three floors");
+        let floors = [b.floor("0", 0.0), b.floor("1", 4.0), b.floor("2", 8.0)];
+        let ids: Vec<Vec<u32>> = (floors.iter())
+            .map(|&f| (0..3).map(|k| b.state(f, Point2::new(5.0 * k as f64, 0.0), vec![])).collect())
+            .collect();
+        for floor in &ids {
+            b.edge(floor[0], floor[1], None);
+            b.edge(floor[1], floor[2], None);
+        }
+        let site = b.build(BuildOptions::default()).unwrap();
+        let n = site.states().len();
+        let landings = site.landings();
+        let share = 0.01;
+        let changes = FloorChanges { inner: &Stay(n), site: &site, landings: &landings, share };
+        let mut row = Vec::new();
+        let i = ids[0][1] as usize;
+        let floor = changes.row(i, &mut row);
+        let mass: f64 = row.iter().map(|e| e.1).sum::<f64>() + floor * (n - row.len()) as f64;
+        assert!((mass - 1.0).abs() < 1e-12, "{mass}");
+        let weight = |j: u32| row.iter().find(|e| e.0 == j).map(|e| e.1);
+        assert_eq!(weight(i as u32), Some(0.5 * (1.0 - share)));
+        // Half the share to each other floor, at the state above and below, which also keeps
+        // the floor weight it had unlisted.
+        for up in [ids[1][1], ids[2][1]] {
+            let expected = share / 2.0 + floor;
+            assert!((weight(up).unwrap() - expected).abs() < 1e-15);
+        }
+        assert_eq!(row.len(), 3);
+        assert_eq!(floor, 0.5 / (n - 1) as f64 * (1.0 - share));
     }
 }

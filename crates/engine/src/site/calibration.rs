@@ -60,6 +60,13 @@ pub struct Calibration {
     /// Since format version 6.
     #[serde(default, skip_serializing_if = "FloorReliability::is_empty")]
     pub floor_reliability: FloorReliability,
+    /// How often a walker changes floor, per second: the survey walks' floor changes over their
+    /// time, as the posterior mean of a Poisson rate under a flat prior, (changes + 1) / time.
+    /// Where the barometer measures the height, the engine moves this much of the mass to the
+    /// other floors each second (docs/accuracy.md#barometer); without it, floors exchange mass
+    /// only through the floor weight. Since format version 8.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub floor_change_rate_hz: Option<f64>,
 }
 
 /// A scan that comes longer than this after the one before it, s, is a sparse scan, and the
@@ -165,6 +172,14 @@ impl Calibration {
         ] {
             if let Some((band, share)) = reliability.invalid() {
                 return Err((format!("{path}[{band}]"), format!("must be in [0, 1], got {share}")));
+            }
+        }
+        if let Some(r) = self.floor_change_rate_hz {
+            if !(0.0..=1.0).contains(&r) {
+                return Err((
+                    "calibration.floor_change_rate_hz".into(),
+                    format!("must be in [0, 1], got {r}"),
+                ));
             }
         }
         if self.estimate_states == Some(0) {

@@ -12,6 +12,7 @@ mod floor_reliability;
 mod geo;
 mod graph;
 mod id_hash;
+mod landing;
 mod pseudo;
 mod reach;
 mod reach_cache;
@@ -31,6 +32,7 @@ pub use floor_reliability::{FloorReliability, FLOOR_BANDS, FLOOR_MISS_BANDS};
 pub use geo::{Anchor, GeoError, LatLon};
 pub use graph::{Edge, Floor, Neighbours, North, State, StateKind};
 pub use id_hash::IdHashing;
+pub(crate) use landing::Landings;
 pub use pseudo::PSEUDO_SPACING_M;
 pub use reach::{Reach, ReachCut, ReachTable};
 pub use reach_cache::ReachTables;
@@ -40,6 +42,7 @@ pub use zones::{Zone, ZoneKind, MAX_ZONES};
 
 use crate::radio::RadioMap;
 use graph::median_edge_length;
+use landing::LandingCache;
 use nalgebra::Point2;
 use reach_cache::ReachCache;
 use std::path::Path;
@@ -79,6 +82,8 @@ pub struct Site {
     /// Walking-distance tables built so far, shared by every engine on this site (and its
     /// clones, whose graph is the same).
     reach_tables: ReachCache,
+    /// Where floor changes land ([`Site::landings`]), built when first asked, shared likewise.
+    landings: LandingCache,
 }
 
 impl Site {
@@ -130,6 +135,7 @@ impl Site {
             zones: Vec::new(),
             zone_of: Vec::new(),
             reach_tables: ReachCache::default(),
+            landings: LandingCache::default(),
         }
     }
 

@@ -305,6 +305,29 @@ fn check_survey_walks(walks: &[&Trace]) -> Result<(), CalibrationError> {
     )))
 }
 
+/// How often the survey's walkers changed floor, per second (docs/accuracy.md#barometer): the
+/// floor changes between consecutive waypoints of every survey walk, over the time between
+/// each walk's first and last waypoint, as the posterior mean of a Poisson rate under a flat
+/// prior, (changes + 1) / time (Gelman et al., Bayesian Data Analysis, 3rd ed., §2.6). A walk
+/// filed under one floor whose waypoints name none stays on it. `None` for a site of one floor
+/// or walks of no duration.
+fn floor_change_rate(floors: &[FloorData]) -> Option<f64> {
+    if floors.len() < 2 {
+        return None;
+    }
+    let (mut changes, mut seconds) = (0u64, 0.0);
+    for (f, floor) in floors.iter().enumerate() {
+        for walk in &floor.survey {
+            let on = walk.waypoints.iter().map(|w| w.floor.unwrap_or(f)).collect::<Vec<_>>();
+            changes += on.windows(2).filter(|w| w[0] != w[1]).count() as u64;
+            if let (Some(first), Some(last)) = (walk.waypoints.first(), walk.waypoints.last()) {
+                seconds += last.timestamp_ns.saturating_sub(first.timestamp_ns) as f64 * 1e-9;
+            }
+        }
+    }
+    (seconds > 0.0).then(|| (changes as f64 + 1.0) / seconds)
+}
+
 /// Calibrates a site from its survey walks: the walkers' step length and the site's north
 /// (from waypoints and steps, [`crate::calibrate_motion`]), then γ per floor by
 /// leave-one-walk-out, Hoang §6.2's jackknife with a walk as the unit: each survey walk is
@@ -336,8 +359,11 @@ pub fn survey_calibrated(
     check_survey_walks(&all)?;
     let motion = crate::calibrate_motion(&all, &options.engine.motion);
     let north = motion.as_ref().map_or(options.north, |m| m.north());
-    let mut calibration =
-        Calibration { step_length: motion.as_ref().map(|m| m.step_length), ..Calibration::default() };
+    let mut calibration = Calibration {
+        step_length: motion.as_ref().map(|m| m.step_length),
+        floor_change_rate_hz: floor_change_rate(floors),
+        ..Calibration::default()
+    };
     report.motion = motion.as_ref().map(|m| MotionSummary {
         step_length: m.step_length,
         heading_offset_deg: m.heading_offset_rad.to_degrees(),
@@ -727,6 +753,38 @@ pub fn survey_calibrated(
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::io::ilc::Waypoint;
+    use std::path::PathBuf;
+
+    #[test]
+    fn the_floor_change_rate_counts_the_walks_changes_over_their_time() {
+        let at = |s: u64, floor: Option<usize>| Waypoint {
+            timestamp_ns: s * 1_000_000_000,
+            x: 0.0,
+            y: 0.0,
+            floor,
+        };
+        let walk = |waypoints: Vec<Waypoint>| Trace { waypoints, ..Trace::default() };
+        let floor = |name: &str, survey: Vec<Trace>| FloorData {
+            name: name.into(),
+            dir: PathBuf::new(),
+            plan: None,
+            survey,
+            test: Vec::new(),
+            geo: None,
+        };
+        // 100 s filed under the ground floor that climbs once and comes back (2 changes), and
+        // 100 s upstairs that names no floor: (2 + 1) / 200 s.
+        let floors = [
+            floor("G", vec![walk(vec![at(0, None), at(40, Some(1)), at(60, Some(1)), at(100, Some(0))])]),
+            floor("1", vec![walk(vec![at(0, None), at(100, None)])]),
+        ];
+        assert_eq!(floor_change_rate(&floors), Some(3.0 / 200.0));
+        // No change at all still allows one in the time walked; one floor, none.
+        assert_eq!(floor_change_rate(&floors[1..]), None);
+        let still = [floor("G", vec![walk(vec![at(0, None), at(50, None)])]), floor("1", Vec::new())];
+        assert_eq!(floor_change_rate(&still), Some(1.0 / 50.0));
+    }
 
     #[test]
     fn the_radio_fit_floor_is_the_held_out_quantile_and_never_below_zero() {
