@@ -157,7 +157,7 @@ struct Undo {
 impl Engine {
     /// A session on `site`. Takes the site's walking-distance tables ([`Site::reach_tables`]:
     /// built by the first engine at this radius, shared by the rest): all allocation happens
-    /// here, but for where floor changes land ([`Site::landings`], likewise shared), taken at
+    /// here, but for where floor changes land (computed once per site and shared), taken at
     /// the first pressure reading on a site with a floor-change rate.
     /// A site whose transmitter ids are hashed needs its salt in `config.site_salt`. A site
     /// whose tables would pass the site budget is refused
