@@ -81,6 +81,13 @@ pub fn print_calibration(c: &calibrate::CalibrationReport) {
         c.motion.as_ref().map(|m| m.step_length),
         c.motion.as_ref().map_or(0.0, |m| m.heading_offset_deg)
     );
+    if let Some(rate) = c.floor_change_rate_hz {
+        // docs/accuracy.md#barometer: what the barometer's floor changes run at.
+        println!(
+            "floor changes: {:.2} per hour walked, (changes + 1) / time over the survey walks",
+            rate * 3600.0
+        );
+    }
     let radius_curve: Vec<String> =
         c.fingerprint_radius_mean_error_m.iter().map(|(r, e, _)| format!("{r:.1} m: {e:.2}")).collect();
     println!(

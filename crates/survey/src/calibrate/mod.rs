@@ -623,6 +623,7 @@ pub fn survey_calibrated(
         calibration.accuracy_scale_by_scenario.set(scenario, scale);
     }
     report.rssi_weight = calibration.rssi_weight;
+    report.floor_change_rate_hz = calibration.floor_change_rate_hz;
     report.rssi_weight_without_movement = calibration.rssi_weight_without_movement;
     report.rssi_weight_by_scenario = calibration.rssi_weight_by_scenario;
     // The held-out walks again with the engine as shipped (every calibrated value) but no

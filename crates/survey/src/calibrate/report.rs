@@ -158,6 +158,9 @@ pub struct CalibrationReport {
     pub rssi_weight: Option<f64>,
     /// The same for epochs without a movement likelihood.
     pub rssi_weight_without_movement: Option<f64>,
+    /// How often the survey's walkers changed floor, per second
+    /// ([`Calibration::floor_change_rate_hz`](waymark_engine::site::Calibration::floor_change_rate_hz)).
+    pub floor_change_rate_hz: Option<f64>,
     /// All floors pooled, with only the distance and with only the heading: the curve each
     /// scenario's own γ is chosen on (`rssi_weight_by_scenario`).
     pub gamma_by_scenario: waymark_engine::site::PerScenario<Vec<GammaPoint>>,
