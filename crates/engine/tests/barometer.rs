@@ -238,3 +238,47 @@ fn the_surveys_floor_change_rate_moves_a_climb_upstairs_without_stairs_in_the_ma
     assert!(with <= 20, "upstairs by {with} s");
     assert!(without.is_none_or(|s| s > with), "{with} s with the rate, {without:?} without");
 }
+
+mod hostile {
+    use super::*;
+    use proptest::prelude::*;
+
+    /// A pressure reading: any time in the first minute, any value (NaN, ±∞, out of range,
+    /// storeys apart).
+    fn reading() -> impl Strategy<Value = PressureSample> {
+        let hpa = prop_oneof![
+            4 => 990.0f64..1010.0,
+            1 => Just(f64::NAN),
+            1 => Just(f64::INFINITY),
+            1 => -2000.0f64..3000.0,
+        ];
+        (0u64..60_000, hpa).prop_map(|(ms, hpa)| PressureSample { timestamp_ns: ms * 1_000_000, hpa })
+    }
+
+    proptest! {
+        #![proptest_config(ProptestConfig { cases: 64, ..ProptestConfig::default() })]
+        /// With floor changes on, any pressure batches between scans leave the posterior a
+        /// distribution and every position finite; what is not a pressure is dropped.
+        #[test]
+        fn pressure_of_any_kind_never_breaks_the_floor_changes(
+            batches in prop::collection::vec(prop::collection::vec(reading(), 0..20), 1..30),
+        ) {
+            let site = twin_floors_with(None, false)
+                .with_calibration(Calibration { floor_change_rate_hz: Some(0.01), ..Calibration::default() })
+                .unwrap();
+            let mut engine = Engine::new(Arc::new(site), EngineConfig::default()).unwrap();
+            for (k, batch) in batches.iter().enumerate() {
+                let report = engine.push_pressure(batch);
+                prop_assert!(report.accepted <= batch.len());
+                let at = (k as u64 + 1) * 2 * SECOND;
+                if let Ok(epoch) = engine.push_scan(&scan(at, &[(0, -40.0), (1, -64.0), (9, -60.0)])) {
+                    let p = epoch.position;
+                    prop_assert!(p.x.is_finite() && p.y.is_finite() && p.accuracy_m > 0.0, "{p:?}");
+                }
+                let total: f64 = engine.posterior().iter().sum();
+                prop_assert!((total - 1.0).abs() < 1e-9, "{total}");
+                prop_assert!(engine.posterior().iter().all(|p| p.is_finite() && *p >= 0.0));
+            }
+        }
+    }
+}
