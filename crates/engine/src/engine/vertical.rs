@@ -125,13 +125,7 @@ impl Engine {
         let clock = self.held.as_ref().map(|h| h.timestamp_ns).or(self.last_epoch_ns);
         let bound_ns = (self.config.motion.max_backlog_s * 1e9) as u64;
         let report = self.barometer.push(batch, clock, bound_ns);
-        let rate = self.site.calibration().floor_change_rate_hz;
-        if report.accepted > 0
-            && self.landings.is_none()
-            && rate.is_some()
-            && self.config.barometer
-            && self.levels.len() >= 2
-        {
+        if report.accepted > 0 && self.landings.is_none() && self.floor_change_rate().is_some() {
             self.landings = Some(self.site.landings());
         }
         self.stats.timestamps_ahead += report.ahead as u64;
@@ -144,13 +138,19 @@ impl Engine {
     /// ([`Calibration::floor_change_rate_hz`](crate::site::Calibration::floor_change_rate_hz)); 0
     /// elsewhere, and on a site without the rate.
     pub(super) fn floor_change(&self, timestamp_ns: u64, dt_s: f64) -> f64 {
-        let rate = self.site.calibration().floor_change_rate_hz.filter(|_| self.config.site_calibration);
-        match rate {
+        match self.floor_change_rate() {
             Some(rate) if self.landings.is_some() && self.barometer.height_at(timestamp_ns).is_some() => {
                 1.0 - (-rate * dt_s).exp()
             }
             _ => 0.0,
         }
+    }
+
+    /// The site's floor-change rate, per second, where this engine uses it: the barometer on,
+    /// the site's calibration on, two floors or more.
+    fn floor_change_rate(&self) -> Option<f64> {
+        let on = self.config.barometer && self.config.site_calibration && self.levels.len() >= 2;
+        self.site.calibration().floor_change_rate_hz.filter(|_| on)
     }
 
     /// Adds the log weight of the height climbed since the anchor to each state's emission.

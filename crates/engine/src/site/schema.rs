@@ -12,8 +12,8 @@ use serde::{Deserialize, Serialize};
 /// holds the optional fields added within version 1, version 3 adds the optional geo anchor
 /// and floor levels, version 4 the survey's reading-age limit, version 5 the calibrated M of
 /// the estimate, version 6 the floor probability's calibration, version 7 the transmitters
-/// that share a radio, version 8 the survey's floor-change rate (docs/site-files.md#versioning): each version's files are files of the
-/// next.
+/// that share a radio, version 8 the survey's floor-change rate
+/// (docs/site-files.md#versioning): each version's files are files of the next.
 pub const FORMAT_VERSION: u32 = 8;
 
 /// The oldest site-file format this build reads.
