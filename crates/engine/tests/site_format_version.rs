@@ -26,6 +26,15 @@ fn with_version(json: &str, version: u64) -> String {
     json.replacen("\"format_version\": 1", &format!("\"format_version\": {version}"), 1)
 }
 
+/// [`VERSION_1`] at `version` with `calibration` (a JSON object's fields) as its calibration.
+fn with_calibration(version: u64, calibration: &str) -> String {
+    with_version(VERSION_1, version).replacen(
+        r#""name":"#,
+        &format!(r#""calibration": {{{calibration}}}, "name":"#),
+        1,
+    )
+}
+
 /// The binary file `binary` with its header's `format_version` set to `version` (one digit)
 /// and its checksum made right again, so only the version differs.
 fn binary_with_version(binary: &[u8], version: u32) -> Vec<u8> {
@@ -81,11 +90,10 @@ fn a_version_5_file_still_loads_and_version_6_adds_the_floor_reliability() {
     let site = Site::from_json(with_version(VERSION_1, 5).as_bytes()).unwrap();
     assert!(site.calibration().floor_reliability.is_empty());
     assert!(!site.to_json().contains("floor_reliability"));
-    let calibrated = with_version(VERSION_1, 6).replacen(
-        r#""name":"#,
-        r#""calibration": {"floor_reliability": [null, 0.4, 0.8, 0.9, 0.99],
-            "sparse_scans": {"floor_reliability": [0.3, 0.5, 0.7, 0.8, 0.95]}}, "name":"#,
-        1,
+    let calibrated = with_calibration(
+        6,
+        r#""floor_reliability": [null, 0.4, 0.8, 0.9, 0.99],
+            "sparse_scans": {"floor_reliability": [0.3, 0.5, 0.7, 0.8, 0.95]}"#,
     );
     let site = Site::from_json(calibrated.as_bytes()).unwrap();
     let expected = [None, Some(0.4), Some(0.8), Some(0.9), Some(0.99)];
@@ -106,11 +114,7 @@ fn a_version_4_file_still_loads_and_version_5_adds_the_calibrated_m() {
     let site = Site::from_json(with_version(VERSION_1, 4).as_bytes()).unwrap();
     assert_eq!(site.calibration().estimate_states, None);
     assert!(!site.to_json().contains("estimate_states"));
-    let calibrated = with_version(VERSION_1, 5).replacen(
-        r#""name":"#,
-        r#""calibration": {"estimate_states": 30}, "name":"#,
-        1,
-    );
+    let calibrated = with_calibration(5, r#""estimate_states": 30"#);
     let site = Site::from_json(calibrated.as_bytes()).unwrap();
     assert_eq!(site.calibration().estimate_states, Some(30));
     assert!(site.to_json().contains(r#""estimate_states":30"#), "{}", site.to_json());
@@ -215,11 +219,7 @@ fn a_version_7_file_still_loads_and_version_8_adds_the_floor_change_rate() {
     let site = Site::from_json(with_version(VERSION_1, 7).as_bytes()).unwrap();
     assert_eq!(site.calibration().floor_change_rate_hz, None);
     assert!(!site.to_json().contains("floor_change_rate_hz"));
-    let calibrated = with_version(VERSION_1, 8).replacen(
-        r#""name":"#,
-        r#""calibration": {"floor_change_rate_hz": 0.00015}, "name":"#,
-        1,
-    );
+    let calibrated = with_calibration(8, r#""floor_change_rate_hz": 0.00015"#);
     let site = Site::from_json(calibrated.as_bytes()).unwrap();
     assert_eq!(site.calibration().floor_change_rate_hz, Some(0.00015));
     assert!(site.to_json().contains(r#""floor_change_rate_hz":0.00015"#), "{}", site.to_json());
